@@ -1,0 +1,103 @@
+"""The default body model: Anny (Apache-2.0 code, CC0 MakeHuman assets, shipped with the package).
+
+Anny builds its assets once (about a minute) into ``$ANNY_CACHE_DIR`` (default ``~/.cache/anny``);
+stmpl caches the parts it cuts from it, so later runs never touch Anny at all.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+
+import numpy as np
+import torch
+
+from stmpl.body.model import BodyMesh, CachedBodyModel, PartSpec
+
+log = logging.getLogger(__name__)
+
+PHENOTYPES = ("gender", "age", "muscle", "weight", "height", "proportions")
+"""Anny's phenotype parameters, each in [0, 1]; 0.5 is the default."""
+
+_ARM = ("upperarm01", "upperarm02", "lowerarm01", "lowerarm02")
+
+
+def _arm(side: str) -> PartSpec:
+    return PartSpec(bones=tuple(f"{b}.{side}" for b in _ARM),
+                    axis_bones=(f"upperarm01.{side}", f"lowerarm01.{side}", f"wrist.{side}"))
+
+
+class AnnyBody(CachedBodyModel):
+    """Anny in its rest pose with the given phenotype.
+
+    Args:
+        phenotype: values in [0, 1] for any of :data:`PHENOTYPES` (others stay 0.5).
+        cache_dir: where parts are cached (default ``$STMPL_CACHE_DIR`` or ``~/.cache/stmpl``).
+    """
+
+    name = "anny"
+    PARTS = {
+        "left_arm": _arm("L"),
+        "right_arm": _arm("R"),
+        "belly": PartSpec(bones=("spine03", "spine04"), front_only=True),
+    }
+
+    def __init__(self, phenotype: dict[str, float] | None = None, cache_dir=None) -> None:
+        super().__init__(cache_dir)
+        self.phenotype = check_phenotype(phenotype or {})
+        self._anny = None
+        self._mesh: BodyMesh | None = None
+
+    @property
+    def weight(self) -> float:
+        """The ``weight`` phenotype (0 thin .. 1 heavy)."""
+        return self.phenotype.get("weight", 0.5)
+
+    def options(self) -> dict:
+        import anny
+
+        return {"phenotype": {k: self.phenotype.get(k, 0.5) for k in PHENOTYPES},
+                "anny_version": anny.__version__}
+
+    @property
+    def anny(self):
+        """The underlying ``anny.Anny`` module (built on first use)."""
+        if self._anny is None:
+            import anny
+
+            log.info("loading anny (the first run builds its assets into %s, about a minute)",
+                     os.environ.get("ANNY_CACHE_DIR", "~/.cache/anny"))
+            self._anny = anny.Anny()
+        return self._anny
+
+    def rest_mesh(self) -> BodyMesh:
+        if self._mesh is None:
+            m = self.anny
+            with torch.no_grad():
+                out = m(phenotype_kwargs={k: float(v) for k, v in self.phenotype.items()})
+            w, bi = m.vertex_bone_weights.numpy(), m.vertex_bone_indices.numpy()
+            self._mesh = BodyMesh(
+                vertices=out["rest_vertices"][0].double().numpy(),
+                faces=m.faces.numpy().astype(np.int64),
+                uv=m.texture_coordinates.double().numpy(),
+                face_uv=m.face_texture_coordinate_indices.numpy().astype(np.int64),
+                dominant_bone=bi[np.arange(len(bi)), w.argmax(axis=1)],
+                bone_labels=tuple(m.bone_labels),
+                bone_heads=out["rest_bone_heads"][0].double().numpy(),
+                forward=np.array([0.0, -1.0, 0.0]),  # anny: z up, the face looks along -y
+            )
+        return self._mesh
+
+
+def check_phenotype(phenotype: dict[str, float]) -> dict[str, float]:
+    """Validate phenotype values: known names, finite, in [0, 1]."""
+    out = {}
+    for k, v in phenotype.items():
+        if k not in PHENOTYPES:
+            raise ValueError(f"unknown anny phenotype {k!r}; known: {', '.join(PHENOTYPES)}")
+        v = float(v)
+        if not math.isfinite(v) or not 0.0 <= v <= 1.0:
+            raise ValueError(f"anny phenotype {k} must be in [0, 1], got {v}")
+        out[k] = v
+    return out

@@ -1,0 +1,287 @@
+"""A body part: a triangulated patch of the skin with its own UV chart.
+
+Everything downstream (tissue, loads, UV images, FEM, predictors) works on the vertices of a
+:class:`BodyPart`. Points are rows, ``(N, 3)`` in metres; UVs are per corner, ``(T, 2)`` in the
+part's own chart, normalised to ``[0, 1]^2`` with the aspect ratio kept and a margin left for the
+pixels that UV images carry past the chart's edge.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from functools import cached_property
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse import csgraph
+
+CHART_MARGIN = 0.04
+"""Share of the unit square left free around a part's chart (room for padded pixels)."""
+
+
+@dataclass(frozen=True, eq=False)
+class BodyPart:
+    """A skin patch of a body model, in its rest pose.
+
+    Attributes:
+        name: part name, e.g. ``"left_arm"``.
+        vertices: ``(N, 3)`` rest positions, metres.
+        faces: ``(M, 3)`` vertex indices, counter-clockwise seen from outside.
+        normals: ``(N, 3)`` unit outward vertex normals (from the whole body, so rims are right).
+        uv: ``(T, 2)`` corner UVs in the part's chart, ``[0, 1]^2``, aspect kept.
+        face_uv: ``(M, 3)`` indices into ``uv`` for each face corner.
+        uv_vertex: ``(T,)`` the vertex each UV corner belongs to.
+        uv_scale: metres per chart unit (square root of 3D area over UV area).
+        rims: open boundary loops, each an ordered ``(K,)`` array of vertex indices.
+        axis: ``(K, 3)`` limb centre line from proximal to distal (metres), or ``None``.
+        body_index: ``(N,)`` index of each vertex in the full body mesh.
+        source: provenance: body model, its options, part name (JSON-serialisable).
+    """
+
+    name: str
+    vertices: np.ndarray
+    faces: np.ndarray
+    normals: np.ndarray
+    uv: np.ndarray
+    face_uv: np.ndarray
+    uv_vertex: np.ndarray
+    uv_scale: float
+    rims: tuple[np.ndarray, ...] = ()
+    axis: np.ndarray | None = None
+    body_index: np.ndarray | None = None
+    source: dict = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        n = len(self.vertices)
+        _check_shape("vertices", self.vertices, (None, 3))
+        _check_shape("faces", self.faces, (None, 3))
+        _check_shape("normals", self.normals, (n, 3))
+        _check_shape("uv", self.uv, (None, 2))
+        _check_shape("face_uv", self.face_uv, (len(self.faces), 3))
+        _check_shape("uv_vertex", self.uv_vertex, (len(self.uv),))
+        if self.faces.size and (self.faces.min() < 0 or self.faces.max() >= n):
+            raise ValueError(f"BodyPart.faces index out of range [0, {n}): "
+                             f"min {self.faces.min()}, max {self.faces.max()}")
+        if not np.array_equal(self.uv_vertex[self.face_uv], self.faces):
+            raise ValueError("BodyPart.face_uv does not match faces through uv_vertex")
+        for name in ("vertices", "normals", "uv"):
+            if not np.isfinite(getattr(self, name)).all():
+                raise ValueError(f"BodyPart.{name} contains non-finite values")
+        if self.axis is not None:
+            _check_shape("axis", self.axis, (None, 3))
+
+    # --- sizes -------------------------------------------------------------------------------
+    @property
+    def n_vertices(self) -> int:
+        return len(self.vertices)
+
+    @property
+    def n_faces(self) -> int:
+        return len(self.faces)
+
+    # --- derived geometry (computed once) ------------------------------------------------------
+    @cached_property
+    def edges(self) -> np.ndarray:
+        """``(E, 2)`` unique undirected vertex edges, sorted pairs."""
+        e = np.concatenate([self.faces[:, [0, 1]], self.faces[:, [1, 2]], self.faces[:, [2, 0]]])
+        return np.unique(np.sort(e, axis=1), axis=0)
+
+    @cached_property
+    def face_areas(self) -> np.ndarray:
+        """``(M,)`` triangle areas, m^2."""
+        v = self.vertices[self.faces]
+        return 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+
+    @cached_property
+    def vertex_areas(self) -> np.ndarray:
+        """``(N,)`` barycentric vertex areas (a third of each adjacent face), m^2."""
+        a = np.zeros(self.n_vertices)
+        np.add.at(a, self.faces.ravel(), np.repeat(self.face_areas / 3.0, 3))
+        return a
+
+    @cached_property
+    def seam_groups(self) -> tuple[np.ndarray, ...]:
+        """The UV copies of each seam vertex: one ``(k,)`` array of ``uv`` indices per vertex with
+        ``k >= 2`` copies, ordered by vertex index."""
+        order = np.argsort(self.uv_vertex, kind="stable")
+        verts, starts, counts = np.unique(self.uv_vertex[order], return_index=True,
+                                          return_counts=True)
+        return tuple(order[s:s + c] for s, c in zip(starts, counts) if c > 1)
+
+    @cached_property
+    def seam_vertices(self) -> np.ndarray:
+        """``(S,)`` vertices with more than one UV copy."""
+        return np.array([self.uv_vertex[g[0]] for g in self.seam_groups], dtype=np.int64)
+
+    @cached_property
+    def axial(self) -> np.ndarray:
+        """``(N,)`` arc length (m) of each vertex's projection on the limb axis."""
+        if self.axis is None:
+            raise ValueError(f"part {self.name!r} has no limb axis (not a limb)")
+        return project_on_polyline(self.vertices, self.axis)
+
+    def mesh(self, vertices: np.ndarray | None = None):
+        """A ``trimesh.Trimesh`` of the part (optionally with other vertex positions)."""
+        import trimesh
+
+        v = self.vertices if vertices is None else vertices
+        return trimesh.Trimesh(v, self.faces, process=False)
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """Arrays for saving (``np.savez``); inverse of :meth:`from_arrays`."""
+        out = {k: getattr(self, k) for k in ("vertices", "faces", "normals", "uv", "face_uv",
+                                             "uv_vertex")}
+        out["uv_scale"] = np.array(self.uv_scale)
+        out["rim_lengths"] = np.array([len(r) for r in self.rims], dtype=np.int64)
+        out["rims"] = (np.concatenate(self.rims) if self.rims else np.zeros(0, np.int64))
+        if self.axis is not None:
+            out["axis"] = self.axis
+        if self.body_index is not None:
+            out["body_index"] = self.body_index
+        return out
+
+    @classmethod
+    def from_arrays(cls, name: str, arrays, source: dict | None = None) -> "BodyPart":
+        rims = tuple(np.split(np.asarray(arrays["rims"]),
+                              np.cumsum(arrays["rim_lengths"])[:-1])) if len(
+            arrays["rim_lengths"]) else ()
+        return cls(name=name, vertices=np.asarray(arrays["vertices"], float),
+                   faces=np.asarray(arrays["faces"], np.int64),
+                   normals=np.asarray(arrays["normals"], float),
+                   uv=np.asarray(arrays["uv"], float),
+                   face_uv=np.asarray(arrays["face_uv"], np.int64),
+                   uv_vertex=np.asarray(arrays["uv_vertex"], np.int64),
+                   uv_scale=float(arrays["uv_scale"]), rims=rims,
+                   axis=np.asarray(arrays["axis"], float) if "axis" in arrays else None,
+                   body_index=np.asarray(arrays["body_index"], np.int64)
+                   if "body_index" in arrays else None,
+                   source=dict(source or {}))
+
+    def with_vertices(self, vertices: np.ndarray) -> "BodyPart":
+        """A copy with other rest positions (normals recomputed)."""
+        return dataclasses.replace(self, vertices=vertices,
+                                   normals=vertex_normals(vertices, self.faces))
+
+
+# --- construction ------------------------------------------------------------------------------
+def extract_part(name: str, vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray,
+                 face_uv: np.ndarray, vertex_mask: np.ndarray, axis: np.ndarray | None = None,
+                 source: dict | None = None) -> BodyPart:
+    """Cut a part out of a whole body mesh.
+
+    Args:
+        vertices: ``(V, 3)`` body rest positions, m. faces: ``(F, 3)``. uv: ``(T, 2)`` atlas UVs.
+        face_uv: ``(F, 3)`` UV corner indices. vertex_mask: ``(V,)`` bool, the part's vertices.
+        axis: ``(K, 3)`` limb centre line or ``None``.
+
+    Faces with all three corners selected are kept; of those, the faces of the largest UV
+    island (so the part has one chart), and of those the largest connected piece in 3D.
+    """
+    vertices = np.asarray(vertices, float)
+    faces = np.asarray(faces, np.int64)
+    body_normals = vertex_normals(vertices, faces)
+    fsel = np.asarray(vertex_mask, bool)[faces].all(axis=1)
+    if not fsel.any():
+        raise ValueError(f"part {name!r}: the selection contains no whole face")
+    face_uv = np.asarray(face_uv, np.int64)
+    # one UV chart: keep faces of the largest UV island (stray corners of a neighbouring
+    # island would stretch the chart), then the largest connected piece in 3D
+    fsel[fsel] = _largest_component(face_uv[fsel], len(uv))
+    fsel[fsel] = _largest_component(faces[fsel], len(vertices))
+    pf, puv = faces[fsel], face_uv[fsel]
+    used = np.unique(pf)
+    vmap = -np.ones(len(vertices), np.int64)
+    vmap[used] = np.arange(len(used))
+    used_uv = np.unique(puv)
+    uvmap = -np.ones(len(uv), np.int64)
+    uvmap[used_uv] = np.arange(len(used_uv))
+    lf, luv = vmap[pf], uvmap[puv]
+    uv_vertex = np.zeros(len(used_uv), np.int64)
+    uv_vertex[luv.ravel()] = lf.ravel()
+    v = vertices[used]
+    chart, scale = normalise_chart(np.asarray(uv, float)[used_uv], v, lf, luv)
+    return BodyPart(name=name, vertices=v, faces=lf, normals=body_normals[used], uv=chart,
+                    face_uv=luv, uv_vertex=uv_vertex, uv_scale=scale,
+                    rims=boundary_loops(lf), axis=axis, body_index=used,
+                    source=dict(source or {}))
+
+
+def normalise_chart(uv: np.ndarray, vertices: np.ndarray, faces: np.ndarray, face_uv: np.ndarray,
+                    margin: float = CHART_MARGIN) -> tuple[np.ndarray, float]:
+    """Fit UVs ``(T, 2)`` into ``[margin, 1 - margin]^2`` (aspect kept, centred).
+
+    Returns the new UVs and the metres per chart unit (sqrt of 3D area / UV area)."""
+    lo, hi = uv.min(axis=0), uv.max(axis=0)
+    span = float((hi - lo).max())
+    if span <= 0:
+        raise ValueError("degenerate UV chart (zero extent)")
+    s = (1.0 - 2 * margin) / span
+    out = (uv - lo) * s + (1.0 - (hi - lo) * s) / 2.0
+    a3 = _tri_areas(vertices[faces]).sum()
+    a2 = _tri_areas(np.concatenate([out[face_uv], np.zeros(face_uv.shape + (1,))], -1)).sum()
+    return out, float(np.sqrt(a3 / a2))
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """``(N, 3)`` area-weighted unit vertex normals of a triangle mesh."""
+    v = vertices[faces]
+    fn = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+    n = np.zeros_like(vertices, dtype=float)
+    for k in range(3):
+        np.add.at(n, faces[:, k], fn)
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return n / np.where(length > 0, length, 1.0)
+
+
+def boundary_loops(faces: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Ordered loops of boundary vertices (edges used by one face), longest first."""
+    directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
+    key = np.sort(directed, axis=1)
+    _, inv, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+    boundary = directed[counts[inv.ravel()] == 1]
+    nxt = {int(a): int(b) for a, b in boundary}
+    loops, seen = [], set()
+    for start in nxt:
+        if start in seen:
+            continue
+        loop, cur = [], start
+        while cur not in seen and cur in nxt:
+            seen.add(cur)
+            loop.append(cur)
+            cur = nxt[cur]
+        loops.append(np.array(loop, np.int64))
+    return tuple(sorted(loops, key=len, reverse=True))
+
+
+def project_on_polyline(points: np.ndarray, line: np.ndarray) -> np.ndarray:
+    """``(N,)`` arc length along a polyline ``(K, 3)`` of each point's nearest projection."""
+    a, b = line[:-1], line[1:]
+    d = b - a
+    seg_len = np.linalg.norm(d, axis=1)
+    t = np.einsum("nkj,kj->nk", points[:, None] - a[None], d) / seg_len**2
+    t = np.clip(t, 0.0, 1.0)
+    foot = a[None] + t[..., None] * d[None]
+    k = np.linalg.norm(points[:, None] - foot, axis=2).argmin(axis=1)
+    start = np.concatenate([[0.0], np.cumsum(seg_len)[:-1]])
+    return start[k] + t[np.arange(len(points)), k] * seg_len[k]
+
+
+def _largest_component(faces: np.ndarray, n: int) -> np.ndarray:
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]]])
+    adj = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
+    _, label = csgraph.connected_components(adj, directed=False)
+    face_label = label[faces[:, 0]]
+    return face_label == np.bincount(face_label).argmax()
+
+
+def _tri_areas(tri: np.ndarray) -> np.ndarray:
+    return 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+
+
+def _check_shape(name: str, arr, shape: tuple) -> None:
+    a = np.asarray(arr)
+    ok = a.ndim == len(shape) and all(s is None or s == d for s, d in zip(shape, a.shape))
+    if not ok:
+        want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
+        raise ValueError(f"BodyPart.{name} must have shape {want}, got {tuple(a.shape)}")
