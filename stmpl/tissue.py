@@ -1,0 +1,106 @@
+"""Soft-tissue thickness per vertex, in metres.
+
+The paper's heuristic ties thickness to body shape: thin to thick bodies get a constant
+5.0 .. 10.0 mm (anny's ``weight`` phenotype 0 .. 1; SMPL's beta_2 -2 .. 2). Beyond the paper, any
+smooth per-vertex map is allowed (``ramp``, ``bumps``, ``smooth``). Learned models see thickness
+normalised to [0, 1] over :data:`THICKNESS_RANGE`; values outside it are refused, never clipped.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import scipy.sparse as sp
+
+from stmpl.body.part import BodyPart
+
+THICKNESS_RANGE = (0.0025, 0.0125)
+"""Normalisation range of thickness, m (the paper's [2.5, 12.5] mm)."""
+
+LEVELS = (0.005, 0.00625, 0.0075, 0.00875, 0.010)
+"""The paper's five thickness levels, m (thin to thick body)."""
+
+
+def check(part: BodyPart, thickness) -> np.ndarray:
+    """Validate a thickness map: ``(N,)``, finite, inside :data:`THICKNESS_RANGE`."""
+    t = np.asarray(thickness, dtype=float)
+    if t.shape != (part.n_vertices,):
+        raise ValueError(f"thickness must have shape ({part.n_vertices},) for part "
+                         f"{part.name!r}, got {t.shape}")
+    bad = ~np.isfinite(t)
+    if bad.any():
+        raise ValueError(f"thickness is not finite at {bad.sum()} vertices (first: vertex "
+                         f"{np.argmax(bad)}, value {t[np.argmax(bad)]})")
+    lo, hi = THICKNESS_RANGE
+    out = (t < lo) | (t > hi)
+    if out.any():
+        i = int(np.argmax(out))
+        raise ValueError(f"thickness must lie in [{lo * 1e3:g}, {hi * 1e3:g}] mm (the model's "
+                         f"normalisation range); vertex {i} has {t[i] * 1e3:g} mm "
+                         f"({out.sum()} vertices outside)")
+    return t
+
+
+def constant(part: BodyPart, thickness: float) -> np.ndarray:
+    """The same thickness (m) at every vertex."""
+    return check(part, np.full(part.n_vertices, float(thickness)))
+
+
+def from_weight(part: BodyPart, weight: float) -> np.ndarray:
+    """The paper's heuristic through anny's ``weight`` phenotype: 0 -> 5 mm, 1 -> 10 mm."""
+    w = float(weight)
+    if not np.isfinite(w) or not 0.0 <= w <= 1.0:
+        raise ValueError(f"weight phenotype must be in [0, 1], got {weight}")
+    return constant(part, 0.005 + 0.005 * w)
+
+
+def from_beta2(part: BodyPart, beta2: float) -> np.ndarray:
+    """The paper's heuristic through SMPL's second shape coefficient: -2 -> 5 mm, 2 -> 10 mm."""
+    b = float(beta2)
+    if not np.isfinite(b) or not -2.0 <= b <= 2.0:
+        raise ValueError(f"beta_2 must be in [-2, 2] (the paper's sweep), got {beta2}")
+    return constant(part, 0.0075 + 0.00125 * b)
+
+
+def ramp(part: BodyPart, start: float, end: float) -> np.ndarray:
+    """Thickness varying linearly along a limb's axis, ``start`` (m) proximal to ``end`` distal."""
+    s = part.axial
+    f = (s - s.min()) / max(s.max() - s.min(), 1e-12)
+    return check(part, start + (end - start) * f)
+
+
+def bumps(part: BodyPart, base: float, amplitude: float, length: float = 0.05,
+          count: int = 4, seed: int = 0) -> np.ndarray:
+    """``base`` plus ``count`` Gaussian bumps of height up to ``amplitude`` (m) and width
+    ``length`` (m) at random vertices: a smooth, non-constant map (seeded)."""
+    rng = np.random.default_rng(seed)
+    centres = part.vertices[rng.choice(part.n_vertices, size=count, replace=False)]
+    heights = amplitude * rng.uniform(-1.0, 1.0, size=count)
+    d2 = ((part.vertices[:, None] - centres[None]) ** 2).sum(-1)
+    return check(part, base + (heights * np.exp(-d2 / (2 * length**2))).sum(1))
+
+
+def smooth(part: BodyPart, values, iterations: int = 10, step: float = 0.5) -> np.ndarray:
+    """Laplacian smoothing of any per-vertex map ``(N,)`` (e.g. painted thickness)."""
+    v = np.asarray(values, dtype=float).copy()
+    if v.shape != (part.n_vertices,) or not np.isfinite(v).all():
+        raise ValueError(f"values must be finite with shape ({part.n_vertices},), got {v.shape}")
+    e = part.edges
+    n = part.n_vertices
+    adj = sp.coo_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
+                        shape=(n, n)).tocsr()
+    deg = np.asarray(adj.sum(1)).ravel()
+    for _ in range(int(iterations)):
+        v = v + step * (adj @ v / deg - v)
+    return v
+
+
+def normalise(thickness) -> np.ndarray:
+    """Map thickness (m) to [0, 1] over :data:`THICKNESS_RANGE`."""
+    lo, hi = THICKNESS_RANGE
+    return (np.asarray(thickness, float) - lo) / (hi - lo)
+
+
+def denormalise(x) -> np.ndarray:
+    """Inverse of :func:`normalise`."""
+    lo, hi = THICKNESS_RANGE
+    return lo + np.asarray(x, float) * (hi - lo)
