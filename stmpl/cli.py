@@ -1,0 +1,135 @@
+"""The ``stmpl`` command line."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+
+log = logging.getLogger("stmpl")
+
+
+def _body(args):
+    from stmpl.body import AnnyBody, SMPLBody
+
+    if args.smpl:
+        return SMPLBody(args.smpl, uv_path=args.smpl_uv,
+                        betas=[0.0, args.beta2] if args.beta2 is not None else None)
+    return AnnyBody(phenotype={"weight": args.weight})
+
+
+def _thickness(args, body, part):
+    from stmpl import tissue
+
+    if args.thickness is not None:
+        return tissue.constant(part, args.thickness * 1e-3)
+    if args.smpl:
+        return tissue.from_beta2(part, args.beta2 or 0.0)
+    return tissue.from_weight(part, args.weight)
+
+
+def _load(args, part):
+    from stmpl import loads
+
+    total = args.force
+    at = {"uv": tuple(args.at)} if args.at else {"uv": (0.5, 0.5)}
+    mm = 1e-3
+    if args.load == "disk":
+        return loads.disk(part, radius=args.radius * mm, total=total, **at)
+    if args.load == "ellipse":
+        return loads.ellipse(part, semi_axes=(args.radius * mm, args.radius * mm / 2),
+                             angle=args.angle, total=total, **at)
+    if args.load == "seam_disk":
+        return loads.seam_disk(part, args.along, args.radius * mm, total)
+    if args.load == "band":
+        return loads.band(part, args.along, args.width * mm, total)
+    return loads.letter(part, args.char, at["uv"], args.height * mm, args.width * mm,
+                        args.angle, total)
+
+
+def cmd_scene(args) -> int:
+    from stmpl.scene import Scene
+    from stmpl.viz import export_mesh, scene_figure
+
+    body = _body(args)
+    part = body.part(args.part)
+    load = _load(args, part)
+    scene = Scene.from_load(part, _thickness(args, body, part), load, body=body.name)
+    print(load.summary())
+    if args.out:
+        scene_figure(scene, args.out, size=args.size)
+        print(f"wrote {args.out}")
+    if args.save:
+        scene.save(args.save)
+        print(f"wrote {args.save}")
+    if args.export:
+        export_mesh(part, args.export, scene.force)
+        print(f"wrote {args.export}")
+    return 0
+
+
+def cmd_parts(args) -> int:
+    body = _body(args)
+    print(f"{'part':<12}{'vertices':>10}{'faces':>8}{'seam':>6}{'rims':>6}  chart m/unit")
+    for name in body.part_names():
+        p = body.part(name)
+        print(f"{name:<12}{p.n_vertices:>10}{p.n_faces:>8}{len(p.seam_vertices):>6}"
+              f"{len(p.rims):>6}  {p.uv_scale:.3f}")
+    return 0
+
+
+def _body_args(p) -> None:
+    p.add_argument("--weight", type=float, default=0.5,
+                   help="anny weight phenotype in [0, 1] (thin..heavy; default 0.5)")
+    p.add_argument("--smpl", help="an SMPL-format model file (.npz/.pkl) instead of anny")
+    p.add_argument("--smpl-uv", help="OBJ with the SMPL UV layout (vt/ft)")
+    p.add_argument("--beta2", type=float, help="SMPL beta_2 in [-2, 2] (thickness heuristic)")
+
+
+def parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="stmpl", description="Soft-tissue contact deformation of "
+                                 "human bodies: scenes, FEM ground truth, learned predictors.")
+    ap.add_argument("-v", "--verbose", action="store_true", help="log progress")
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    sc = sub.add_parser("scene", help="build a loaded scene on a body part and draw it")
+    _body_args(sc)
+    sc.add_argument("--part", default="left_arm", help="body part (default left_arm)")
+    sc.add_argument("--load", default="disk",
+                    choices=["disk", "ellipse", "seam_disk", "band", "letter"])
+    sc.add_argument("--force", type=float, default=5.0, help="total force F_total, N")
+    sc.add_argument("--radius", type=float, default=20.0, help="disk radius / ellipse a, mm")
+    sc.add_argument("--width", type=float, default=30.0, help="band width / letter stroke, mm")
+    sc.add_argument("--height", type=float, default=100.0, help="letter height, mm")
+    sc.add_argument("--char", default="A", help="letter character")
+    sc.add_argument("--angle", type=float, default=0.0, help="ellipse/letter angle, rad")
+    sc.add_argument("--along", type=float, default=0.5,
+                    help="band/seam disk position along the limb or seam, 0..1")
+    sc.add_argument("--at", type=float, nargs=2, metavar=("U", "V"),
+                    help="load centre in chart coordinates (default 0.5 0.5)")
+    sc.add_argument("--thickness", type=float, help="constant thickness, mm (default: heuristic)")
+    sc.add_argument("--size", type=int, default=256, help="UV image size in the picture, px")
+    sc.add_argument("--out", help="PNG picture to write")
+    sc.add_argument("--save", help="scene file to write (.npz)")
+    sc.add_argument("--export", help="mesh coloured by force to write (.ply/.obj/.glb)")
+    sc.set_defaults(func=cmd_scene)
+
+    pa = sub.add_parser("parts", help="list the body model's parts and their sizes")
+    _body_args(pa)
+    pa.set_defaults(func=cmd_parts)
+    return ap
+
+
+def main(argv=None) -> int:
+    args = parser().parse_args(argv)
+    logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
+                        format="%(levelname)s %(name)s: %(message)s")
+    try:
+        return args.func(args)
+    except (ValueError, FileNotFoundError) as exc:
+        print(f"stmpl {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())

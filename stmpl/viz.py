@@ -1,0 +1,147 @@
+"""Pictures (PNG) and mesh export (PLY / OBJ / GLB with per-vertex colours).
+
+3D views are drawn with matplotlib as flat-shaded triangles sorted back to front (no OpenGL
+needed, so they work on a headless machine). The camera looks at the load (or across the part).
+"""
+
+from __future__ import annotations
+
+import pathlib
+
+import numpy as np
+
+from stmpl.body.part import BodyPart
+
+
+def _matplotlib():
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def view_basis(part: BodyPart, focus: np.ndarray | None = None) -> np.ndarray:
+    """``(3, 3)`` camera rows (right, up, towards the viewer): the part's long axis runs across,
+    the camera faces the outward normal at ``focus`` (vertex weights ``(N,)``) if given."""
+    x = part.vertices - part.vertices.mean(0)
+    pcs = np.linalg.svd(x, full_matrices=False)[2]
+    if focus is not None and np.asarray(focus).sum() > 0:
+        w = np.asarray(focus, float)
+        toward = (w[:, None] * part.normals).sum(0)
+    else:
+        toward = pcs[2]
+    toward /= np.linalg.norm(toward)
+    right = pcs[0] - (pcs[0] @ toward) * toward
+    right /= np.linalg.norm(right)
+    return np.stack([right, np.cross(toward, right), toward])
+
+
+def draw_part(ax, part: BodyPart, values: np.ndarray, basis: np.ndarray, cmap="viridis",
+              vmin=None, vmax=None, vertices: np.ndarray | None = None):
+    """Draw the part seen through ``basis`` coloured by per-vertex ``values`` ``(N,)``."""
+    from matplotlib.collections import PolyCollection
+    import matplotlib
+    import matplotlib.cm as cm
+    import matplotlib.colors as mcolors
+
+    v = (part.vertices if vertices is None else vertices) @ basis.T
+    tri = v[part.faces]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    front = n[:, 2] > 0
+    order = np.argsort(tri[:, :, 2].mean(1))
+    order = order[front[order]]
+    norm = mcolors.Normalize(vmin=np.min(values) if vmin is None else vmin,
+                             vmax=np.max(values) if vmax is None else vmax)
+    rgba = matplotlib.colormaps[cmap](norm(np.asarray(values)[part.faces].mean(1)))
+    shade = 0.45 + 0.55 * n[:, 2:3]
+    rgba[:, :3] *= shade
+    pc = PolyCollection(tri[order, :, :2], facecolors=rgba[order], edgecolors=(0, 0, 0, 0.08),
+                        linewidths=0.2)
+    ax.add_collection(pc)
+    ax.set_xlim(v[:, 0].min() - 0.01, v[:, 0].max() + 0.01)
+    ax.set_ylim(v[:, 1].min() - 0.01, v[:, 1].max() + 0.01)
+    ax.set_aspect("equal")
+    ax.axis("off")
+    return cm.ScalarMappable(norm=norm, cmap=cmap)
+
+
+def draw_uv(ax, part: BodyPart, values: np.ndarray, size: int = 256, cmap="viridis",
+            vmin=None, vmax=None):
+    """Show per-vertex ``values`` ``(N,)`` as the UV image a UV-UNet sees (chart only)."""
+    import torch
+
+    from stmpl.uv import uv_map
+
+    m = uv_map(part, size)
+    img = m.rasterise(torch.tensor(np.array(values, float)[:, None])).numpy()[0]
+    img = np.where(m.mask.numpy(), img, np.nan)
+    im = ax.imshow(img, cmap=cmap, vmin=vmin, vmax=vmax, extent=(0, 1, 0, 1), origin="upper")
+    ax.set_xticks([])
+    ax.set_yticks([])
+    return im
+
+
+def scene_figure(scene, path=None, size: int = 256, dpi: int = 110):
+    """A PNG of a scene: the part in 3D from two sides coloured by force (top) and thickness
+    (bottom), with the matching UV images on the right. Returns the figure (saved if ``path``)."""
+    plt = _matplotlib()
+    part = scene.part
+    force, thick = np.asarray(scene.force), np.asarray(scene.thickness) * 1e3
+    front = view_basis(part, scene.force if scene.force.sum() > 0 else None)
+    back = front * np.array([[-1.0], [1.0], [-1.0]])
+    fig, axes = plt.subplots(2, 3, figsize=(13, 7.5),
+                             gridspec_kw={"width_ratios": [1.25, 1.25, 1.0]})
+    tmin, tmax = (thick.min() - 0.5, thick.max() + 0.5) if np.ptp(thick) < 1e-9 else (None, None)
+    rows = [("force per vertex (N)", force, "inferno", 0.0, max(force.max(), 1e-9)),
+            ("tissue thickness (mm)", thick, "viridis", tmin, tmax)]
+    for r, (label, val, cmap, lo, hi) in enumerate(rows):
+        draw_part(axes[r, 0], part, val, front, cmap, lo, hi)
+        draw_part(axes[r, 1], part, val, back, cmap, lo, hi)
+        im = draw_uv(axes[r, 2], part, val, size, cmap, lo, hi)
+        fig.colorbar(im, ax=axes[r, 2], fraction=0.046, pad=0.04, label=label)
+        axes[r, 0].set_title(f"{label}: loaded side")
+        axes[r, 1].set_title("opposite side")
+        axes[r, 2].set_title(f"UV image {size}x{size}")
+    title = f"{part.name} ({part.n_vertices} vertices, {part.n_faces} faces)"
+    if scene.load is not None:
+        title += " | " + scene.load.summary()
+    fig.suptitle(title)
+    fig.tight_layout()
+    if path is not None:
+        pathlib.Path(path).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=dpi)
+        plt.close(fig)
+    return fig
+
+
+def vertex_colors(values: np.ndarray, cmap="inferno", vmin=None, vmax=None) -> np.ndarray:
+    """``(N, 4)`` uint8 RGBA colours of per-vertex values."""
+    import matplotlib
+    import matplotlib.cm as cm
+    import matplotlib.colors as mcolors
+
+    values = np.asarray(values, float)
+    norm = mcolors.Normalize(vmin=values.min() if vmin is None else vmin,
+                             vmax=values.max() if vmax is None else vmax)
+    return (matplotlib.colormaps[cmap](norm(values)) * 255).round().astype(np.uint8)
+
+
+def export_mesh(part: BodyPart, path, values: np.ndarray | None = None,
+                vertices: np.ndarray | None = None, cmap="inferno") -> pathlib.Path:
+    """Write the part (optionally moved to ``vertices`` ``(N, 3)``) with per-vertex colours of
+    ``values`` ``(N,)`` to ``.ply``, ``.obj`` or ``.glb``."""
+    path = pathlib.Path(path)
+    if path.suffix.lower() not in (".ply", ".obj", ".glb"):
+        raise ValueError(f"mesh export supports .ply, .obj, .glb; got {path.suffix!r}")
+    mesh = part.mesh(vertices)
+    if values is not None:
+        values = np.asarray(values, float)
+        if values.shape != (part.n_vertices,):
+            raise ValueError(f"values must have shape ({part.n_vertices},), got {values.shape}")
+        mesh.visual.vertex_colors = vertex_colors(values, cmap)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    mesh.export(path)
+    return path

@@ -1,0 +1,75 @@
+import numpy as np
+import pytest
+
+from stmpl.body import BodyPart, extract_part, sheet, tube
+from stmpl.body.part import boundary_loops, project_on_polyline
+
+
+def test_tube_geometry_matches_closed_form():
+    p = tube(radius=0.04, length=0.3, n_around=48, n_along=31)
+    # polygonal lateral area: n * (2 r sin(pi/n)) * length
+    exact = 48 * 2 * 0.04 * np.sin(np.pi / 48) * 0.3
+    assert p.face_areas.sum() == pytest.approx(exact, rel=1e-12)
+    assert p.vertex_areas.sum() == pytest.approx(exact, rel=1e-12)
+    assert len(p.seam_groups) == 31 and all(len(g) == 2 for g in p.seam_groups)
+    assert [len(r) for r in p.rims] == [48, 48]
+    assert p.axial.min() == pytest.approx(0) and p.axial.max() == pytest.approx(0.3)
+
+
+def test_chart_is_normalised_with_aspect_kept():
+    p = tube(radius=0.04, length=0.3, n_around=24, n_along=10)
+    lo, hi = p.uv.min(0), p.uv.max(0)
+    assert lo.min() == pytest.approx(0.04) and hi.max() == pytest.approx(0.96)
+    # aspect: circumference / length
+    assert (hi - lo)[0] / (hi - lo)[1] == pytest.approx(2 * np.pi * 0.04 / 0.3, rel=1e-9)
+    # uv_scale * chart extent = true length along the tube
+    assert (hi - lo)[1] * p.uv_scale == pytest.approx(0.3, rel=0.02)
+
+
+def test_arrays_round_trip():
+    p = tube(n_around=12, n_along=5)
+    q = BodyPart.from_arrays(p.name, p.arrays(), p.source)
+    for k in ("vertices", "faces", "normals", "uv", "face_uv", "uv_vertex", "axis"):
+        np.testing.assert_array_equal(getattr(p, k), getattr(q, k))
+    assert [r.tolist() for r in p.rims] == [r.tolist() for r in q.rims]
+
+
+def test_extract_part_keeps_one_chart_and_one_piece():
+    p = tube(n_around=16, n_along=11)
+    mask = p.vertices[:, 2] <= 0.15 + 1e-9
+    mask[-1] = True  # a stray vertex with no whole face is dropped
+    q = extract_part("half", p.vertices, p.faces, p.uv, p.face_uv, mask)
+    assert q.n_faces == 2 * 16 * 5
+    assert q.n_vertices == 16 * 6
+    assert len(q.rims) == 2
+
+
+def test_boundary_loops_of_sheet_and_closed_surface():
+    s = sheet(nx=5, ny=4)
+    (loop,) = s.rims
+    assert len(loop) == 2 * (5 + 4) - 4
+    closed = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 1], [1, 3, 2]])
+    assert boundary_loops(closed) == ()
+
+
+def test_project_on_polyline():
+    line = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0]], float)
+    pts = np.array([[0.5, 0.2, 0], [1.3, 0.5, 0], [-1, 0, 0]], float)
+    np.testing.assert_allclose(project_on_polyline(pts, line), [0.5, 1.5, 0.0])
+
+
+@pytest.mark.parametrize("field,value,message", [
+    ("vertices", np.zeros((4, 2)), "vertices must have shape"),
+    ("faces", np.array([[0, 1, 99]]), "out of range"),
+    ("normals", np.full((4, 3), np.nan), "non-finite"),
+])
+def test_bad_part_arrays_are_named(field, value, message):
+    base = dict(name="x", vertices=np.eye(4, 3), faces=np.array([[0, 1, 2]]),
+                normals=np.tile([0, 0, 1.0], (4, 1)), uv=np.eye(3, 2), face_uv=np.array([[0, 1,
+                                                                                      2]]),
+                uv_vertex=np.array([0, 1, 2]), uv_scale=1.0)
+    base[field] = value
+    if field == "faces":
+        base["face_uv"] = np.array([[0, 1, 2]])
+    with pytest.raises(ValueError, match=message):
+        BodyPart(**base)

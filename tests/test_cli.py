@@ -1,0 +1,30 @@
+import numpy as np
+
+from stmpl.cli import main
+from stmpl.scene import Scene
+
+
+def test_scene_command_writes_picture_scene_and_mesh(tmp_path, capsys, arm):
+    rc = main(["scene", "--load", "disk", "--force", "5", "--out", str(tmp_path / "s.png"),
+               "--save", str(tmp_path / "s.npz"), "--export", str(tmp_path / "s.ply")])
+    assert rc == 0
+    assert (tmp_path / "s.png").stat().st_size > 20_000
+    s = Scene.load(tmp_path / "s.npz")
+    assert s.force.sum() == np.float64(5.0) or abs(s.force.sum() - 5.0) < 1e-9
+    np.testing.assert_allclose(s.thickness, 0.0075)  # weight 0.5 -> 7.5 mm
+    assert "disk: 5 N on" in capsys.readouterr().out
+
+
+def test_scene_command_reports_bad_input(capsys, arm):
+    assert main(["scene", "--force", "-1"]) == 2
+    assert "total force must be finite and > 0" in capsys.readouterr().err
+    assert main(["scene", "--part", "leg"]) == 2
+    assert "unknown part 'leg'" in capsys.readouterr().err
+    assert main(["scene", "--thickness", "20"]) == 2
+    assert "thickness must lie in" in capsys.readouterr().err
+
+
+def test_parts_command(capsys, arm):
+    assert main(["parts"]) == 0
+    out = capsys.readouterr().out
+    assert "left_arm" in out and "541" in out and "belly" in out

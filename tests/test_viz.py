@@ -1,0 +1,39 @@
+import numpy as np
+import pytest
+import trimesh
+
+from stmpl import loads, tissue, viz
+from stmpl.scene import Scene
+
+
+def test_scene_picture(arm, tmp_path):
+    import matplotlib.image as mpimg
+
+    s = Scene.from_load(arm, tissue.ramp(arm, 0.005, 0.01), loads.seam_disk(arm, 0.5, 0.03, 5))
+    viz.scene_figure(s, tmp_path / "s.png")
+    img = mpimg.imread(tmp_path / "s.png")
+    assert img.shape[0] > 500 and img.shape[1] > 1000
+    # the force colour map's bright end appears (the load is drawn), and so does the background
+    assert (img[..., :3].std(axis=2) > 0.2).mean() > 0.005
+
+
+def test_view_faces_the_load(arm):
+    ld = loads.disk(arm, uv=(0.5, 0.5), radius=0.03, total=1)
+    basis = viz.view_basis(arm, ld.force)
+    assert (arm.normals[ld.vertices] @ basis[2]).mean() > 0.7
+
+
+@pytest.mark.parametrize("suffix", [".ply", ".obj", ".glb"])
+def test_mesh_export_with_colours(arm, tmp_path, suffix):
+    values = arm.vertices[:, 0]
+    path = viz.export_mesh(arm, tmp_path / f"m{suffix}", values)
+    m = trimesh.load(path, force="mesh", process=False)
+    assert len(m.faces) == arm.n_faces
+    assert len(np.unique(m.visual.vertex_colors[:, :3], axis=0)) > 50
+
+
+def test_export_rejects_bad_input(arm, tmp_path):
+    with pytest.raises(ValueError, match="supports .ply"):
+        viz.export_mesh(arm, tmp_path / "m.stl")
+    with pytest.raises(ValueError, match="values must have shape"):
+        viz.export_mesh(arm, tmp_path / "m.ply", np.zeros(3))
