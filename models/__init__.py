@@ -1,0 +1,1 @@
+"""Learned predictors: one model per package, each plugs into stmpl.predictor."""

@@ -1,0 +1,9 @@
+#!/usr/bin/env bash
+# Regenerates the pictures in docs/ (the default anny left arm, weight 0.5 -> 7.5 mm tissue).
+set -euo pipefail
+cd "$(dirname "$0")"
+stmpl scene --load disk --force 5 --radius 25 --at 0.5 0.5 --out arm_disk.png
+stmpl scene --load seam_disk --force 5 --radius 30 --along 0.5 --out arm_seam_disk.png
+stmpl scene --load band --force 5 --width 30 --along 0.4 --out arm_band.png
+stmpl scene --load letter --char A --force 5 --height 170 --width 18 --at 0.5 0.5 \
+    --out arm_letter_A.png

@@ -1,0 +1,1 @@
+"""The gnn predictor (arrives with the predictors issue)."""

@@ -1,0 +1,1 @@
+"""The naive predictor (arrives with the predictors issue)."""

@@ -1,0 +1,1 @@
+"""The uv_unet predictor (arrives with the predictors issue)."""
