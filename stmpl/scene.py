@@ -8,15 +8,14 @@ to one ``.npz`` (arrays, the part included, so a file is self-contained) with a 
 from __future__ import annotations
 
 import json
-import os
 import pathlib
-import tempfile
 from dataclasses import dataclass, field
 
 import numpy as np
 
 from stmpl import tissue
 from stmpl.body.part import BodyPart
+from stmpl.files import atomic_savez
 from stmpl.loads import FORCE_RANGE, Load
 
 FORMAT = "stmpl-scene/1"
@@ -151,18 +150,8 @@ class Deformation:
 
 
 def _save(path, arrays: dict, header: dict) -> pathlib.Path:
-    path = pathlib.Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     arrays = dict(arrays, header=np.frombuffer(json.dumps(header).encode(), dtype=np.uint8))
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez_compressed(f, **arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        pathlib.Path(tmp).unlink(missing_ok=True)
-        raise
-    return path
+    return atomic_savez(path, arrays, compressed=True)
 
 
 def _load(path, fmt: str) -> tuple[dict, dict]:

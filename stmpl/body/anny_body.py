@@ -55,15 +55,21 @@ class AnnyBody(CachedBodyModel):
         return self.phenotype.get("weight", 0.5)
 
     def options(self) -> dict:
-        import anny
+        from importlib.metadata import version
 
         return {"phenotype": {k: self.phenotype.get(k, 0.5) for k in PHENOTYPES},
-                "anny_version": anny.__version__}
+                "anny_version": version("anny")}
 
     @property
     def anny(self):
         """The underlying ``anny.Anny`` module (built on first use)."""
         if self._anny is None:
+            try:  # anny's skinning initialises NVIDIA Warp, which prints a banner otherwise
+                import warp
+
+                warp.config.log_level = warp.LOG_ERROR
+            except ImportError:  # pragma: no cover
+                pass
             import anny
 
             log.info("loading anny (the first run builds its assets into %s, about a minute)",

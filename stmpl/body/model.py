@@ -12,7 +12,6 @@ import json
 import logging
 import os
 import pathlib
-import tempfile
 from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
@@ -20,6 +19,7 @@ import numpy as np
 import torch
 
 from stmpl.body.part import BodyPart, extract_part
+from stmpl.files import atomic_savez
 
 log = logging.getLogger(__name__)
 
@@ -112,7 +112,7 @@ class CachedBodyModel(torch.nn.Module):
             except Exception as exc:  # a corrupt cache entry is rebuilt, never trusted
                 log.warning("rebuilding corrupt part cache %s (%s)", path, exc)
         part = self._build_part(name, source)
-        _atomic_savez(path, part.arrays())
+        atomic_savez(path, part.arrays())
         return part
 
     def _build_part(self, name: str, source: dict) -> BodyPart:
@@ -131,15 +131,3 @@ class CachedBodyModel(torch.nn.Module):
         log.info("building part %s of %s", name, self.name)
         return extract_part(name, mesh.vertices, mesh.faces, mesh.uv, mesh.face_uv, mask,
                             axis=axis, source=source)
-
-
-def _atomic_savez(path: pathlib.Path, arrays: dict) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, suffix=".npz")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez(f, **arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        pathlib.Path(tmp).unlink(missing_ok=True)
-        raise
