@@ -72,8 +72,9 @@ class AnnyBody(CachedBodyModel):
                 pass
             import anny
 
-            log.info("loading anny (the first run builds its assets into %s, about a minute)",
-                     os.environ.get("ANNY_CACHE_DIR", "~/.cache/anny"))
+            cache = os.path.expanduser(os.environ.get("ANNY_CACHE_DIR", "~/.cache/anny"))
+            if not os.path.isdir(cache) or not os.listdir(cache):
+                log.warning("building anny's assets once into %s (about a minute)", cache)
             self._anny = anny.Anny()
         return self._anny
 
