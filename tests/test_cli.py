@@ -1,4 +1,5 @@
 import numpy as np
+import pytest
 
 from stmpl.cli import main
 from stmpl.scene import Scene
@@ -10,7 +11,7 @@ def test_scene_command_writes_picture_scene_and_mesh(tmp_path, capsys, arm):
     assert rc == 0
     assert (tmp_path / "s.png").stat().st_size > 20_000
     s = Scene.load(tmp_path / "s.npz")
-    assert s.force.sum() == np.float64(5.0) or abs(s.force.sum() - 5.0) < 1e-9
+    assert s.force.sum() == pytest.approx(5.0)
     np.testing.assert_allclose(s.thickness, 0.0075)  # weight 0.5 -> 7.5 mm
     assert "disk: 5 N on" in capsys.readouterr().out
 
