@@ -15,6 +15,8 @@ are upright (``v`` grows upwards).
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 import torch
 from scipy import ndimage
@@ -165,15 +167,13 @@ def _sample_plan(part: BodyPart, size: int) -> tuple[np.ndarray, np.ndarray]:
     return idx, w
 
 
-_CACHE: dict[tuple[int, int, int], UVMap] = {}
+_CACHE: "weakref.WeakKeyDictionary[BodyPart, dict]" = weakref.WeakKeyDictionary()
 
 
 def uv_map(part: BodyPart, size: int = 256, pad: int = 4) -> UVMap:
     """A :class:`UVMap` for ``part`` at ``size``, reused while the part object lives."""
-    key = (id(part), int(size), int(pad))
-    m = _CACHE.get(key)
-    if m is None or m.n_vertices != part.n_vertices:
-        if len(_CACHE) > 32:
-            _CACHE.clear()
-        m = _CACHE[key] = UVMap(part, size, pad)
-    return m
+    maps = _CACHE.setdefault(part, {})
+    key = (int(size), int(pad))
+    if key not in maps:
+        maps[key] = UVMap(part, size, pad)
+    return maps[key]

@@ -22,7 +22,6 @@ from __future__ import annotations
 import hashlib
 import pathlib
 import pickle
-import sys
 
 import numpy as np
 import scipy.sparse as sp
@@ -201,7 +200,3 @@ def read_obj_uv(path, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if ft.max() >= len(uv) or ft.min() < 0:
         raise ValueError(f"UV OBJ {path.name}: vt index out of range")
     return uv, ft[order]
-
-
-if sys.version_info < (3, 10):  # pragma: no cover
-    raise RuntimeError("stmpl needs Python >= 3.10")
