@@ -1,0 +1,441 @@
+"""Static equilibrium of the tissue shell: Newton's method with a line search on the energy.
+
+The displacement ``u`` of the free nodes minimises ``Pi(u) = sum_t V_t W(F_t) - f . u`` with P1
+tetrahedra (``F = I + sum_a u_a (x) grad phi_a``, constant per element). Each Newton step solves
+``K du = -r`` (``r = dPi/du``, ``K = d^2 Pi/du^2``) and backtracks along ``du`` until the energy
+falls (Armijo) with every ``det F > 0``. The inner surface is fixed; more fixed components can be
+given. Forces are dead loads (their direction does not follow the skin).
+
+Assembly is a vectorised NumPy kernel over all elements: with the tangent in the form
+``A_iJkL = a d_ik d_JL + b H_Ji H_Lk + c H_Li H_Jk`` the element matrix is
+``K_aibk = V (a d_ik G_a.G_b + b g_ai g_bk + c g_ak g_bi)`` with ``g_a = H^T G_a``, and the
+scatter into the (fixed) sparse pattern is one ``bincount``. A test checks it against
+scikit-fem's own assembly.
+
+A solve that does not converge, or would need an inverted element, returns a :class:`Solution`
+with ``ok = False`` and a reason, never a displacement. So does a converged state that pushes the
+skin through the fixed inner surface (``inward displacement > thickness``: converged but
+non-physical).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+
+from fem.material import NeoHookean
+from fem.mesh import ShellMesh
+
+
+@dataclass(frozen=True)
+class SolverOptions:
+    """Newton settings.
+
+    Attributes:
+        rtol: converged when ``|r| <= rtol * |f|`` (free DOFs).
+        max_iter: Newton iterations per solve (per force level or sub-step).
+        stagnation: fail when the residual has not halved over this many iterations.
+        max_substeps: a failed force increment is halved up to this many times.
+        max_compression: reject states whose skin moves inward by more than this share of the
+            local thickness (1.0: skin reaches bone).
+        linear_solver: ``"auto"``, ``"pardiso"``, ``"superlu"`` or ``"cg"`` (AMG-preconditioned).
+        load: ``"traction"`` or ``"nodal"`` (see :meth:`ShellMesh.nodal_forces`).
+    """
+
+    rtol: float = 1e-7
+    max_iter: int = 25
+    stagnation: int = 6
+    max_substeps: int = 3
+    max_compression: float = 1.0
+    linear_solver: str = "auto"
+    load: str = "traction"
+
+    def __post_init__(self) -> None:
+        if self.linear_solver not in ("auto", *LINEAR_SOLVERS):
+            raise ValueError(f"unknown linear_solver {self.linear_solver!r}; choose auto or one "
+                             f"of {sorted(LINEAR_SOLVERS)}")
+        if self.load not in ("traction", "nodal"):
+            raise ValueError(f"unknown load mode {self.load!r}; use 'traction' or 'nodal'")
+        if not (self.rtol > 0 and self.max_iter >= 1 and self.max_compression > 0):
+            raise ValueError("rtol, max_iter and max_compression must be positive")
+
+
+@dataclass(frozen=True, eq=False)
+class Solution:
+    """One solve's outcome. ``displacement`` is ``(M, 3)`` in metres when ``ok``, else ``None``.
+
+    ``reason`` says why a solve failed (``""`` when ok). Diagnostics: Newton ``iterations``,
+    relative ``residual``, ``min_det_F`` of the last accepted state, wall ``time`` in s,
+    ``total_force`` (sum of per-vertex force magnitudes, N) and ``substeps`` used.
+    """
+
+    ok: bool
+    reason: str
+    displacement: np.ndarray | None
+    iterations: int
+    residual: float
+    min_det_F: float
+    time: float
+    total_force: float
+    substeps: int = 0
+    max_displacement: float = float("nan")
+    max_compression: float = float("nan")
+    info: dict = field(default_factory=dict)
+
+    def diagnostics(self) -> dict:
+        """JSON-ready scalars."""
+        return {"ok": self.ok, "reason": self.reason, "iterations": self.iterations,
+                "residual": self.residual, "min_det_F": self.min_det_F, "time": self.time,
+                "total_force": self.total_force, "substeps": self.substeps,
+                "max_displacement": self.max_displacement,
+                "max_compression": self.max_compression}
+
+    def part_displacement(self, mesh: ShellMesh) -> np.ndarray:
+        """``(N, 3)`` displacement of the body part's vertices, m."""
+        if not self.ok:
+            raise RuntimeError(f"the solve failed ({self.reason}); there is no displacement")
+        return self.displacement[mesh.part_nodes]
+
+
+class SolveFailed(RuntimeError):
+    """Raised by helpers that need a converged solve."""
+
+
+class Solver:
+    """Newton solver for one shell mesh and material; reuse it for many loads (the sparse pattern,
+    shape gradients and the linear solver's symbolic analysis are kept).
+
+    Args:
+        mesh: the tissue shell.
+        material: a material with ``energy`` and ``tangent_parts`` (default Neo-Hookean,
+            E = 1 kPa, nu = 0.4).
+        fixed: optional ``(M, 3)`` bool mask of further fixed components (the inner surface is
+            always fixed).
+        options: :class:`SolverOptions`.
+    """
+
+    def __init__(self, mesh: ShellMesh, material=None, fixed: np.ndarray | None = None,
+                 options: SolverOptions | None = None):
+        self.mesh = mesh
+        self.material = material if material is not None else NeoHookean()
+        self.options = options or SolverOptions()
+        M = mesh.n_nodes
+        mask = np.zeros((M, 3), dtype=bool)
+        mask[mesh.inner_nodes] = True
+        if fixed is not None:
+            fixed = np.asarray(fixed, dtype=bool)
+            if fixed.shape != (M, 3):
+                raise ValueError(f"fixed must have shape ({M}, 3), got {fixed.shape}")
+            mask |= fixed
+        self.fixed = mask
+        self.free = np.flatnonzero(~mask.ravel())
+        X = mesh.nodes[mesh.tets]                                      # (T, 4, 3)
+        Dm = (X[:, 1:] - X[:, :1]).transpose(0, 2, 1)                  # columns are edges
+        Dinv = np.linalg.inv(Dm)
+        self.G = np.concatenate([-Dinv.sum(1, keepdims=True), Dinv], 1)  # (T, 4, 3) grad phi_a
+        self.V = mesh.volumes
+        if np.any(self.V <= 0):
+            raise ValueError("mesh has inverted or flat elements; check its quality()")
+        self.GG = np.einsum("taJ,tbJ->tab", self.G, self.G)           # (T, 4, 4)
+        self.linear = make_linear_solver(self.options.linear_solver)
+        self._pattern(upper=self.linear.upper)
+
+    # ------------------------------------------------------------------ assembly
+    def _pattern(self, upper: bool) -> None:
+        nf = len(self.free)
+        fmap = np.full(3 * self.mesh.n_nodes, -1, dtype=np.int64)
+        fmap[self.free] = np.arange(nf)
+        dofs = fmap[(3 * self.mesh.tets[:, :, None] + np.arange(3)).reshape(-1, 12)]  # (T, 12)
+        rows = np.broadcast_to(dofs[:, :, None], (len(dofs), 12, 12)).ravel()
+        cols = np.broadcast_to(dofs[:, None, :], (len(dofs), 12, 12)).ravel()
+        keep = (rows >= 0) & (cols >= 0)
+        if upper:
+            keep &= rows <= cols
+        key = rows[keep] * nf + cols[keep]
+        uniq, inv = np.unique(key, return_inverse=True)
+        self._keep, self._inv, self._nnz = np.flatnonzero(keep), inv, len(uniq)
+        r, c = np.divmod(uniq, nf)
+        self._indices = c.astype(np.int32)
+        self._indptr = np.searchsorted(r, np.arange(nf + 1)).astype(np.int32)
+        self._dofs = fmap
+
+    def deformation_gradient(self, u: np.ndarray) -> np.ndarray:
+        """``(T, 3, 3)`` ``F = I + sum_a u_a (x) G_a`` for nodal displacement ``u`` ``(M, 3)``."""
+        return np.eye(3) + np.matmul(u[self.mesh.tets].transpose(0, 2, 1), self.G)
+
+    def energy(self, u: np.ndarray, f: np.ndarray) -> float:
+        """Total potential energy, J (``inf`` if an element inverts)."""
+        W = self.material.energy(self.deformation_gradient(u))
+        return float(self.V @ W - np.vdot(f, u))
+
+    def residual(self, u: np.ndarray, f: np.ndarray) -> np.ndarray:
+        """``(M, 3)`` out-of-balance force ``dPi/du``, N (all nodes, fixed ones included)."""
+        P = self.material.stress(self.deformation_gradient(u))
+        return self._scatter_force(P) - f
+
+    def _scatter_force(self, P: np.ndarray) -> np.ndarray:
+        """``(M, 3)`` internal nodal forces ``f_a = sum_t V P G_a`` from stresses ``(T, 3, 3)``."""
+        fe = self.V[:, None, None] * np.matmul(self.G, P.transpose(0, 2, 1))  # (T, 4, 3)
+        M = self.mesh.n_nodes
+        idx = (3 * self.mesh.tets[:, :, None] + np.arange(3)).ravel()
+        return np.bincount(idx, weights=fe.ravel(), minlength=3 * M).reshape(M, 3)
+
+    def assemble(self, u: np.ndarray, f: np.ndarray):
+        """``(r (M, 3), K)``: residual and the tangent on free DOFs (CSR; upper triangle only
+        when the linear solver wants it)."""
+        F = self.deformation_gradient(u)
+        P, (a, b, c, H) = self.material.tangent_parts(F)
+        r = self._scatter_force(P)
+        g = np.matmul(self.G, H)                                      # (T, 4, 3) H^T G_a
+        T = len(g)
+        gg = (g.reshape(T, 12, 1) * g.reshape(T, 1, 12)).reshape(T, 4, 3, 4, 3)
+        Ke = (b * self.V)[:, None, None, None, None] * gg
+        Ke += (c * self.V)[:, None, None, None, None] * gg.transpose(0, 1, 4, 3, 2)
+        diag = (a * self.V)[:, None, None] * self.GG                   # (T, 4, 4)
+        for i in range(3):
+            Ke[:, :, i, :, i] += diag
+        data = np.bincount(self._inv, weights=Ke.reshape(-1)[self._keep], minlength=self._nnz)
+        nf = len(self.free)
+        K = sp.csr_matrix((data, self._indices, self._indptr), shape=(nf, nf))
+        return r - f, K
+
+    def tangent_full(self, u: np.ndarray) -> sp.csr_matrix:
+        """The full symmetric tangent on free DOFs (for checks)."""
+        _, K = self.assemble(u, np.zeros_like(u))
+        if self.linear.upper:
+            K = (K + sp.triu(K, 1).T).tocsr()
+        return K
+
+    # ------------------------------------------------------------------ solving
+    def solve(self, force: np.ndarray, u0: np.ndarray | None = None) -> Solution:
+        """Equilibrium under per-vertex normal ``force`` ``(N,)`` (N) on the part.
+
+        ``u0``: ``(M, 3)`` start (a converged neighbour state), else rest. A failed increment from
+        ``u0`` is retried in up to ``max_substeps`` halvings before the solve fails.
+        """
+        force = self._check_force(force)
+        t0 = time.perf_counter()
+        u = np.zeros((self.mesh.n_nodes, 3)) if u0 is None else np.array(u0, dtype=float)
+        if u.shape != (self.mesh.n_nodes, 3):
+            raise ValueError(f"u0 must have shape ({self.mesh.n_nodes}, 3), got {u.shape}")
+        f_target = self.mesh.nodal_forces(force, self.options.load)
+        f_start = self._balanced_force(u) if u0 is not None else np.zeros_like(f_target)
+        # march from the start state's load to the target, halving the step on failure
+        s, step, iters, substeps, last = 0.0, 1.0, 0, 0, None
+        while s < 1.0:
+            step = min(step, 1.0 - s)
+            f = f_start + (s + step) * (f_target - f_start)
+            res = self._newton(u, f)
+            iters += res["iterations"]
+            last = res
+            if res["ok"]:
+                u, s = res["u"], s + step
+                continue
+            if substeps >= self.options.max_substeps:
+                return self._fail(res, iters, t0, force, substeps)
+            substeps += 1
+            step /= 2
+        return self._finish(last, u, iters, t0, force, substeps)
+
+    def continuation(self, force: np.ndarray, totals) -> list[Solution]:
+        """Solve the load pattern ``force`` ``(N,)`` scaled to each total in ``totals`` (N, rising),
+        each level warm-started from the last converged one. After a failure the remaining levels
+        are reported as failed without being tried (a higher force cannot be carried either)."""
+        force = self._check_force(force)
+        base = force.sum()
+        if base <= 0:
+            raise ValueError("the load pattern carries no force")
+        out, u, failed = [], None, None
+        for total in totals:
+            if failed is not None:
+                out.append(Solution(False, f"skipped: a lower force ({failed:.3g} N) failed", None,
+                                    0, float("nan"), float("nan"), 0.0, float(total)))
+                continue
+            sol = self.solve(force * (total / base), u0=u)
+            out.append(sol)
+            if sol.ok:
+                u = sol.displacement
+            else:
+                failed = float(total)
+        return out
+
+    def _check_force(self, force) -> np.ndarray:
+        force = np.asarray(force, dtype=float)
+        n = self.mesh.part.n_vertices
+        if force.shape != (n,):
+            raise ValueError(f"force must have shape ({n},), got {force.shape}")
+        if not np.all(np.isfinite(force)) or force.min() < 0:
+            raise ValueError("force must be finite and >= 0 N at every vertex")
+        return force
+
+    def _balanced_force(self, u: np.ndarray) -> np.ndarray:
+        """The external force that holds state ``u`` in equilibrium (free DOFs)."""
+        r = self.residual(u, np.zeros_like(u)).reshape(-1)
+        out = np.zeros_like(r)
+        out[self.free] = r[self.free]
+        return out.reshape(-1, 3)
+
+    def _newton(self, u: np.ndarray, f: np.ndarray) -> dict:
+        opt = self.options
+        free = self.free
+        fnorm = max(np.linalg.norm(f.reshape(-1)[free]), 1e-30)
+        E = self.energy(u, f)
+        history: list[float] = []
+        rel = float("nan")
+        for it in range(opt.max_iter + 1):
+            r, K = self.assemble(u, f)
+            rf = r.reshape(-1)[free]
+            rel = float(np.linalg.norm(rf) / fnorm)
+            history.append(rel)
+            if rel <= opt.rtol:
+                return {"ok": True, "u": u, "iterations": it, "residual": rel}
+            if it == opt.max_iter:
+                break
+            if (len(history) > opt.stagnation
+                    and history[-1] > 0.5 * history[-1 - opt.stagnation]):
+                return {"ok": False, "reason": f"stagnated: residual {rel:.2e} did not halve in "
+                        f"{opt.stagnation} iterations", "iterations": it, "residual": rel}
+            try:
+                du, neg = self.linear.solve(K, -rf)
+            except (RuntimeError, ValueError) as e:
+                return {"ok": False, "reason": f"linear solve failed: {e}", "iterations": it,
+                        "residual": rel}
+            slope = float(rf @ du)
+            if not np.all(np.isfinite(du)) or slope >= 0:
+                why = f" ({neg} negative eigenvalues)" if neg else ""
+                return {"ok": False, "reason": f"indefinite tangent{why}: the layer buckles",
+                        "iterations": it, "residual": rel}
+            step = np.zeros(u.size)
+            step[free] = du
+            step = step.reshape(-1, 3)
+            alpha, accepted = 1.0, False
+            for _ in range(12):
+                trial = u + alpha * step
+                Et = self.energy(trial, f)
+                if np.isfinite(Et) and (Et <= E + 1e-4 * alpha * slope
+                                        or (Et - E) <= 1e-12 * abs(E)):
+                    accepted = True
+                    break
+                alpha *= 0.5
+            if not accepted:
+                inv = not np.isfinite(self.energy(u + 2.0**-11 * step, f))
+                reason = ("element inversion: every step along the Newton direction makes "
+                          "det F <= 0" if inv else "line search failed to lower the energy")
+                return {"ok": False, "reason": reason, "iterations": it + 1, "residual": rel}
+            u, E = trial, Et
+        return {"ok": False, "reason": f"no convergence in {opt.max_iter} iterations (residual "
+                f"{rel:.2e})", "iterations": opt.max_iter, "residual": rel}
+
+    def _fail(self, res, iters, t0, force, substeps) -> Solution:
+        return Solution(False, res["reason"], None, iters, res["residual"], float("nan"),
+                        time.perf_counter() - t0, float(force.sum()), substeps)
+
+    def _finish(self, res, u, iters, t0, force, substeps) -> Solution:
+        detF = float(np.linalg.det(self.deformation_gradient(u)).min())
+        m = self.mesh
+        skin_u = u[: m.n_skin]
+        inward = -np.einsum("si,si->s", skin_u, m.skin_normals) / m.thickness
+        comp = float(inward.max())
+        umax = float(np.linalg.norm(skin_u, axis=1).max())
+        elapsed = time.perf_counter() - t0
+        base = dict(iterations=iters, residual=res["residual"], min_det_F=detF, time=elapsed,
+                    total_force=float(force.sum()), substeps=substeps, max_displacement=umax,
+                    max_compression=comp)
+        if detF <= 0:
+            return Solution(False, f"inverted element (min det F {detF:.3g})", None, **base)
+        if comp > self.options.max_compression:
+            return Solution(False, f"non-physical: the skin moves inward {comp:.2f} x the "
+                            f"thickness (limit {self.options.max_compression})", None, **base)
+        return Solution(True, "", u, **base)
+
+
+# ---------------------------------------------------------------------- linear solvers
+class _SuperLU:
+    """SciPy's SuperLU with a minimum-degree ordering on ``A^T + A`` (always available)."""
+
+    name, upper = "superlu", False
+
+    def solve(self, K, b):
+        from scipy.sparse.linalg import splu
+
+        lu = splu(K.tocsc(), permc_spec="MMD_AT_PLUS_A",
+                  options={"SymmetricMode": True}, diag_pivot_thresh=0.0)
+        neg = int(np.sum(np.sign(lu.U.diagonal()) < 0))
+        return lu.solve(b), neg
+
+
+class _Pardiso:
+    """MKL PARDISO through pypardiso, symmetric indefinite mode (reports the tangent's inertia).
+
+    The symbolic analysis is done once per sparsity pattern and reused for every Newton step."""
+
+    name, upper = "pardiso", True
+
+    def __init__(self):
+        import pypardiso
+
+        self._solver = pypardiso.PyPardisoSolver(mtype=-2)
+        self._analysed = None
+
+    def solve(self, K, b):
+        s = self._solver
+        s._check_A(K)
+        key = (K.shape, K.nnz)  # one Solver keeps one pattern
+        b = np.asfortranarray(b.reshape(-1, 1))
+        if self._analysed != key:
+            s.set_phase(11)
+            s._call_pardiso(K, b)
+            self._analysed = key
+        s.set_phase(23)
+        x = s._call_pardiso(K, b)
+        neg = int(s.get_iparm(23))  # iparm(23): number of negative eigenvalues
+        return x.ravel(), neg
+
+
+class _AMGCG:
+    """Conjugate gradients preconditioned by smoothed-aggregation AMG (pyamg)."""
+
+    name, upper = "cg", False
+
+    def solve(self, K, b):
+        import pyamg
+        from scipy.sparse.linalg import cg
+
+        ml = pyamg.smoothed_aggregation_solver(K, symmetry="symmetric")
+        x, info = cg(K, b, rtol=1e-10, maxiter=2000, M=ml.aspreconditioner())
+        if info != 0:
+            raise RuntimeError(f"AMG-CG did not converge (info {info})")
+        return x, 0
+
+
+LINEAR_SOLVERS = {"pardiso": _Pardiso, "superlu": _SuperLU, "cg": _AMGCG}
+
+
+def available_linear_solvers() -> list[str]:
+    """Names of the linear solvers that import on this machine, fastest first."""
+    out = []
+    for name, mod in (("pardiso", "pypardiso"), ("superlu", None), ("cg", "pyamg")):
+        if mod is None:
+            out.append(name)
+            continue
+        try:
+            __import__(mod)
+            out.append(name)
+        except Exception:  # noqa: BLE001 - a broken optional install counts as absent
+            pass
+    return out
+
+
+def make_linear_solver(name: str = "auto"):
+    """A linear solver by name; ``"auto"`` takes PARDISO if it loads, else SuperLU."""
+    if name == "auto":
+        name = "pardiso" if "pardiso" in available_linear_solvers() else "superlu"
+    if name not in LINEAR_SOLVERS:
+        raise ValueError(f"unknown linear solver {name!r}")
+    try:
+        return LINEAR_SOLVERS[name]()
+    except ImportError as e:
+        raise ImportError(f"linear solver {name!r} needs a package that is not installed: {e}")

@@ -1,0 +1,206 @@
+"""Verification of the FEM solver against closed forms, finite differences and scikit-fem."""
+
+import numpy as np
+import pytest
+
+from fem.material import LinearElastic, NeoHookean, lame
+from fem.mesh import shell_mesh
+from fem.solver import Solver, SolverOptions, available_linear_solvers
+from stmpl.body.primitives import sheet, tube
+
+
+def _lame(n_around, layers, p=1.0, b=0.05, t=0.01, material=None):
+    """A thick cylinder (radii b - t, b in m) under outer pressure ``p`` (Pa), inner face fixed,
+    ends held axially (plane strain), with ``n_around`` vertices per ring and axial spacing tied
+    to it. Returns (FEM mean outer radial displacement, closed form, max nodal error / max |u|)."""
+    part = tube(radius=b, length=0.24 / n_around, n_around=n_around, n_along=3)
+    mesh = shell_mesh(part, np.full(part.n_vertices, t), layers=layers, normal_smoothing=0)
+    fixed = np.zeros((mesh.n_nodes, 3), bool)
+    rim = np.concatenate(part.rims)
+    for k in range(layers + 1):
+        fixed[rim + k * mesh.n_skin, 2] = True
+    material = material or LinearElastic(1000.0, 0.4)
+    sol = Solver(mesh, material, fixed=fixed).solve(p * part.vertex_areas)
+    assert sol.ok, sol.reason
+    mu, lam = lame(material.E, material.nu)
+    a = b - t
+    A = -p / (2 * (lam + mu) + 2 * mu * a**2 / b**2)   # u(r) = A r + B / r, u(a) = 0
+    r = np.linalg.norm(mesh.nodes[:, :2], axis=1)
+    ur = np.einsum("si,si->s", sol.displacement[:, :2], mesh.nodes[:, :2] / r[:, None])
+    exact = A * (r - a**2 / r)
+    skin = slice(0, mesh.n_skin)
+    return ur[skin].mean(), exact[skin].mean(), np.abs(ur - exact).max() / np.abs(exact).max()
+
+
+def test_lame_cylinder_matches_closed_form_within_2_percent():
+    fem, exact, _ = _lame(48, 2)
+    assert exact < 0  # pressure pushes inward
+    assert abs(fem / exact - 1) < 0.02
+
+
+def test_lame_error_falls_at_second_order():
+    errs = np.array([_lame(n, L)[2] for n, L in [(48, 2), (96, 4), (192, 8)]])
+    rates = np.log2(errs[:-1] / errs[1:])
+    assert errs[-1] < 0.005 and rates[0] > 1.5 and rates[1] > 1.85, (errs, rates)
+
+
+def test_neo_hookean_agrees_with_linear_elasticity_at_small_load():
+    lin = _lame(48, 2, p=2.0)[0]
+    nh = _lame(48, 2, p=2.0, material=NeoHookean(1000.0, 0.4))[0]
+    assert abs(nh / lin - 1) < 0.01
+    # and they part ways under a large load (the reason the FEM is Neo-Hookean)
+    lin = _lame(24, 1, p=100.0)[0]
+    nh = _lame(24, 1, p=100.0, material=NeoHookean(1000.0, 0.4))[0]
+    assert abs(nh / lin - 1) > 0.03
+
+
+def _small_shell(layers=2):
+    part = tube(radius=0.04, length=0.08, n_around=12, n_along=5)
+    return part, shell_mesh(part, np.full(part.n_vertices, 0.008), layers=layers)
+
+
+@pytest.mark.parametrize("material", [NeoHookean(), LinearElastic()])
+def test_tangent_matches_finite_differences_of_the_residual(material):
+    part, mesh = _small_shell()
+    S = Solver(mesh, material, options=SolverOptions(linear_solver="superlu"))
+    rng = np.random.default_rng(1)
+    u = np.zeros((mesh.n_nodes, 3))
+    u.reshape(-1)[S.free] = rng.normal(0, 5e-4, len(S.free))
+    d = np.zeros_like(u)
+    d.reshape(-1)[S.free] = rng.normal(0, 1, len(S.free))
+    K = S.tangent_full(u)
+    h = 1e-7
+    zero = np.zeros_like(u)
+    fd = (S.residual(u + h * d, zero) - S.residual(u - h * d, zero)).reshape(-1)[S.free] / (2 * h)
+    Kd = K @ d.reshape(-1)[S.free]
+    assert np.linalg.norm(fd - Kd) < 1e-6 * np.linalg.norm(Kd)
+    assert abs(K - K.T).max() < 1e-12 * abs(K).max()
+    # the residual is the energy's gradient
+    dE = (S.energy(u + h * d, zero) - S.energy(u - h * d, zero)) / (2 * h)
+    assert dE == pytest.approx(np.vdot(S.residual(u, zero), d), rel=1e-6)
+
+
+def test_assembly_matches_scikit_fem():
+    skfem = pytest.importorskip("skfem")
+    from skfem.helpers import ddot, det, eye, grad, inv, transpose, mul, trace
+    from skfem.models.elasticity import linear_elasticity
+
+    part, mesh = _small_shell(layers=1)
+    m = skfem.MeshTet(mesh.nodes.T, mesh.tets.T)
+    basis = skfem.Basis(m, skfem.ElementVector(skfem.ElementTetP1()))
+    E, nu = 1000.0, 0.4
+    mu, lam = lame(E, nu)
+    # linear elasticity at rest
+    K_sk = skfem.asm(linear_elasticity(lam, mu), basis).tocsr()
+    S = Solver(mesh, LinearElastic(E, nu), options=SolverOptions(linear_solver="superlu"))
+    K = S.tangent_full(np.zeros((mesh.n_nodes, 3)))
+    Kf = K_sk[S.free][:, S.free]
+    assert abs(K - Kf).max() < 1e-10 * abs(Kf).max()
+
+    # Neo-Hookean residual and tangent at a deformed state, written as scikit-fem forms
+    rng = np.random.default_rng(2)
+    u = np.zeros((mesh.n_nodes, 3))
+    u.reshape(-1)[S.free] = rng.normal(0, 5e-4, len(S.free))
+    prev = basis.interpolate(u.reshape(-1))
+
+    def parts(w):
+        g = grad(w["prev"])                                     # (3, 3, elements, points)
+        F = eye(np.ones_like(g[0, 0]), 3) + g
+        H = inv(F)
+        return F, H, np.log(det(F))
+
+    @skfem.LinearForm
+    def internal(v, w):
+        F, H, lnJ = parts(w)
+        P = mu * (F - transpose(H)) + lam * lnJ * transpose(H)
+        return ddot(P, grad(v))
+
+    @skfem.BilinearForm
+    def tangent(du, v, w):
+        F, H, lnJ = parts(w)
+        dF = grad(du)
+        AdF = (mu * dF + lam * trace(mul(H, dF)) * transpose(H)
+               + (mu - lam * lnJ) * mul(transpose(H), mul(transpose(dF), transpose(H))))
+        return ddot(AdF, grad(v))
+
+    r_sk = skfem.asm(internal, basis, prev=prev)
+    K_sk = skfem.asm(tangent, basis, prev=prev).tocsr()[S.free][:, S.free]
+    S = Solver(mesh, NeoHookean(E, nu), options=SolverOptions(linear_solver="superlu"))
+    r = S.residual(u, np.zeros_like(u)).reshape(-1)
+    np.testing.assert_allclose(r, r_sk, atol=1e-10 * abs(r_sk).max())
+    K = S.tangent_full(u)
+    assert abs(K - K_sk).max() < 1e-10 * abs(K_sk).max()
+
+
+def test_linear_solvers_agree():
+    part, mesh = _small_shell()
+    force = np.zeros(part.n_vertices)
+    force[20:23] = 0.05
+    ref = None
+    for name in available_linear_solvers():
+        sol = Solver(mesh, options=SolverOptions(linear_solver=name)).solve(force)
+        assert sol.ok, (name, sol.reason)
+        if ref is None:
+            ref = sol.displacement
+        np.testing.assert_allclose(sol.displacement, ref, atol=1e-9 * np.abs(ref).max())
+
+
+def test_continuation_warm_start_matches_a_cold_solve():
+    part = sheet(0.1, 0.1, 9, 9)
+    mesh = shell_mesh(part, np.full(part.n_vertices, 0.01), layers=2)
+    force = np.zeros(part.n_vertices)
+    force[40] = 1.0
+    S = Solver(mesh)
+    sols = S.continuation(force, [0.05, 0.1, 0.15])
+    assert all(s.ok for s in sols)
+    assert [s.total_force for s in sols] == pytest.approx([0.05, 0.1, 0.15])
+    cold = S.solve(force * 0.15)
+    np.testing.assert_allclose(sols[-1].displacement, cold.displacement,
+                               atol=1e-6 * np.abs(cold.displacement).max())
+    assert sols[-1].iterations < cold.iterations
+    # deeper press, more displacement, the centre moves down
+    d = [-s.part_displacement(mesh)[40, 2] for s in sols]
+    assert 0 < d[0] < d[1] < d[2]
+
+
+def test_a_failed_solve_reports_why_and_returns_no_displacement():
+    part = sheet(0.1, 0.1, 9, 9)
+    mesh = shell_mesh(part, np.full(part.n_vertices, 0.005), layers=2)
+    force = np.zeros(part.n_vertices)
+    force[40] = 1.0
+    sols = Solver(mesh, options=SolverOptions(max_substeps=1)).continuation(force, [0.05, 50.0,
+                                                                                    60.0])
+    assert sols[0].ok
+    assert not sols[1].ok and sols[1].displacement is None and sols[1].reason
+    assert not sols[2].ok and sols[2].reason.startswith("skipped")
+    with pytest.raises(RuntimeError, match="failed"):
+        sols[1].part_displacement(mesh)
+
+
+def test_non_physical_states_are_rejected():
+    part = sheet(0.1, 0.1, 9, 9)
+    mesh = shell_mesh(part, np.full(part.n_vertices, 0.01), layers=2)
+    force = np.zeros(part.n_vertices)
+    force[40] = 0.1
+    ok = Solver(mesh).solve(force)
+    assert ok.ok and 0 < ok.max_compression < 1
+    strict = Solver(mesh, options=SolverOptions(max_compression=0.5 * ok.max_compression))
+    bad = strict.solve(force)
+    assert not bad.ok and "non-physical" in bad.reason and bad.displacement is None
+
+
+def test_bad_input_is_named():
+    part, mesh = _small_shell()
+    S = Solver(mesh)
+    with pytest.raises(ValueError, match="force must have shape"):
+        S.solve(np.zeros(3))
+    bad = np.zeros(part.n_vertices)
+    bad[0] = np.nan
+    with pytest.raises(ValueError, match="finite"):
+        S.solve(bad)
+    with pytest.raises(ValueError, match="fixed must have shape"):
+        Solver(mesh, fixed=np.zeros((2, 3), bool))
+    with pytest.raises(ValueError, match="linear_solver"):
+        SolverOptions(linear_solver="magic")
+    with pytest.raises(ValueError, match="no force"):
+        S.continuation(np.zeros(part.n_vertices), [1.0])
