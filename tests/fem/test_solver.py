@@ -204,3 +204,21 @@ def test_bad_input_is_named():
         SolverOptions(linear_solver="magic")
     with pytest.raises(ValueError, match="no force"):
         S.continuation(np.zeros(part.n_vertices), [1.0])
+
+
+def test_compiled_and_numpy_assembly_agree(monkeypatch):
+    import fem.solver as fs
+
+    part, mesh = _small_shell()
+    rng = np.random.default_rng(3)
+    for name in ("superlu", "pardiso"):
+        if name not in available_linear_solvers():
+            continue
+        S = Solver(mesh, options=SolverOptions(linear_solver=name))
+        u = np.zeros((mesh.n_nodes, 3))
+        u.reshape(-1)[S.free] = rng.normal(0, 5e-4, len(S.free))
+        K1 = S.assemble(u, u)[1]
+        monkeypatch.setattr(fs, "_kernel", None)
+        K2 = S.assemble(u, u)[1]
+        monkeypatch.undo()
+        assert abs(K1 - K2).max() <= 1e-12 * abs(K2).max()
