@@ -89,6 +89,14 @@ class ShellMesh:
         """``(S,)`` the nodes of the fixed inner surface."""
         return np.arange(self.layers * self.n_skin, (self.layers + 1) * self.n_skin)
 
+    @property
+    def rim_nodes(self) -> np.ndarray:
+        """Nodes on the part's cut rims, all layers (the tissue goes on past the cut)."""
+        if not self.part.rims:
+            return np.zeros(0, dtype=np.int64)
+        rim = np.concatenate(self.part.rims)
+        return (rim[None, :] + self.n_skin * np.arange(self.layers + 1)[:, None]).ravel()
+
     @cached_property
     def volumes(self) -> np.ndarray:
         """``(T,)`` rest volumes, m^3."""

@@ -20,6 +20,7 @@ non-physical).
 
 from __future__ import annotations
 
+import os
 import time
 from dataclasses import dataclass, field
 
@@ -43,6 +44,8 @@ class SolverOptions:
             local thickness (1.0: skin reaches bone).
         linear_solver: ``"auto"``, ``"pardiso"``, ``"superlu"`` or ``"cg"`` (AMG-preconditioned).
         load: ``"traction"`` or ``"nodal"`` (see :meth:`ShellMesh.nodal_forces`).
+        rims: ``"fixed"`` holds the part's cut rims (all layers) where the tissue would go on
+            into the rest of the body; ``"free"`` leaves the cut faces traction-free.
     """
 
     rtol: float = 1e-7
@@ -52,6 +55,7 @@ class SolverOptions:
     max_compression: float = 1.0
     linear_solver: str = "auto"
     load: str = "traction"
+    rims: str = "fixed"
 
     def __post_init__(self) -> None:
         if self.linear_solver not in ("auto", *LINEAR_SOLVERS):
@@ -59,6 +63,8 @@ class SolverOptions:
                              f"of {sorted(LINEAR_SOLVERS)}")
         if self.load not in ("traction", "nodal"):
             raise ValueError(f"unknown load mode {self.load!r}; use 'traction' or 'nodal'")
+        if self.rims not in ("fixed", "free"):
+            raise ValueError(f"rims must be 'fixed' or 'free', got {self.rims!r}")
         if not (self.rtol > 0 and self.max_iter >= 1 and self.max_compression > 0):
             raise ValueError("rtol, max_iter and max_compression must be positive")
 
@@ -125,6 +131,8 @@ class Solver:
         M = mesh.n_nodes
         mask = np.zeros((M, 3), dtype=bool)
         mask[mesh.inner_nodes] = True
+        if self.options.rims == "fixed":
+            mask[mesh.rim_nodes] = True
         if fixed is not None:
             fixed = np.asarray(fixed, dtype=bool)
             if fixed.shape != (M, 3):
@@ -146,33 +154,52 @@ class Solver:
     # ------------------------------------------------------------------ assembly
     def _pattern(self, upper: bool) -> None:
         """Map the 78 upper-triangle entries ``(p <= q)`` of each 12 x 12 element matrix to the
-        CSR data of the free-DOF tangent (both triangles unless ``upper``)."""
+        CSR data of the free-DOF tangent (both triangles unless ``upper``).
+
+        Works on unique node pairs (``T * 16`` keys, not ``T * 144``): each pair's 3 x 3 block
+        is numbered once, and SciPy's CSR conversion orders the entries."""
+        M, tets = self.mesh.n_nodes, self.mesh.tets
         nf = len(self.free)
-        fmap = np.full(3 * self.mesh.n_nodes, -1, dtype=np.int64)
+        fmap = np.full(3 * M, -1, dtype=np.int64)
         fmap[self.free] = np.arange(nf)
-        dofs = fmap[(3 * self.mesh.tets[:, :, None] + np.arange(3)).reshape(-1, 12)]  # (T, 12)
+        na, nb = np.repeat(tets, 4, axis=1), np.tile(tets, (1, 4))      # (T, 16) node pairs
+        lo, hi = np.minimum(na, nb), np.maximum(na, nb)
+        pairs, pinv = np.unique((lo * M + hi).ravel(), return_inverse=True)
+        pinv = pinv.reshape(-1, 4, 4)
+        plo, phi = np.divmod(pairs, M)
+        i, k = np.divmod(np.arange(9), 3)
+        row = fmap[3 * plo[:, None] + i]                                 # (P, 9) entry (i, k)
+        col = fmap[3 * phi[:, None] + k]
+        ok = (row >= 0) & (col >= 0) & ((plo[:, None] < phi[:, None]) | (i <= k))
+        ids = np.flatnonzero(ok.ravel())
+        r, c = row.ravel()[ids], col.ravel()[ids]
+        if upper:
+            rr, cc, tag = r, c, ids + 1
+        else:                                                            # mirror off-diagonals
+            off = r != c
+            rr = np.concatenate([r, c[off]])
+            cc = np.concatenate([c, r[off]])
+            tag = np.concatenate([ids + 1, -(ids[off] + 1)])
+        K = sp.csr_matrix((tag.astype(float), (rr, cc)), shape=(nf, nf))
+        K.sort_indices()
+        tags = K.data.astype(np.int64)
+        up = np.full(9 * len(pairs), -1, dtype=np.int64)
+        dn = np.full(9 * len(pairs), -1, dtype=np.int64)
+        up[tags[tags > 0] - 1] = np.flatnonzero(tags > 0)
+        dn[-tags[tags < 0] - 1] = np.flatnonzero(tags < 0)
+        # element entry (a, i, b, k), p <= q -> pair entry (i, k), or (k, i) if node a > node b
         p, q = np.triu_indices(12)
-        self._local = (p // 3, p % 3, q // 3, q % 3)                    # node a, comp i, b, k
-        rp, rq = dofs[:, p], dofs[:, q]                                  # (T, 78)
-        valid = (rp >= 0) & (rq >= 0)
-        lo, hi = np.minimum(rp, rq), np.maximum(rp, rq)
-        keys = [np.where(valid, lo * nf + hi, -1)]
-        if not upper:                                                    # mirror off-diagonals
-            keys.append(np.where(valid & (rp != rq), hi * nf + lo, -1))
-        allkeys = np.concatenate([k.ravel() for k in keys])
-        uniq, inv = np.unique(allkeys, return_inverse=True)
-        inv = inv - 1 if uniq[0] == -1 else inv                          # -1 keys -> index -1
-        if uniq[0] == -1:
-            uniq = uniq[1:]
-        self._pos = [inv[i * dofs.shape[0] * 78:(i + 1) * dofs.shape[0] * 78] for i in
-                     range(len(keys))]
-        self._pos2d = [pos.reshape(-1, 78) for pos in self._pos]
+        A, I, B, Kc = p // 3, p % 3, q // 3, q % 3
+        self._local = (A, I, B, Kc)
+        swap = tets[:, A] > tets[:, B]                                   # (T, 78)
+        eid = 9 * pinv[:, A, B] + np.where(swap, 3 * Kc + I, 3 * I + Kc)
+        self._pos2d = [up[eid]] if upper else [up[eid], dn[eid]]
+        self._pos = [pos.ravel() for pos in self._pos2d]
         self._sel = [np.flatnonzero(pos >= 0) for pos in self._pos]
         self._pos = [pos[sel] for pos, sel in zip(self._pos, self._sel)]
-        self._nnz = len(uniq)
-        r, c = np.divmod(uniq, nf)
-        self._indices = c.astype(np.int32)
-        self._indptr = np.searchsorted(r, np.arange(nf + 1)).astype(np.int32)
+        self._nnz = K.nnz
+        self._indices = K.indices.astype(np.int32)
+        self._indptr = K.indptr.astype(np.int32)
 
     def deformation_gradient(self, u: np.ndarray) -> np.ndarray:
         """``(T, 3, 3)`` ``F = I + sum_a u_a (x) G_a`` for nodal displacement ``u`` ``(M, 3)``."""
@@ -443,7 +470,16 @@ class _Pardiso:
 
         self._error = pypardiso.pardiso_wrapper.PyPardisoError
         self._solver = pypardiso.PyPardisoSolver(mtype=2)
+        # pypardiso globs the environment for MKL on every construction (0.5 s): once is enough
+        os.environ.setdefault("PYPARDISO_MKL_RT", self._solver.libmkl._name)
         self._analysed = None
+
+    def __del__(self):
+        try:  # release PARDISO's internal memory (factors) with the solver
+            if self._analysed is not None:
+                self._solver.free_memory(everything=True)
+        except Exception:  # noqa: BLE001 - interpreter shutdown
+            pass
 
     def solve(self, K, b):
         s = self._solver

@@ -1,0 +1,121 @@
+"""FEM speed and mesh convergence on the anny left arm.
+
+For each resolution (fem.simulate.RESOLUTIONS), in a fresh process so that peak memory is its own:
+DOFs, tetrahedra, Newton iterations, median time per simulation from rest, median time per force
+level inside a 10-level continuation, peak resident memory. Then the convergence study: the
+loaded vertices' displacement against the finest mesh; the reference resolution is the coarsest
+within 2 %.
+
+Run: python benchmarks/fem_speed.py [--thickness 7.5] [--radius 2] [--force 0.5]
+Target (issue #3): median <= 1.0 s per simulation at the reference resolution on 2 cores
+(the paper: 84 +- 53 s per simulation with PolyFEM on one CPU thread).
+"""
+
+from __future__ import annotations
+
+import argparse
+import concurrent.futures as cf
+import multiprocessing as mp
+import os
+import platform
+import resource
+
+import numpy as np
+
+PLACEMENTS = (300, 200, 400)
+"""Disk centres (vertex indices of the anny left arm) on the upper arm, elbow and forearm."""
+
+
+def _run(name: str, thickness: float, radius: float, force: float, levels: int) -> dict:
+    import time
+
+    from fem.simulate import RESOLUTIONS, load_mesh
+    from fem.solver import Solver
+    from stmpl import AnnyBody, loads
+
+    part = AnnyBody().part("left_arm")
+    res = RESOLUTIONS[name]
+    warm = loads.disk(part, at=PLACEMENTS[0], radius=radius, total=0.01)  # load compiled code
+    Solver(load_mesh(part, np.full(part.n_vertices, thickness), warm.force, "coarse")).solve(
+        warm.force)
+    out = {"name": name, "res": res.to_dict(), "rest": [], "level": [], "iters_rest": [],
+           "iters_level": [], "u": [], "dofs": [], "tets": [], "failed": []}
+    for at in PLACEMENTS:
+        ld = loads.disk(part, at=at, radius=radius, total=force)
+        t0 = time.perf_counter()
+        mesh = load_mesh(part, np.full(part.n_vertices, thickness), ld.force, res)
+        solver = Solver(mesh)
+        setup = time.perf_counter() - t0
+        sol = solver.solve(ld.force)
+        if not sol.ok:
+            out["failed"].append(f"{at}: {sol.reason}")
+            continue
+        out["rest"].append(setup + sol.time)
+        out["iters_rest"].append(sol.iterations)
+        out["u"].append(sol.part_displacement(mesh)[ld.vertices].tolist())
+        out["dofs"].append(len(solver.free))
+        out["tets"].append(len(mesh.tets))
+        totals = force * np.arange(1, levels + 1) / levels
+        for s in solver.continuation(ld.force, totals):
+            if s.ok:
+                out["level"].append(s.time)
+                out["iters_level"].append(s.iterations)
+            else:
+                out["failed"].append(f"{at} @ {s.total_force:.2f} N: {s.reason}")
+    out["peak_mb"] = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--thickness", type=float, default=7.5, help="mm")
+    ap.add_argument("--radius", type=float, default=2.0, help="disk radius, cm")
+    ap.add_argument("--force", type=float, default=0.5, help="total force, N")
+    ap.add_argument("--levels", type=int, default=10)
+    args = ap.parse_args()
+    from fem.simulate import REFERENCE, RESOLUTIONS
+    from fem.solver import available_linear_solvers
+
+    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; "
+          f"linear solvers here: {', '.join(available_linear_solvers())}")
+    print(f"anny left arm, thickness {args.thickness} mm, disk radius {args.radius} cm at "
+          f"vertices {PLACEMENTS}, F_total {args.force} N (continuation: {args.levels} levels "
+          f"up to it), Neo-Hookean E = 1 kPa, nu = 0.4")
+    ctx = mp.get_context("spawn")
+    rows = []
+    for name in RESOLUTIONS:
+        with cf.ProcessPoolExecutor(1, mp_context=ctx) as ex:
+            rows.append(ex.submit(_run, name, args.thickness / 1e3, args.radius / 100,
+                                  args.force, args.levels).result())
+    finest = rows[-1]
+    print()
+    print("| resolution | subdiv | layers | DOFs | tets | Newton its from rest | s/sim from rest "
+          "| its/level | s/level (continuation) | peak MB | loaded-vertex error vs finest |")
+    print("|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|")
+    errs = {}
+    for r in rows:
+        e = []
+        for u, uf in zip(r["u"], finest["u"]):
+            u, uf = np.asarray(u), np.asarray(uf)
+            e.append(np.linalg.norm(u - uf) / np.linalg.norm(uf))
+        errs[r["name"]] = max(e) if e else float("nan")
+        print(f"| {r['name']} | {r['res']['subdivisions']} | {r['res']['layers']} | "
+              f"{int(np.median(r['dofs']))} | {int(np.median(r['tets']))} | "
+              f"{np.median(r['iters_rest']):.0f} | {np.median(r['rest']):.2f} | "
+              f"{np.median(r['iters_level']):.0f} | {np.median(r['level']):.2f} | "
+              f"{r['peak_mb']:.0f} | {100 * errs[r['name']]:.2f} % |")
+        for f in r["failed"]:
+            print(f"  failed ({r['name']}): {f}")
+    chosen = next(n for n in RESOLUTIONS if errs[n] <= 0.02)
+    ref = next(r for r in rows if r["name"] == REFERENCE)
+    print()
+    print(f"coarsest resolution within 2 % of the finest: {chosen} (fem.simulate.REFERENCE = "
+          f"{REFERENCE!r})")
+    t_rest, t_level = np.median(ref["rest"]), np.median(ref["level"])
+    print(f"reference: {t_rest:.2f} s per simulation from rest, {t_level:.2f} s per level in a "
+          f"continuation; target <= 1.0 s; paper 84 s -> {84 / t_rest:.0f}x / "
+          f"{84 / t_level:.0f}x faster")
+
+
+if __name__ == "__main__":
+    main()

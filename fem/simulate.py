@@ -1,0 +1,90 @@
+"""One call from a load on a body part to FEM displacements: mesh at a named resolution, refined
+around the load, then Newton with load continuation.
+
+Resolutions (chosen by the convergence study in ``benchmarks/fem_speed.py``; see
+``benchmarks/RESULTS.md``): ``subdivisions`` levels of midpoint refinement within
+``refine_radius`` of the loaded vertices, ``layers`` element layers through the thickness.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from fem.material import NeoHookean
+from fem.mesh import ShellMesh, shell_mesh
+from fem.solver import Solution, Solver, SolverOptions
+from stmpl.body.part import BodyPart
+
+
+@dataclass(frozen=True)
+class Resolution:
+    """Mesh resolution of a tissue shell (see :func:`fem.mesh.shell_mesh`)."""
+
+    subdivisions: int
+    layers: int
+    refine_radius: float | None = 0.03
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+RESOLUTIONS = {
+    "coarse": Resolution(1, 2),
+    "medium": Resolution(2, 3),
+    "fine": Resolution(3, 3),
+    "finest": Resolution(3, 4),
+}
+REFERENCE = "fine"
+"""The resolution datasets are generated at: the coarsest whose loaded-vertex displacement lies
+within 2 % of the finest mesh's (benchmarks/fem_speed.py)."""
+
+
+def resolution(res: str | Resolution | dict) -> Resolution:
+    """A :class:`Resolution` from a name, a mapping or itself."""
+    if isinstance(res, Resolution):
+        return res
+    if isinstance(res, str):
+        if res == "reference":
+            res = REFERENCE
+        if res not in RESOLUTIONS:
+            raise ValueError(f"unknown resolution {res!r}; choose one of "
+                             f"{sorted(RESOLUTIONS) + ['reference']} or give "
+                             "subdivisions/layers/refine_radius")
+        return RESOLUTIONS[res]
+    if isinstance(res, dict):
+        unknown = set(res) - {"subdivisions", "layers", "refine_radius"}
+        if unknown:
+            raise ValueError(f"unknown resolution keys {sorted(unknown)}")
+        return Resolution(**res)
+    raise TypeError(f"resolution must be a name, a dict or a Resolution, got {type(res)}")
+
+
+def load_mesh(part: BodyPart, thickness: np.ndarray, force: np.ndarray,
+              res: str | Resolution | dict = "reference") -> ShellMesh:
+    """The tissue shell for one load pattern ``force`` ``(N,)``, refined around its vertices."""
+    r = resolution(res)
+    force = np.asarray(force, dtype=float)
+    loaded = np.flatnonzero(force > 0)
+    if len(loaded) == 0:
+        raise ValueError("the load has no loaded vertex (force is zero everywhere)")
+    near = None if r.refine_radius is None else part.vertices[loaded]
+    return shell_mesh(part, thickness, layers=r.layers, subdivisions=r.subdivisions,
+                      refine_near=near, refine_radius=r.refine_radius or 0.03)
+
+
+def simulate(part: BodyPart, thickness: np.ndarray, force: np.ndarray, totals=None,
+             res: str | Resolution | dict = "reference", material=None,
+             options: SolverOptions | None = None) -> tuple[ShellMesh, list[Solution]]:
+    """Solve the load pattern ``force`` ``(N,)`` (N per vertex) on ``part`` with per-vertex
+    ``thickness`` ``(N,)`` (m), scaled to each total force in ``totals`` (N, rising; default
+    the pattern's own total), by continuation. Returns the mesh and one :class:`Solution` per
+    level; failed levels carry their reason and no displacement."""
+    force = np.asarray(force, dtype=float)
+    mesh = load_mesh(part, thickness, force, res)
+    solver = Solver(mesh, material if material is not None else NeoHookean(), options=options)
+    totals = [float(force.sum())] if totals is None else [float(t) for t in totals]
+    if any(b <= a for a, b in zip(totals, totals[1:])):
+        raise ValueError(f"totals must rise strictly, got {totals}")
+    return mesh, solver.continuation(force, totals)
