@@ -47,6 +47,23 @@ def _load(args, part):
                         args.angle, total)
 
 
+def cmd_generate(args) -> int:
+    from fem.generate import generate
+
+    card = generate(args.config, args.out, workers=args.workers, backend=args.backend,
+                    scheduler=args.scheduler, progress=not args.quiet,
+                    max_shards=args.max_shards)
+    if not card:
+        print("stopped early (--max-shards); run again to finish")
+        return 0
+    sp = card["samples_per_split"]
+    print(f"{card['samples']} samples (train {sp['train']}, val {sp['val']}, test "
+          f"{sp['test']}) from {card['placements']} placements; {card['failures']} of "
+          f"{card['attempted']} solves failed {card['failures_by_reason'] or ''}; "
+          f"median {card['timing']['solve_seconds_median_per_sample']:.2f} s per sample")
+    return 0
+
+
 def cmd_scene(args) -> int:
     from stmpl.scene import Scene
     from stmpl.viz import export_mesh, scene_figure
@@ -113,6 +130,16 @@ def parser() -> argparse.ArgumentParser:
     sc.add_argument("--save", help="scene file to write (.npz)")
     sc.add_argument("--export", help="mesh coloured by force to write (.ply/.obj/.glb)")
     sc.set_defaults(func=cmd_scene)
+
+    ge = sub.add_parser("generate", help="generate a FEM dataset from a config (resumable)")
+    ge.add_argument("config", help="dataset config (YAML), e.g. configs/data/small.yaml")
+    ge.add_argument("--out", help="output folder (default data/<config name>)")
+    ge.add_argument("--workers", type=int, help="parallel workers (default from the config)")
+    ge.add_argument("--backend", choices=["serial", "processes", "dask"])
+    ge.add_argument("--scheduler", help="Dask scheduler address (implies --backend dask)")
+    ge.add_argument("--max-shards", type=int, help="stop after this many new shards")
+    ge.add_argument("--quiet", action="store_true", help="no progress bar")
+    ge.set_defaults(func=cmd_generate)
 
     pa = sub.add_parser("parts", help="list the body model's parts and their sizes")
     _body_args(pa)

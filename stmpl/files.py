@@ -23,3 +23,33 @@ def atomic_savez(path, arrays: dict, compressed: bool = False) -> pathlib.Path:
         pathlib.Path(tmp).unlink(missing_ok=True)
         raise
     return path
+
+
+class atomic_path:
+    """``with atomic_path(target) as tmp:`` write ``tmp``; it becomes ``target`` only when the
+    block ends without an error (a temporary file in the same folder, then ``os.replace``)."""
+
+    def __init__(self, path, suffix: str = ".tmp"):
+        self.path = pathlib.Path(path)
+        self.suffix = suffix
+
+    def __enter__(self) -> pathlib.Path:
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=self.path.parent, prefix=self.path.name + ".",
+                                   suffix=self.suffix)
+        os.close(fd)
+        self.tmp = pathlib.Path(tmp)
+        return self.tmp
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if exc_type is None:
+            os.replace(self.tmp, self.path)
+        else:
+            self.tmp.unlink(missing_ok=True)
+
+
+def atomic_write_text(path, text: str) -> pathlib.Path:
+    """Write ``text`` to ``path`` atomically."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(text)
+    return pathlib.Path(path)

@@ -1,0 +1,161 @@
+"""Dataset generation: config checks, splits, failures, resuming after a kill, Dask workers."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import numpy as np
+import pytest
+import yaml
+
+from fem.generate import generate, load_config, plan, split_of
+from fem.simulate import simulate
+from stmpl.data import Dataset
+
+
+def _cfg(**over):
+    cfg = {"name": "tiny",
+           "body": {"model": "tube", "radius": 0.04, "length": 0.2, "n_around": 16,
+                    "n_along": 12},
+           "part": "tube", "thickness_mm": [5.0, 10.0],
+           "resolution": {"subdivisions": 1, "layers": 2, "refine_radius": 0.03},
+           "forces": [0.05, 0.1, 0.2],
+           "placements": {"disk": {"centres": 4, "radii": [0.02]},
+                          "band": {"at": [0.5], "widths": [0.03]}},
+           "shard_tasks": 2, "parallel": {"backend": "serial", "workers": 1}}
+    cfg.update(over)
+    return cfg
+
+
+def _samples(folder):
+    a = Dataset(folder).arrays()
+    order = np.lexsort((a["total"], a["task"]))
+    return {k: a[k][order] for k in ("task", "total", "displacement", "split")}
+
+
+def _same(a, b):
+    """Same samples; displacements equal to 1 nm (PARDISO's threads may round differently)."""
+    for k in ("task", "total", "split"):
+        np.testing.assert_array_equal(a[k], b[k])
+    np.testing.assert_allclose(a["displacement"], b["displacement"], rtol=0, atol=1e-9)
+
+
+def test_config_is_checked():
+    with pytest.raises(ValueError, match="unknown config keys"):
+        load_config({**_cfg(), "forcez": [1.0]})
+    with pytest.raises(ValueError, match="thickness_mm"):
+        load_config(_cfg(thickness_mm=[50.0]))
+    with pytest.raises(ValueError, match="forces"):
+        load_config(_cfg(forces=[1.0, 0.5]))
+    with pytest.raises(ValueError, match="placement kind"):
+        load_config(_cfg(placements={"poke": {}}))
+    with pytest.raises(ValueError, match="placements.disk takes keys"):
+        load_config(_cfg(placements={"disk": {"centers": 3}}))
+    with pytest.raises(ValueError, match="resolution"):
+        load_config(_cfg(resolution="ultra"))
+    with pytest.raises(FileNotFoundError):
+        load_config("no/such/config.yaml")
+    cfg = load_config(_cfg(placements={"band": {"at": [1.5]}}))
+    with pytest.raises(ValueError, match="impossible load placement band"):
+        plan(cfg)
+
+
+def test_splits_go_by_placement():
+    s = split_of(20, [0.8, 0.1, 0.1], seed=0)
+    assert np.bincount(s, minlength=3).tolist() == [16, 2, 2]
+    assert np.bincount(split_of(5, [0.8, 0.1, 0.1], 0), minlength=3).tolist() == [3, 1, 1]
+    assert not np.array_equal(split_of(20, [0.8, 0.1, 0.1], 1), s)
+
+
+def test_serial_run_card_and_samples(tmp_path):
+    card = generate(_cfg(), tmp_path / "d", progress=False)
+    p = plan(load_config(_cfg()))
+    assert card["placements"] == 5 and card["tasks"] == 10
+    assert card["samples"] + card["failures"] == card["attempted"] == 30
+    assert card["samples"] == sum(card["samples_per_split"].values())
+    ds = Dataset(tmp_path / "d")
+    ds.verify()
+    a = ds.arrays()
+    # every placement's samples share one split
+    for pl in np.unique(a["placement"]):
+        assert len(np.unique(a["split"][a["placement"] == pl])) == 1
+    assert set(ds.arrays("val")["placement"]).isdisjoint(ds.arrays("train")["placement"])
+    # a stored sample is the solver's answer for that load
+    i = [j for j, k in enumerate(a["kind"]) if k == "disk"][2]
+    pl = p.placements[a["placement"][i]]
+    from fem.generate import make_load
+
+    load = make_load(ds.part, pl)
+    th = a["thickness"][i].astype(float)
+    levels = [f for f in _cfg()["forces"] if f <= a["total"][i]]
+    mesh, sols = simulate(ds.part, th, load.force, levels, _cfg()["resolution"])
+    np.testing.assert_allclose(a["displacement"][i], sols[-1].part_displacement(mesh),
+                               atol=1e-7)
+    np.testing.assert_allclose(a["force"][i].sum(), a["total"][i], rtol=1e-5)
+    assert json.loads((tmp_path / "d" / "card.json").read_text())["hash"] == card["hash"]
+
+
+def test_failures_are_counted_not_stored(tmp_path):
+    cfg = _cfg(thickness_mm=[5.0], forces=[0.1, 3.0, 4.0], max_pressure=3000.0,
+               placements={"disk": {"centres": 2, "radii": [0.02]}})
+    card = generate(cfg, tmp_path / "f", progress=False)
+    assert card["failures"] > 0 and card["samples"] + card["failures"] == card["attempted"]
+    assert card["failures_by_reason"]
+    a = Dataset(tmp_path / "f").arrays()
+    assert np.all(a["max_compression"] <= 1.0)
+    assert np.all(np.isfinite(a["displacement"]))
+
+
+def test_a_killed_run_resumes_without_loss_or_duplicates(tmp_path):
+    cfg = _cfg(shard_tasks=1, resolution={"subdivisions": 2, "layers": 2,
+                                          "refine_radius": 0.03})
+    path = tmp_path / "cfg.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    out = tmp_path / "killed"
+    proc = subprocess.Popen([sys.executable, "-m", "stmpl.cli", "generate", str(path),
+                             "--out", str(out), "--quiet"], env={**os.environ},
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    deadline = time.time() + 120
+    while time.time() < deadline and not list(out.glob("shard-*.h5")):
+        time.sleep(0.05)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    done = len(list(out.glob("shard-*.h5")))
+    assert 1 <= done < 10, done
+    assert not (out / "card.json").exists()
+    (out / "shard-00009.h5.x.tmp").write_bytes(b"half a file")  # a torn write
+    generate(path, out, progress=False)
+    assert not list(out.glob("*.tmp"))
+    generate(cfg, tmp_path / "whole", progress=False)
+    a, b = _samples(out), _samples(tmp_path / "whole")
+    assert len(np.unique(np.stack([a["task"], a["total"]], 1), axis=0)) == len(a["task"])
+    _same(a, b)
+    # the same folder refuses a different config
+    with pytest.raises(ValueError, match="different config"):
+        generate(_cfg(forces=[0.05]), out, progress=False)
+
+
+def test_dask_local_cluster_with_two_workers_matches_serial(tmp_path):
+    pytest.importorskip("dask.distributed")
+    cfg = _cfg(thickness_mm=[7.5])
+    generate(cfg, tmp_path / "serial", progress=False)
+    generate(cfg, tmp_path / "dask", backend="dask", workers=2, progress=False)
+    a, b = _samples(tmp_path / "serial"), _samples(tmp_path / "dask")
+    _same(a, b)
+
+
+def test_dataset_errors_name_the_problem(tmp_path):
+    with pytest.raises(FileNotFoundError, match="card.json"):
+        Dataset(tmp_path)
+    generate(_cfg(thickness_mm=[7.5], forces=[0.05]), tmp_path / "d", progress=False)
+    shard = sorted((tmp_path / "d").glob("shard-*.h5"))[0]
+    data = bytearray(shard.read_bytes())
+    data[-100] ^= 0xFF
+    shard.write_bytes(bytes(data))
+    with pytest.raises(ValueError, match="do not match"):
+        Dataset(tmp_path / "d").verify()
+    with pytest.raises(ValueError, match="split must be"):
+        Dataset(tmp_path / "d").arrays("training")
