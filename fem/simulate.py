@@ -3,7 +3,8 @@ around the load, then Newton with load continuation.
 
 Resolutions (chosen by the convergence study in ``benchmarks/fem_speed.py``; see
 ``benchmarks/RESULTS.md``): ``subdivisions`` levels of midpoint refinement within
-``refine_radius`` of the loaded vertices, ``layers`` element layers through the thickness.
+``refine_radius`` of the loaded vertices, ``layers`` element layers through the thickness,
+element ``order`` 1 (4-node) or 2 (10-node tetrahedra).
 """
 
 from __future__ import annotations
@@ -25,16 +26,17 @@ class Resolution:
     subdivisions: int
     layers: int
     refine_radius: float | None = 0.03
+    order: int = 1
 
     def to_dict(self) -> dict:
         return asdict(self)
 
 
 RESOLUTIONS = {
-    "coarse": Resolution(1, 2),
-    "medium": Resolution(2, 3),
-    "fine": Resolution(3, 3),
-    "finest": Resolution(3, 4),
+    "coarse": Resolution(2, 3, order=1),
+    "medium": Resolution(1, 1, order=2),
+    "fine": Resolution(1, 2, order=2),
+    "finest": Resolution(2, 3, order=2),
 }
 REFERENCE = "fine"
 """The resolution datasets are generated at: the coarsest whose loaded-vertex displacement lies
@@ -54,7 +56,7 @@ def resolution(res: str | Resolution | dict) -> Resolution:
                              "subdivisions/layers/refine_radius")
         return RESOLUTIONS[res]
     if isinstance(res, dict):
-        unknown = set(res) - {"subdivisions", "layers", "refine_radius"}
+        unknown = set(res) - {"subdivisions", "layers", "refine_radius", "order"}
         if unknown:
             raise ValueError(f"unknown resolution keys {sorted(unknown)}")
         return Resolution(**res)
@@ -83,7 +85,8 @@ def simulate(part: BodyPart, thickness: np.ndarray, force: np.ndarray, totals=No
     level; failed levels carry their reason and no displacement."""
     force = np.asarray(force, dtype=float)
     mesh = load_mesh(part, thickness, force, res)
-    solver = Solver(mesh, material if material is not None else NeoHookean(), options=options)
+    solver = Solver(mesh, material if material is not None else NeoHookean(), options=options,
+                    order=resolution(res).order)
     totals = [float(force.sum())] if totals is None else [float(t) for t in totals]
     if any(b <= a for a, b in zip(totals, totals[1:])):
         raise ValueError(f"totals must rise strictly, got {totals}")

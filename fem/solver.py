@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 import numpy as np
 import scipy.sparse as sp
 
+from fem.elements import ELEMENTS, TRI_EDGES, TRI_POINTS, TRI_WEIGHTS, quadratic, tri_shape
 from fem.material import NeoHookean, det3
 from fem.mesh import ShellMesh
 
@@ -38,6 +39,8 @@ class SolverOptions:
     Attributes:
         rtol: converged when ``|r| <= rtol * |f|`` (free DOFs).
         max_iter: Newton iterations per solve (per force level or sub-step).
+        reuse: keep the factorised tangent while the residual falls at least this much per
+            step (0 for plain Newton: a new factorisation every step).
         stagnation: fail when the residual has not halved over this many iterations.
         max_substeps: a failed force increment is halved up to this many times.
         max_compression: reject states whose skin moves inward by more than this share of the
@@ -49,7 +52,8 @@ class SolverOptions:
     """
 
     rtol: float = 1e-7
-    max_iter: int = 25
+    max_iter: int = 40
+    reuse: float = 0.1
     stagnation: int = 6
     max_substeps: int = 3
     max_compression: float = 1.0
@@ -71,7 +75,9 @@ class SolverOptions:
 
 @dataclass(frozen=True, eq=False)
 class Solution:
-    """One solve's outcome. ``displacement`` is ``(M, 3)`` in metres when ``ok``, else ``None``.
+    """One solve's outcome. ``displacement`` is ``(M, 3)`` in metres at the mesh nodes when
+    ``ok``, else ``None``; ``state`` is the solver's full unknown (edge nodes too, for P2), the
+    start of a warm-started solve.
 
     ``reason`` says why a solve failed (``""`` when ok). Diagnostics: Newton ``iterations``,
     relative ``residual``, ``min_det_F`` of the last accepted state, wall ``time`` in s,
@@ -89,6 +95,7 @@ class Solution:
     substeps: int = 0
     max_displacement: float = float("nan")
     max_compression: float = float("nan")
+    state: np.ndarray | None = None
     info: dict = field(default_factory=dict)
 
     def diagnostics(self) -> dict:
@@ -115,19 +122,23 @@ class Solver:
     shape gradients and the linear solver's symbolic analysis are kept).
 
     Args:
-        mesh: the tissue shell.
+        mesh: the tissue shell (P1 tetrahedra; ``order=2`` adds a node on every edge).
         material: a material with ``energy`` and ``tangent_parts`` (default Neo-Hookean,
             E = 1 kPa, nu = 0.4).
-        fixed: optional ``(M, 3)`` bool mask of further fixed components (the inner surface is
-            always fixed).
+        fixed: optional ``(M, 3)`` bool mask of further fixed components on the mesh nodes (the
+            inner surface is always fixed; an edge node is fixed where both ends are).
         options: :class:`SolverOptions`.
+        order: element order, 1 (4-node) or 2 (10-node tetrahedra, four quadrature points).
     """
 
     def __init__(self, mesh: ShellMesh, material=None, fixed: np.ndarray | None = None,
-                 options: SolverOptions | None = None):
+                 options: SolverOptions | None = None, order: int = 1):
+        if order not in ELEMENTS:
+            raise ValueError(f"element order must be 1 or 2, got {order!r}")
         self.mesh = mesh
         self.material = material if material is not None else NeoHookean()
         self.options = options or SolverOptions()
+        self.element = ELEMENTS[order]
         M = mesh.n_nodes
         mask = np.zeros((M, 3), dtype=bool)
         mask[mesh.inner_nodes] = True
@@ -138,34 +149,48 @@ class Solver:
             if fixed.shape != (M, 3):
                 raise ValueError(f"fixed must have shape ({M}, 3), got {fixed.shape}")
             mask |= fixed
-        self.fixed = mask
-        self.free = np.flatnonzero(~mask.ravel())
         X = mesh.nodes[mesh.tets]                                      # (T, 4, 3)
         Dm = (X[:, 1:] - X[:, :1]).transpose(0, 2, 1)                  # columns are edges
         Dinv = np.linalg.inv(Dm)
-        self.G = np.concatenate([-Dinv.sum(1, keepdims=True), Dinv], 1)  # (T, 4, 3) grad phi_a
+        G1 = np.concatenate([-Dinv.sum(1, keepdims=True), Dinv], 1)    # (T, 4, 3) grad L_k
         self.V = mesh.volumes
         if np.any(self.V <= 0):
             raise ValueError("mesh has inverted or flat elements; check its quality()")
-        self.GG = np.einsum("taJ,tbJ->tab", self.G, self.G)           # (T, 4, 4)
+        if order == 1:
+            self.conn, self.edges = mesh.tets, np.zeros((0, 2), dtype=np.int64)
+        else:
+            self.conn, self.edges = quadratic(mesh.tets, M)
+            mask = np.concatenate([mask, mask[self.edges[:, 0]] & mask[self.edges[:, 1]]])
+        self.n_all = M + len(self.edges)
+        self.fixed = mask
+        self.free = np.flatnonzero(~mask.ravel())
+        el = self.element
+        self.G = np.einsum("qak,tkj->tqaj", el.dN, G1)                 # (T, Q, n, 3) grad N_a
+        self.W = self.V[:, None] * el.weights[None]                     # (T, Q) weights, m^3
+        self.GG = np.matmul(self.G, self.G.transpose(0, 1, 3, 2))      # (T, Q, n, n)
+        self._force_idx = (3 * self.conn[:, :, None] + np.arange(3)).ravel()
         self.linear = make_linear_solver(self.options.linear_solver)
         self._pattern(upper=self.linear.upper)
 
+    @property
+    def order(self) -> int:
+        return self.element.order
+
     # ------------------------------------------------------------------ assembly
     def _pattern(self, upper: bool) -> None:
-        """Map the 78 upper-triangle entries ``(p <= q)`` of each 12 x 12 element matrix to the
-        CSR data of the free-DOF tangent (both triangles unless ``upper``).
+        """Map the upper-triangle entries ``(p <= q)`` of each ``3n x 3n`` element matrix to
+        the CSR data of the free-DOF tangent (both triangles unless ``upper``).
 
-        Works on unique node pairs (``T * 16`` keys, not ``T * 144``): each pair's 3 x 3 block
+        Works on unique node pairs (``T n^2`` keys, not ``9 T n^2``): each pair's 3 x 3 block
         is numbered once, and SciPy's CSR conversion orders the entries."""
-        M, tets = self.mesh.n_nodes, self.mesh.tets
+        M, tets, n = self.n_all, self.conn, self.element.n
         nf = len(self.free)
         fmap = np.full(3 * M, -1, dtype=np.int64)
         fmap[self.free] = np.arange(nf)
-        na, nb = np.repeat(tets, 4, axis=1), np.tile(tets, (1, 4))      # (T, 16) node pairs
+        na, nb = np.repeat(tets, n, axis=1), np.tile(tets, (1, n))      # (T, n^2) node pairs
         lo, hi = np.minimum(na, nb), np.maximum(na, nb)
         pairs, pinv = np.unique((lo * M + hi).ravel(), return_inverse=True)
-        pinv = pinv.reshape(-1, 4, 4)
+        pinv = pinv.reshape(-1, n, n)
         plo, phi = np.divmod(pairs, M)
         i, k = np.divmod(np.arange(9), 3)
         row = fmap[3 * plo[:, None] + i]                                 # (P, 9) entry (i, k)
@@ -188,10 +213,10 @@ class Solver:
         up[tags[tags > 0] - 1] = np.flatnonzero(tags > 0)
         dn[-tags[tags < 0] - 1] = np.flatnonzero(tags < 0)
         # element entry (a, i, b, k), p <= q -> pair entry (i, k), or (k, i) if node a > node b
-        p, q = np.triu_indices(12)
+        p, q = np.triu_indices(3 * n)
         A, I, B, Kc = p // 3, p % 3, q // 3, q % 3
         self._local = (A, I, B, Kc)
-        swap = tets[:, A] > tets[:, B]                                   # (T, 78)
+        swap = tets[:, A] > tets[:, B]                                   # (T, E)
         eid = 9 * pinv[:, A, B] + np.where(swap, 3 * Kc + I, 3 * I + Kc)
         self._pos2d = [up[eid]] if upper else [up[eid], dn[eid]]
         self._pos = [pos.ravel() for pos in self._pos2d]
@@ -202,50 +227,59 @@ class Solver:
         self._indptr = K.indptr.astype(np.int32)
 
     def deformation_gradient(self, u: np.ndarray) -> np.ndarray:
-        """``(T, 3, 3)`` ``F = I + sum_a u_a (x) G_a`` for nodal displacement ``u`` ``(M, 3)``."""
-        return np.eye(3) + np.matmul(u[self.mesh.tets].transpose(0, 2, 1), self.G)
+        """``(T, Q, 3, 3)`` ``F = I + sum_a u_a (x) grad N_a`` at the quadrature points, for
+        nodal displacement ``u`` ``(n_all, 3)``."""
+        ue = u[self.conn].transpose(0, 2, 1)[:, None]                  # (T, 1, 3, n)
+        return np.eye(3) + np.matmul(ue, self.G)
+
+    def _F(self, u: np.ndarray) -> np.ndarray:
+        return self.deformation_gradient(u).reshape(-1, 3, 3)
 
     def energy(self, u: np.ndarray, f: np.ndarray) -> float:
         """Total potential energy, J (``inf`` if an element inverts)."""
-        W = self.material.energy(self.deformation_gradient(u))
-        return float(self.V @ W - np.vdot(f, u))
+        W = self.material.energy(self._F(u))
+        return float(self.W.ravel() @ W - np.vdot(f, u))
 
     def residual(self, u: np.ndarray, f: np.ndarray) -> np.ndarray:
-        """``(M, 3)`` out-of-balance force ``dPi/du``, N (all nodes, fixed ones included)."""
-        P = self.material.stress(self.deformation_gradient(u))
-        return self._scatter_force(P) - f
+        """``(n_all, 3)`` out-of-balance force ``dPi/du``, N (fixed nodes included)."""
+        return self._scatter_force(self.material.stress(self._F(u))) - f
 
     def _scatter_force(self, P: np.ndarray) -> np.ndarray:
-        """``(M, 3)`` internal nodal forces ``f_a = sum_t V P G_a`` from stresses ``(T, 3, 3)``."""
-        fe = self.V[:, None, None] * np.matmul(self.G, P.transpose(0, 2, 1))  # (T, 4, 3)
-        M = self.mesh.n_nodes
-        idx = (3 * self.mesh.tets[:, :, None] + np.arange(3)).ravel()
-        return np.bincount(idx, weights=fe.ravel(), minlength=3 * M).reshape(M, 3)
+        """``(n_all, 3)`` internal nodal forces ``f_a = sum_q w V P grad N_a`` from stresses
+        ``(T Q, 3, 3)``."""
+        T, Q = self.W.shape
+        P = P.reshape(T, Q, 3, 3)
+        fe = np.einsum("tq,tqaJ,tqiJ->tai", self.W, self.G, P)          # (T, n, 3)
+        return np.bincount(self._force_idx, weights=fe.ravel(),
+                           minlength=3 * self.n_all).reshape(-1, 3)
 
     def assemble(self, u: np.ndarray, f: np.ndarray):
-        """``(r (M, 3), K)``: residual and the tangent on free DOFs (CSR; upper triangle only
+        """``(r (n_all, 3), K)``: residual and the tangent on free DOFs (CSR; upper triangle only
         when the linear solver wants it)."""
-        F = self.deformation_gradient(u)
-        P, (a, b, c, H) = self.material.tangent_parts(F)
+        T, Q = self.W.shape
+        P, (a, b, c, H) = self.material.tangent_parts(self._F(u))
         r = self._scatter_force(P)
-        g = np.matmul(self.G, H)                                      # (T, 4, 3) H^T G_a
+        g = np.matmul(self.G, np.asarray(H).reshape(T, Q, 3, 3))      # (T, Q, n, 3) H^T grad N
+        aW, bW, cW = (np.asarray(x).reshape(T, Q) * self.W for x in (a, b, c))
         if _kernel is not None:
             data = np.zeros(self._nnz)
             for pos in self._pos2d:
-                _kernel(g, self.GG, a * self.V, b * self.V, c * self.V, pos, data)
+                _kernel(g, self.GG, aW, bW, cW, pos, data)
         else:
-            data = self._element_data_numpy(g, a, b, c)
+            data = self._element_data_numpy(g, aW, bW, cW)
         nf = len(self.free)
         K = sp.csr_matrix((data, self._indices, self._indptr), shape=(nf, nf))
         return r - f, K
 
-    def _element_data_numpy(self, g, a, b, c) -> np.ndarray:
-        """The tangent's CSR data from ``g`` ``(T, 4, 3)`` and the tangent parts, in NumPy."""
+    def _element_data_numpy(self, g, aW, bW, cW) -> np.ndarray:
+        """The tangent's CSR data from ``g`` ``(T, Q, n, 3)`` and weighted parts ``(T, Q)``."""
         A, I, B, Kc = self._local
-        V = self.V[:, None]
-        vals = (b[:, None] * V) * g[:, A, I] * g[:, B, Kc]
-        vals += (c[:, None] * V) * g[:, A, Kc] * g[:, B, I]
-        vals += (I == Kc) * ((a[:, None] * V) * self.GG[:, A, B])
+        vals = 0.0
+        for q in range(g.shape[1]):
+            gq = g[:, q]
+            vals = vals + (bW[:, q, None] * gq[:, A, I] * gq[:, B, Kc]
+                           + cW[:, q, None] * gq[:, A, Kc] * gq[:, B, I]
+                           + (I == Kc) * (aW[:, q, None] * self.GG[:, q][:, A, B]))
         flat = vals.ravel()
         data = np.zeros(self._nnz)
         for pos, sel in zip(self._pos, self._sel):
@@ -259,6 +293,34 @@ class Solver:
             K = (K + sp.triu(K, 1).T).tocsr()
         return K
 
+    def external_forces(self, force: np.ndarray) -> np.ndarray:
+        """``(n_all, 3)`` consistent nodal forces for per-vertex normal forces ``(N,)`` (N)."""
+        mesh = self.mesh
+        if self.order == 1 or self.options.load == "nodal":
+            f = mesh.nodal_forces(force, self.options.load)
+            return np.concatenate([f, np.zeros((len(self.edges), 3))])
+        # P2: integrate the linear pressure against the 6-node skin triangles
+        p = mesh.interp @ (np.asarray(force, float) / mesh.part.vertex_areas)
+        tri = mesh.skin_faces
+        key = self.edges[:, 0] * self.n_all + self.edges[:, 1]
+        te = np.sort(tri[:, TRI_EDGES], axis=2)                          # (K, 3, 2)
+        mid = mesh.n_nodes + np.searchsorted(key, te[..., 0] * self.n_all + te[..., 1])
+        nodes6 = np.concatenate([tri, mid], axis=1)                      # (K, 6)
+        v = mesh.nodes[tri]
+        area = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+        pq = TRI_POINTS @ p[tri].T                                       # (Qs, K)
+        N6 = tri_shape(2, TRI_POINTS)                                    # (Qs, 6)
+        load = area[:, None] * np.einsum("q,qk,qa->ka", TRI_WEIGHTS, pq, N6)  # (K, 6)
+        mag = np.bincount(nodes6.ravel(), weights=load.ravel(), minlength=self.n_all)
+        normals = np.zeros((self.n_all, 3))
+        normals[: mesh.n_skin] = mesh.skin_normals
+        e = self.edges
+        skin_edge = (e[:, 0] < mesh.n_skin) & (e[:, 1] < mesh.n_skin)
+        nm = mesh.skin_normals[e[skin_edge, 0]] + mesh.skin_normals[e[skin_edge, 1]]
+        normals[mesh.n_nodes + np.flatnonzero(skin_edge)] = nm / np.linalg.norm(
+            nm, axis=1, keepdims=True)
+        return -mag[:, None] * normals
+
     # ------------------------------------------------------------------ solving
     def solve(self, force: np.ndarray, u0: np.ndarray | None = None) -> Solution:
         """Equilibrium under per-vertex normal ``force`` ``(N,)`` (N) on the part.
@@ -268,10 +330,11 @@ class Solver:
         """
         force = self._check_force(force)
         t0 = time.perf_counter()
-        u = np.zeros((self.mesh.n_nodes, 3)) if u0 is None else np.array(u0, dtype=float)
-        if u.shape != (self.mesh.n_nodes, 3):
-            raise ValueError(f"u0 must have shape ({self.mesh.n_nodes}, 3), got {u.shape}")
-        f_target = self.mesh.nodal_forces(force, self.options.load)
+        u = np.zeros((self.n_all, 3)) if u0 is None else np.array(u0, dtype=float)
+        if u.shape != (self.n_all, 3):
+            raise ValueError(f"u0 must have shape ({self.n_all}, 3) (a Solution's state), got "
+                             f"{u.shape}")
+        f_target = self.external_forces(force)
         f_start = self._balanced_force(u) if u0 is not None else np.zeros_like(f_target)
         # march from the start state's load to the target, halving the step on failure
         s, step, iters, substeps, last = 0.0, 1.0, 0, 0, None
@@ -307,7 +370,7 @@ class Solver:
             sol = self.solve(force * (total / base), u0=u)
             out.append(sol)
             if sol.ok:
-                u = sol.displacement
+                u = sol.state
             else:
                 failed = float(total)
         return out
@@ -329,35 +392,54 @@ class Solver:
         return out.reshape(-1, 3)
 
     def _newton(self, u: np.ndarray, f: np.ndarray) -> dict:
+        """Newton iterations from ``u`` under nodal forces ``f``. The factorised tangent is kept
+        while the residual still contracts by ``options.reuse`` per step (a solve with stored
+        factors costs a sixth of a factorisation); otherwise, or when a kept factorisation gives
+        no usable step, the tangent is assembled and factorised afresh."""
         opt = self.options
         free = self.free
         fnorm = max(np.linalg.norm(f.reshape(-1)[free]), 1e-30)
         E = self.energy(u, f)
         history: list[float] = []
-        rel = float("nan")
+        rel, factorisations, refresh = float("nan"), 0, True
+        r = self.residual(u, f)
         for it in range(opt.max_iter + 1):
-            r, K = self.assemble(u, f)
             rf = r.reshape(-1)[free]
             rel = float(np.linalg.norm(rf) / fnorm)
             history.append(rel)
             if rel <= opt.rtol:
-                return {"ok": True, "u": u, "iterations": it, "residual": rel}
+                return {"ok": True, "u": u, "iterations": it, "residual": rel,
+                        "factorisations": factorisations}
             if it == opt.max_iter:
                 break
             if (len(history) > opt.stagnation
                     and history[-1] > 0.5 * history[-1 - opt.stagnation]):
                 return {"ok": False, "reason": f"stagnated: residual {rel:.2e} did not halve in "
                         f"{opt.stagnation} iterations", "iterations": it, "residual": rel}
+            if len(history) > 1 and rel > opt.reuse * history[-2]:
+                refresh = True
+            if refresh:
+                try:
+                    _, K = self.assemble(u, f)
+                    self.linear.factor(K)
+                except IndefiniteTangent:
+                    return {"ok": False, "reason": "indefinite tangent: the layer buckles",
+                            "iterations": it + 1, "residual": rel}
+                except (RuntimeError, ValueError) as e:
+                    return {"ok": False, "reason": f"linear solve failed: {e}",
+                            "iterations": it, "residual": rel}
+                factorisations += 1
+            fresh, refresh = refresh, False
             try:
-                du, neg = self.linear.solve(K, -rf)
-            except IndefiniteTangent:
-                return {"ok": False, "reason": "indefinite tangent: the layer buckles",
-                        "iterations": it + 1, "residual": rel}
-            except (RuntimeError, ValueError) as e:
+                du = self.linear.solve(-rf)
+            except RuntimeError as e:
                 return {"ok": False, "reason": f"linear solve failed: {e}", "iterations": it,
                         "residual": rel}
             slope = float(rf @ du)
             if not np.all(np.isfinite(du)) or slope >= 0:
+                if not fresh:  # kept factors gave no descent: refactorise next iteration
+                    refresh = True
+                    continue
                 return {"ok": False, "reason": "indefinite tangent: no descent direction",
                         "iterations": it + 1, "residual": rel}
             step = np.zeros(u.size)
@@ -373,11 +455,16 @@ class Solver:
                     break
                 alpha *= 0.5
             if not accepted:
+                if not fresh:
+                    refresh = True
+                    continue
                 inv = not np.isfinite(self.energy(u + 2.0**-11 * step, f))
                 reason = ("element inversion: every step along the Newton direction makes "
                           "det F <= 0" if inv else "line search failed to lower the energy")
                 return {"ok": False, "reason": reason, "iterations": it + 1, "residual": rel}
             u, E = trial, Et
+            r = self.residual(u, f)
+            refresh = alpha < 1.0  # a damped step: the tangent has moved on
         return {"ok": False, "reason": f"no convergence in {opt.max_iter} iterations (residual "
                 f"{rel:.2e})", "iterations": opt.max_iter, "residual": rel}
 
@@ -386,7 +473,7 @@ class Solver:
                         time.perf_counter() - t0, float(force.sum()), substeps)
 
     def _finish(self, res, u, iters, t0, force, substeps) -> Solution:
-        detF = float(det3(self.deformation_gradient(u)).min())
+        detF = float(det3(self._F(u)).min())
         m = self.mesh
         skin_u = u[: m.n_skin]
         inward = -np.einsum("si,si->s", skin_u, m.skin_normals) / m.thickness
@@ -401,35 +488,38 @@ class Solver:
         if comp > self.options.max_compression:
             return Solution(False, f"non-physical: the skin moves inward {comp:.2f} x the "
                             f"thickness (limit {self.options.max_compression})", None, **base)
-        return Solution(True, "", u, **base)
+        return Solution(True, "", u[: m.n_nodes], state=u, **base)
 
 
 # ---------------------------------------------------------------------- compiled kernel
 def _make_kernel():
-    """A Numba kernel that adds the 78 upper entries of every element matrix
-    ``K_aibk = aV d_ik G_a.G_b + bV g_ai g_bk + cV g_ak g_bi`` straight into the CSR data
-    (4x faster than the NumPy path here); ``None`` when Numba is absent."""
+    """A Numba kernel that adds the upper entries of every element matrix,
+    ``K_aibk = sum_q (aW d_ik G_a.G_b + bW g_ai g_bk + cW g_ak g_bi)``, straight into the CSR
+    data (4x faster than the NumPy path here); ``None`` when Numba is absent."""
     try:
         from numba import njit
     except ImportError:
         return None
 
     @njit(cache=True, nogil=True)
-    def kernel(g, GG, aV, bV, cV, pos, data):  # pragma: no cover - compiled
-        for t in range(g.shape[0]):
-            e = 0
-            for p in range(12):
-                A, i = p // 3, p % 3
-                for q in range(p, 12):
-                    B, k = q // 3, q % 3
-                    j = pos[t, e]
-                    e += 1
-                    if j < 0:
-                        continue
-                    v = bV[t] * g[t, A, i] * g[t, B, k] + cV[t] * g[t, A, k] * g[t, B, i]
-                    if i == k:
-                        v += aV[t] * GG[t, A, B]
-                    data[j] += v
+    def kernel(g, GG, aW, bW, cW, pos, data):  # pragma: no cover - compiled
+        T, Q, n = g.shape[0], g.shape[1], g.shape[2]
+        for t in range(T):
+            for qp in range(Q):
+                e = 0
+                for p in range(3 * n):
+                    A, i = p // 3, p % 3
+                    for q in range(p, 3 * n):
+                        B, k = q // 3, q % 3
+                        j = pos[t, e]
+                        e += 1
+                        if j < 0:
+                            continue
+                        v = (bW[t, qp] * g[t, qp, A, i] * g[t, qp, B, k]
+                             + cW[t, qp] * g[t, qp, A, k] * g[t, qp, B, i])
+                        if i == k:
+                            v += aW[t, qp] * GG[t, qp, A, B]
+                        data[j] += v
 
     return kernel
 
@@ -443,15 +533,17 @@ class _SuperLU:
 
     name, upper = "superlu", False
 
-    def solve(self, K, b):
+    def factor(self, K):
         from scipy.sparse.linalg import splu
 
-        lu = splu(K.tocsc(), permc_spec="MMD_AT_PLUS_A",
-                  options={"SymmetricMode": True}, diag_pivot_thresh=0.0)
-        neg = int(np.sum(lu.U.diagonal() <= 0))
+        self._lu = splu(K.tocsc(), permc_spec="MMD_AT_PLUS_A",
+                        options={"SymmetricMode": True}, diag_pivot_thresh=0.0)
+        neg = int(np.sum(self._lu.U.diagonal() <= 0))
         if neg:
             raise IndefiniteTangent(f"{neg} non-positive pivots")
-        return lu.solve(b), 0
+
+    def solve(self, b):
+        return self._lu.solve(b)
 
 
 class IndefiniteTangent(ArithmeticError):
@@ -481,23 +573,28 @@ class _Pardiso:
         except Exception:  # noqa: BLE001 - interpreter shutdown
             pass
 
-    def solve(self, K, b):
+    def factor(self, K):
         s = self._solver
         s._check_A(K)
         key = (K.shape, K.nnz)  # one Solver keeps one pattern
-        b = np.asfortranarray(b.reshape(-1, 1))
+        b = np.zeros((K.shape[0], 1), order="F")
         try:
             if self._analysed != key:
                 s.set_phase(11)
                 s._call_pardiso(K, b)
                 self._analysed = key
-            s.set_phase(23)
-            x = s._call_pardiso(K, b)
+            s.set_phase(22)
+            s._call_pardiso(K, b)
         except self._error as e:
             if "-4" in str(e):
                 raise IndefiniteTangent("Cholesky factorisation met a non-positive pivot") from e
             raise RuntimeError(f"PARDISO failed: {e}") from e
-        return x.ravel(), 0
+        self._K = K
+
+    def solve(self, b):
+        s = self._solver
+        s.set_phase(33)
+        return s._call_pardiso(self._K, np.asfortranarray(b.reshape(-1, 1))).ravel()
 
 
 class _AMGCG:
@@ -505,15 +602,19 @@ class _AMGCG:
 
     name, upper = "cg", False
 
-    def solve(self, K, b):
+    def factor(self, K):
         import pyamg
+
+        self._K = K
+        self._M = pyamg.smoothed_aggregation_solver(K, symmetry="symmetric").aspreconditioner()
+
+    def solve(self, b):
         from scipy.sparse.linalg import cg
 
-        ml = pyamg.smoothed_aggregation_solver(K, symmetry="symmetric")
-        x, info = cg(K, b, rtol=1e-10, maxiter=2000, M=ml.aspreconditioner())
+        x, info = cg(self._K, b, rtol=1e-10, maxiter=2000, M=self._M)
         if info != 0:
             raise RuntimeError(f"AMG-CG did not converge (info {info})")
-        return x, 0
+        return x
 
 
 LINEAR_SOLVERS = {"pardiso": _Pardiso, "superlu": _SuperLU, "cg": _AMGCG}

@@ -9,7 +9,7 @@ from fem.solver import Solver, SolverOptions, available_linear_solvers
 from stmpl.body.primitives import sheet, tube
 
 
-def _lame(n_around, layers, p=1.0, b=0.05, t=0.01, material=None):
+def _lame(n_around, layers, p=1.0, b=0.05, t=0.01, material=None, order=1):
     """A thick cylinder (radii b - t, b in m) under outer pressure ``p`` (Pa), inner face fixed,
     ends held axially (plane strain), with ``n_around`` vertices per ring and axial spacing tied
     to it. Returns (FEM mean outer radial displacement, closed form, max nodal error / max |u|)."""
@@ -20,8 +20,8 @@ def _lame(n_around, layers, p=1.0, b=0.05, t=0.01, material=None):
     for k in range(layers + 1):
         fixed[rim + k * mesh.n_skin, 2] = True
     material = material or LinearElastic(1000.0, 0.4)
-    sol = Solver(mesh, material, fixed=fixed, options=SolverOptions(rims="free")).solve(
-        p * part.vertex_areas)
+    sol = Solver(mesh, material, fixed=fixed, options=SolverOptions(rims="free"),
+                 order=order).solve(p * part.vertex_areas)
     assert sol.ok, sol.reason
     mu, lam = lame(material.E, material.nu)
     a = b - t
@@ -33,8 +33,9 @@ def _lame(n_around, layers, p=1.0, b=0.05, t=0.01, material=None):
     return ur[skin].mean(), exact[skin].mean(), np.abs(ur - exact).max() / np.abs(exact).max()
 
 
-def test_lame_cylinder_matches_closed_form_within_2_percent():
-    fem, exact, _ = _lame(48, 2)
+@pytest.mark.parametrize("order", [1, 2])
+def test_lame_cylinder_matches_closed_form_within_2_percent(order):
+    fem, exact, _ = _lame(48, 2, order=order)
     assert exact < 0  # pressure pushes inward
     assert abs(fem / exact - 1) < 0.02
 
@@ -43,6 +44,12 @@ def test_lame_error_falls_at_second_order():
     errs = np.array([_lame(n, L)[2] for n, L in [(48, 2), (96, 4), (192, 8)]])
     rates = np.log2(errs[:-1] / errs[1:])
     assert errs[-1] < 0.005 and rates[0] > 1.5 and rates[1] > 1.85, (errs, rates)
+    # quadratic elements: smaller errors at the same mesh (the polygon's facets then dominate)
+    errs2 = np.array([_lame(n, L, order=2)[2] for n, L in [(24, 1), (48, 2), (96, 4)]])
+    rates2 = np.log2(errs2[:-1] / errs2[1:])
+    assert np.all(errs2 < 0.4 * np.array([_lame(n, L)[2] for n, L in [(24, 1), (48, 2),
+                                                                        (96, 4)]]))
+    assert np.all(rates2 > 1.7), (errs2, rates2)
 
 
 def test_neo_hookean_agrees_with_linear_elasticity_at_small_load():
@@ -60,12 +67,13 @@ def _small_shell(layers=2):
     return part, shell_mesh(part, np.full(part.n_vertices, 0.008), layers=layers)
 
 
-@pytest.mark.parametrize("material", [NeoHookean(), LinearElastic()])
-def test_tangent_matches_finite_differences_of_the_residual(material):
-    part, mesh = _small_shell()
-    S = Solver(mesh, material, options=SolverOptions(linear_solver="superlu"))
+@pytest.mark.parametrize("material,order", [(NeoHookean(), 1), (LinearElastic(), 1),
+                                            (NeoHookean(), 2)])
+def test_tangent_matches_finite_differences_of_the_residual(material, order):
+    part, mesh = _small_shell(layers=2 if order == 1 else 1)
+    S = Solver(mesh, material, options=SolverOptions(linear_solver="superlu"), order=order)
     rng = np.random.default_rng(1)
-    u = np.zeros((mesh.n_nodes, 3))
+    u = np.zeros((S.n_all, 3))
     u.reshape(-1)[S.free] = rng.normal(0, 5e-4, len(S.free))
     d = np.zeros_like(u)
     d.reshape(-1)[S.free] = rng.normal(0, 1, len(S.free))
@@ -133,6 +141,45 @@ def test_assembly_matches_scikit_fem():
     assert abs(K - K_sk).max() < 1e-10 * abs(K_sk).max()
 
 
+def test_quadratic_assembly_matches_scikit_fem():
+    skfem = pytest.importorskip("skfem")
+    from scipy.spatial import cKDTree
+    from skfem.models.elasticity import linear_elasticity
+
+    part, mesh = _small_shell(layers=1)
+    E, nu = 1000.0, 0.4
+    mu, lam = lame(E, nu)
+    S = Solver(mesh, LinearElastic(E, nu), options=SolverOptions(linear_solver="superlu"),
+               order=2)
+    m = skfem.MeshTet(mesh.nodes.T, mesh.tets.T)
+    basis = skfem.Basis(m, skfem.ElementVector(skfem.ElementTetP2()))
+    K_sk = skfem.asm(linear_elasticity(lam, mu), basis).tocsr()
+    # match scikit-fem's DOFs to ours by position and component
+    ours = np.concatenate([mesh.nodes, mesh.nodes[S.edges].mean(1)])
+    locs = basis.doflocs.T                                             # (3 * nodes, 3)
+    node = cKDTree(ours).query(locs)[1]
+    comp = np.zeros(len(locs), dtype=int)
+    for c in range(3):
+        comp[basis.nodal_dofs[c]] = c
+        comp[basis.edge_dofs[c]] = c
+    perm = np.empty(len(locs), dtype=int)
+    perm[3 * node + comp] = np.arange(len(locs))
+    assert len(np.unique(perm)) == len(perm)
+    Kf = K_sk[perm][:, perm][S.free][:, S.free]
+    K = S.tangent_full(np.zeros((S.n_all, 3)))
+    assert abs(K - Kf).max() < 1e-10 * abs(Kf).max()
+
+
+def test_quadratic_pressure_loads_keep_the_total():
+    part = sheet(0.1, 0.1, 7, 7)
+    mesh = shell_mesh(part, np.full(part.n_vertices, 0.005), layers=1)
+    force = np.zeros(part.n_vertices)
+    force[[24, 25, 31]] = [0.2, 0.1, 0.3]
+    f = Solver(mesh, order=2).external_forces(force)
+    np.testing.assert_allclose(f.sum(0), [0.0, 0.0, -0.6], atol=1e-12)
+    assert np.abs(f[:, :2]).max() == 0
+
+
 def test_linear_solvers_agree():
     part, mesh = _small_shell()
     force = np.zeros(part.n_vertices)
@@ -146,12 +193,13 @@ def test_linear_solvers_agree():
         np.testing.assert_allclose(sol.displacement, ref, atol=1e-9 * np.abs(ref).max())
 
 
-def test_continuation_warm_start_matches_a_cold_solve():
+@pytest.mark.parametrize("order", [1, 2])
+def test_continuation_warm_start_matches_a_cold_solve(order):
     part = sheet(0.1, 0.1, 9, 9)
-    mesh = shell_mesh(part, np.full(part.n_vertices, 0.01), layers=2)
+    mesh = shell_mesh(part, np.full(part.n_vertices, 0.01), layers=2 if order == 1 else 1)
     force = np.zeros(part.n_vertices)
     force[40] = 1.0
-    S = Solver(mesh)
+    S = Solver(mesh, order=order)
     sols = S.continuation(force, [0.05, 0.1, 0.15])
     assert all(s.ok for s in sols)
     assert [s.total_force for s in sols] == pytest.approx([0.05, 0.1, 0.15])
@@ -210,13 +258,13 @@ def test_bad_input_is_named():
 def test_compiled_and_numpy_assembly_agree(monkeypatch):
     import fem.solver as fs
 
-    part, mesh = _small_shell()
+    part, mesh = _small_shell(layers=1)
     rng = np.random.default_rng(3)
-    for name in ("superlu", "pardiso"):
+    for name, order in (("superlu", 1), ("pardiso", 1), ("superlu", 2)):
         if name not in available_linear_solvers():
             continue
-        S = Solver(mesh, options=SolverOptions(linear_solver=name))
-        u = np.zeros((mesh.n_nodes, 3))
+        S = Solver(mesh, options=SolverOptions(linear_solver=name), order=order)
+        u = np.zeros((S.n_all, 3))
         u.reshape(-1)[S.free] = rng.normal(0, 5e-4, len(S.free))
         K1 = S.assemble(u, u)[1]
         monkeypatch.setattr(fs, "_kernel", None)
