@@ -1,14 +1,19 @@
 """FEM ground truth: tissue-shell tetrahedral meshes, Neo-Hookean material, Newton solver and
 dataset generation. ``stmpl`` never imports it at module level.
 
->>> from fem import shell_mesh, Solver
->>> mesh = shell_mesh(part, thickness, layers=3, subdivisions=2, refine_near=loaded_points)
->>> sol = Solver(mesh).solve(force)          # sol.ok, sol.reason, sol.part_displacement(mesh)
+>>> from fem import simulate
+>>> mesh, sols = simulate(part, thickness, force, totals=[0.1, 0.2], res="reference")
+>>> sols[-1].ok, sols[-1].reason, sols[-1].part_displacement(mesh)   # (N, 3) m
+
+Lower level: ``shell_mesh(part, thickness, layers, subdivisions, refine_near=...)`` and
+``Solver(mesh, material, order=2).solve(force)`` / ``.continuation(force, totals)``.
 """
 
 from fem.material import LinearElastic, NeoHookean, material
 from fem.mesh import Quality, ShellMesh, shell_mesh
+from fem.simulate import REFERENCE, RESOLUTIONS, Resolution, simulate
 from fem.solver import Solution, Solver, SolverOptions, available_linear_solvers
 
 __all__ = ["LinearElastic", "NeoHookean", "material", "Quality", "ShellMesh", "shell_mesh",
-           "Solution", "Solver", "SolverOptions", "available_linear_solvers"]
+           "Solution", "Solver", "SolverOptions", "available_linear_solvers", "REFERENCE",
+           "RESOLUTIONS", "Resolution", "simulate"]

@@ -159,3 +159,21 @@ def test_dataset_errors_name_the_problem(tmp_path):
         Dataset(tmp_path / "d").verify()
     with pytest.raises(ValueError, match="split must be"):
         Dataset(tmp_path / "d").arrays("training")
+
+
+def test_cli_generate_stops_early_and_finishes(tmp_path, capsys):
+    from stmpl.cli import main
+
+    path = tmp_path / "cfg.yaml"
+    path.write_text(yaml.safe_dump(_cfg(thickness_mm=[7.5], forces=[0.05, 0.1])))
+    out = tmp_path / "cli"
+    assert main(["generate", str(path), "--out", str(out), "--max-shards", "1", "--quiet"]) == 0
+    assert "stopped early" in capsys.readouterr().out
+    assert len(list(out.glob("shard-*.h5"))) == 1 and not (out / "card.json").exists()
+    assert main(["generate", str(path), "--out", str(out), "--quiet"]) == 0
+    printed = capsys.readouterr().out
+    card = json.loads((out / "card.json").read_text())
+    assert f"{card['samples']} samples" in printed
+    assert len(card["timing"]["runs"]) == 2
+    assert main(["generate", str(tmp_path / "missing.yaml")]) == 2
+    assert "config file not found" in capsys.readouterr().err
