@@ -85,6 +85,47 @@ def cmd_scene(args) -> int:
     return 0
 
 
+def cmd_simulate(args) -> int:
+    import numpy as np
+
+    from fem.simulate import simulate
+    from stmpl.scene import Deformation, Scene
+    from stmpl.viz import deformation_figure
+
+    body = _body(args)
+    part = body.part(args.part)
+    load = _load(args, part)
+    scene = Scene.from_load(part, _thickness(args, body, part), load, body=body.name)
+    print(load.summary())
+    if args.levels < 1:
+        raise ValueError(f"--levels must be >= 1, got {args.levels}")
+    totals = args.force * np.arange(1, args.levels + 1) / args.levels
+    mesh, sols = simulate(part, scene.thickness, scene.force, totals, args.res)
+    print(f"shell: {mesh.n_nodes} nodes, {len(mesh.tets)} tets ({args.res}); {mesh.quality()}")
+    for s in sols:
+        state = "ok" if s.ok else f"FAILED: {s.reason}"
+        print(f"  {s.total_force:6.3f} N  {state}  {s.iterations} Newton steps  "
+              f"max |u| {1e3 * s.max_displacement:.2f} mm  {s.time:.2f} s")
+    last = sols[-1]
+    if not last.ok:
+        raise ValueError(f"the FEM solve failed at {last.total_force:.3g} N ({last.reason}); "
+                         "try a smaller --force")
+    deformation = Deformation(scene, last.part_displacement(mesh),
+                              {"predictor": "fem", "resolution": args.res,
+                               **last.diagnostics()})
+    if args.out:
+        deformation_figure(deformation, mesh.nodes, mesh.tets, last.displacement, args.out,
+                           size=args.size)
+        print(f"wrote {args.out}")
+    if args.save:
+        deformation.save(args.save)
+        print(f"wrote {args.save}")
+    if args.vtu:
+        mesh.to_vtu(args.vtu, point_data={"displacement": last.displacement})
+        print(f"wrote {args.vtu}")
+    return 0
+
+
 def cmd_parts(args) -> int:
     body = _body(args)
     print(f"{'part':<12}{'vertices':>10}{'faces':>8}{'seam':>6}{'rims':>6}  chart m/unit")
@@ -103,18 +144,13 @@ def _body_args(p) -> None:
     p.add_argument("--beta2", type=float, help="SMPL beta_2 in [-2, 2] (thickness heuristic)")
 
 
-def parser() -> argparse.ArgumentParser:
-    ap = argparse.ArgumentParser(prog="stmpl", description="Soft-tissue contact deformation of "
-                                 "human bodies: scenes, FEM ground truth, learned predictors.")
-    ap.add_argument("-v", "--verbose", action="store_true", help="log progress")
-    sub = ap.add_subparsers(dest="command", required=True)
-
-    sc = sub.add_parser("scene", help="build a loaded scene on a body part and draw it")
+def _scene_args(sc, force: float) -> None:
     _body_args(sc)
     sc.add_argument("--part", default="left_arm", help="body part (default left_arm)")
     sc.add_argument("--load", default="disk",
                     choices=["disk", "ellipse", "seam_disk", "band", "letter"])
-    sc.add_argument("--force", type=float, default=5.0, help="total force F_total, N")
+    sc.add_argument("--force", type=float, default=force,
+                    help=f"total force F_total, N (default {force:g})")
     sc.add_argument("--radius", type=float, default=20.0, help="disk radius / ellipse a, mm")
     sc.add_argument("--width", type=float, default=30.0, help="band width / letter stroke, mm")
     sc.add_argument("--height", type=float, default=100.0, help="letter height, mm")
@@ -126,10 +162,30 @@ def parser() -> argparse.ArgumentParser:
                     help="load centre in chart coordinates (default 0.5 0.5)")
     sc.add_argument("--thickness", type=float, help="constant thickness, mm (default: heuristic)")
     sc.add_argument("--size", type=int, default=256, help="UV image size in the picture, px")
+
+
+def parser() -> argparse.ArgumentParser:
+    ap = argparse.ArgumentParser(prog="stmpl", description="Soft-tissue contact deformation of "
+                                 "human bodies: scenes, FEM ground truth, learned predictors.")
+    ap.add_argument("-v", "--verbose", action="store_true", help="log progress")
+    sub = ap.add_subparsers(dest="command", required=True)
+
+    sc = sub.add_parser("scene", help="build a loaded scene on a body part and draw it")
+    _scene_args(sc, force=5.0)
     sc.add_argument("--out", help="PNG picture to write")
     sc.add_argument("--save", help="scene file to write (.npz)")
     sc.add_argument("--export", help="mesh coloured by force to write (.ply/.obj/.glb)")
     sc.set_defaults(func=cmd_scene)
+
+    si = sub.add_parser("simulate", help="solve a loaded scene with the FEM and draw it")
+    _scene_args(si, force=0.3)
+    si.add_argument("--levels", type=int, default=3, help="continuation levels up to --force")
+    si.add_argument("--res", default="reference",
+                    help="mesh resolution: coarse, medium, fine, finest or reference")
+    si.add_argument("--out", help="PNG picture to write")
+    si.add_argument("--save", help="deformation file to write (.npz)")
+    si.add_argument("--vtu", help="the deformed tissue shell for ParaView (.vtu)")
+    si.set_defaults(func=cmd_simulate)
 
     ge = sub.add_parser("generate", help="generate a FEM dataset from a config (resumable)")
     ge.add_argument("config", help="dataset config (YAML), e.g. configs/data/small.yaml")

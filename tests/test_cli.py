@@ -29,3 +29,26 @@ def test_parts_command(capsys, arm):
     assert main(["parts"]) == 0
     out = capsys.readouterr().out
     assert "left_arm" in out and "541" in out and "belly" in out
+
+
+def test_simulate_command_solves_draws_and_saves(tmp_path, capsys, arm):
+    from stmpl.scene import Deformation
+
+    rc = main(["simulate", "--force", "0.1", "--levels", "2", "--res", "medium",
+               "--out", str(tmp_path / "f.png"), "--save", str(tmp_path / "d.npz"),
+               "--vtu", str(tmp_path / "s.vtu")])
+    assert rc == 0
+    out = capsys.readouterr().out
+    assert out.count(" ok ") == 2 and "wrote" in out
+    d = Deformation.load(tmp_path / "d.npz")
+    assert 1e-4 < d.magnitude.max() < 7.5e-3          # pressed in, not through the layer
+    loaded = d.scene.force > 0
+    assert np.all(np.einsum("ni,ni->n", d.displacement[loaded],
+                            d.scene.part.normals[loaded]) < 0)     # inward
+    assert (tmp_path / "f.png").stat().st_size > 20_000 and (tmp_path / "s.vtu").exists()
+
+
+def test_simulate_command_reports_a_failed_solve(capsys, arm):
+    assert main(["simulate", "--force", "8", "--levels", "1", "--res", "coarse",
+                 "--radius", "10"]) == 2
+    assert "FEM solve failed" in capsys.readouterr().err

@@ -37,3 +37,18 @@ def test_export_rejects_bad_input(arm, tmp_path):
         viz.export_mesh(arm, tmp_path / "m.stl")
     with pytest.raises(ValueError, match="values must have shape"):
         viz.export_mesh(arm, tmp_path / "m.ply", np.zeros(3))
+
+
+def test_section_of_a_flat_layer_has_the_layer_area():
+    from fem.mesh import shell_mesh
+    from stmpl.body.primitives import sheet
+
+    part = sheet(0.1, 0.1, 8, 8)
+    mesh = shell_mesh(part, np.full(part.n_vertices, 0.006), layers=2)
+    polys, vals = viz.section(mesh.nodes, mesh.tets, np.array([0.013, 0.0, 0.0]),
+                              np.array([1.0, 0.0, 0.0]), values=mesh.nodes[:, 1])
+    def area(p):
+        c = p - p.mean(0)
+        return 0.5 * abs(sum(np.cross(c[i], c[(i + 1) % len(c)])[0] for i in range(len(c))))
+    assert sum(area(p) for p in polys) == pytest.approx(0.1 * 0.006, rel=1e-9)
+    assert np.all(np.abs(vals) <= 0.05 + 1e-12)
