@@ -113,10 +113,6 @@ class Solution:
         return self.displacement[mesh.part_nodes]
 
 
-class SolveFailed(RuntimeError):
-    """Raised by helpers that need a converged solve."""
-
-
 class Solver:
     """Newton solver for one shell mesh and material; reuse it for many loads (the sparse pattern,
     shape gradients and the linear solver's symbolic analysis are kept).
@@ -636,12 +632,21 @@ def available_linear_solvers() -> list[str]:
 
 
 def make_linear_solver(name: str = "auto"):
-    """A linear solver by name; ``"auto"`` takes PARDISO if it loads, else SuperLU."""
+    """A linear solver by name; ``"auto"`` takes PARDISO if it loads (MKL found), else SciPy's
+    SuperLU, with a warning since it is several times slower."""
     if name == "auto":
-        name = "pardiso" if "pardiso" in available_linear_solvers() else "superlu"
+        try:
+            return LINEAR_SOLVERS["pardiso"]()
+        except (ImportError, OSError) as e:
+            import warnings
+
+            warnings.warn(f"PARDISO is not available ({e}); the FEM falls back to SciPy's "
+                          "SuperLU, several times slower", RuntimeWarning, stacklevel=2)
+            return LINEAR_SOLVERS["superlu"]()
     if name not in LINEAR_SOLVERS:
         raise ValueError(f"unknown linear solver {name!r}")
     try:
         return LINEAR_SOLVERS[name]()
-    except ImportError as e:
-        raise ImportError(f"linear solver {name!r} needs a package that is not installed: {e}")
+    except (ImportError, OSError) as e:
+        raise ImportError(f"linear solver {name!r} needs a package that is not installed: "
+                          f"{e}") from e

@@ -271,3 +271,17 @@ def test_compiled_and_numpy_assembly_agree(monkeypatch):
         K2 = S.assemble(u, u)[1]
         monkeypatch.undo()
         assert abs(K1 - K2).max() <= 1e-12 * abs(K2).max()
+
+
+def test_auto_falls_back_to_superlu_without_pardiso(monkeypatch):
+    import fem.solver as fs
+
+    def missing():
+        raise ImportError("no MKL here")
+
+    monkeypatch.setitem(fs.LINEAR_SOLVERS, "pardiso", missing)
+    with pytest.warns(RuntimeWarning, match="SuperLU"):
+        solver = fs.make_linear_solver("auto")
+    assert solver.name == "superlu"
+    with pytest.raises(ImportError, match="not installed"):
+        fs.make_linear_solver("pardiso")
