@@ -64,6 +64,24 @@ def cmd_generate(args) -> int:
     return 0
 
 
+def cmd_train(args) -> int:
+    from stmpl.train import train
+
+    path = train(args.config, resume=not args.restart, progress=not args.quiet)
+    print(f"wrote {path}")
+    return 0
+
+
+def cmd_evaluate(args) -> int:
+    from stmpl.evaluate import evaluate
+
+    print(evaluate(args.predictors, args.data, args.split, args.out, args.limit, args.device),
+          end="")
+    if args.out:
+        print(f"wrote {args.out} (.md, .csv)")
+    return 0
+
+
 def cmd_scene(args) -> int:
     from stmpl.scene import Scene
     from stmpl.viz import export_mesh, scene_figure
@@ -196,6 +214,22 @@ def parser() -> argparse.ArgumentParser:
     ge.add_argument("--max-shards", type=int, help="stop after this many new shards")
     ge.add_argument("--quiet", action="store_true", help="no progress bar")
     ge.set_defaults(func=cmd_generate)
+
+    tr = sub.add_parser("train", help="train a learned predictor from a config (resumable)")
+    tr.add_argument("config", help="training config (YAML), e.g. configs/train/naive.yaml")
+    tr.add_argument("--restart", action="store_true", help="ignore a saved state; start over")
+    tr.add_argument("--quiet", action="store_true", help="no progress bar")
+    tr.set_defaults(func=cmd_train)
+
+    ev = sub.add_parser("evaluate", help="measure predictors on a dataset split")
+    ev.add_argument("predictors", nargs="+",
+                    help="fem, fem:<resolution>, or .safetensors checkpoints")
+    ev.add_argument("--data", required=True, help="dataset folder")
+    ev.add_argument("--split", default="test", choices=["train", "val", "test"])
+    ev.add_argument("--limit", type=int, help="first N samples only")
+    ev.add_argument("--device", default="cpu")
+    ev.add_argument("--out", help="write the table here (.md and .csv)")
+    ev.set_defaults(func=cmd_evaluate)
 
     pa = sub.add_parser("parts", help="list the body model's parts and their sizes")
     _body_args(pa)

@@ -33,3 +33,26 @@ def arm(anny_body):
 @pytest.fixture
 def rng():
     return np.random.default_rng(0)
+
+
+TINY_DATA = {
+    "name": "tiny",
+    "body": {"model": "tube", "radius": 0.04, "length": 0.2, "n_around": 16, "n_along": 12},
+    "part": "tube", "thickness_mm": [5.0, 10.0],
+    "resolution": {"subdivisions": 1, "layers": 1, "refine_radius": 0.03, "order": 1},
+    "forces": [0.05, 0.1, 0.2],
+    "placements": {"disk": {"centres": 8, "radii": [0.02]},
+                   "band": {"at": [0.3, 0.6], "widths": [0.03]}},
+    "shard_tasks": 4, "parallel": {"backend": "serial", "workers": 1},
+}
+
+
+@pytest.fixture(scope="session")
+def tiny_dataset(tmp_path_factory):
+    """A real FEM dataset on an analytic tube (10 placements x 2 thicknesses x 3 forces), made
+    once per session in about a second."""
+    from fem.generate import generate
+
+    out = tmp_path_factory.mktemp("data") / "tiny"
+    generate(TINY_DATA, out, progress=False)
+    return out

@@ -1,0 +1,35 @@
+"""The Naive baseline of the paper (its eq. 4): each vertex moves by ``alpha * t_i * F_i`` with a
+learned ``alpha = (alpha_x, alpha_y, alpha_z)`` in global axes (1/N), ``t_i`` the thickness (m) and
+``F_i`` the force magnitude (N). It knows nothing of where the load is nor of its direction: the
+floor every learned model must clear."""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from stmpl.predictor import DISP_SCALE, LearnedPredictor, register
+
+
+class NaiveModel(nn.Module):
+    """``(B, N) x (B, N) -> (B, N, 3)``: ``alpha * t * F``, output in units of DISP_SCALE."""
+
+    def __init__(self):
+        super().__init__()
+        self.alpha = nn.Parameter(torch.zeros(3))
+
+    def forward(self, thickness: torch.Tensor, force: torch.Tensor) -> torch.Tensor:
+        return (thickness * force)[..., None] * self.alpha / DISP_SCALE
+
+
+@register("naive")
+class NaivePredictor(LearnedPredictor):
+    """Predictor around :class:`NaiveModel` (no options)."""
+
+    defaults: dict = {}
+
+    def build_model(self) -> nn.Module:
+        return NaiveModel()
+
+    def forward(self, thickness, force):
+        return self.model(thickness, force)

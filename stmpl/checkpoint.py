@@ -1,0 +1,78 @@
+"""Checkpoints: a ``.safetensors`` file of tensors plus a JSON sidecar (``<name>.json``) with the
+model kind, its config, the dataset card's hash, normalisation ranges, training metrics and the
+library version. The sidecar carries the tensor file's SHA-256: a tampered or truncated file is
+refused with an error that says so.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import pathlib
+
+FORMAT = "stmpl-checkpoint/1"
+
+
+def sidecar_path(path) -> pathlib.Path:
+    return pathlib.Path(path).with_suffix(".json")
+
+
+def sha256(path) -> str:
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for chunk in iter(lambda: f.read(1 << 20), b""):
+            h.update(chunk)
+    return h.hexdigest()
+
+
+def save(path, tensors: dict, meta: dict) -> pathlib.Path:
+    """Write ``tensors`` (name -> torch tensor) and the sidecar ``meta`` (must hold ``kind``)."""
+    from safetensors.torch import save_file
+
+    import stmpl
+    from stmpl.files import atomic_path, atomic_write_text
+
+    path = pathlib.Path(path)
+    if path.suffix != ".safetensors":
+        raise ValueError(f"a checkpoint file ends in .safetensors, got {path.name}")
+    if "kind" not in meta:
+        raise ValueError("checkpoint metadata needs a 'kind'")
+    with atomic_path(path) as tmp:
+        save_file({k: v.detach().contiguous().cpu() for k, v in tensors.items()}, str(tmp))
+    side = {"format": FORMAT, **meta, "stmpl": stmpl.__version__, "sha256": sha256(path),
+            "bytes": path.stat().st_size}
+    atomic_write_text(sidecar_path(path), json.dumps(side, indent=1))
+    return path
+
+
+def read_sidecar(path) -> dict:
+    """The sidecar of checkpoint ``path``, checked for format and presence of the tensor file."""
+    path = pathlib.Path(path)
+    side = sidecar_path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"checkpoint not found: {path}")
+    if not side.is_file():
+        raise FileNotFoundError(f"checkpoint {path} has no sidecar {side.name}")
+    try:
+        meta = json.loads(side.read_text())
+    except json.JSONDecodeError as e:
+        raise ValueError(f"checkpoint sidecar {side} is corrupt: {e}") from e
+    if meta.get("format") != FORMAT:
+        raise ValueError(f"{side} is not a stmpl checkpoint sidecar (format "
+                         f"{meta.get('format')!r})")
+    return meta
+
+
+def load(path) -> tuple[dict, dict]:
+    """``(tensors, meta)`` of a checkpoint, after checking the file's size and SHA-256."""
+    from safetensors.torch import load_file
+
+    path = pathlib.Path(path)
+    meta = read_sidecar(path)
+    size = path.stat().st_size
+    if size != meta.get("bytes"):
+        raise ValueError(f"checkpoint {path} is truncated or altered: {size} bytes, the sidecar "
+                         f"says {meta.get('bytes')}")
+    if sha256(path) != meta.get("sha256"):
+        raise ValueError(f"checkpoint {path} does not match its SHA-256 (tampered or corrupt)")
+    return load_file(str(path)), meta

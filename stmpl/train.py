@@ -1,0 +1,181 @@
+"""One training loop for every learned predictor (``stmpl train CONFIG``).
+
+A config (YAML, checked on load) names the model kind and its options, the dataset folder, an
+optional thickness filter (the paper's "seen levels" ablation), and the optimiser settings. The
+loop: Adam, shuffled mini-batches (seeded), validation loss every epoch, early stopping with the
+best weights kept, a progress bar, CPU or CUDA. After every epoch the full state goes to
+``<out>/state.pt`` atomically, so a killed run resumes where it stopped. At the end the best
+model is evaluated on the validation and test splits and written as a checkpoint
+(``<out>/<name>.safetensors`` + sidecar) carrying its config, the dataset card's hash, and the
+metrics.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pathlib
+import time
+
+import numpy as np
+import yaml
+
+DEFAULTS = {
+    "name": None,
+    "model": None,
+    "options": {},
+    "data": None,
+    "thickness_mm": None,
+    "epochs": 100,
+    "batch": 64,
+    "lr": 1e-4,
+    "patience": 15,
+    "seed": 0,
+    "device": "cpu",
+    "out": None,
+    "max_train": None,
+}
+
+
+def load_config(source) -> dict:
+    """A checked, completed training config from a YAML path or a dict."""
+    if isinstance(source, (str, os.PathLike)):
+        path = pathlib.Path(source)
+        if not path.is_file():
+            raise FileNotFoundError(f"config file not found: {path}")
+        raw = yaml.safe_load(path.read_text()) or {}
+        default_name = path.stem
+    else:
+        raw, default_name = dict(source), "model"
+    unknown = set(raw) - set(DEFAULTS)
+    if unknown:
+        raise ValueError(f"unknown training config keys {sorted(unknown)}; allowed: "
+                         f"{sorted(DEFAULTS)}")
+    cfg = {**DEFAULTS, **raw}
+    cfg["name"] = cfg["name"] or default_name
+    from stmpl import predictor
+
+    if cfg["model"] not in predictor.names() or cfg["model"] == "fem":
+        raise ValueError(f"model must be a learned predictor "
+                         f"{[n for n in predictor.names() if n != 'fem']}, got {cfg['model']!r}")
+    if not cfg["data"]:
+        raise ValueError("data: the dataset folder to train on is missing")
+    for k in ("epochs", "batch", "patience"):
+        if not (isinstance(cfg[k], int) and cfg[k] >= 1):
+            raise ValueError(f"{k} must be an integer >= 1, got {cfg[k]!r}")
+    if not (isinstance(cfg["lr"], (int, float)) and cfg["lr"] > 0):
+        raise ValueError(f"lr must be > 0, got {cfg['lr']!r}")
+    cfg["out"] = cfg["out"] or str(pathlib.Path("runs") / cfg["name"])
+    return cfg
+
+
+def _split_tensors(ds, split, cfg, device):
+    import torch
+
+    a = ds.arrays(split)
+    keep = np.arange(len(a["total"]))
+    if cfg["thickness_mm"] is not None:
+        levels = np.asarray(cfg["thickness_mm"], float) * 1e-3
+        keep = keep[np.isin(np.round(a["thickness"][:, 0], 6), np.round(levels, 6))]
+    if split == "train" and cfg["max_train"]:
+        keep = keep[: int(cfg["max_train"])]
+    def t(x):
+        return torch.tensor(np.asarray(x)[keep], dtype=torch.float32, device=device)
+    return t(a["thickness"]), t(a["force"]), t(a["displacement"])
+
+
+def train(config, resume: bool = True, progress: bool = True):
+    """Train the config's model; returns the path of the written checkpoint."""
+    import torch
+
+    from stmpl import predictor
+    from stmpl.data import Dataset
+    from stmpl.files import atomic_path
+
+    cfg = load_config(config)
+    out = pathlib.Path(cfg["out"])
+    out.mkdir(parents=True, exist_ok=True)
+    ds = Dataset(cfg["data"])
+    if cfg["device"].startswith("cuda") and not torch.cuda.is_available():
+        raise ValueError("device cuda was asked for but CUDA is not available")
+    device = torch.device(cfg["device"])
+    torch.manual_seed(cfg["seed"])
+    np.random.seed(cfg["seed"])
+    p = predictor.REGISTRY[cfg["model"]](ds.part, cfg["options"], device=cfg["device"])
+    opt = torch.optim.Adam(p.model.parameters(), lr=cfg["lr"])
+    tr = _split_tensors(ds, "train", cfg, device)
+    va = _split_tensors(ds, "val", cfg, device)
+    if len(tr[0]) == 0 or len(va[0]) == 0:
+        raise ValueError(f"dataset {cfg['data']} has no training or no validation samples "
+                         "(after the thickness filter)")
+    state_path = out / "state.pt"
+    start, best, best_state, bad, history = 0, np.inf, None, 0, []
+    if resume and state_path.exists():
+        st = torch.load(state_path, map_location=device, weights_only=False)
+        same = {k: v for k, v in st["config"].items() if k != "epochs"}
+        if same != {k: v for k, v in cfg.items() if k != "epochs"}:
+            raise ValueError(f"{state_path} belongs to another config (only epochs may change "
+                             "to extend a run); delete it, use --restart or another out folder")
+        p.model.load_state_dict(st["model"])
+        opt.load_state_dict(st["opt"])
+        start, best, best_state, bad, history = (st["epoch"], st["best"], st["best_state"],
+                                                 st["bad"], st["history"])
+        torch.set_rng_state(st["rng"])
+    gen = torch.Generator().manual_seed(cfg["seed"])
+    for _ in range(start):  # the same shuffles as an uninterrupted run
+        torch.randperm(len(tr[0]), generator=gen)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=cfg["epochs"], initial=start, unit="epoch",
+                   desc=f"train {cfg['name']}", dynamic_ncols=True)
+    t0 = time.perf_counter()
+    epoch = start
+    for epoch in range(start, cfg["epochs"]):
+        if bad >= cfg["patience"]:
+            break
+        p.model.train()
+        perm = torch.randperm(len(tr[0]), generator=gen).to(device)
+        total = 0.0
+        for i in range(0, len(perm), cfg["batch"]):
+            idx = perm[i:i + cfg["batch"]]
+            loss = p.loss(tr[0][idx], tr[1][idx], tr[2][idx])
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            total += float(loss.detach()) * len(idx)
+        p.model.eval()
+        with torch.no_grad():
+            vloss = float(np.mean([float(p.loss(va[0][i:i + 256], va[1][i:i + 256],
+                                                va[2][i:i + 256])) for i in
+                                   range(0, len(va[0]), 256)]))
+        history.append({"epoch": epoch + 1, "train": total / len(perm), "val": vloss})
+        if vloss < best:
+            best, bad = vloss, 0
+            best_state = {k: v.detach().clone() for k, v in p.model.state_dict().items()}
+        else:
+            bad += 1
+        with atomic_path(state_path) as tmp:
+            torch.save({"config": cfg, "model": p.model.state_dict(), "opt": opt.state_dict(),
+                        "epoch": epoch + 1, "best": best, "best_state": best_state, "bad": bad,
+                        "history": history, "rng": torch.get_rng_state()}, tmp)
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(train=f"{total / len(perm):.3g}", val=f"{vloss:.3g}")
+    if bar is not None:
+        bar.close()
+    p.model.load_state_dict(best_state)
+    from stmpl.evaluate import evaluate_dataset
+
+    metrics = {s: evaluate_dataset(p, ds, s, thickness_mm=None)
+               for s in ("val", "test") if ds.card["samples_per_split"][s]}
+    meta = {"dataset": {"folder": str(cfg["data"]), "hash": ds.card["hash"],
+                        "name": ds.card["name"], "samples": ds.card["samples_per_split"]},
+            "training": {"epochs": len(history), "best_val": best,
+                         "seconds": round(time.perf_counter() - t0, 1), "device": cfg["device"],
+                         "history": history[-5:]},
+            "metrics": metrics}
+    path = p.save(out / f"{cfg['name']}.safetensors", meta)
+    (out / "history.json").write_text(json.dumps(history))
+    return path

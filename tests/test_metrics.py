@@ -1,0 +1,48 @@
+import numpy as np
+import pytest
+
+from stmpl import metrics
+from stmpl.body.primitives import tube
+
+
+def test_sample_metrics_by_hand():
+    true = np.zeros((4, 3))
+    true[0] = [1e-3, 0, 0]          # 1 mm
+    true[1] = [0, 2e-3, 0]          # 2 mm
+    true[2] = [0, 0, 0.5e-6]        # 0.0005 mm: below the 0.001 mm threshold, ignored
+    pred = true.copy()
+    pred[0] += [0, 0, 0.3e-3]       # 0.3 mm error
+    pred[1] += [0.05e-3, 0, 0]      # 0.05 mm error
+    pred[3] += [9e-3, 0, 0]         # an inactive vertex: ignored
+    m = metrics.sample_metrics(true, pred)
+    assert m["active"] == 2 and m["max_disp"] == pytest.approx(2.0)
+    assert m["mee"] == pytest.approx(0.175)
+    assert m["mae_x"] == pytest.approx(0.025) and m["mae_z"] == pytest.approx(0.15)
+    assert m["rel_mee"] == pytest.approx(100 * 0.175 / 2.0)
+    assert m["max_err"] == pytest.approx(0.3)
+    assert m["ee<=0.1"] == 50.0 and m["ee<=0.5"] == 100.0
+    with pytest.raises(ValueError, match="shape|both"):
+        metrics.sample_metrics(true, pred[:3])
+    with pytest.raises(ValueError, match="finite"):
+        metrics.sample_metrics(true, pred * np.nan)
+
+
+def test_summary_and_tables():
+    rows = [{"active": 3, "mee": 1.0, "x": 2.0}, {"active": 3, "mee": 3.0, "x": np.nan}]
+    s = metrics.summarise(rows)
+    assert s["mee"] == (2.0, 1.0) and s["x"] == (2.0, 0.0) and s["samples"] == 2
+    true = np.random.default_rng(0).normal(0, 1e-3, (50, 3))
+    s = metrics.summarise([metrics.sample_metrics(true, true + 1e-5)] * 3)
+    md = metrics.table({"a": s})
+    assert md.startswith("| predictor") and "| a | 3 |" in md
+    csv = metrics.table({"a": s}, "csv").splitlines()
+    assert csv[0].startswith("predictor,samples,mae_x_mean") and csv[1].startswith("a,3,")
+
+
+def test_seam_gap():
+    part = tube(n_around=8, n_along=3)
+    corners = np.zeros((len(part.uv), 3))
+    assert metrics.seam_gap(part, corners) == 0.0
+    g = part.seam_groups[0]
+    corners[g[1]] = [0.0, 0.0, 2e-3]      # one copy of one seam vertex 2 mm off
+    assert metrics.seam_gap(part, corners) == pytest.approx(2.0 / len(part.seam_groups))
