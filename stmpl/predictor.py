@@ -65,12 +65,17 @@ def names() -> list[str]:
     return sorted(REGISTRY)
 
 
-def create(name: str, **kwargs) -> "BasePredictor":
-    """A predictor by registered name."""
+def get(name: str) -> type:
+    """The predictor class registered as ``name``."""
     _import_models()
     if name not in REGISTRY:
         raise ValueError(f"unknown predictor {name!r}; known: {sorted(REGISTRY)}")
-    return REGISTRY[name](**kwargs)
+    return REGISTRY[name]
+
+
+def create(name: str, *args, **kwargs) -> "BasePredictor":
+    """A predictor by registered name (learned ones take the body part first)."""
+    return get(name)(*args, **kwargs)
 
 
 def load(path, device: str = "cpu") -> "BasePredictor":

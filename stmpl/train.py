@@ -101,7 +101,7 @@ def train(config, resume: bool = True, progress: bool = True):
     device = torch.device(cfg["device"])
     torch.manual_seed(cfg["seed"])
     np.random.seed(cfg["seed"])
-    p = predictor.REGISTRY[cfg["model"]](ds.part, cfg["options"], device=cfg["device"])
+    p = predictor.create(cfg["model"], ds.part, cfg["options"], device=cfg["device"])
     opt = torch.optim.Adam(p.model.parameters(), lr=cfg["lr"])
     tr = _split_tensors(ds, "train", cfg, device)
     va = _split_tensors(ds, "val", cfg, device)

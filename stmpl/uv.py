@@ -50,6 +50,9 @@ class UVMap(torch.nn.Module):
         idx, w = _sample_plan(part, self.size)
         self.register_buffer("sample_index", torch.as_tensor(idx, dtype=torch.long))
         self.register_buffer("sample_weight", torch.as_tensor(w, dtype=torch.float32))
+        taps, tw = _corner_taps(part.uv, self.size)
+        self.register_buffer("corner_index", torch.as_tensor(taps, dtype=torch.long))
+        self.register_buffer("corner_weight", torch.as_tensor(tw, dtype=torch.float32))
 
     def rasterise(self, values: torch.Tensor) -> torch.Tensor:
         """Vertex values ``(N, C)`` or ``(B, N, C)`` -> images ``(C, H, W)`` or ``(B, C, H, W)``.
@@ -76,6 +79,13 @@ class UVMap(torch.nn.Module):
         w = self.sample_weight.to(images.dtype)
         out = (flat[:, :, self.sample_index] * w).sum(dim=-1).transpose(1, 2)  # (B, N, C)
         return out[0] if single else out
+
+    def sample_corners(self, images: torch.Tensor) -> torch.Tensor:
+        """Images ``(B, C, H, W)`` -> values at every UV corner ``(B, T, C)``, seam copies kept
+        apart (to measure how far a seam vertex's copies disagree)."""
+        flat = images.flatten(2)
+        w = self.corner_weight.to(images.dtype)
+        return (flat[:, :, self.corner_index] * w).sum(dim=-1).transpose(1, 2)
 
     @staticmethod
     def _batch(values: torch.Tensor, name: str, n: int) -> tuple[torch.Tensor, bool]:
@@ -144,15 +154,21 @@ def _dilate(pix, tri, bary, inside, size, pad, tri_xy):
             np.concatenate([bary, ring_bary]))
 
 
-def _sample_plan(part: BodyPart, size: int) -> tuple[np.ndarray, np.ndarray]:
-    """``(N, 4K)`` pixel indices and weights: bilinear taps of every UV copy, averaged."""
-    x, y = _pixel_xy(part.uv, size).T
+def _corner_taps(uv: np.ndarray, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(T, 4)`` bilinear pixel taps and weights of every UV corner."""
+    x, y = _pixel_xy(uv, size).T
     x0 = np.clip(np.floor(x).astype(int), 0, size - 2)
     y0 = np.clip(np.floor(y).astype(int), 0, size - 2)
     fx, fy = np.clip(x - x0, 0, 1), np.clip(y - y0, 0, 1)
     taps = np.stack([y0 * size + x0, y0 * size + x0 + 1, (y0 + 1) * size + x0,
                      (y0 + 1) * size + x0 + 1], 1)
     tw = np.stack([(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy], 1)
+    return taps, tw
+
+
+def _sample_plan(part: BodyPart, size: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(N, 4K)`` pixel indices and weights: bilinear taps of every UV copy, averaged."""
+    taps, tw = _corner_taps(part.uv, size)
     copies = np.bincount(part.uv_vertex, minlength=part.n_vertices)
     k = int(copies.max())
     idx = np.zeros((part.n_vertices, 4 * k), np.int64)

@@ -1,0 +1,104 @@
+"""A MeshGraphNets-style GNN on the body part's mesh, and its predictor.
+
+Encode - process - decode (Pfaff et al. 2021), on the part's vertices and edges:
+
+    h_i = f_v(node inputs_i),        e_ij = f_e(edge inputs_ij)                 (encoder)
+    e_ij <- e_ij + g_e([e_ij, h_i, h_j]);  h_i <- h_i + g_v([h_i, sum_j e_ij])  (x steps)
+    u_i = d(h_i)                                                                 (decoder)
+
+Every MLP has two layers and (except the decoder) a LayerNorm. The network sees only graphs; the
+predictor builds the features and normalises them with fixed scales kept as buffers. Node inputs:
+pressure ``F_i / A_i`` over 1 kPa, thickness normalised over [2.5, 12.5] mm, the outward normal.
+Edge inputs: the rest-pose offset ``x_j - x_i`` over the mean edge length, and its length. Output:
+the displacement over 30 mm. A seam vertex is one node, so there is no seam by construction.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import nn
+from torch_geometric.nn import MessagePassing
+
+from stmpl import tissue
+from stmpl.predictor import LearnedPredictor, register
+
+PRESSURE_SCALE = 1000.0
+
+
+def mlp(c_in: int, hidden: int, c_out: int, norm: bool = True) -> nn.Sequential:
+    """Two linear layers with a ReLU between, optionally a LayerNorm on the output."""
+    layers = [nn.Linear(c_in, hidden), nn.ReLU(), nn.Linear(hidden, c_out)]
+    return nn.Sequential(*layers, nn.LayerNorm(c_out)) if norm else nn.Sequential(*layers)
+
+
+class GraphNetBlock(MessagePassing):
+    """One processor step: ``e_ij <- e_ij + g_e([e_ij, h_i, h_j])``, then
+    ``h_i <- h_i + g_v([h_i, sum_j e_ij])``. ``h``: ``(V, L)``, ``e``: ``(E, L)``,
+    ``edge_index``: ``(2, E)`` (source j, target i)."""
+
+    def __init__(self, latent: int):
+        super().__init__(aggr="add")
+        self.edge_mlp = mlp(3 * latent, latent, latent)
+        self.node_mlp = mlp(2 * latent, latent, latent)
+
+    def forward(self, h: torch.Tensor, edge_index: torch.Tensor, e: torch.Tensor):
+        j, i = edge_index
+        e = e + self.edge_mlp(torch.cat([e, h[i], h[j]], dim=-1))
+        agg = self.propagate(edge_index, e=e, size=(h.shape[0], h.shape[0]))
+        return h + self.node_mlp(torch.cat([h, agg], dim=-1)), e
+
+    def message(self, e: torch.Tensor) -> torch.Tensor:
+        return e
+
+
+class MeshGraphNet(nn.Module):
+    """``(V, node_in), (E, edge_in), (2, E) -> (V, out)``."""
+
+    def __init__(self, node_in: int = 5, edge_in: int = 4, out: int = 3, latent: int = 128,
+                 steps: int = 15):
+        super().__init__()
+        self.node_encoder = mlp(node_in, latent, latent)
+        self.edge_encoder = mlp(edge_in, latent, latent)
+        self.processor = nn.ModuleList(GraphNetBlock(latent) for _ in range(steps))
+        self.decoder = mlp(latent, latent, out, norm=False)
+
+    def forward(self, x: torch.Tensor, edge_attr: torch.Tensor, edge_index: torch.Tensor):
+        h, e = self.node_encoder(x), self.edge_encoder(edge_attr)
+        for block in self.processor:
+            h, e = block(h, edge_index, e)
+        return self.decoder(h)
+
+
+@register("gnn")
+class GNNPredictor(LearnedPredictor):
+    """Mesh GNN predictor. Options: ``latent`` (width), ``steps`` (message passing)."""
+
+    defaults = {"latent": 128, "steps": 15}
+
+    def build_model(self) -> nn.Module:
+        part = self.part
+        e = part.edges
+        ei = np.concatenate([e, e[:, ::-1]]).T                      # (2, 2E): both directions
+        rel = part.vertices[ei[0]] - part.vertices[ei[1]]           # x_j - x_i
+        scale = float(np.linalg.norm(rel, axis=1).mean())
+        feats = np.concatenate([rel / scale, np.linalg.norm(rel, axis=1, keepdims=True) / scale],
+                               1)
+        dev = self.device
+        self.edge_index = torch.tensor(ei.copy(), dtype=torch.long, device=dev)
+        self.edge_attr = torch.tensor(feats, dtype=torch.float32, device=dev)
+        self.normals = torch.tensor(part.normals, dtype=torch.float32, device=dev)
+        self.inv_area = torch.tensor(1.0 / part.vertex_areas / PRESSURE_SCALE,
+                                     dtype=torch.float32, device=dev)
+        return MeshGraphNet(5, 4, 3, int(self.config["latent"]), int(self.config["steps"]))
+
+    def forward(self, thickness, force):
+        B, N = thickness.shape
+        lo, hi = tissue.THICKNESS_RANGE
+        x = torch.cat([(force * self.inv_area)[..., None], ((thickness - lo) / (hi - lo))[..., None],
+                       self.normals.expand(B, -1, -1)], -1).reshape(B * N, 5)
+        E = self.edge_index.shape[1]
+        offs = (torch.arange(B, device=x.device) * N).repeat_interleave(E)
+        ei = self.edge_index.repeat(1, B) + offs
+        ea = self.edge_attr.repeat(B, 1)
+        return self.model(x, ea, ei).reshape(B, N, 3)

@@ -1,0 +1,123 @@
+"""The paper's UV-space UNet (pix2pix-style) and its predictor.
+
+Network (:class:`UNet`): ``depth`` down-steps of 4x4 convolutions with stride 2 (LeakyReLU 0.2
+before each but the first, no normalisation), and as many 4x4 transposed convolutions up with
+skip connections (LeakyReLU 0.2 before each, dropout 0.5 on the three innermost), a tanh output.
+Channels double from ``width`` up to ``8 * width``. Images ``(B, C_in, S, S) -> (B, 3, S, S)``.
+
+Predictor (:class:`UVUNetPredictor`): per-vertex inputs become UV images (:mod:`stmpl.uv`):
+pressure ``F_i / A_i`` over 1 kPa (resolution-independent, unlike the raw per-vertex force) and
+thickness normalised over [2.5, 12.5] mm, optionally geometry (rest positions about the part's
+centre over its extent, normals). The output images hold the displacement over 30 mm; they are
+sampled back at the vertices, a seam vertex's copies averaged. The loss is the mean squared error
+over the chart's pixels (the paper's L2), plus an optional total-variation term.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+from torch import nn
+
+from stmpl import tissue
+from stmpl.predictor import DISP_SCALE, LearnedPredictor, register
+
+PRESSURE_SCALE = 1000.0
+"""Pa: pressure inputs are divided by this (the tissue's Young's modulus in the paper)."""
+
+
+class UNet(nn.Module):
+    """pix2pix UNet: ``(B, C_in, S, S) -> (B, C_out, S, S)`` in [-1, 1]; ``S`` divisible by
+    ``2 ** depth``."""
+
+    def __init__(self, c_in: int, c_out: int = 3, width: int = 16, depth: int = 5,
+                 dropout: float = 0.5):
+        super().__init__()
+        ch = [width * 2 ** min(d, 3) for d in range(depth)]
+        self.down = nn.ModuleList()
+        prev = c_in
+        for d, c in enumerate(ch):
+            layers = [] if d == 0 else [nn.LeakyReLU(0.2)]
+            self.down.append(nn.Sequential(*layers, nn.Conv2d(prev, c, 4, 2, 1)))
+            prev = c
+        self.up = nn.ModuleList()
+        for d in reversed(range(depth)):
+            c_skip = 0 if d == depth - 1 else ch[d]
+            c_out_d = ch[d - 1] if d > 0 else c_out
+            layers = [nn.LeakyReLU(0.2), nn.ConvTranspose2d(ch[d] + c_skip, c_out_d, 4, 2, 1)]
+            if 0 < d and d >= depth - 3 and dropout > 0:
+                layers.append(nn.Dropout(dropout))
+            self.up.append(nn.Sequential(*layers))
+        self.depth = depth
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        if x.shape[-1] % (2 ** self.depth) or x.shape[-2] % (2 ** self.depth):
+            raise ValueError(f"image size {tuple(x.shape[-2:])} is not divisible by "
+                             f"2^{self.depth}")
+        skips = []
+        for layer in self.down:
+            x = layer(x)
+            skips.append(x)
+        x = skips.pop()
+        for i, layer in enumerate(self.up):
+            if i > 0:
+                x = torch.cat([x, skips.pop()], dim=1)
+            x = layer(x)
+        return torch.tanh(x)
+
+
+@register("uv_unet")
+class UVUNetPredictor(LearnedPredictor):
+    """UV-UNet predictor. Options: ``size`` (UV image pixels, 64..512), ``width``, ``depth``,
+    ``dropout``, ``geometry`` (add position and normal channels), ``tv`` (total-variation weight
+    in the loss)."""
+
+    defaults = {"size": 128, "width": 16, "depth": 5, "dropout": 0.5, "geometry": False,
+                "tv": 0.0}
+
+    def build_model(self) -> nn.Module:
+        from stmpl.uv import UVMap
+
+        c = self.config
+        if not 64 <= int(c["size"]) <= 512 or int(c["size"]) % (2 ** int(c["depth"])):
+            raise ValueError(f"size must be in [64, 512] and divisible by 2^depth, got "
+                             f"{c['size']} with depth {c['depth']}")
+        self.uvmap = UVMap(self.part, int(c["size"])).to(self.device)
+        part = self.part
+        extent = float(np.ptp(part.vertices, axis=0).max())
+        geo = np.concatenate([(part.vertices - part.vertices.mean(0)) / extent, part.normals], 1)
+        self._geometry = torch.tensor(geo, dtype=torch.float32, device=self.device)
+        self._inv_area = torch.tensor(1.0 / part.vertex_areas / PRESSURE_SCALE,
+                                      dtype=torch.float32, device=self.device)
+        c_in = 2 + (6 if c["geometry"] else 0)
+        return UNet(c_in, 3, int(c["width"]), int(c["depth"]), float(c["dropout"]))
+
+    def images(self, thickness, force) -> torch.Tensor:
+        """``(B, C, S, S)`` input images from ``(B, N)`` thickness (m) and force (N)."""
+        lo, hi = tissue.THICKNESS_RANGE
+        chans = [force * self._inv_area, (thickness - lo) / (hi - lo)]
+        x = torch.stack(chans, -1)
+        if self.config["geometry"]:
+            x = torch.cat([x, self._geometry.expand(x.shape[0], -1, -1)], -1)
+        return self.uvmap.rasterise(x)
+
+    def forward(self, thickness, force):
+        return self.uvmap.sample(self.model(self.images(thickness, force)))
+
+    def loss(self, thickness, force, target):
+        out = self.model(self.images(thickness, force))
+        tgt = self.uvmap.rasterise(target / DISP_SCALE)
+        m = self.uvmap.mask.to(out.dtype)
+        loss = (((out - tgt) ** 2) * m).sum() / (m.sum() * out.shape[0] * out.shape[1])
+        if self.config["tv"]:
+            dx = (out[..., :, 1:] - out[..., :, :-1]).abs() * m[:, 1:] * m[:, :-1]
+            dy = (out[..., 1:, :] - out[..., :-1, :]).abs() * m[1:] * m[:-1]
+            loss = loss + self.config["tv"] * (dx.mean() + dy.mean())
+        return loss
+
+    def corner_displacement(self, thickness, force) -> np.ndarray:
+        """``(B, T, 3)`` displacement (m) at every UV corner, seam copies apart."""
+        self.model.eval()
+        with torch.no_grad():
+            out = self.model(self.images(thickness, force))
+            return (self.uvmap.sample_corners(out) * DISP_SCALE).double().cpu().numpy()
