@@ -176,8 +176,11 @@ class FEMPredictor(BasePredictor):
         return {"resolution": self.res.to_dict(), **self._last.pop(id(scene), {})}
 
 
-DISP_SCALE = 0.03
-"""Displacement normalisation, m: [-30, 30] mm maps to [-1, 1]."""
+DISP_SCALE_MM = 10.0
+"""Default displacement normalisation, mm: [-10, 10] mm maps to [-1, 1]. The paper's 30 mm
+suits its 1..10 N; the forces E = 1 kPa tissue can carry give at most a few mm, and a UNet's
+tanh output squeezed into 1/10 of its range learns the far field poorly. Every learned model
+takes it as the option ``disp_scale_mm``; the checkpoint keeps it."""
 
 
 class LearnedPredictor(BasePredictor):
@@ -193,12 +196,16 @@ class LearnedPredictor(BasePredictor):
     def __init__(self, part, config: dict | None = None, device: str = "cpu"):
         import torch
 
-        unknown = set(config or {}) - set(self.defaults)
+        allowed = {**self.defaults, "disp_scale_mm": DISP_SCALE_MM}
+        unknown = set(config or {}) - set(allowed)
         if unknown:
             raise ValueError(f"unknown {self.name} model options {sorted(unknown)}; allowed: "
-                             f"{sorted(self.defaults)}")
+                             f"{sorted(allowed)}")
         self.part = part
-        self.config = {**self.defaults, **(config or {})}
+        self.config = {**allowed, **(config or {})}
+        if not float(self.config["disp_scale_mm"]) > 0:
+            raise ValueError(f"disp_scale_mm must be > 0, got {self.config['disp_scale_mm']}")
+        self.scale = float(self.config["disp_scale_mm"]) * 1e-3
         self.device = torch.device(device)
         self.model = self.build_model().to(self.device)
         self.meta: dict = {}
@@ -208,7 +215,7 @@ class LearnedPredictor(BasePredictor):
         raise NotImplementedError
 
     def forward(self, thickness, force):
-        """``(B, N, 3)`` displacement in units of :data:`DISP_SCALE` from ``thickness``
+        """``(B, N, 3)`` displacement in units of ``self.scale`` (m) from ``thickness``
         ``(B, N)`` (m) and ``force`` ``(B, N)`` (N), torch tensors on ``self.device``."""
         raise NotImplementedError
 
@@ -216,7 +223,7 @@ class LearnedPredictor(BasePredictor):
         """Training loss for a batch; ``target`` ``(B, N, 3)`` in m. Default: mean squared error
         of the normalised displacement over the vertices (the paper's L2)."""
         pred = self.forward(thickness, force)
-        return ((pred - target / DISP_SCALE) ** 2).mean()
+        return ((pred - target / self.scale) ** 2).mean()
 
     # -- shared
     def check(self, scenes) -> None:
@@ -236,7 +243,7 @@ class LearnedPredictor(BasePredictor):
                          device=self.device)
         self.model.eval()
         with torch.no_grad():
-            u = self.forward(t, f) * DISP_SCALE
+            u = self.forward(t, f) * self.scale
         return list(u.double().cpu().numpy())
 
     def n_parameters(self) -> int:
@@ -252,7 +259,7 @@ class LearnedPredictor(BasePredictor):
         for k, v in self.part.arrays().items():
             tensors[f"part.{k}"] = torch.as_tensor(np.asarray(v))
         side = {"kind": self.name, "config": self.config, "part": self.part.name,
-                "part_source": self.part.source, "disp_scale_m": DISP_SCALE,
+                "part_source": self.part.source, "disp_scale_m": self.scale,
                 "parameters": self.n_parameters(), **self.meta, **(meta or {})}
         return checkpoint.save(path, tensors, side)
 

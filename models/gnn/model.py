@@ -10,7 +10,7 @@ Every MLP has two layers and (except the decoder) a LayerNorm. The network sees 
 predictor builds the features and normalises them with fixed scales kept as buffers. Node inputs:
 pressure ``F_i / A_i`` over 1 kPa, thickness normalised over [2.5, 12.5] mm, the outward normal.
 Edge inputs: the rest-pose offset ``x_j - x_i`` over the mean edge length, and its length. Output:
-the displacement over 30 mm. A seam vertex is one node, so there is no seam by construction.
+the displacement over ``disp_scale_mm``. A seam vertex is one node, so there is no seam by construction.
 """
 
 from __future__ import annotations
@@ -35,16 +35,24 @@ def mlp(c_in: int, hidden: int, c_out: int, norm: bool = True) -> nn.Sequential:
 class GraphNetBlock(MessagePassing):
     """One processor step: ``e_ij <- e_ij + g_e([e_ij, h_i, h_j])``, then
     ``h_i <- h_i + g_v([h_i, sum_j e_ij])``. ``h``: ``(V, L)``, ``e``: ``(E, L)``,
-    ``edge_index``: ``(2, E)`` (source j, target i)."""
+    ``edge_index``: ``(2, E)`` (source j, target i).
+
+    ``g_e``'s first layer is applied as ``A e_ij + B h_i + C h_j``: the same map as on the
+    concatenation, but ``B h`` and ``C h`` are computed once per node and gathered, which saves
+    two thirds of the edge work (there are about six times more edges than nodes)."""
 
     def __init__(self, latent: int):
         super().__init__(aggr="add")
-        self.edge_mlp = mlp(3 * latent, latent, latent)
+        self.edge_in = nn.Linear(3 * latent, latent)
+        self.edge_out = nn.Sequential(nn.ReLU(), nn.Linear(latent, latent), nn.LayerNorm(latent))
         self.node_mlp = mlp(2 * latent, latent, latent)
 
     def forward(self, h: torch.Tensor, edge_index: torch.Tensor, e: torch.Tensor):
         j, i = edge_index
-        e = e + self.edge_mlp(torch.cat([e, h[i], h[j]], dim=-1))
+        L = h.shape[1]
+        W, b = self.edge_in.weight, self.edge_in.bias
+        hi, hj = h @ W[:, L:2 * L].T, h @ W[:, 2 * L:].T              # per node, then gathered
+        e = e + self.edge_out(e @ W[:, :L].T + hi[i] + hj[j] + b)
         agg = self.propagate(edge_index, e=e, size=(h.shape[0], h.shape[0]))
         return h + self.node_mlp(torch.cat([h, agg], dim=-1)), e
 

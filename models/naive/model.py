@@ -8,18 +8,19 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from stmpl.predictor import DISP_SCALE, LearnedPredictor, register
+from stmpl.predictor import LearnedPredictor, register
 
 
 class NaiveModel(nn.Module):
-    """``(B, N) x (B, N) -> (B, N, 3)``: ``alpha * t * F``, output in units of DISP_SCALE."""
+    """``(B, N) x (B, N) -> (B, N, 3)``: ``alpha * t * F`` (m), divided by ``scale`` (m)."""
 
-    def __init__(self):
+    def __init__(self, scale: float):
         super().__init__()
         self.alpha = nn.Parameter(torch.zeros(3))
+        self.scale = scale
 
     def forward(self, thickness: torch.Tensor, force: torch.Tensor) -> torch.Tensor:
-        return (thickness * force)[..., None] * self.alpha / DISP_SCALE
+        return (thickness * force)[..., None] * self.alpha / self.scale
 
 
 @register("naive")
@@ -29,7 +30,7 @@ class NaivePredictor(LearnedPredictor):
     defaults: dict = {}
 
     def build_model(self) -> nn.Module:
-        return NaiveModel()
+        return NaiveModel(self.scale)
 
     def forward(self, thickness, force):
         return self.model(thickness, force)

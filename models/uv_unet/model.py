@@ -8,7 +8,8 @@ Channels double from ``width`` up to ``8 * width``. Images ``(B, C_in, S, S) -> 
 Predictor (:class:`UVUNetPredictor`): per-vertex inputs become UV images (:mod:`stmpl.uv`):
 pressure ``F_i / A_i`` over 1 kPa (resolution-independent, unlike the raw per-vertex force) and
 thickness normalised over [2.5, 12.5] mm, optionally geometry (rest positions about the part's
-centre over its extent, normals). The output images hold the displacement over 30 mm; they are
+centre over its extent, normals). The output images hold the displacement over ``disp_scale_mm``
+(10 mm by default; the paper's 30 mm); they are
 sampled back at the vertices, a seam vertex's copies averaged. The loss is the mean squared error
 over the chart's pixels (the paper's L2), plus an optional total-variation term.
 """
@@ -20,7 +21,7 @@ import torch
 from torch import nn
 
 from stmpl import tissue
-from stmpl.predictor import DISP_SCALE, LearnedPredictor, register
+from stmpl.predictor import LearnedPredictor, register
 
 PRESSURE_SCALE = 1000.0
 """Pa: pressure inputs are divided by this (the tissue's Young's modulus in the paper)."""
@@ -106,7 +107,7 @@ class UVUNetPredictor(LearnedPredictor):
 
     def loss(self, thickness, force, target):
         out = self.model(self.images(thickness, force))
-        tgt = self.uvmap.rasterise(target / DISP_SCALE)
+        tgt = self.uvmap.rasterise(target / self.scale)
         m = self.uvmap.mask.to(out.dtype)
         loss = (((out - tgt) ** 2) * m).sum() / (m.sum() * out.shape[0] * out.shape[1])
         if self.config["tv"]:
@@ -120,4 +121,4 @@ class UVUNetPredictor(LearnedPredictor):
         self.model.eval()
         with torch.no_grad():
             out = self.model(self.images(thickness, force))
-            return (self.uvmap.sample_corners(out) * DISP_SCALE).double().cpu().numpy()
+            return (self.uvmap.sample_corners(out) * self.scale).double().cpu().numpy()

@@ -1,0 +1,90 @@
+"""Predictor latency and throughput on the anny left arm, side by side.
+
+For each learned predictor (untrained weights: speed does not depend on them): the median time
+per scene of ``predict(scene)`` at batch 1 (the whole API: tensors, UV maps, Deformation) and of
+the bare forward pass, and scenes per second at batch 64. The FEM (reference resolution) is timed
+once for scale.
+
+Run: python benchmarks/predictor_speed.py [--repeat 30] [--device cpu|cuda] [--fem]
+Target (issue #4): <= 5 ms per scene at batch 1 on this CPU for each learned predictor.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+
+import numpy as np
+import torch
+
+CONFIGS = {
+    "naive": {},
+    "uv_unet": {},                                  # 128 px, width 16, depth 5
+    "uv_unet-256": {"size": 256, "depth": 6},
+    "gnn": {},                                      # latent 128, 15 steps
+    "gnn-small": {"latent": 64, "steps": 8},
+}
+
+
+def _median(fn, repeat: int) -> float:
+    fn()
+    fn()
+    t = []
+    for _ in range(repeat):
+        s = time.perf_counter()
+        fn()
+        t.append(time.perf_counter() - s)
+    return float(np.median(t))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--repeat", type=int, default=30)
+    ap.add_argument("--device", default="cpu")
+    ap.add_argument("--fem", action="store_true", help="also time the FEM (reference mesh)")
+    args = ap.parse_args()
+    from stmpl import AnnyBody, loads, predictor, tissue
+    from stmpl.scene import Scene
+
+    torch.manual_seed(0)
+    arm = AnnyBody().part("left_arm")
+    scene = Scene.from_load(arm, tissue.constant(arm, 0.0075),
+                            loads.disk(arm, uv=(0.5, 0.5), radius=0.02, total=0.3))
+    batch = [scene] * 64
+    dev = args.device
+    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+          f"torch {torch.__version__}, {torch.get_num_threads()} threads, device {dev}"
+          + (f" ({torch.cuda.get_device_name()})" if dev.startswith("cuda") else ""))
+    print(f"left arm, {arm.n_vertices} vertices; median of {args.repeat} runs")
+    print()
+    print("| predictor | parameters | MB | predict() ms, batch 1 | forward ms, batch 1 | "
+          "scenes/s, batch 64 |")
+    print("|---|--:|--:|--:|--:|--:|")
+    t1 = torch.tensor(scene.thickness[None], dtype=torch.float32, device=dev)
+    f1 = torch.tensor(scene.force[None], dtype=torch.float32, device=dev)
+    for label, opts in CONFIGS.items():
+        p = predictor.create(label.split("-")[0], arm, opts, device=dev)
+        p.model.eval()
+        sync = torch.cuda.synchronize if dev.startswith("cuda") else (lambda: None)
+
+        def fwd():
+            with torch.no_grad():
+                p.forward(t1, f1)
+            sync()
+
+        t_pred = _median(lambda: p.predict(scene), args.repeat)
+        t_fwd = _median(fwd, args.repeat)
+        t_b = _median(lambda: p.predict(batch), max(3, args.repeat // 5))
+        n = p.n_parameters()
+        print(f"| {label} | {n} | {4 * n / 2**20:.1f} | {1e3 * t_pred:.2f} | {1e3 * t_fwd:.2f} | "
+              f"{64 / t_b:.0f} |")
+    if args.fem:
+        p = predictor.create("fem")
+        t = _median(lambda: p.predict(scene), 3)
+        print(f"| fem (reference mesh) | - | - | {1e3 * t:.0f} | - | {1 / t:.1f} |")
+
+
+if __name__ == "__main__":
+    main()
