@@ -571,6 +571,20 @@ def generate(config, out=None, *, workers: int | None = None, backend: str | Non
     return write_card(out, p, chash, runs)
 
 
+def _watch_parent(parent: int) -> None:
+    """Worker initialiser: leave when the generating process is gone (killed), rather than
+    finish orphaned shards that nobody will write."""
+    import threading
+
+    def watch():
+        while True:
+            time.sleep(0.5)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    threading.Thread(target=watch, daemon=True).start()
+
+
 def _run(p: Plan, todo: list[int], par: dict, threads: int):
     """Yield solved shards as they finish, from the chosen backend."""
     if not todo:
@@ -583,7 +597,8 @@ def _run(p: Plan, todo: list[int], par: dict, threads: int):
         import concurrent.futures as cf
         import multiprocessing as mp
 
-        with cf.ProcessPoolExecutor(par["workers"], mp_context=mp.get_context("spawn")) as ex:
+        with cf.ProcessPoolExecutor(par["workers"], mp_context=mp.get_context("spawn"),
+                                    initializer=_watch_parent, initargs=(os.getpid(),)) as ex:
             futs = [ex.submit(solve_shard, _payload(p, k, threads)) for k in todo]
             try:
                 for f in cf.as_completed(futs):

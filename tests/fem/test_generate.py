@@ -177,3 +177,36 @@ def test_cli_generate_stops_early_and_finishes(tmp_path, capsys):
     assert len(card["timing"]["runs"]) == 2
     assert main(["generate", str(tmp_path / "missing.yaml")]) == 2
     assert "config file not found" in capsys.readouterr().err
+
+
+def test_workers_leave_when_the_generator_is_killed(tmp_path):
+    psutil = pytest.importorskip("psutil")
+    cfg = _cfg(shard_tasks=1, parallel={"backend": "processes", "workers": 2},
+               resolution={"subdivisions": 2, "layers": 2, "refine_radius": 0.03})
+    path = tmp_path / "cfg.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    out = tmp_path / "orphans"
+    proc = subprocess.Popen([sys.executable, "-m", "stmpl.cli", "generate", str(path),
+                             "--out", str(out), "--quiet"], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL)
+    parent = psutil.Process(proc.pid)
+    deadline = time.time() + 120
+    def spawned():
+        out_ = []
+        for c in parent.children(recursive=True):
+            try:
+                if "spawn_main" in " ".join(c.cmdline()):
+                    out_.append(c)
+            except psutil.Error:  # a process that ended meanwhile
+                pass
+        return out_
+
+    workers = []
+    while time.time() < deadline and not list(out.glob("shard-*.h5")):
+        workers = spawned() or workers
+        time.sleep(0.05)
+    assert workers, "no worker processes seen"
+    proc.send_signal(signal.SIGKILL)
+    proc.wait()
+    gone, alive = psutil.wait_procs(workers, timeout=10)
+    assert not alive, [p.pid for p in alive]
