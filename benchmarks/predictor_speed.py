@@ -14,10 +14,9 @@ from __future__ import annotations
 import argparse
 import os
 import platform
-import time
 
-import numpy as np
 import torch
+from _timing import median_time
 
 CONFIGS = {
     "naive": {},
@@ -26,17 +25,6 @@ CONFIGS = {
     "gnn": {},                                      # latent 128, 15 steps
     "gnn-small": {"latent": 64, "steps": 8},
 }
-
-
-def _median(fn, repeat: int) -> float:
-    fn()
-    fn()
-    t = []
-    for _ in range(repeat):
-        s = time.perf_counter()
-        fn()
-        t.append(time.perf_counter() - s)
-    return float(np.median(t))
 
 
 def main() -> None:
@@ -74,15 +62,15 @@ def main() -> None:
                 p.forward(t1, f1)
             sync()
 
-        t_pred = _median(lambda: p.predict(scene), args.repeat)
-        t_fwd = _median(fwd, args.repeat)
-        t_b = _median(lambda: p.predict(batch), max(3, args.repeat // 5))
+        t_pred = median_time(lambda: p.predict(scene), args.repeat, 2)
+        t_fwd = median_time(fwd, args.repeat, 2)
+        t_b = median_time(lambda: p.predict(batch), max(3, args.repeat // 5), 2)
         n = p.n_parameters()
         print(f"| {label} | {n} | {4 * n / 2**20:.1f} | {1e3 * t_pred:.2f} | {1e3 * t_fwd:.2f} | "
               f"{64 / t_b:.0f} |")
     if args.fem:
         p = predictor.create("fem")
-        t = _median(lambda: p.predict(scene), 3)
+        t = median_time(lambda: p.predict(scene), 3)
         print(f"| fem (reference mesh) | - | - | {1e3 * t:.0f} | - | {1 / t:.1f} |")
 
 

@@ -14,18 +14,9 @@ import time
 import numpy as np
 import torch
 
+from _timing import median_time
 from stmpl.body import AnnyBody
 from stmpl.uv import UVMap
-
-
-def _time(fn, repeat: int) -> float:
-    fn()  # warm-up
-    t = []
-    for _ in range(repeat):
-        s = time.perf_counter()
-        fn()
-        t.append(time.perf_counter() - s)
-    return float(np.median(t))
 
 
 def main() -> None:
@@ -52,10 +43,10 @@ def main() -> None:
         img = m.rasterise(field)
         imgs = m.rasterise(batch)
         with torch.no_grad():
-            r1 = _time(lambda: m.rasterise(field), args.repeat)
-            s1 = _time(lambda: m.sample(img), args.repeat)
-            rb = _time(lambda: m.rasterise(batch), max(3, args.repeat // 5))
-            sb = _time(lambda: m.sample(imgs), max(3, args.repeat // 5))
+            r1 = median_time(lambda: m.rasterise(field), args.repeat)
+            s1 = median_time(lambda: m.sample(img), args.repeat)
+            rb = median_time(lambda: m.rasterise(batch), max(3, args.repeat // 5))
+            sb = median_time(lambda: m.sample(imgs), max(3, args.repeat // 5))
         err = ((m.sample(img) - field).abs().max(0).values /
                (field.max(0).values - field.min(0).values)).max().item() * 100
         rows.append((size, r1))

@@ -62,12 +62,13 @@ def lame(E: float, nu: float) -> tuple[float, float]:
 
 
 @dataclass(frozen=True)
-class NeoHookean:
-    """Compressible Neo-Hookean solid. ``E`` in Pa, ``nu`` dimensionless."""
+class Material:
+    """An isotropic material given by ``E`` (Pa) and ``nu``; subclasses define ``energy`` and
+    ``tangent_parts``, from which the stress and the full tangent follow."""
 
     E: float = 1000.0
     nu: float = 0.4
-    name = "neo_hookean"
+    name = "material"
 
     def __post_init__(self) -> None:
         lame(self.E, self.nu)
@@ -80,6 +81,22 @@ class NeoHookean:
     def lam(self) -> float:
         return lame(self.E, self.nu)[1]
 
+    def stress(self, F: np.ndarray) -> np.ndarray:
+        """``(T, 3, 3)`` first Piola-Kirchhoff stress, Pa."""
+        return self.tangent_parts(F)[0]
+
+    def stress_tangent(self, F: np.ndarray, tangent: bool = True):
+        """``(P, A)``: ``(T, 3, 3)`` stress and ``(T, 3, 3, 3, 3)`` tangent (``None`` if not asked)."""
+        P, parts = self.tangent_parts(F)
+        return P, (tangent_from_parts(*parts) if tangent else None)
+
+
+@dataclass(frozen=True)
+class NeoHookean(Material):
+    """Compressible Neo-Hookean solid. ``E`` in Pa, ``nu`` dimensionless; needs ``det F > 0``."""
+
+    name = "neo_hookean"
+
     def energy(self, F: np.ndarray) -> np.ndarray:
         """``(T,)`` energy density, J/m^3; ``inf`` where ``det F <= 0``."""
         mu, lam = lame(self.E, self.nu)
@@ -88,15 +105,6 @@ class NeoHookean:
             lnJ = np.log(J)
             W = 0.5 * mu * (np.einsum("tij,tij->t", F, F) - 3) - mu * lnJ + 0.5 * lam * lnJ**2
         return np.where(J > 0, W, np.inf)
-
-    def stress(self, F: np.ndarray) -> np.ndarray:
-        """``(T, 3, 3)`` first Piola-Kirchhoff stress, Pa. Needs ``det F > 0``."""
-        return self.stress_tangent(F, tangent=False)[0]
-
-    def stress_tangent(self, F: np.ndarray, tangent: bool = True):
-        """``(P, A)``: ``(T, 3, 3)`` stress and ``(T, 3, 3, 3, 3)`` tangent (``None`` if not asked)."""
-        P, parts = self.tangent_parts(F)
-        return P, (tangent_from_parts(*parts) if tangent else None)
 
     def tangent_parts(self, F: np.ndarray):
         """``(P, (a, b, c, H))`` with ``A_iJkL = a d_ik d_JL + b H_Ji H_Lk + c H_Li H_Jk``.
@@ -114,15 +122,10 @@ class NeoHookean:
 
 
 @dataclass(frozen=True)
-class LinearElastic:
+class LinearElastic(Material):
     """Small-strain isotropic linear elasticity written on ``F`` (for checks and light touches)."""
 
-    E: float = 1000.0
-    nu: float = 0.4
     name = "linear"
-
-    def __post_init__(self) -> None:
-        lame(self.E, self.nu)
 
     def energy(self, F: np.ndarray) -> np.ndarray:
         """``(T,)`` energy density, J/m^3."""
@@ -130,13 +133,6 @@ class LinearElastic:
         eps = 0.5 * (F + F.transpose(0, 2, 1)) - _I
         tr = np.trace(eps, axis1=1, axis2=2)
         return mu * np.einsum("tij,tij->t", eps, eps) + 0.5 * lam * tr**2
-
-    def stress(self, F: np.ndarray) -> np.ndarray:
-        return self.stress_tangent(F, tangent=False)[0]
-
-    def stress_tangent(self, F: np.ndarray, tangent: bool = True):
-        P, parts = self.tangent_parts(F)
-        return P, (tangent_from_parts(*parts) if tangent else None)
 
     def tangent_parts(self, F: np.ndarray):
         """As :meth:`NeoHookean.tangent_parts`: ``a = mu``, ``b = lam``, ``c = mu``, ``H = I``."""

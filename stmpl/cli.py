@@ -83,14 +83,10 @@ def cmd_evaluate(args) -> int:
 
 
 def cmd_scene(args) -> int:
-    from stmpl.scene import Scene
     from stmpl.viz import export_mesh, scene_figure
 
-    body = _body(args)
-    part = body.part(args.part)
-    load = _load(args, part)
-    scene = Scene.from_load(part, _thickness(args, body, part), load, body=body.name)
-    print(load.summary())
+    scene = _scene(args)
+    part = scene.part
     if args.out:
         scene_figure(scene, args.out, size=args.size)
         print(f"wrote {args.out}")
@@ -103,18 +99,26 @@ def cmd_scene(args) -> int:
     return 0
 
 
-def cmd_simulate(args) -> int:
-    import numpy as np
-
-    from fem.simulate import simulate
-    from stmpl.scene import Deformation, Scene
-    from stmpl.viz import deformation_figure
+def _scene(args):
+    """The scene the command-line options describe (its load summary printed)."""
+    from stmpl.scene import Scene
 
     body = _body(args)
     part = body.part(args.part)
     load = _load(args, part)
-    scene = Scene.from_load(part, _thickness(args, body, part), load, body=body.name)
     print(load.summary())
+    return Scene.from_load(part, _thickness(args, body, part), load, body=body.name)
+
+
+def cmd_simulate(args) -> int:
+    import numpy as np
+
+    from fem.simulate import simulate
+    from stmpl.scene import Deformation
+    from stmpl.viz import deformation_figure
+
+    scene = _scene(args)
+    part = scene.part
     if args.levels < 1:
         raise ValueError(f"--levels must be >= 1, got {args.levels}")
     totals = args.force * np.arange(1, args.levels + 1) / args.levels

@@ -109,11 +109,16 @@ def scene_figure(scene, path=None, size: int = 256, dpi: int = 110):
     if scene.load is not None:
         title += " | " + scene.load.summary()
     fig.suptitle(title)
+    return _finish(fig, path, dpi)
+
+
+def _finish(fig, path, dpi: int):
+    """Lay out ``fig``; save and close it when a ``path`` is given. Returns the figure."""
     fig.tight_layout()
     if path is not None:
         pathlib.Path(path).parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(path, dpi=dpi)
-        plt.close(fig)
+        _matplotlib().close(fig)
     return fig
 
 
@@ -251,9 +256,4 @@ def deformation_figure(deformation, nodes: np.ndarray, tets: np.ndarray, node_u:
         title += " | " + scene.load.summary()
     title += f" | max |u| {mag.max():.2f} mm"
     fig.suptitle(title)
-    fig.tight_layout()
-    if path is not None:
-        pathlib.Path(path).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=dpi)
-        plt.close(fig)
-    return fig
+    return _finish(fig, path, dpi)
