@@ -47,6 +47,9 @@ class UVMap(torch.nn.Module):
         self.register_buffer("corner_vertex", torch.as_tensor(corner_vertex, dtype=torch.long))
         self.register_buffer("bary", torch.as_tensor(bary, dtype=torch.float32))
         self.register_buffer("mask", torch.as_tensor(inside.reshape(self.size, self.size)))
+        support = np.zeros(self.size * self.size, dtype=bool)
+        support[pix] = True
+        self.register_buffer("support", torch.as_tensor(support.reshape(self.size, self.size)))
         idx, w = _sample_plan(part, self.size)
         self.register_buffer("sample_index", torch.as_tensor(idx, dtype=torch.long))
         self.register_buffer("sample_weight", torch.as_tensor(w, dtype=torch.float32))
@@ -57,7 +60,8 @@ class UVMap(torch.nn.Module):
     def rasterise(self, values: torch.Tensor) -> torch.Tensor:
         """Vertex values ``(N, C)`` or ``(B, N, C)`` -> images ``(C, H, W)`` or ``(B, C, H, W)``.
 
-        Pixels beyond the padded chart are 0; :attr:`mask` marks the chart itself."""
+        Pixels beyond the padded chart are 0; :attr:`mask` marks the chart itself and
+        :attr:`support` the chart with its padding (every pixel that sampling can read)."""
         values, single = self._batch(values, "values", self.n_vertices)
         b, _, c = values.shape
         w = self.bary.to(values.dtype)

@@ -78,3 +78,13 @@ def test_bad_input(arm):
         m.sample(torch.zeros(1, 32, 32))
     with pytest.raises(ValueError, match="size must be in"):
         UVMap(arm, 4)
+
+
+def test_support_covers_every_pixel_sampling_reads(arm):
+    from stmpl.uv import UVMap
+
+    m = UVMap(arm, 64)
+    assert m.mask.sum() < m.support.sum()
+    assert bool(m.support[m.mask].all())
+    read = m.sample_index[m.sample_weight > 0]
+    assert bool(m.support.flatten()[read].all())

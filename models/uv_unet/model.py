@@ -11,7 +11,8 @@ thickness normalised over [2.5, 12.5] mm, optionally geometry (rest positions ab
 centre over its extent, normals). The output images hold the displacement over ``disp_scale_mm``
 (10 mm by default; the paper's 30 mm); they are
 sampled back at the vertices, a seam vertex's copies averaged. The loss is the mean squared error
-over the chart's pixels (the paper's L2), plus an optional total-variation term.
+over the chart's pixels and the few padding pixels around it that bilinear sampling at edge
+vertices reads (the paper's L2, masked), plus an optional total-variation term.
 """
 
 from __future__ import annotations
@@ -108,7 +109,7 @@ class UVUNetPredictor(LearnedPredictor):
     def loss(self, thickness, force, target):
         out = self.model(self.images(thickness, force))
         tgt = self.uvmap.rasterise(target / self.scale)
-        m = self.uvmap.mask.to(out.dtype)
+        m = self.uvmap.support.to(out.dtype)  # the chart and its padding: sampling reads both
         loss = (((out - tgt) ** 2) * m).sum() / (m.sum() * out.shape[0] * out.shape[1])
         if self.config["tv"]:
             dx = (out[..., :, 1:] - out[..., :, :-1]).abs() * m[:, 1:] * m[:, :-1]
