@@ -164,6 +164,7 @@ class Solver:
         self.G = np.einsum("qak,tkj->tqaj", el.dN, G1)                 # (T, Q, n, 3) grad N_a
         self.W = self.V[:, None] * el.weights[None]                     # (T, Q) weights, m^3
         self.GG = np.matmul(self.G, self.G.transpose(0, 1, 3, 2))      # (T, Q, n, n)
+        self.GW = self.G * self.W[:, :, None, None]                     # weighted gradients
         self._force_idx = (3 * self.conn[:, :, None] + np.arange(3)).ravel()
         self.linear = make_linear_solver(self.options.linear_solver)
         self._pattern(upper=self.linear.upper)
@@ -245,7 +246,7 @@ class Solver:
         ``(T Q, 3, 3)``."""
         T, Q = self.W.shape
         P = P.reshape(T, Q, 3, 3)
-        fe = np.einsum("tq,tqaJ,tqiJ->tai", self.W, self.G, P)          # (T, n, 3)
+        fe = np.matmul(self.GW, P.transpose(0, 1, 3, 2)).sum(1)        # (T, n, 3)
         return np.bincount(self._force_idx, weights=fe.ravel(),
                            minlength=3 * self.n_all).reshape(-1, 3)
 
