@@ -322,8 +322,8 @@ class Solver:
     def solve(self, force: np.ndarray, u0: np.ndarray | None = None) -> Solution:
         """Equilibrium under per-vertex normal ``force`` ``(N,)`` (N) on the part.
 
-        ``u0``: ``(M, 3)`` start (a converged neighbour state), else rest. A failed increment from
-        ``u0`` is retried in up to ``max_substeps`` halvings before the solve fails.
+        ``u0``: ``(n_all, 3)`` start, the ``state`` of a converged neighbouring solve; else rest.
+        A failed increment is retried in up to ``max_substeps`` halvings before the solve fails.
         """
         force = self._check_force(force)
         t0 = time.perf_counter()
