@@ -20,7 +20,7 @@ from functools import cached_property
 import numpy as np
 import scipy.sparse as sp
 
-from stmpl.body.part import BodyPart
+from stmpl.body.part import BodyPart, triangle_areas
 
 
 @dataclass(frozen=True, eq=False)
@@ -103,12 +103,15 @@ class ShellMesh:
         return tet_volumes(self.nodes, self.tets)
 
     @cached_property
+    def skin_face_areas(self) -> np.ndarray:
+        """``(K,)`` areas of the skin triangles, m^2."""
+        return triangle_areas(self.nodes, self.skin_faces)
+
+    @cached_property
     def skin_areas(self) -> np.ndarray:
         """``(S,)`` barycentric skin-node areas, m^2."""
-        v = self.nodes[self.skin_faces]
-        a = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
         out = np.zeros(self.n_skin)
-        np.add.at(out, self.skin_faces.ravel(), np.repeat(a / 3, 3))
+        np.add.at(out, self.skin_faces.ravel(), np.repeat(self.skin_face_areas / 3, 3))
         return out
 
     def quality(self) -> Quality:
@@ -140,10 +143,8 @@ class ShellMesh:
         if mode != "traction":
             raise ValueError(f"unknown load mode {mode!r}; use 'traction' or 'nodal'")
         p = self.interp @ (force / self.part.vertex_areas)
-        v = self.nodes[self.skin_faces]
-        area = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
         pf = p[self.skin_faces]                                       # (K, 3)
-        load = area[:, None] * (pf + pf.sum(1, keepdims=True)) / 12   # int p phi_a over each face
+        load = self.skin_face_areas[:, None] * (pf + pf.sum(1, keepdims=True)) / 12   # int p phi_a over each face
         mag = np.zeros(self.n_skin)
         np.add.at(mag, self.skin_faces.ravel(), load.ravel())
         out[: self.n_skin] = -mag[:, None] * self.skin_normals
@@ -229,8 +230,7 @@ def check_surface(vertices: np.ndarray, faces: np.ndarray) -> None:
     """Raise ``ValueError`` for a degenerate (zero-area) or non-manifold triangle mesh."""
     if not np.all(np.isfinite(vertices)):
         raise ValueError("surface has non-finite vertex coordinates")
-    v = vertices[faces]
-    area = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+    area = triangle_areas(vertices, faces)
     tiny = 1e-10 * max(area.mean(), 1e-30)
     if np.any(area <= tiny):
         i = int(np.argmin(area))

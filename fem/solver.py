@@ -303,8 +303,7 @@ class Solver:
         te = np.sort(tri[:, TRI_EDGES], axis=2)                          # (K, 3, 2)
         mid = mesh.n_nodes + np.searchsorted(key, te[..., 0] * self.n_all + te[..., 1])
         nodes6 = np.concatenate([tri, mid], axis=1)                      # (K, 6)
-        v = mesh.nodes[tri]
-        area = 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+        area = mesh.skin_face_areas
         pq = TRI_POINTS @ p[tri].T                                       # (Qs, K)
         N6 = tri_shape(2, TRI_POINTS)                                    # (Qs, 6)
         load = area[:, None] * np.einsum("q,qk,qa->ka", TRI_WEIGHTS, pq, N6)  # (K, 6)

@@ -90,8 +90,7 @@ class BodyPart:
     @cached_property
     def face_areas(self) -> np.ndarray:
         """``(M,)`` triangle areas, m^2."""
-        v = self.vertices[self.faces]
-        return 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1)
+        return triangle_areas(self.vertices, self.faces)
 
     @cached_property
     def vertex_areas(self) -> np.ndarray:
@@ -277,6 +276,11 @@ def _largest_component(faces: np.ndarray, n: int) -> np.ndarray:
 
 def _tri_areas(tri: np.ndarray) -> np.ndarray:
     return 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
+
+
+def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """``(M,)`` areas of triangles ``faces`` ``(M, 3)`` over ``vertices`` ``(N, 3)``, m^2."""
+    return _tri_areas(np.asarray(vertices)[faces])
 
 
 def _check_shape(name: str, arr, shape: tuple) -> None:
