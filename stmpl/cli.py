@@ -82,6 +82,25 @@ def cmd_evaluate(args) -> int:
     return 0
 
 
+def cmd_zoo(args) -> int:
+    from stmpl import zoo
+
+    if args.action == "list":
+        print(zoo.table(args.zoo), end="")
+    elif args.action == "verify":
+        for name in args.names or zoo.names(args.zoo):
+            f = zoo.verify(name, args.zoo)
+            print(f"{name}: {f.name} ok")
+    else:  # add
+        if not args.checkpoint or len(args.names) != 1:
+            raise ValueError("zoo add needs --checkpoint FILE and one NAME")
+        trained = {"command": args.command_line, "machine": args.machine,
+                   "time": args.time} if args.command_line else None
+        e = zoo.add(args.checkpoint, args.names[0], trained, args.zoo)
+        print(f"added {args.names[0]}: {e['file']} ({e['bytes'] / 1e6:.2f} MB)")
+    return 0
+
+
 def cmd_scene(args) -> int:
     from stmpl.viz import export_mesh, scene_figure
 
@@ -227,13 +246,23 @@ def parser() -> argparse.ArgumentParser:
 
     ev = sub.add_parser("evaluate", help="measure predictors on a dataset split")
     ev.add_argument("predictors", nargs="+",
-                    help="fem, fem:<resolution>, or .safetensors checkpoints")
+                    help="fem, fem:<resolution>, zoo:<name>, or .safetensors checkpoints")
     ev.add_argument("--data", required=True, help="dataset folder")
     ev.add_argument("--split", default="test", choices=["train", "val", "test"])
     ev.add_argument("--limit", type=int, help="first N samples only")
     ev.add_argument("--device", default="cpu")
     ev.add_argument("--out", help="write the table here (.md and .csv)")
     ev.set_defaults(func=cmd_evaluate)
+
+    zo = sub.add_parser("zoo", help="the shipped models: list, verify, add")
+    zo.add_argument("action", choices=["list", "verify", "add"])
+    zo.add_argument("names", nargs="*", help="model names (verify: default all; add: one)")
+    zo.add_argument("--zoo", help="zoo folder (default $STMPL_ZOO or the repository's zoo/)")
+    zo.add_argument("--checkpoint", help="add: the .safetensors checkpoint to add")
+    zo.add_argument("--command-line", help="add: the command that trained it")
+    zo.add_argument("--machine", help="add: the machine it trained on")
+    zo.add_argument("--time", help="add: how long it trained")
+    zo.set_defaults(func=cmd_zoo)
 
     pa = sub.add_parser("parts", help="list the body model's parts and their sizes")
     _body_args(pa)
@@ -247,7 +276,7 @@ def main(argv=None) -> int:
                         format="%(levelname)s %(name)s: %(message)s")
     try:
         return args.func(args)
-    except (ValueError, FileNotFoundError) as exc:
+    except (ValueError, FileNotFoundError, KeyError) as exc:
         print(f"stmpl {args.command}: error: {exc}", file=sys.stderr)
         return 2
 

@@ -45,16 +45,19 @@ def evaluate_dataset(predictor, ds, split: str = "test", thickness_mm=None,
 
 
 def resolve(spec: str, device: str = "cpu"):
-    """A predictor from a command-line spec: ``fem``, ``fem:medium``, or a checkpoint path."""
-    from stmpl import predictor
+    """A predictor from a command-line spec: ``fem``, ``fem:medium``, ``zoo:<name>`` or a
+    checkpoint path."""
+    from stmpl import predictor, zoo
 
+    if spec.startswith("zoo:"):
+        return zoo.load(spec[4:], device=device)
     if spec == "fem" or spec.startswith("fem:"):
         return predictor.create("fem", res=spec.split(":", 1)[1] if ":" in spec else
                                 "reference")
     path = pathlib.Path(spec)
     if path.suffix == ".safetensors" or path.exists():
         return predictor.load(path, device=device)
-    raise ValueError(f"unknown predictor {spec!r}: give fem, fem:<resolution> or a "
+    raise ValueError(f"unknown predictor {spec!r}: give fem, fem:<resolution>, zoo:<name> or a "
                      ".safetensors checkpoint")
 
 

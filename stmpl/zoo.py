@@ -1,0 +1,136 @@
+"""The model zoo: named, shipped checkpoints (``zoo/`` beside the package, or ``$STMPL_ZOO``).
+
+``zoo/manifest.json`` lists each model: its name, file, SHA-256, size, kind, config, the card of
+the dataset it learned from (name, hash, sample counts), its metrics and how it was trained. A
+file is verified against the manifest before it is loaded (and again against its own sidecar),
+so a tampered or truncated checkpoint is refused with an error that names it.
+
+>>> from stmpl import zoo
+>>> zoo.names()                       # doctest: +SKIP
+['gnn_arm', 'naive_arm', 'uv_unet_arm']
+>>> predictor = zoo.load("uv_unet_arm")  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import pathlib
+import shutil
+
+MANIFEST = "manifest.json"
+FORMAT = "stmpl-zoo/1"
+MAX_BYTES = 10 * 2 ** 20
+"""The largest checkpoint the zoo accepts (10 MiB): the repository ships its models."""
+
+
+def root(path=None) -> pathlib.Path:
+    """The zoo folder: ``path``, else ``$STMPL_ZOO``, else ``zoo/`` beside the package."""
+    if path is not None:
+        return pathlib.Path(path)
+    if os.environ.get("STMPL_ZOO"):
+        return pathlib.Path(os.environ["STMPL_ZOO"])
+    return pathlib.Path(__file__).resolve().parents[1] / "zoo"
+
+
+def manifest(path=None) -> dict:
+    """The zoo's manifest (``{"format", "models": {name: entry}}``), checked."""
+    folder = root(path)
+    f = folder / MANIFEST
+    if not f.is_file():
+        raise FileNotFoundError(f"no model zoo at {folder} ({MANIFEST} is missing); set "
+                                "STMPL_ZOO or pass the folder")
+    try:
+        m = json.loads(f.read_text())
+    except json.JSONDecodeError as e:
+        raise ValueError(f"zoo manifest {f} is corrupt: {e}") from e
+    if m.get("format") != FORMAT or not isinstance(m.get("models"), dict):
+        raise ValueError(f"{f} is not a stmpl zoo manifest (format {m.get('format')!r})")
+    return m
+
+
+def names(path=None) -> list[str]:
+    """Names of the zoo's models."""
+    return sorted(manifest(path)["models"])
+
+
+def entry(name: str, path=None) -> dict:
+    """The manifest entry of model ``name``."""
+    models = manifest(path)["models"]
+    if name not in models:
+        raise KeyError(f"no model {name!r} in the zoo at {root(path)}; it has "
+                       f"{sorted(models)}")
+    return models[name]
+
+
+def verify(name: str, path=None) -> pathlib.Path:
+    """The checkpoint file of ``name`` after checking its size and SHA-256 against the
+    manifest; raises ``ValueError`` naming the file when it differs."""
+    from stmpl.checkpoint import sha256
+
+    e = entry(name, path)
+    f = root(path) / e["file"]
+    if not f.is_file():
+        raise FileNotFoundError(f"zoo model {name!r}: file {f} is missing")
+    size = f.stat().st_size
+    if size != e["bytes"]:
+        raise ValueError(f"zoo model {name!r}: {f.name} is truncated or altered ({size} bytes, "
+                         f"the manifest says {e['bytes']})")
+    if sha256(f) != e["sha256"]:
+        raise ValueError(f"zoo model {name!r}: {f.name} does not match the manifest's SHA-256 "
+                         "(tampered or corrupt)")
+    return f
+
+
+def load(name: str, device: str = "cpu", path=None):
+    """The predictor of zoo model ``name``, verified, on ``device``."""
+    from stmpl import predictor
+
+    return predictor.load(verify(name, path), device=device)
+
+
+def add(checkpoint, name: str, trained: dict | None = None, path=None) -> dict:
+    """Copy a checkpoint (and its sidecar) into the zoo as ``name`` and record it in the
+    manifest with ``trained`` (how it was made: command, time, machine). Returns the entry."""
+    from stmpl.checkpoint import load as load_checkpoint
+    from stmpl.checkpoint import sidecar_path
+    from stmpl.files import atomic_write_text
+
+    src = pathlib.Path(checkpoint)
+    _, meta = load_checkpoint(src)  # checks the file against its sidecar
+    if meta["bytes"] > MAX_BYTES:
+        raise ValueError(f"{src} is {meta['bytes'] / 2**20:.1f} MiB; the zoo takes at most "
+                         f"{MAX_BYTES / 2**20:.0f} MiB per model")
+    folder = root(path)
+    folder.mkdir(parents=True, exist_ok=True)
+    f = folder / MANIFEST
+    m = manifest(path) if f.is_file() else {"format": FORMAT, "models": {}}
+    dst = folder / f"{name}.safetensors"
+    if src.resolve() != dst.resolve():
+        shutil.copyfile(src, dst)
+        shutil.copyfile(sidecar_path(src), sidecar_path(dst))
+    e = {"file": dst.name, "sha256": meta["sha256"], "bytes": meta["bytes"],
+         "kind": meta["kind"], "part": meta.get("part"), "parameters": meta.get("parameters"),
+         "config": meta.get("config"), "dataset": meta.get("dataset"),
+         "metrics": meta.get("metrics"), "training": meta.get("training"),
+         "trained": trained or {}, "stmpl": meta.get("stmpl")}
+    if e["training"]:
+        e["training"] = {k: v for k, v in e["training"].items() if k != "history"}
+    m["models"][name] = e
+    atomic_write_text(f, json.dumps(m, indent=1, sort_keys=True))
+    return e
+
+
+def table(path=None) -> str:
+    """A markdown table of the zoo: name, kind, size, dataset, test MEE and relative MEE."""
+    rows = ["| model | kind | parameters | MB | dataset | test MEE mm | test rel. MEE % |",
+            "|---|---|---|---|---|---|---|"]
+    for n, e in sorted(manifest(path)["models"].items()):
+        t = (e.get("metrics") or {}).get("test") or {}
+        mee = t.get("mee", [float("nan")])[0]   # mm
+        rel = t.get("rel_mee", [float("nan")])[0]  # %
+        ds = e.get("dataset") or {}
+        rows.append(f"| {n} | {e['kind']} | {e.get('parameters') or 0:,} | "
+                    f"{e['bytes'] / 1e6:.2f} | {ds.get('name')} ({ds.get('hash')}) | "
+                    f"{mee:.4f} | {rel:.2f} |")
+    return "\n".join(rows) + "\n"

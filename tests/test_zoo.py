@@ -1,0 +1,94 @@
+"""The model zoo: add, list, load, and refusal of altered files."""
+
+import json
+
+import numpy as np
+import pytest
+
+from stmpl import predictor, zoo
+from stmpl.evaluate import resolve, scenes_of
+
+
+@pytest.fixture
+def zoo_dir(tiny_dataset, tmp_path):
+    import torch
+
+    from stmpl.data import Dataset
+
+    ds = Dataset(tiny_dataset)
+    torch.manual_seed(0)
+    p = predictor.create("uv_unet", ds.part, {"size": 64, "width": 4, "depth": 3})
+    ckpt = p.save(tmp_path / "run" / "m.safetensors",
+                  {"dataset": {"name": "tiny", "hash": ds.card["hash"]},
+                   "metrics": {"test": {"mee": [0.5, 0.1], "rel_mee": [10.0, 2.0]}}})
+    folder = tmp_path / "zoo"
+    zoo.add(ckpt, "unet_tiny", {"command": "stmpl train x.yaml", "machine": "test"}, folder)
+    return folder, ds, p
+
+
+def test_add_list_load_round_trip(zoo_dir):
+    folder, ds, p = zoo_dir
+    assert zoo.names(folder) == ["unet_tiny"]
+    e = zoo.entry("unet_tiny", folder)
+    assert e["kind"] == "uv_unet" and e["dataset"]["hash"] == ds.card["hash"]
+    assert e["trained"]["command"] == "stmpl train x.yaml" and e["bytes"] < zoo.MAX_BYTES
+    assert "unet_tiny | uv_unet" in zoo.table(folder) and "0.5000 | 10.00" in zoo.table(folder)
+    q = zoo.load("unet_tiny", path=folder)
+    scenes, _ = scenes_of(ds, "test", limit=2)
+    for a, b in zip(p.predict(scenes), q.predict(scenes)):
+        np.testing.assert_array_equal(a.displacement, b.displacement)
+
+
+def test_zoo_env_and_spec(zoo_dir, monkeypatch):
+    folder, ds, _ = zoo_dir
+    monkeypatch.setenv("STMPL_ZOO", str(folder))
+    assert zoo.root() == folder
+    assert resolve("zoo:unet_tiny").name == "uv_unet"
+    with pytest.raises(KeyError, match="no model 'nope'.*unet_tiny"):
+        zoo.load("nope")
+
+
+def test_tampered_truncated_missing_are_refused(zoo_dir):
+    folder, _, _ = zoo_dir
+    f = folder / "unet_tiny.safetensors"
+    data = f.read_bytes()
+    f.write_bytes(data[:-10])
+    with pytest.raises(ValueError, match="unet_tiny.*truncated"):
+        zoo.load("unet_tiny", path=folder)
+    flipped = bytearray(data)
+    flipped[len(data) // 2] ^= 0xFF
+    f.write_bytes(bytes(flipped))
+    with pytest.raises(ValueError, match="SHA-256"):
+        zoo.load("unet_tiny", path=folder)
+    f.unlink()
+    with pytest.raises(FileNotFoundError, match="missing"):
+        zoo.load("unet_tiny", path=folder)
+    (folder / "manifest.json").write_text("{not json")
+    with pytest.raises(ValueError, match="corrupt"):
+        zoo.names(folder)
+    with pytest.raises(FileNotFoundError, match="no model zoo"):
+        zoo.names(folder / "elsewhere")
+
+
+def test_oversized_checkpoints_are_refused(zoo_dir, monkeypatch, tmp_path):
+    folder, _, p = zoo_dir
+    monkeypatch.setattr(zoo, "MAX_BYTES", 1000)
+    ckpt = p.save(tmp_path / "big.safetensors")
+    with pytest.raises(ValueError, match="at most"):
+        zoo.add(ckpt, "big", path=folder)
+    assert zoo.names(folder) == ["unet_tiny"]
+
+
+def test_cli_zoo(zoo_dir, capsys):
+    from stmpl.cli import main
+
+    folder, _, _ = zoo_dir
+    assert main(["zoo", "list", "--zoo", str(folder)]) == 0
+    assert "unet_tiny" in capsys.readouterr().out
+    assert main(["zoo", "verify", "--zoo", str(folder)]) == 0
+    assert "unet_tiny: unet_tiny.safetensors ok" in capsys.readouterr().out
+    m = json.loads((folder / "manifest.json").read_text())
+    m["models"]["unet_tiny"]["sha256"] = "0" * 64
+    (folder / "manifest.json").write_text(json.dumps(m))
+    assert main(["zoo", "verify", "--zoo", str(folder)]) == 2
+    assert "SHA-256" in capsys.readouterr().err
