@@ -1,9 +1,10 @@
 """One training loop for every learned predictor (``stmpl train CONFIG``).
 
 A config (YAML, checked on load) names the model kind and its options, the dataset folder, an
-optional thickness filter (the paper's "seen levels" ablation), and the optimiser settings. The
-loop: Adam, shuffled mini-batches (seeded), validation loss every epoch, early stopping with the
-best weights kept, a progress bar, CPU or CUDA. After every epoch the full state goes to
+optional thickness filter (the paper's "seen levels" ablation), an optional share of the training
+placements (``train_fraction``, for learning curves), and the optimiser settings. The loop: Adam
+(constant or cosine learning rate), shuffled mini-batches (seeded), validation loss every epoch,
+early stopping with the best weights kept, a progress bar, CPU or CUDA. After every epoch the full state goes to
 ``<out>/state.pt`` atomically, so a killed run resumes where it stopped. At the end the best
 model is evaluated on the validation and test splits and written as a checkpoint
 (``<out>/<name>.safetensors`` + sidecar) carrying its config, the dataset card's hash, and the
@@ -29,12 +30,26 @@ DEFAULTS = {
     "epochs": 100,
     "batch": 64,
     "lr": 1e-4,
+    "schedule": "constant",
     "patience": 15,
     "seed": 0,
     "device": "cpu",
     "out": None,
     "max_train": None,
+    "train_fraction": 1.0,
 }
+
+
+SCHEDULES = ("constant", "cosine")
+"""Learning-rate schedules: ``constant``, or ``cosine`` from ``lr`` down to 0 at the last step of
+``epochs`` (stateless: the rate is a function of the step, so a resumed run follows it)."""
+
+
+def learning_rate(cfg: dict, step: int, total: int) -> float:
+    """The learning rate at optimiser step ``step`` of ``total``."""
+    if cfg["schedule"] == "cosine":
+        return 0.5 * cfg["lr"] * (1.0 + np.cos(np.pi * min(step, total) / total))
+    return cfg["lr"]
 
 
 def load_config(source) -> dict:
@@ -65,6 +80,10 @@ def load_config(source) -> dict:
             raise ValueError(f"{k} must be an integer >= 1, got {cfg[k]!r}")
     if not (isinstance(cfg["lr"], (int, float)) and cfg["lr"] > 0):
         raise ValueError(f"lr must be > 0, got {cfg['lr']!r}")
+    if not (isinstance(cfg["train_fraction"], (int, float)) and 0 < cfg["train_fraction"] <= 1):
+        raise ValueError(f"train_fraction must be in (0, 1], got {cfg['train_fraction']!r}")
+    if cfg["schedule"] not in SCHEDULES:
+        raise ValueError(f"schedule must be one of {SCHEDULES}, got {cfg['schedule']!r}")
     cfg["out"] = cfg["out"] or str(pathlib.Path("runs") / cfg["name"])
     return cfg
 
@@ -77,6 +96,12 @@ def _split_tensors(ds, split, cfg, device):
     if cfg["thickness_mm"] is not None:
         levels = np.asarray(cfg["thickness_mm"], float) * 1e-3
         keep = keep[np.isin(np.round(a["thickness"][:, 0], 6), np.round(levels, 6))]
+    if split == "train" and cfg["train_fraction"] < 1.0:  # a seeded share of the placements
+        places = np.unique(a["placement"][keep])
+        rng = np.random.default_rng(cfg["seed"])
+        n = max(1, int(round(cfg["train_fraction"] * len(places))))
+        chosen = rng.permutation(places)[:n]
+        keep = keep[np.isin(a["placement"][keep], chosen)]
     if split == "train" and cfg["max_train"]:
         keep = keep[: int(cfg["max_train"])]
     def t(x):
@@ -138,8 +163,11 @@ def train(config, resume: bool = True, progress: bool = True):
         p.model.train()
         perm = torch.randperm(len(tr[0]), generator=gen).to(device)
         total = 0.0
-        for i in range(0, len(perm), cfg["batch"]):
+        per_epoch = -(-len(perm) // cfg["batch"])
+        for k, i in enumerate(range(0, len(perm), cfg["batch"])):
             idx = perm[i:i + cfg["batch"]]
+            for g in opt.param_groups:
+                g["lr"] = learning_rate(cfg, epoch * per_epoch + k, cfg["epochs"] * per_epoch)
             loss = p.loss(tr[0][idx], tr[1][idx], tr[2][idx])
             opt.zero_grad()
             loss.backward()

@@ -69,3 +69,29 @@ def test_training_config_is_checked(tiny_dataset):
         load_config({"model": "fem", "data": "x"})
     with pytest.raises(ValueError, match="lr"):
         load_config({"model": "naive", "data": "x", "lr": -1})
+    with pytest.raises(ValueError, match="schedule"):
+        load_config({"model": "naive", "data": "x", "schedule": "step"})
+    with pytest.raises(ValueError, match="train_fraction"):
+        load_config({"model": "naive", "data": "x", "train_fraction": 0})
+
+
+def test_cosine_schedule_and_placement_share(tiny_dataset):
+    import torch
+
+    from stmpl.train import _split_tensors, learning_rate
+
+    cfg = load_config({"model": "naive", "data": "x", "lr": 0.1, "schedule": "cosine"})
+    assert learning_rate(cfg, 0, 100) == pytest.approx(0.1)
+    assert learning_rate(cfg, 50, 100) == pytest.approx(0.05)
+    assert learning_rate(cfg, 100, 100) == pytest.approx(0.0, abs=1e-12)
+    ds = Dataset(tiny_dataset)
+    a = ds.arrays("train")
+    places = np.unique(a["placement"])
+    half = load_config({"model": "naive", "data": "x", "train_fraction": 0.5})
+    t, f, u = _split_tensors(ds, "train", half, torch.device("cpu"))
+    # whole placements are kept, with all their samples, and about half of them
+    kept = {int(p) for p in places if any(np.allclose(f[i].numpy(), a["force"][j])
+                                          for i in range(len(f))
+                                          for j in np.flatnonzero(a["placement"] == p)[:1])}
+    n_kept = sum(int((a["placement"] == p).sum()) for p in kept)
+    assert len(kept) == round(0.5 * len(places)) and n_kept == len(f)
