@@ -17,8 +17,10 @@ ACTIVE_MM = 0.001
 THRESHOLDS_MM = (0.1, 0.125, 0.15, 0.2, 0.5)
 
 
-def sample_metrics(true: np.ndarray, pred: np.ndarray) -> dict:
-    """Measures of one sample. ``true``, ``pred``: ``(N, 3)`` displacements, m."""
+def sample_metrics(true: np.ndarray, pred: np.ndarray, seam: np.ndarray | None = None) -> dict:
+    """Measures of one sample. ``true``, ``pred``: ``(N, 3)`` displacements, m. With ``seam``
+    (indices of the UV seam's vertices) also ``seam_mee``: the MEE over the active seam
+    vertices, mm (NaN when none is active)."""
     true, pred = np.asarray(true, float), np.asarray(pred, float)
     if true.shape != pred.shape or true.ndim != 2 or true.shape[1] != 3:
         raise ValueError(f"true and pred must both be (N, 3), got {true.shape} and {pred.shape}")
@@ -30,7 +32,8 @@ def sample_metrics(true: np.ndarray, pred: np.ndarray) -> dict:
     if not active.any():
         return {**out, "mae_x": np.nan, "mae_y": np.nan, "mae_z": np.nan, "mee": np.nan,
                 "rel_mee": np.nan, "max_err": np.nan,
-                **{f"ee<={t:g}": np.nan for t in THRESHOLDS_MM}}
+                **{f"ee<={t:g}": np.nan for t in THRESHOLDS_MM},
+                **({"seam_mee": np.nan} if seam is not None else {})}
     err = (pred - true)[active] * 1e3
     ee = np.linalg.norm(err, axis=1)
     out.update(mae_x=float(np.abs(err[:, 0]).mean()), mae_y=float(np.abs(err[:, 1]).mean()),
@@ -39,6 +42,11 @@ def sample_metrics(true: np.ndarray, pred: np.ndarray) -> dict:
     out["rel_mee"] = 100.0 * out["mee"] / out["max_disp"]
     for t in THRESHOLDS_MM:
         out[f"ee<={t:g}"] = 100.0 * float((ee <= t).mean())
+    if seam is not None:
+        on = np.zeros(len(true), bool)
+        on[np.asarray(seam, int)] = True
+        sel = on[active]
+        out["seam_mee"] = float(ee[sel].mean()) if sel.any() else np.nan
     return out
 
 
@@ -73,7 +81,8 @@ def summarise(rows: list[dict]) -> dict:
 
 COLUMNS = [("mae_x", "MAE x"), ("mae_y", "MAE y"), ("mae_z", "MAE z"), ("mee", "MEE"),
            ("rel_mee", "MEE / max %"), ("max_err", "max err")] + \
-    [(f"ee<={t:g}", f"EE<={t:g} %") for t in THRESHOLDS_MM]
+    [(f"ee<={t:g}", f"EE<={t:g} %") for t in THRESHOLDS_MM] + \
+    [("seam_mee", "seam MEE"), ("seam_gap", "seam gap")]
 
 
 def table(results: dict[str, dict], fmt: str = "markdown") -> str:
@@ -83,7 +92,8 @@ def table(results: dict[str, dict], fmt: str = "markdown") -> str:
                                                                                   "std")]
         lines = [",".join(head)]
         for name, s in results.items():
-            vals = [name, str(s["samples"])] + [f"{x:.6g}" for k, _ in COLUMNS for x in s[k]]
+            vals = [name, str(s["samples"])] + [f"{x:.6g}" for k, _ in COLUMNS
+                                                for x in s.get(k, (np.nan, np.nan))]
             lines.append(",".join(vals))
         return "\n".join(lines) + "\n"
     if fmt != "markdown":
@@ -92,7 +102,8 @@ def table(results: dict[str, dict], fmt: str = "markdown") -> str:
                                               for _, label in COLUMNS) + " |"
     lines = [head, "|---|--:|" + "--:|" * len(COLUMNS)]
     for name, s in results.items():
-        cells = [f"{s[k][0]:.3f} ± {s[k][1]:.3f}" if "ee<=" not in k and k != "rel_mee"
+        cells = [("–" if k not in s else f"{s[k][0]:.3f} ± {s[k][1]:.3f}")
+                 if "ee<=" not in k and k != "rel_mee"
                  else f"{s[k][0]:.1f} ± {s[k][1]:.1f}" for k, _ in COLUMNS]
         lines.append(f"| {name} | {s['samples']} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

@@ -130,3 +130,20 @@ def test_seam_gap_unet_has_one_the_gnn_none_by_construction(ds):
     gnn = _make("gnn", ds)
     u = gnn.predict(scenes_of(ds, "train", limit=1)[0][0]).displacement
     assert seam_gap(ds.part, u[ds.part.uv_vertex]) == 0.0   # one node per vertex
+
+
+def test_evaluate_reports_seam_measures(ds):
+    from stmpl.evaluate import evaluate_dataset
+    from stmpl.metrics import sample_metrics
+
+    unet = evaluate_dataset(_make("uv_unet", ds), ds, "test", limit=4)
+    gnn = evaluate_dataset(_make("gnn", ds), ds, "test", limit=4)
+    assert unet["seam_gap"][0] > 0 and gnn["seam_gap"] == [0.0, 0.0]
+    assert np.isfinite(unet["seam_mee"][0]) and np.isfinite(gnn["seam_mee"][0])
+    # seam MEE is the MEE restricted to the seam's active vertices
+    true = np.zeros((4, 3))
+    true[:, 2] = 1e-3
+    pred = true.copy()
+    pred[1, 2] += 2e-3
+    m = sample_metrics(true, pred, seam=np.array([1, 3]))
+    assert m["seam_mee"] == pytest.approx(1.0) and m["mee"] == pytest.approx(0.5)

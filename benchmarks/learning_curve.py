@@ -1,0 +1,99 @@
+"""Learning curve: accuracy against the number of training placements, at a fixed step budget.
+
+Trains a training config on seeded shares of its dataset's training placements
+(``train_fraction``), each for the same number of optimiser steps (a smaller share gets more
+epochs), then measures the validation and test splits (the same for every share). Prints a table
+and writes it (markdown) and a log-log plot beside ``--out``. If the error still falls steeply at
+the full share, more placements would pay; if it has flattened, the dataset is big enough for
+this model.
+
+Run: python benchmarks/learning_curve.py configs/train/uv_unet.yaml --steps 3000 \
+         --fractions 0.125 0.25 0.5 1 --out runs/curve/uv_unet
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import os
+import pathlib
+import platform
+import time
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("config", help="training config (YAML)")
+    ap.add_argument("--fractions", type=float, nargs="+", default=[0.125, 0.25, 0.5, 1.0])
+    ap.add_argument("--steps", type=int, default=3000, help="optimiser steps per share")
+    ap.add_argument("--out", default=None, help="folder of the runs, table and plot")
+    ap.add_argument("--data", help="dataset folder (default: the config's)")
+    args = ap.parse_args()
+    import numpy as np
+    import torch
+
+    from stmpl.data import Dataset
+    from stmpl.evaluate import evaluate_dataset
+    from stmpl.train import _split_tensors, load_config, train
+
+    base = load_config(args.config)
+    if args.data:
+        base["data"] = args.data
+    out = pathlib.Path(args.out or pathlib.Path("runs") / "curve" / base["name"])
+    out.mkdir(parents=True, exist_ok=True)
+    ds = Dataset(base["data"])
+    n_places = ds.card["placements_per_split"]["train"]
+    rows = []
+    for frac in args.fractions:
+        cfg = {**base, "train_fraction": frac, "name": f"{base['name']}-f{frac:g}",
+               "out": str(out / f"f{frac:g}"), "patience": 10 ** 6}
+        n = len(_split_tensors(ds, "train", load_config(cfg), torch.device("cpu"))[0])
+        cfg["epochs"] = max(1, math.ceil(args.steps / math.ceil(n / cfg["batch"])))
+        t0 = time.perf_counter()
+        path = train(cfg, progress=True)
+        seconds = time.perf_counter() - t0
+        from stmpl import predictor
+
+        p = predictor.load(path)
+        m = {s: evaluate_dataset(p, ds, s) for s in ("val", "test")}
+        rows.append({"fraction": frac, "placements": max(1, round(frac * n_places)),
+                     "samples": n, "epochs": cfg["epochs"], "seconds": round(seconds, 1),
+                     **{f"{s}_{k}": m[s][k][0] for s in m for k in ("mee", "rel_mee")}})
+        print(json.dumps(rows[-1]), flush=True)
+    lines = [f"Learning curve of `{args.config}` on {base['data']} (hash {ds.card['hash']}), "
+             f"{args.steps} steps of batch {base['batch']} per share; {platform.processor() or platform.machine()}, "
+             f"{os.cpu_count()} cores, torch {torch.__version__}, {torch.get_num_threads()} threads.",
+             "", "| share | placements | samples | epochs | train s | val MEE mm | val rel. % | "
+             "test MEE mm | test rel. % |", "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    for r in rows:
+        lines.append(f"| {r['fraction']:g} | {r['placements']} | {r['samples']} | {r['epochs']} "
+                     f"| {r['seconds']:.0f} | {r['val_mee']:.4f} | {r['val_rel_mee']:.2f} | "
+                     f"{r['test_mee']:.4f} | {r['test_rel_mee']:.2f} |")
+    table = "\n".join(lines) + "\n"
+    print(table)
+    (out / "curve.md").write_text(table)
+    (out / "curve.json").write_text(json.dumps(rows, indent=1))
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5, 3.6))
+    x = np.array([r["placements"] for r in rows])
+    for s, style in (("val", "o--"), ("test", "s-")):
+        ax.plot(x, [r[f"{s}_rel_mee"] for r in rows], style, label=f"{s} split")
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlabel("training placements")
+    ax.set_ylabel("MEE / max displacement, %")
+    ax.set_title(f"{base['name']}: {args.steps} steps per share")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend()
+    fig.tight_layout()
+    fig.savefig(out / "curve.png", dpi=120)
+    print(f"wrote {out / 'curve.md'} and {out / 'curve.png'}")
+
+
+if __name__ == "__main__":
+    main()
