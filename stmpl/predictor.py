@@ -183,12 +183,29 @@ tanh output squeezed into 1/10 of its range learns the far field poorly. Every l
 takes it as the option ``disp_scale_mm``; the checkpoint keeps it."""
 
 
+MIN_TOTAL_N = 1e-9
+"""N: below this total force a scene is unloaded; a per-newton model's inputs are then zero."""
+
+
+def total_force(force):
+    """``(B,)`` total force (N) of ``(B, N)`` per-vertex force magnitudes (torch)."""
+    return force.sum(-1)
+
+
+def force_pattern(force):
+    """``(B, N)`` per-vertex force divided by the scene's total (1 where loaded alone; zero for
+    an unloaded scene), torch."""
+    return force / total_force(force).clamp_min(MIN_TOTAL_N)[:, None]
+
+
 class LearnedPredictor(BasePredictor):
     """A predictor with a torch model trained on FEM data, for one body part.
 
-    Subclasses set ``kind`` and implement :meth:`build_model` and :meth:`forward`; they may
-    override :meth:`loss`. A checkpoint stores the model's tensors and the part's arrays, so it
-    rebuilds the predictor with nothing else.
+    Subclasses set ``kind`` and implement :meth:`build_model` and :meth:`raw`; they may
+    override :meth:`loss`. With the option ``per_newton`` the network predicts the displacement
+    per newton of the scene's total force and :meth:`forward` multiplies it back. A checkpoint
+    stores the model's tensors and the part's arrays, so it rebuilds the predictor with nothing
+    else.
     """
 
     defaults: dict = {}
@@ -203,6 +220,7 @@ class LearnedPredictor(BasePredictor):
                              f"{sorted(allowed)}")
         self.part = part
         self.config = {**allowed, **(config or {})}
+        self.per_newton = bool(self.config.get("per_newton", False))
         if not float(self.config["disp_scale_mm"]) > 0:
             raise ValueError(f"disp_scale_mm must be > 0, got {self.config['disp_scale_mm']}")
         self.scale = float(self.config["disp_scale_mm"]) * 1e-3
@@ -214,16 +232,31 @@ class LearnedPredictor(BasePredictor):
     def build_model(self):
         raise NotImplementedError
 
-    def forward(self, thickness, force):
-        """``(B, N, 3)`` displacement in units of ``self.scale`` (m) from ``thickness``
-        ``(B, N)`` (m) and ``force`` ``(B, N)`` (N), torch tensors on ``self.device``."""
+    def raw(self, thickness, force):
+        """The network's ``(B, N, 3)`` output from ``thickness`` ``(B, N)`` (m) and ``force``
+        ``(B, N)`` (N), torch tensors on ``self.device``: the displacement in units of
+        ``self.scale`` (m), or with ``per_newton`` in units of ``self.scale`` per newton of
+        the scene's total force."""
         raise NotImplementedError
+
+    def forward(self, thickness, force):
+        """``(B, N, 3)`` displacement in units of ``self.scale`` (m)."""
+        r = self.raw(thickness, force)
+        return r * total_force(force)[:, None, None] if self.per_newton else r
+
+    def normalised(self, target, force):
+        """The target ``(B, N, 3)`` (m) in the units of :meth:`raw`."""
+        t = target / self.scale
+        if self.per_newton:
+            t = t / total_force(force).clamp_min(MIN_TOTAL_N)[:, None, None]
+        return t
 
     def loss(self, thickness, force, target):
         """Training loss for a batch; ``target`` ``(B, N, 3)`` in m. Default: mean squared error
-        of the normalised displacement over the vertices (the paper's L2)."""
-        pred = self.forward(thickness, force)
-        return ((pred - target / self.scale) ** 2).mean()
+        over the vertices of :meth:`raw` against the normalised target (the paper's L2; with
+        ``per_newton`` each sample's error counts per newton, so a light press weighs as much
+        as a heavy one)."""
+        return ((self.raw(thickness, force) - self.normalised(target, force)) ** 2).mean()
 
     # -- shared
     def check(self, scenes) -> None:

@@ -11,6 +11,7 @@ from stmpl.scene import Deformation, Scene
 
 TINY = {"naive": {}, "uv_unet": {"size": 64, "width": 4, "depth": 3},
         "gnn": {"latent": 16, "steps": 2}}
+LEARNED = ["naive", "uv_unet", "gnn", "uv_unet/per_newton", "gnn/per_newton"]
 
 
 def _make(name, ds):
@@ -19,7 +20,8 @@ def _make(name, ds):
     import torch
 
     torch.manual_seed(0)
-    return predictor.create(name, ds.part, TINY[name])
+    kind, _, variant = name.partition("/")
+    return predictor.create(kind, ds.part, {**TINY[kind], **({variant: True} if variant else {})})
 
 
 @pytest.fixture(scope="module")
@@ -29,13 +31,13 @@ def ds(tiny_dataset):
     return Dataset(tiny_dataset)
 
 
-@pytest.mark.parametrize("name", ["fem", "naive", "uv_unet", "gnn"])
+@pytest.mark.parametrize("name", ["fem"] + LEARNED)
 def test_contract(name, ds):
     p = _make(name, ds)
     scenes, _ = scenes_of(ds, "train", limit=3)
     one = p.predict(scenes[0])
     assert isinstance(one, Deformation) and one.displacement.shape == (ds.part.n_vertices, 3)
-    assert one.info["predictor"] == name and one.info["seconds"] >= 0
+    assert one.info["predictor"] == name.split("/")[0] and one.info["seconds"] >= 0
     many = p.predict(scenes)
     assert isinstance(many, list) and len(many) == 3
     np.testing.assert_allclose(many[0].displacement, one.displacement, atol=1e-7)
@@ -84,7 +86,7 @@ def test_registry():
         predictor.create("naive", tube(), {"depth": 3})
 
 
-@pytest.mark.parametrize("name", ["uv_unet", "gnn"])
+@pytest.mark.parametrize("name", ["uv_unet", "gnn", "uv_unet/per_newton", "gnn/per_newton"])
 def test_learned_models_fit_a_few_samples(name, ds):
     """Each network can learn: on four training samples the loss falls at least tenfold. (The
     three-parameter Naive model cannot: on a tube its best fixed direction is almost zero.)"""
@@ -147,3 +149,23 @@ def test_evaluate_reports_seam_measures(ds):
     pred[1, 2] += 2e-3
     m = sample_metrics(true, pred, seam=np.array([1, 3]))
     assert m["seam_mee"] == pytest.approx(1.0) and m["mee"] == pytest.approx(0.5)
+
+
+@pytest.mark.parametrize("name", ["uv_unet/per_newton", "gnn/per_newton"])
+def test_per_newton_models_scale_with_the_total_force(name, ds):
+    """A per-newton model predicts u / F_total from the force pattern and the total: an unloaded
+    scene gets exactly zero, and its target is the displacement per newton."""
+    import torch
+
+    p = _make(name, ds)
+    scenes, truth = scenes_of(ds, "test", limit=1)
+    s = scenes[0]
+    zero = p.predict(Scene(s.part, s.thickness, np.zeros_like(s.force)))
+    assert np.all(zero.displacement == 0.0)
+    f = torch.tensor(s.force[None], dtype=torch.float32)
+    u = torch.tensor(truth[:1], dtype=torch.float32)
+    np.testing.assert_allclose(p.normalised(u, f).numpy() * s.force.sum() * p.scale,
+                               truth[:1], rtol=1e-4, atol=1e-9)
+    raw = p.raw(torch.tensor(s.thickness[None], dtype=torch.float32), f)
+    np.testing.assert_allclose(p.forward(torch.tensor(s.thickness[None], dtype=torch.float32), f)
+                               .detach().numpy(), raw.detach().numpy() * s.force.sum(), rtol=1e-5)

@@ -21,7 +21,7 @@ from torch import nn
 from torch_geometric.nn import MessagePassing
 
 from stmpl import tissue
-from stmpl.predictor import LearnedPredictor, register
+from stmpl.predictor import LearnedPredictor, force_pattern, register, total_force
 
 PRESSURE_SCALE = 1000.0
 
@@ -80,9 +80,11 @@ class MeshGraphNet(nn.Module):
 
 @register("gnn")
 class GNNPredictor(LearnedPredictor):
-    """Mesh GNN predictor. Options: ``latent`` (width), ``steps`` (message passing)."""
+    """Mesh GNN predictor. Options: ``latent`` (width), ``steps`` (message passing),
+    ``per_newton`` (node inputs: the pressure per newton of the total and the total; output:
+    the displacement per newton, ``disp_scale_mm`` then in mm/N)."""
 
-    defaults = {"latent": 128, "steps": 15}
+    defaults = {"latent": 128, "steps": 15, "per_newton": False}
 
     def build_model(self) -> nn.Module:
         part = self.part
@@ -98,13 +100,20 @@ class GNNPredictor(LearnedPredictor):
         self.normals = torch.tensor(part.normals, dtype=torch.float32, device=dev)
         self.inv_area = torch.tensor(1.0 / part.vertex_areas / PRESSURE_SCALE,
                                      dtype=torch.float32, device=dev)
-        return MeshGraphNet(5, 4, 3, int(self.config["latent"]), int(self.config["steps"]))
+        c_in = 6 if self.per_newton else 5
+        return MeshGraphNet(c_in, 4, 3, int(self.config["latent"]), int(self.config["steps"]))
 
-    def forward(self, thickness, force):
+    def raw(self, thickness, force):
         B, N = thickness.shape
         lo, hi = tissue.THICKNESS_RANGE
-        x = torch.cat([(force * self.inv_area)[..., None], ((thickness - lo) / (hi - lo))[..., None],
-                       self.normals.expand(B, -1, -1)], -1).reshape(B * N, 5)
+        if self.per_newton:
+            load = [(force_pattern(force) * self.inv_area)[..., None],
+                    total_force(force)[:, None, None].expand(B, N, 1)]
+        else:
+            load = [(force * self.inv_area)[..., None]]
+        x = torch.cat([*load, ((thickness - lo) / (hi - lo))[..., None],
+                       self.normals.expand(B, -1, -1)], -1)
+        x = x.reshape(B * N, x.shape[-1])
         E = self.edge_index.shape[1]
         offs = (torch.arange(B, device=x.device) * N).repeat_interleave(E)
         ei = self.edge_index.repeat(1, B) + offs

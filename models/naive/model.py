@@ -32,5 +32,5 @@ class NaivePredictor(LearnedPredictor):
     def build_model(self) -> nn.Module:
         return NaiveModel(self.scale)
 
-    def forward(self, thickness, force):
+    def raw(self, thickness, force):
         return self.model(thickness, force)

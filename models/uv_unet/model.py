@@ -22,7 +22,7 @@ import torch
 from torch import nn
 
 from stmpl import tissue
-from stmpl.predictor import LearnedPredictor, register
+from stmpl.predictor import LearnedPredictor, force_pattern, register, total_force
 
 PRESSURE_SCALE = 1000.0
 """Pa: pressure inputs are divided by this (the tissue's Young's modulus in the paper)."""
@@ -72,10 +72,11 @@ class UNet(nn.Module):
 class UVUNetPredictor(LearnedPredictor):
     """UV-UNet predictor. Options: ``size`` (UV image pixels, 64..512), ``width``, ``depth``,
     ``dropout``, ``geometry`` (add position and normal channels), ``tv`` (total-variation weight
-    in the loss)."""
+    in the loss), ``per_newton`` (inputs: the pressure per newton of the total and the total;
+    output: the displacement per newton, ``disp_scale_mm`` then in mm/N)."""
 
     defaults = {"size": 128, "width": 16, "depth": 5, "dropout": 0.5, "geometry": False,
-                "tv": 0.0}
+                "tv": 0.0, "per_newton": False}
 
     def build_model(self) -> nn.Module:
         from stmpl.uv import UVMap
@@ -91,24 +92,29 @@ class UVUNetPredictor(LearnedPredictor):
         self._geometry = torch.tensor(geo, dtype=torch.float32, device=self.device)
         self._inv_area = torch.tensor(1.0 / part.vertex_areas / PRESSURE_SCALE,
                                       dtype=torch.float32, device=self.device)
-        c_in = 2 + (6 if c["geometry"] else 0)
+        c_in = 2 + (1 if c["per_newton"] else 0) + (6 if c["geometry"] else 0)
         return UNet(c_in, 3, int(c["width"]), int(c["depth"]), float(c["dropout"]))
 
     def images(self, thickness, force) -> torch.Tensor:
         """``(B, C, S, S)`` input images from ``(B, N)`` thickness (m) and force (N)."""
         lo, hi = tissue.THICKNESS_RANGE
-        chans = [force * self._inv_area, (thickness - lo) / (hi - lo)]
+        thick = (thickness - lo) / (hi - lo)
+        if self.per_newton:  # pressure per newton of the total, and the total (N)
+            total = total_force(force)[:, None].expand_as(force)
+            chans = [force_pattern(force) * self._inv_area, total, thick]
+        else:
+            chans = [force * self._inv_area, thick]
         x = torch.stack(chans, -1)
         if self.config["geometry"]:
             x = torch.cat([x, self._geometry.expand(x.shape[0], -1, -1)], -1)
         return self.uvmap.rasterise(x)
 
-    def forward(self, thickness, force):
+    def raw(self, thickness, force):
         return self.uvmap.sample(self.model(self.images(thickness, force)))
 
     def loss(self, thickness, force, target):
         out = self.model(self.images(thickness, force))
-        tgt = self.uvmap.rasterise(target / self.scale)
+        tgt = self.uvmap.rasterise(self.normalised(target, force))
         m = self.uvmap.support.to(out.dtype)  # the chart and its padding: sampling reads both
         loss = (((out - tgt) ** 2) * m).sum() / (m.sum() * out.shape[0] * out.shape[1])
         if self.config["tv"]:
@@ -121,5 +127,7 @@ class UVUNetPredictor(LearnedPredictor):
         """``(B, T, 3)`` displacement (m) at every UV corner, seam copies apart."""
         self.model.eval()
         with torch.no_grad():
-            out = self.model(self.images(thickness, force))
-            return (self.uvmap.sample_corners(out) * self.scale).double().cpu().numpy()
+            c = self.uvmap.sample_corners(self.model(self.images(thickness, force)))
+            if self.per_newton:
+                c = c * total_force(force)[:, None, None]
+            return (c * self.scale).double().cpu().numpy()
