@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import argparse
 import logging
+import pathlib
 import sys
 
 log = logging.getLogger("stmpl")
@@ -167,6 +168,51 @@ def cmd_simulate(args) -> int:
     return 0
 
 
+DEFAULT_MODEL = "zoo:uv_unet_arm"
+"""The predictor ``stmpl predict`` uses unless told: the shipped UV-UNet of the Anny left arm."""
+
+
+def cmd_predict(args) -> int:
+    import numpy as np
+
+    from stmpl.evaluate import resolve
+    from stmpl.viz import prediction_figure
+
+    scene = _scene(args)
+    specs = args.model or [DEFAULT_MODEL]
+    out = {}
+    for spec in specs:
+        p = resolve(spec, args.device)
+        d = p.predict(scene)
+        name = (spec.split(":", 1)[1] if spec.startswith("zoo:") else
+                pathlib.Path(spec).stem if spec.endswith(".safetensors") else spec)
+        out[name] = d
+        print(f"{name:<24} max |u| {1e3 * d.magnitude.max():6.3f} mm  "
+              f"{1e3 * d.info['seconds']:8.2f} ms")
+    truth = None
+    if args.compare:
+        from stmpl.predictor import create
+
+        fem = create("fem", res=args.res, levels=args.levels)
+        truth = fem.predict(scene)
+        print(f"{'fem (' + args.res + ')':<24} max |u| {1e3 * truth.magnitude.max():6.3f} mm  "
+              f"{1e3 * truth.info['seconds']:8.2f} ms")
+        active = truth.magnitude * 1e3 > 0.001
+        for name, d in out.items():
+            err = np.linalg.norm(d.displacement - truth.displacement, axis=1)[active] * 1e3
+            print(f"  {name}: MEE {err.mean():.4f} mm = {100 * err.mean() / (1e3 * truth.magnitude.max()):.2f} % "
+                  f"of the max, max error {err.max():.3f} mm")
+    if args.out:
+        prediction_figure(out, truth, args.out)
+        print(f"wrote {args.out}")
+    if args.save:
+        if len(out) != 1:
+            raise ValueError("--save takes one --model")
+        next(iter(out.values())).save(args.save)
+        print(f"wrote {args.save}")
+    return 0
+
+
 def cmd_parts(args) -> int:
     body = _body(args)
     print(f"{'part':<12}{'vertices':>10}{'faces':>8}{'seam':>6}{'rims':>6}  chart m/unit")
@@ -227,6 +273,19 @@ def parser() -> argparse.ArgumentParser:
     si.add_argument("--save", help="deformation file to write (.npz)")
     si.add_argument("--vtu", help="the deformed tissue shell for ParaView (.vtu)")
     si.set_defaults(func=cmd_simulate)
+
+    pr = sub.add_parser("predict", help="predict a loaded scene with learned models (zoo or "
+                        "checkpoint) and draw it; --compare solves the FEM beside them")
+    _scene_args(pr, force=0.3)
+    pr.add_argument("--model", action="append", help=f"zoo:<name>, a .safetensors checkpoint "
+                    f"or fem[:res]; repeat to compare (default {DEFAULT_MODEL})")
+    pr.add_argument("--compare", action="store_true", help="also solve the FEM and report errors")
+    pr.add_argument("--res", default="reference", help="FEM resolution for --compare")
+    pr.add_argument("--levels", type=int, default=3, help="FEM continuation levels (--compare)")
+    pr.add_argument("--device", default="cpu")
+    pr.add_argument("--out", help="PNG picture to write")
+    pr.add_argument("--save", help="deformation file to write (.npz)")
+    pr.set_defaults(func=cmd_predict)
 
     ge = sub.add_parser("generate", help="generate a FEM dataset from a config (resumable)")
     ge.add_argument("config", help="dataset config (YAML), e.g. configs/data/small.yaml")

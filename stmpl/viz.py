@@ -257,3 +257,64 @@ def deformation_figure(deformation, nodes: np.ndarray, tets: np.ndarray, node_u:
     title += f" | max |u| {mag.max():.2f} mm"
     fig.suptitle(title)
     return _finish(fig, path, dpi)
+
+
+def prediction_figure(deformations: dict, truth=None, path=None, size: int = 256,
+                      dpi: int = 100):
+    """A PNG comparing predictions of one scene: per predictor (a row) the deformed skin around
+    the load coloured by |u| (mm, true scale) and its UV image; with ``truth`` (a
+    :class:`~stmpl.scene.Deformation`, e.g. the FEM's) also the UV image of the error |u - u*|
+    (mm) and its mean over the moving vertices in the title. ``deformations``: name ->
+    Deformation, all of the same scene."""
+    plt = _matplotlib()
+
+    items = list(deformations.items())
+    if not items:
+        raise ValueError("no deformations to draw")
+    scene = items[0][1].scene
+    part = scene.part
+    if truth is not None and truth.scene is not scene and not np.allclose(
+            truth.scene.force, scene.force):
+        raise ValueError("truth is a deformation of another scene")
+    rows = items if truth is None or "fem" in deformations else [("fem", truth)] + items
+    top = max(max(d.magnitude.max() for _, d in rows) * 1e3, 1e-9)
+    w = np.asarray(scene.force, float)
+    c = (part.vertices * w[:, None]).sum(0) / max(w.sum(), 1e-300)
+    area = scene.load.area if scene.load is not None else float(part.vertex_areas[w > 0].sum())
+    reach = max(3.0 * np.sqrt(area / np.pi), 0.03)
+    front = view_basis(part, scene.force if w.sum() > 0 else None)
+    cx, cy = (c @ front.T)[:2]
+    ncol = 3 if truth is not None else 2
+    fig, axes = plt.subplots(len(rows), ncol, figsize=(4.6 * ncol, 3.9 * len(rows)),
+                             squeeze=False)
+    err_top = None
+    if truth is not None:
+        err_top = max(max(np.linalg.norm(d.displacement - truth.displacement, axis=1).max()
+                          for _, d in rows) * 1e3, 1e-9)
+    for (name, d), ax in zip(rows, axes):
+        mag = d.magnitude * 1e3
+        sm = draw_part(ax[0], part, mag, front, "inferno", 0.0, top, vertices=d.vertices)
+        ax[0].set_xlim(cx - reach, cx + reach)
+        ax[0].set_ylim(cy - reach, cy + reach)
+        ms = d.info.get("seconds")
+        ax[0].set_title(f"{name}: max |u| {mag.max():.2f} mm"
+                        + (f", {1e3 * ms:.1f} ms" if ms is not None else ""))
+        fig.colorbar(sm, ax=ax[0], fraction=0.046, pad=0.04, label="|u| (mm)")
+        im = draw_uv(ax[1], part, mag, size, "inferno", 0.0, top)
+        ax[1].set_title("|u| in UV")
+        fig.colorbar(im, ax=ax[1], fraction=0.046, pad=0.04, label="mm")
+        if truth is not None and d is truth:
+            ax[2].axis("off")
+            ax[2].text(0.5, 0.5, "the reference", ha="center", va="center")
+        elif truth is not None:
+            err = np.linalg.norm(d.displacement - truth.displacement, axis=1) * 1e3
+            active = truth.magnitude * 1e3 > 0.001
+            im = draw_uv(ax[2], part, err, size, "magma", 0.0, err_top)
+            mee = err[active].mean() if active.any() else float("nan")
+            ax[2].set_title(f"error |u - u_fem|: MEE {mee:.3f} mm")
+            fig.colorbar(im, ax=ax[2], fraction=0.046, pad=0.04, label="mm")
+    title = f"{part.name}"
+    if scene.load is not None:
+        title += " | " + scene.load.summary()
+    fig.suptitle(title)
+    return _finish(fig, path, dpi)

@@ -52,3 +52,25 @@ def test_simulate_command_reports_a_failed_solve(capsys, arm):
     assert main(["simulate", "--force", "8", "--levels", "1", "--res", "coarse",
                  "--radius", "10"]) == 2
     assert "FEM solve failed" in capsys.readouterr().err
+
+
+def test_predict_command_runs_a_checkpoint_against_the_fem(tmp_path, capsys, arm):
+    import torch
+
+    from stmpl import predictor
+    from stmpl.scene import Deformation
+
+    torch.manual_seed(0)
+    p = predictor.create("uv_unet", arm, {"size": 64, "width": 4, "depth": 3})
+    ckpt = p.save(tmp_path / "tiny_unet.safetensors")
+    rc = main(["predict", "--model", str(ckpt), "--force", "0.1", "--compare", "--res", "coarse",
+               "--levels", "1", "--out", str(tmp_path / "p.png")])
+    out = capsys.readouterr().out
+    assert rc == 0 and (tmp_path / "p.png").stat().st_size > 20_000
+    assert "tiny_unet" in out and "fem (coarse)" in out and "MEE" in out
+    assert main(["predict", "--model", str(ckpt), "--force", "0.1",
+                 "--save", str(tmp_path / "d.npz")]) == 0
+    d = Deformation.load(tmp_path / "d.npz")
+    np.testing.assert_allclose(d.displacement, p.predict(d.scene).displacement, atol=1e-9)
+    assert main(["predict", "--model", "zoo:nope", "--force", "0.1"]) == 2
+    assert "zoo" in capsys.readouterr().err  # no zoo there, or no model "nope" in it
