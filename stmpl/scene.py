@@ -87,16 +87,23 @@ class Scene:
         arrays.update(thickness=self.thickness, force=self.force)
         return _save(path, arrays, self.header())
 
-    @classmethod
-    def load(cls, path) -> "Scene":
-        arrays, header = _load(path, FORMAT)
-        part = BodyPart.from_arrays(header["part"], {k[5:]: v for k, v in arrays.items()
-                                                     if k.startswith("part/")},
-                                    header.get("source"))
-        try:
-            return cls(part, arrays["thickness"], arrays["force"], None, header.get("meta", {}))
-        except KeyError as exc:
-            raise ValueError(f"scene file {path} lacks array {exc}") from exc
+
+def _read_scene(cls, path) -> "Scene":
+    """Read a scene written by :meth:`Scene.save` (``.npz``)."""
+    arrays, header = _load(path, FORMAT)
+    part = BodyPart.from_arrays(header["part"], {k[5:]: v for k, v in arrays.items()
+                                                 if k.startswith("part/")},
+                                header.get("source"))
+    try:
+        return cls(part, arrays["thickness"], arrays["force"], None, header.get("meta", {}))
+    except KeyError as exc:
+        raise ValueError(f"scene file {path} lacks array {exc}") from exc
+
+
+# Attached after the class: a ``def load`` in the class body would shadow the dataclass field
+# ``load``'s default (None), and a scene made without a load would carry the method instead.
+Scene.load = classmethod(_read_scene)
+
 
 
 @dataclass(frozen=True, eq=False)

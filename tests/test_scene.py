@@ -29,6 +29,8 @@ def test_scene_is_frozen_and_read_only(scene):
 
 def test_scene_and_deformation_save_load_round_trip(scene, tmp_path):
     back = Scene.load(scene.save(tmp_path / "s.npz"))
+    assert back.load is None          # a scene read back (or made from arrays) has no Load
+    assert Scene(back.part, back.thickness, back.force).load is None
     np.testing.assert_array_equal(back.force, scene.force)
     np.testing.assert_array_equal(back.thickness, scene.thickness)
     np.testing.assert_array_equal(back.part.faces, scene.part.faces)
