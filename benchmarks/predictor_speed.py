@@ -20,10 +20,12 @@ from _timing import median_time
 
 CONFIGS = {
     "naive": {},
-    "uv_unet": {},                                  # 128 px, width 16, depth 5
+    "uv_unet-paper": {},                            # 128 px, width 16, depth 5, dropout 0.5
+    "uv_unet-shipped": {"depth": 3, "dropout": 0.0, "per_newton": True},   # the zoo's
     "uv_unet-256": {"size": 256, "depth": 6},
-    "gnn": {},                                      # latent 128, 15 steps
-    "gnn-small": {"latent": 64, "steps": 8},
+    "gnn-mgn": {},                                  # MeshGraphNets: latent 128, 15 steps
+    "gnn-64x8": {"latent": 64, "steps": 8},
+    "gnn-shipped": {"latent": 32, "steps": 8, "per_newton": True},         # the zoo's
 }
 
 
