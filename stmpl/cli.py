@@ -97,7 +97,7 @@ def cmd_zoo(args) -> int:
             raise ValueError("zoo add needs --checkpoint FILE and one NAME")
         trained = {"command": args.command_line, "machine": args.machine,
                    "time": args.time} if args.command_line else None
-        e = zoo.add(args.checkpoint, args.names[0], trained, args.zoo)
+        e = zoo.add(args.checkpoint, args.names[0], trained, args.zoo, args.evaluate_on)
         print(f"added {args.names[0]}: {e['file']} ({e['bytes'] / 1e6:.2f} MB)")
     return 0
 
@@ -321,6 +321,8 @@ def parser() -> argparse.ArgumentParser:
     zo.add_argument("--command-line", help="add: the command that trained it")
     zo.add_argument("--machine", help="add: the machine it trained on")
     zo.add_argument("--time", help="add: how long it trained")
+    zo.add_argument("--evaluate-on", nargs="+", metavar="DATA",
+                    help="add: also measure these datasets' test splits (e.g. data/ood_bands)")
     zo.set_defaults(func=cmd_zoo)
 
     pa = sub.add_parser("parts", help="list the body model's parts and their sizes")

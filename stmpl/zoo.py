@@ -89,9 +89,12 @@ def load(name: str, device: str = "cpu", path=None):
     return predictor.load(verify(name, path), device=device)
 
 
-def add(checkpoint, name: str, trained: dict | None = None, path=None) -> dict:
+def add(checkpoint, name: str, trained: dict | None = None, path=None,
+        evaluate_on: list | None = None) -> dict:
     """Copy a checkpoint (and its sidecar) into the zoo as ``name`` and record it in the
-    manifest with ``trained`` (how it was made: command, time, machine). Returns the entry."""
+    manifest with ``trained`` (how it was made: command, time, machine). ``evaluate_on``: more
+    dataset folders (e.g. the out-of-distribution sets) whose test split is measured and kept in
+    the entry's metrics under the dataset's name. Returns the entry."""
     from stmpl.checkpoint import load as load_checkpoint
     from stmpl.checkpoint import sidecar_path
     from stmpl.files import atomic_write_text
@@ -116,21 +119,40 @@ def add(checkpoint, name: str, trained: dict | None = None, path=None) -> dict:
          "trained": trained or {}, "stmpl": meta.get("stmpl")}
     if e["training"]:
         e["training"] = {k: v for k, v in e["training"].items() if k != "history"}
+    if evaluate_on:
+        from stmpl import predictor
+        from stmpl.data import Dataset
+        from stmpl.evaluate import evaluate_dataset
+
+        p = predictor.load(dst)
+        e["metrics"] = dict(e["metrics"] or {})
+        for folder in evaluate_on:
+            ds = Dataset(folder)
+            e["metrics"][ds.card["name"]] = {**evaluate_dataset(p, ds, "test"),
+                                             "dataset_hash": ds.card["hash"]}
     m["models"][name] = e
     atomic_write_text(f, json.dumps(m, indent=1, sort_keys=True))
     return e
 
 
 def table(path=None) -> str:
-    """A markdown table of the zoo: name, kind, size, dataset, test MEE and relative MEE."""
-    rows = ["| model | kind | parameters | MB | dataset | test MEE mm | test rel. MEE % |",
-            "|---|---|---|---|---|---|---|"]
-    for n, e in sorted(manifest(path)["models"].items()):
-        t = (e.get("metrics") or {}).get("test") or {}
-        mee = t.get("mee", [float("nan")])[0]   # mm
-        rel = t.get("rel_mee", [float("nan")])[0]  # %
+    """A markdown table of the zoo: name, kind, size, training dataset, and the MEE (mm) and
+    relative MEE (%) on the test split of every dataset it was measured on."""
+    models = manifest(path)["models"]
+    sets = sorted({k for e in models.values() for k in (e.get("metrics") or {})
+                   if k not in ("val",)}, key=lambda k: (k != "test", k))
+    head = "| model | kind | parameters | MB | trained on | " + " | ".join(
+        f"{'in-distribution test' if k == 'test' else k}: MEE mm, rel. %" for k in sets) + " |"
+    rows = [head, "|---|---|--:|--:|---|" + "--:|" * len(sets)]
+    for n, e in sorted(models.items()):
         ds = e.get("dataset") or {}
+        cells = []
+        for k in sets:
+            t = (e.get("metrics") or {}).get(k) or {}
+            mee = t.get("mee", [float("nan")])[0]
+            rel = t.get("rel_mee", [float("nan")])[0]
+            cells.append(f"{mee:.4f}, {rel:.2f}")
         rows.append(f"| {n} | {e['kind']} | {e.get('parameters') or 0:,} | "
                     f"{e['bytes'] / 1e6:.2f} | {ds.get('name')} ({ds.get('hash')}) | "
-                    f"{mee:.4f} | {rel:.2f} |")
+                    + " | ".join(cells) + " |")
     return "\n".join(rows) + "\n"

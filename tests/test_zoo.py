@@ -22,7 +22,8 @@ def zoo_dir(tiny_dataset, tmp_path):
                   {"dataset": {"name": "tiny", "hash": ds.card["hash"]},
                    "metrics": {"test": {"mee": [0.5, 0.1], "rel_mee": [10.0, 2.0]}}})
     folder = tmp_path / "zoo"
-    zoo.add(ckpt, "unet_tiny", {"command": "stmpl train x.yaml", "machine": "test"}, folder)
+    zoo.add(ckpt, "unet_tiny", {"command": "stmpl train x.yaml", "machine": "test"}, folder,
+            evaluate_on=[tiny_dataset])
     return folder, ds, p
 
 
@@ -32,7 +33,12 @@ def test_add_list_load_round_trip(zoo_dir):
     e = zoo.entry("unet_tiny", folder)
     assert e["kind"] == "uv_unet" and e["dataset"]["hash"] == ds.card["hash"]
     assert e["trained"]["command"] == "stmpl train x.yaml" and e["bytes"] < zoo.MAX_BYTES
-    assert "unet_tiny | uv_unet" in zoo.table(folder) and "0.5000 | 10.00" in zoo.table(folder)
+    assert "unet_tiny | uv_unet" in zoo.table(folder) and "| 0.5000, 10.00 |" in zoo.table(folder)
+    tiny = e["metrics"]["tiny"]   # measured on add: the same numbers evaluate gives
+    from stmpl.evaluate import evaluate_dataset
+
+    assert tiny["dataset_hash"] == ds.card["hash"]
+    assert tiny["mee"][0] == pytest.approx(evaluate_dataset(p, ds, "test")["mee"][0])
     q = zoo.load("unet_tiny", path=folder)
     scenes, _ = scenes_of(ds, "test", limit=2)
     for a, b in zip(p.predict(scenes), q.predict(scenes)):
