@@ -7,7 +7,8 @@ Encode - process - decode (Pfaff et al. 2021), on the part's vertices and edges:
     u_i = d(h_i)                                                                 (decoder)
 
 Every MLP has two layers and (except the decoder) a LayerNorm. The network sees only graphs; the
-predictor builds the features and normalises them with fixed scales kept as buffers. Node inputs:
+predictor builds the features in SI units and :class:`Normaliser` modules (fixed shift and scale,
+kept as buffers, so the checkpoint carries them) bring them to order one. Node inputs:
 pressure ``F_i / A_i`` over 1 kPa, thickness normalised over [2.5, 12.5] mm, the outward normal.
 Edge inputs: the rest-pose offset ``x_j - x_i`` over the mean edge length, and its length. Output:
 the displacement over ``disp_scale_mm``. A seam vertex is one node, so there is no seam by construction.
@@ -60,6 +61,31 @@ class GraphNetBlock(MessagePassing):
         return e
 
 
+class Normaliser(nn.Module):
+    """Fixed feature normalisation ``(x - shift) / scale`` per channel, kept as buffers so that a
+    checkpoint carries it. ``x``: ``(..., C)``."""
+
+    def __init__(self, shift, scale):
+        super().__init__()
+        self.register_buffer("shift", torch.as_tensor(shift, dtype=torch.float32))
+        self.register_buffer("scale", torch.as_tensor(scale, dtype=torch.float32))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return (x - self.shift) / self.scale
+
+
+class NormalisedGraphNet(nn.Module):
+    """A :class:`MeshGraphNet` behind its input normalisers: raw node and edge features in SI
+    units in, the network's output out."""
+
+    def __init__(self, node_norm: Normaliser, edge_norm: Normaliser, net: "MeshGraphNet"):
+        super().__init__()
+        self.node_norm, self.edge_norm, self.net = node_norm, edge_norm, net
+
+    def forward(self, x, edge_attr, edge_index):
+        return self.net(self.node_norm(x), self.edge_norm(edge_attr), edge_index)
+
+
 class MeshGraphNet(nn.Module):
     """``(V, node_in), (E, edge_in), (2, E) -> (V, out)``."""
 
@@ -90,29 +116,31 @@ class GNNPredictor(LearnedPredictor):
         part = self.part
         e = part.edges
         ei = np.concatenate([e, e[:, ::-1]]).T                      # (2, 2E): both directions
-        rel = part.vertices[ei[0]] - part.vertices[ei[1]]           # x_j - x_i
-        scale = float(np.linalg.norm(rel, axis=1).mean())
-        feats = np.concatenate([rel / scale, np.linalg.norm(rel, axis=1, keepdims=True) / scale],
-                               1)
+        rel = part.vertices[ei[0]] - part.vertices[ei[1]]           # x_j - x_i, m
+        length = float(np.linalg.norm(rel, axis=1).mean())
+        feats = np.concatenate([rel, np.linalg.norm(rel, axis=1, keepdims=True)], 1)
         dev = self.device
         self.edge_index = torch.tensor(ei.copy(), dtype=torch.long, device=dev)
         self.edge_attr = torch.tensor(feats, dtype=torch.float32, device=dev)
         self.normals = torch.tensor(part.normals, dtype=torch.float32, device=dev)
-        self.inv_area = torch.tensor(1.0 / part.vertex_areas / PRESSURE_SCALE,
-                                     dtype=torch.float32, device=dev)
-        c_in = 6 if self.per_newton else 5
-        return MeshGraphNet(c_in, 4, 3, int(self.config["latent"]), int(self.config["steps"]))
+        self.inv_area = torch.tensor(1.0 / part.vertex_areas, dtype=torch.float32, device=dev)
+        # node features: pressure (Pa, or Pa per N), [total force N], thickness m, normal
+        lo, hi = tissue.THICKNESS_RANGE
+        load = ([0.0, 0.0], [PRESSURE_SCALE, 1.0]) if self.per_newton else ([0.0], [PRESSURE_SCALE])
+        node = Normaliser(load[0] + [lo, 0, 0, 0], load[1] + [hi - lo, 1, 1, 1])
+        edge = Normaliser([0.0] * 4, [length] * 4)
+        net = MeshGraphNet(len(load[0]) + 4, 4, 3, int(self.config["latent"]),
+                           int(self.config["steps"]))
+        return NormalisedGraphNet(node, edge, net)
 
     def raw(self, thickness, force):
         B, N = thickness.shape
-        lo, hi = tissue.THICKNESS_RANGE
         if self.per_newton:
             load = [(force_pattern(force) * self.inv_area)[..., None],
                     total_force(force)[:, None, None].expand(B, N, 1)]
         else:
             load = [(force * self.inv_area)[..., None]]
-        x = torch.cat([*load, ((thickness - lo) / (hi - lo))[..., None],
-                       self.normals.expand(B, -1, -1)], -1)
+        x = torch.cat([*load, thickness[..., None], self.normals.expand(B, -1, -1)], -1)
         x = x.reshape(B * N, x.shape[-1])
         E = self.edge_index.shape[1]
         offs = (torch.arange(B, device=x.device) * N).repeat_interleave(E)
