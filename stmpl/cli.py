@@ -168,8 +168,9 @@ def cmd_simulate(args) -> int:
     return 0
 
 
-DEFAULT_MODEL = "zoo:uv_unet_arm"
-"""The predictor ``stmpl predict`` uses unless told: the shipped UV-UNet of the Anny left arm."""
+DEFAULT_MODEL = "zoo:gnn_arm"
+"""The predictor ``stmpl predict`` uses unless told: the shipped mesh GNN of the Anny left arm
+(the most accurate of the zoo's models)."""
 
 
 def cmd_predict(args) -> int:

@@ -10,6 +10,13 @@ import tempfile
 import numpy as np
 
 
+def _default_mode() -> int:
+    """The mode a plain ``open(path, "w")`` would give (``mkstemp`` makes files 0600)."""
+    umask = os.umask(0)
+    os.umask(umask)
+    return 0o666 & ~umask
+
+
 def atomic_savez(path, arrays: dict, compressed: bool = False) -> pathlib.Path:
     """Write ``arrays`` to the ``.npz`` file ``path`` atomically."""
     path = pathlib.Path(path)
@@ -18,6 +25,7 @@ def atomic_savez(path, arrays: dict, compressed: bool = False) -> pathlib.Path:
     try:
         with os.fdopen(fd, "wb") as f:
             (np.savez_compressed if compressed else np.savez)(f, **arrays)
+        os.chmod(tmp, _default_mode())
         os.replace(tmp, path)
     except BaseException:
         pathlib.Path(tmp).unlink(missing_ok=True)
@@ -43,6 +51,7 @@ class atomic_path:
 
     def __exit__(self, exc_type, exc, tb) -> None:
         if exc_type is None:
+            os.chmod(self.tmp, _default_mode())
             os.replace(self.tmp, self.path)
         else:
             self.tmp.unlink(missing_ok=True)

@@ -16,7 +16,16 @@ def test_readme_python_snippets_run(arm):
 
 def test_readme_names_the_two_commands():
     text = (ROOT / "README.md").read_text()
-    assert "stmpl scene --load disk --force 5 --out scene.png" in text
+    assert "pip install -e . && stmpl predict --load disk --force 0.3 --out prediction.png" in text
     assert 'pip install -e ".[test]" && python -m pytest -q' in text
     ci = (ROOT / ".ci" / "run").read_text()
     assert 'pip install -e ".[test]" && python -m pytest -q' in ci
+
+
+def test_readme_main_command_runs_on_the_shipped_default(tmp_path, capsys, arm):
+    from stmpl.cli import main
+
+    assert main(["predict", "--load", "disk", "--force", "0.3",
+                 "--out", str(tmp_path / "prediction.png")]) == 0
+    out = capsys.readouterr().out
+    assert "gnn_arm" in out and (tmp_path / "prediction.png").stat().st_size > 20_000

@@ -1,0 +1,24 @@
+import os
+
+import numpy as np
+import pytest
+
+from stmpl.files import atomic_path, atomic_savez, atomic_write_text
+
+
+def test_atomic_writes_replace_whole_files_with_ordinary_permissions(tmp_path):
+    umask = os.umask(0o022)
+    try:
+        f = atomic_write_text(tmp_path / "a.json", "{}")
+        assert f.read_text() == "{}" and (f.stat().st_mode & 0o777) == 0o644
+        z = atomic_savez(tmp_path / "a.npz", {"x": np.arange(3)})
+        assert (z.stat().st_mode & 0o777) == 0o644
+        np.testing.assert_array_equal(np.load(z)["x"], np.arange(3))
+    finally:
+        os.umask(umask)
+    with pytest.raises(RuntimeError):
+        with atomic_path(tmp_path / "a.json") as tmp:
+            tmp.write_text("half")
+            raise RuntimeError("killed")
+    assert (tmp_path / "a.json").read_text() == "{}"           # the old file stays
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.json", "a.npz"]  # no debris
