@@ -114,7 +114,8 @@ def scene_figure(scene, path=None, size: int = 256, dpi: int = 110):
 
 def _finish(fig, path, dpi: int):
     """Lay out ``fig``; save and close it when a ``path`` is given. Returns the figure."""
-    fig.tight_layout()
+    top = 1.0 - 0.45 / fig.get_figheight() if fig._suptitle is not None else 1.0
+    fig.tight_layout(rect=(0.0, 0.0, 1.0, top))   # room for the suptitle
     if path is not None:
         pathlib.Path(path).parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(path, dpi=dpi)
