@@ -241,7 +241,11 @@ class LearnedPredictor(BasePredictor):
 
     def forward(self, thickness, force):
         """``(B, N, 3)`` displacement in units of ``self.scale`` (m)."""
-        r = self.raw(thickness, force)
+        return self.denormalised(self.raw(thickness, force), force)
+
+    def denormalised(self, r, force):
+        """Network output ``(B, ..., 3)`` in the units of :meth:`raw` -> units of ``self.scale``
+        (the inverse of :meth:`normalised` without the scale)."""
         return r * total_force(force)[:, None, None] if self.per_newton else r
 
     def normalised(self, target, force):

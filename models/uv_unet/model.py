@@ -128,6 +128,4 @@ class UVUNetPredictor(LearnedPredictor):
         self.model.eval()
         with torch.no_grad():
             c = self.uvmap.sample_corners(self.model(self.images(thickness, force)))
-            if self.per_newton:
-                c = c * total_force(force)[:, None, None]
-            return (c * self.scale).double().cpu().numpy()
+            return (self.denormalised(c, force) * self.scale).double().cpu().numpy()
