@@ -183,6 +183,11 @@ tanh output squeezed into 1/10 of its range learns the far field poorly. Every l
 takes it as the option ``disp_scale_mm``; the checkpoint keeps it."""
 
 
+LOSSES = ("mse", "relative")
+LOSS_EPS = 1e-6
+"""Regularises the ``relative`` loss's norms (units of :meth:`LearnedPredictor.raw`, so about
+1e-6 of the full scale, well under any error that counts)."""
+
 MIN_TOTAL_N = 1e-9
 """N: below this total force a scene is unloaded; a per-newton model's inputs are then zero."""
 
@@ -221,6 +226,8 @@ class LearnedPredictor(BasePredictor):
         self.part = part
         self.config = {**allowed, **(config or {})}
         self.per_newton = bool(self.config.get("per_newton", False))
+        if self.config.get("loss", "mse") not in LOSSES:
+            raise ValueError(f"loss must be one of {LOSSES}, got {self.config['loss']!r}")
         if not float(self.config["disp_scale_mm"]) > 0:
             raise ValueError(f"disp_scale_mm must be > 0, got {self.config['disp_scale_mm']}")
         self.scale = float(self.config["disp_scale_mm"]) * 1e-3
@@ -256,11 +263,20 @@ class LearnedPredictor(BasePredictor):
         return t
 
     def loss(self, thickness, force, target):
-        """Training loss for a batch; ``target`` ``(B, N, 3)`` in m. Default: mean squared error
-        over the vertices of :meth:`raw` against the normalised target (the paper's L2; with
-        ``per_newton`` each sample's error counts per newton, so a light press weighs as much
-        as a heavy one)."""
-        return ((self.raw(thickness, force) - self.normalised(target, force)) ** 2).mean()
+        """Training loss for a batch; ``target`` ``(B, N, 3)`` in m. Option ``loss``: ``mse``
+        (default, the paper's L2), the mean squared error over the vertices of :meth:`raw`
+        against the normalised target (with ``per_newton`` each sample's error counts per
+        newton, so a light press weighs as much as a heavy one); ``relative``, each sample's
+        mean Euclidean error over its peak displacement (the relative MEE the targets use)."""
+        import torch
+
+        err = self.raw(thickness, force) - self.normalised(target, force)
+        if self.config.get("loss", "mse") == "mse":
+            return (err ** 2).mean()
+        # relative: each sample's mean Euclidean error over its peak displacement
+        norm = torch.sqrt((err ** 2).sum(-1) + LOSS_EPS ** 2)                 # (B, N)
+        peak = self.normalised(target, force).norm(dim=-1).amax(-1)          # (B,)
+        return (norm.mean(-1) / (peak + LOSS_EPS)).mean()
 
     # -- shared
     def check(self, scenes) -> None:

@@ -205,3 +205,21 @@ def test_gnn_normalisers_travel_in_the_checkpoint(ds, tmp_path):
                                rtol=1e-6)
     edge_len = np.linalg.norm(np.diff(ds.part.vertices[ds.part.edges], axis=1)[:, 0], axis=1)
     np.testing.assert_allclose(q.model.edge_norm.scale.numpy(), edge_len.mean(), rtol=1e-5)
+
+
+def test_relative_loss_is_the_relative_mee(ds):
+    """``loss: relative`` is each sample's mean Euclidean error over its peak: a prediction 10 %
+    too large everywhere scores 0.1 * mean |u| / max |u|; an unknown loss is refused."""
+    import torch
+
+    p = predictor.create("gnn", ds.part, {**TINY["gnn"], "per_newton": True, "loss": "relative"})
+    scenes, truth = scenes_of(ds, "test", limit=2)
+    t = torch.tensor(np.stack([s.thickness for s in scenes]), dtype=torch.float32)
+    f = torch.tensor(np.stack([s.force for s in scenes]), dtype=torch.float32)
+    u = torch.tensor(truth, dtype=torch.float32)
+    p.raw = lambda thickness, force: p.normalised(1.1 * u, force)
+    mag = np.linalg.norm(truth, axis=-1)
+    expected = np.mean(0.1 * mag.mean(-1) / mag.max(-1))
+    assert float(p.loss(t, f, u)) == pytest.approx(expected, rel=2e-3)
+    with pytest.raises(ValueError, match="loss must be one of"):
+        predictor.create("gnn", ds.part, {**TINY["gnn"], "loss": "l1"})

@@ -110,9 +110,10 @@ class MeshGraphNet(nn.Module):
 class GNNPredictor(LearnedPredictor):
     """Mesh GNN predictor. Options: ``latent`` (width), ``steps`` (message passing),
     ``per_newton`` (node inputs: the pressure per newton of the total and the total; output:
-    the displacement per newton, ``disp_scale_mm`` then in mm/N)."""
+    the displacement per newton, ``disp_scale_mm`` then in mm/N), ``loss`` (``mse`` or
+    ``relative``, see :meth:`LearnedPredictor.loss`)."""
 
-    defaults = {"latent": 128, "steps": 15, "per_newton": False}
+    defaults = {"latent": 128, "steps": 15, "per_newton": False, "loss": "mse"}
 
     def build_model(self) -> nn.Module:
         part = self.part
