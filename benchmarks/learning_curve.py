@@ -9,6 +9,12 @@ this model.
 
 Run: python benchmarks/learning_curve.py configs/train/uv_unet.yaml --steps 3000 \
          --fractions 0.125 0.25 0.5 1 --out runs/curve/uv_unet
+
+A share's run resumes from ``<out>/f<share>/state.pt`` (a finished one is only measured again).
+``--trained 1=runs/gnn_arm/gnn_arm.safetensors`` takes a share from a checkpoint trained
+elsewhere (the zoo run), after checking that it was trained with the same config and steps.
+Training times are the checkpoints' own (summed over resumed runs; ``-`` where a run predates
+that record).
 """
 
 from __future__ import annotations
@@ -29,6 +35,8 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=3000, help="optimiser steps per share")
     ap.add_argument("--out", default=None, help="folder of the runs, table and plot")
     ap.add_argument("--data", help="dataset folder (default: the config's)")
+    ap.add_argument("--trained", nargs="+", default=[], metavar="SHARE=CHECKPOINT",
+                    help="shares already trained elsewhere with the same config and steps")
     args = ap.parse_args()
     import numpy as np
     import torch
@@ -44,21 +52,40 @@ def main() -> None:
     out.mkdir(parents=True, exist_ok=True)
     ds = Dataset(base["data"])
     n_places = ds.card["placements_per_split"]["train"]
+    from stmpl import predictor
+
+    trained = {}
+    for item in args.trained:
+        share, sep, path = item.partition("=")
+        if not sep:
+            raise SystemExit(f"--trained takes SHARE=CHECKPOINT, got {item!r}")
+        trained[float(share)] = pathlib.Path(path)
     rows = []
-    for frac in args.fractions:
+    for frac in sorted(set(args.fractions) | set(trained)):
         cfg = {**base, "train_fraction": frac, "name": f"{base['name']}-f{frac:g}",
                "out": str(out / f"f{frac:g}"), "patience": 10 ** 6}
         n = len(_split_tensors(ds, "train", load_config(cfg), torch.device("cpu"))[0])
         cfg["epochs"] = max(1, math.ceil(args.steps / math.ceil(n / cfg["batch"])))
-        t0 = time.perf_counter()
-        path = train(cfg, progress=True)
-        seconds = time.perf_counter() - t0
-        from stmpl import predictor
-
-        p = predictor.load(path)
+        if frac in trained:
+            path = trained[frac]
+            p = predictor.load(path)
+            done = p.meta["training"]["epochs"]
+            recipe = p.meta["training"].get("config", {})  # older checkpoints lack it
+            same = {k: recipe.get(k) for k in ("batch", "lr", "schedule", "seed")}
+            if (p.name != base["model"] or p.config != predictor.create(
+                    base["model"], ds.part, base["options"]).config
+                    or p.meta["dataset"]["hash"] != ds.card["hash"] or done != cfg["epochs"]
+                    or any(v is not None and v != base[k] for k, v in same.items())):
+                raise SystemExit(f"{path} was not trained with {args.config}'s model, options "
+                                 f"and data for {cfg['epochs']} epochs (it has {done})")
+        else:
+            path = train(cfg, progress=True)
+            p = predictor.load(path)
+        seconds = p.meta["training"]["seconds"]
         m = {s: evaluate_dataset(p, ds, s) for s in ("val", "test")}
         rows.append({"fraction": frac, "placements": max(1, round(frac * n_places)),
                      "samples": n, "epochs": cfg["epochs"], "seconds": round(seconds, 1),
+                     "checkpoint": str(path),
                      **{f"{s}_{k}": m[s][k][0] for s in m for k in ("mee", "rel_mee")}})
         print(json.dumps(rows[-1]), flush=True)
     lines = [f"Learning curve of `{args.config}` on {base['data']} (hash {ds.card['hash']}), "
@@ -67,17 +94,26 @@ def main() -> None:
              "", "| share | placements | samples | epochs | train s | val MEE mm | val rel. % | "
              "test MEE mm | test rel. % |", "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
     for r in rows:
+        secs = f"{r['seconds']:.0f}" if r["seconds"] > 0 else "-"
         lines.append(f"| {r['fraction']:g} | {r['placements']} | {r['samples']} | {r['epochs']} "
-                     f"| {r['seconds']:.0f} | {r['val_mee']:.4f} | {r['val_rel_mee']:.2f} | "
+                     f"| {secs} | {r['val_mee']:.4f} | {r['val_rel_mee']:.2f} | "
                      f"{r['test_mee']:.4f} | {r['test_rel_mee']:.2f} |")
     table = "\n".join(lines) + "\n"
     print(table)
     (out / "curve.md").write_text(table)
     (out / "curve.json").write_text(json.dumps(rows, indent=1))
+    plot(rows, out / "curve.png", f"{base['name']}: {args.steps} steps per share")
+    print(f"wrote {out / 'curve.md'} and {out / 'curve.png'}")
+
+
+def plot(rows: list[dict], path, title: str) -> None:
+    """Relative MEE (val and test) against training placements, log-log."""
     import matplotlib
+    import numpy as np
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import FormatStrFormatter, NullFormatter
 
     fig, ax = plt.subplots(figsize=(5, 3.6))
     x = np.array([r["placements"] for r in rows])
@@ -85,14 +121,21 @@ def main() -> None:
         ax.plot(x, [r[f"{s}_rel_mee"] for r in rows], style, label=f"{s} split")
     ax.set_xscale("log")
     ax.set_yscale("log")
+    ax.set_xticks(x)
+    for axis in (ax.xaxis, ax.yaxis):
+        axis.set_major_formatter(FormatStrFormatter("%g"))
+        axis.set_minor_formatter(NullFormatter())
+    ax.set_yticks(np.round(np.geomspace(min(min(r["val_rel_mee"], r["test_rel_mee"]) for r in rows),
+                                        max(max(r["val_rel_mee"], r["test_rel_mee"]) for r in rows),
+                                        4), 1))
     ax.set_xlabel("training placements")
     ax.set_ylabel("MEE / max displacement, %")
-    ax.set_title(f"{base['name']}: {args.steps} steps per share")
+    ax.set_title(title)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend()
     fig.tight_layout()
-    fig.savefig(out / "curve.png", dpi=120)
-    print(f"wrote {out / 'curve.md'} and {out / 'curve.png'}")
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
 
 
 if __name__ == "__main__":

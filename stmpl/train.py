@@ -137,8 +137,9 @@ def train(config, resume: bool = True, progress: bool = True):
     start, best, best_state, bad, history = 0, np.inf, None, 0, []
     if resume and state_path.exists():
         st = torch.load(state_path, map_location=device, weights_only=False)
-        same = {k: v for k, v in st["config"].items() if k != "epochs"}
-        if same != {k: v for k, v in cfg.items() if k != "epochs"}:
+        free = ("epochs", "out")  # a run may be extended, and its folder moved
+        same = {k: v for k, v in st["config"].items() if k not in free}
+        if same != {k: v for k, v in cfg.items() if k not in free}:
             raise ValueError(f"{state_path} belongs to another config (only epochs may change "
                              "to extend a run); delete it, use --restart or another out folder")
         p.model.load_state_dict(st["model"])
@@ -156,6 +157,7 @@ def train(config, resume: bool = True, progress: bool = True):
         bar = tqdm(total=cfg["epochs"], initial=start, unit="epoch",
                    desc=f"train {cfg['name']}", dynamic_ncols=True)
     t0 = time.perf_counter()
+    before = history[-1].get("seconds", 0.0) if history else 0.0   # training time of earlier runs
     epoch = start
     for epoch in range(start, cfg["epochs"]):
         if bad >= cfg["patience"]:
@@ -178,7 +180,8 @@ def train(config, resume: bool = True, progress: bool = True):
             vloss = float(np.mean([float(p.loss(va[0][i:i + 256], va[1][i:i + 256],
                                                 va[2][i:i + 256])) for i in
                                    range(0, len(va[0]), 256)]))
-        history.append({"epoch": epoch + 1, "train": total / len(perm), "val": vloss})
+        history.append({"epoch": epoch + 1, "train": total / len(perm), "val": vloss,
+                        "seconds": round(before + time.perf_counter() - t0, 3)})
         if vloss < best:
             best, bad = vloss, 0
             best_state = {k: v.detach().clone() for k, v in p.model.state_dict().items()}
@@ -200,8 +203,9 @@ def train(config, resume: bool = True, progress: bool = True):
                for s in ("val", "test") if ds.card["samples_per_split"][s]}
     meta = {"dataset": {"folder": str(cfg["data"]), "hash": ds.card["hash"],
                         "name": ds.card["name"], "samples": ds.card["samples_per_split"]},
-            "training": {"epochs": len(history), "best_val": best,
-                         "seconds": round(time.perf_counter() - t0, 1), "device": cfg["device"],
+            "training": {"config": cfg, "epochs": len(history), "best_val": best,
+                         "seconds": history[-1].get("seconds", 0.0) if history else 0.0,
+                         "device": cfg["device"],
                          "history": history[-5:]},
             "metrics": metrics}
     path = p.save(out / f"{cfg['name']}.safetensors", meta)

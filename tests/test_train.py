@@ -43,6 +43,10 @@ def test_training_resumes_where_it_stopped(tiny_dataset, tmp_path):
     assert len(ha) == len(hb) == 6
     np.testing.assert_allclose([h["val"] for h in ha], [h["val"] for h in hb], rtol=1e-6)
     assert a.name == b.name
+    # training time adds up across the two runs: per-epoch seconds rise, the sidecar's is the sum
+    secs = [h["seconds"] for h in hb]
+    assert all(s2 >= s1 for s1, s2 in zip(secs, secs[1:])) and secs[2] > 0
+    assert json.loads(b.with_suffix(".json").read_text())["training"]["seconds"] == secs[-1]
     with pytest.raises(ValueError, match="another config"):
         train(_cfg(tiny_dataset, tmp_path / "b", lr=0.01), progress=False)
 
