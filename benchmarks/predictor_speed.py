@@ -25,7 +25,8 @@ CONFIGS = {
     "uv_unet-256": {"size": 256, "depth": 6},
     "gnn-mgn": {},                                  # MeshGraphNets: latent 128, 15 steps
     "gnn-64x8": {"latent": 64, "steps": 8},
-    "gnn-shipped": {"latent": 32, "steps": 8, "per_newton": True},         # the zoo's
+    "gnn-32x8": {"latent": 32, "steps": 8, "per_newton": True},            # the first zoo GNN
+    "gnn-shipped": {"latent": 32, "steps": 6, "per_newton": True},         # the zoo's
 }
 
 

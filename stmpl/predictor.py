@@ -188,6 +188,16 @@ LOSS_EPS = 1e-6
 """Regularises the ``relative`` loss's norms (units of :meth:`LearnedPredictor.raw`, so about
 1e-6 of the full scale, well under any error that counts)."""
 
+def relative_loss(pred, target):
+    """Mean over samples of ``mean_i |pred_i - target_i| / max_i |target_i|`` for ``(B, N, 3)``
+    tensors: the relative MEE, smooth at zero error (``LOSS_EPS``)."""
+    import torch
+
+    norm = torch.sqrt(((pred - target) ** 2).sum(-1) + LOSS_EPS ** 2)      # (B, N)
+    peak = target.norm(dim=-1).amax(-1)                                    # (B,)
+    return (norm.mean(-1) / (peak + LOSS_EPS)).mean()
+
+
 MIN_TOTAL_N = 1e-9
 """N: below this total force a scene is unloaded; a per-newton model's inputs are then zero."""
 
@@ -268,15 +278,10 @@ class LearnedPredictor(BasePredictor):
         against the normalised target (with ``per_newton`` each sample's error counts per
         newton, so a light press weighs as much as a heavy one); ``relative``, each sample's
         mean Euclidean error over its peak displacement (the relative MEE the targets use)."""
-        import torch
-
-        err = self.raw(thickness, force) - self.normalised(target, force)
+        pred, tgt = self.raw(thickness, force), self.normalised(target, force)
         if self.config.get("loss", "mse") == "mse":
-            return (err ** 2).mean()
-        # relative: each sample's mean Euclidean error over its peak displacement
-        norm = torch.sqrt((err ** 2).sum(-1) + LOSS_EPS ** 2)                 # (B, N)
-        peak = self.normalised(target, force).norm(dim=-1).amax(-1)          # (B,)
-        return (norm.mean(-1) / (peak + LOSS_EPS)).mean()
+            return ((pred - tgt) ** 2).mean()
+        return relative_loss(pred, tgt)
 
     # -- shared
     def check(self, scenes) -> None:

@@ -223,3 +223,25 @@ def test_relative_loss_is_the_relative_mee(ds):
     assert float(p.loss(t, f, u)) == pytest.approx(expected, rel=2e-3)
     with pytest.raises(ValueError, match="loss must be one of"):
         predictor.create("gnn", ds.part, {**TINY["gnn"], "loss": "l1"})
+
+
+def test_unet_relative_loss_reads_the_corners(ds):
+    """The UV-UNet's ``loss: relative`` samples its output at every UV corner: an output image
+    that holds the target scores near 0, one that holds 1.1 x the target near the closed form
+    0.1 * mean |u| / max |u| (corners, so seam vertices count once per copy)."""
+    import torch
+
+    # 256 px: the rasterise -> sample round trip of a peaked field is exact only as pixels shrink
+    # (at 64 px it flattens this fixture's one-vertex peaks by a few per cent)
+    p = predictor.create("uv_unet", ds.part, {**TINY["uv_unet"], "size": 256,
+                                              "per_newton": True, "loss": "relative"})
+    scenes, truth = scenes_of(ds, "test", limit=2)
+    t = torch.tensor(np.stack([s.thickness for s in scenes]), dtype=torch.float32)
+    f = torch.tensor(np.stack([s.force for s in scenes]), dtype=torch.float32)
+    u = torch.tensor(truth, dtype=torch.float32)
+    mag = np.linalg.norm(truth[:, ds.part.uv_vertex], axis=-1)
+    expected = np.mean(0.1 * mag.mean(-1) / mag.max(-1))
+    for factor, want, tol in ((1.0, 0.0, 0.1 * expected), (1.1, expected, 0.1 * expected)):
+        image = p.uvmap.rasterise(p.normalised(factor * u, f))
+        p.model = lambda x, image=image: image
+        assert abs(float(p.loss(t, f, u)) - want) < tol

@@ -22,7 +22,8 @@ import torch
 from torch import nn
 
 from stmpl import tissue
-from stmpl.predictor import LearnedPredictor, force_pattern, register, total_force
+from stmpl.predictor import (LearnedPredictor, force_pattern, register, relative_loss,
+                             total_force)
 
 PRESSURE_SCALE = 1000.0
 """Pa: pressure inputs are divided by this (the tissue's Young's modulus in the paper)."""
@@ -73,10 +74,11 @@ class UVUNetPredictor(LearnedPredictor):
     """UV-UNet predictor. Options: ``size`` (UV image pixels, 64..512), ``width``, ``depth``,
     ``dropout``, ``geometry`` (add position and normal channels), ``tv`` (total-variation weight
     in the loss), ``per_newton`` (inputs: the pressure per newton of the total and the total;
-    output: the displacement per newton, ``disp_scale_mm`` then in mm/N)."""
+    output: the displacement per newton, ``disp_scale_mm`` then in mm/N), ``loss`` (``mse`` or
+    ``relative``, see :meth:`loss`)."""
 
     defaults = {"size": 128, "width": 16, "depth": 5, "dropout": 0.5, "geometry": False,
-                "tv": 0.0, "per_newton": False}
+                "tv": 0.0, "per_newton": False, "loss": "mse"}
 
     def build_model(self) -> nn.Module:
         from stmpl.uv import UVMap
@@ -90,6 +92,8 @@ class UVUNetPredictor(LearnedPredictor):
         extent = float(np.ptp(part.vertices, axis=0).max())
         geo = np.concatenate([(part.vertices - part.vertices.mean(0)) / extent, part.normals], 1)
         self._geometry = torch.tensor(geo, dtype=torch.float32, device=self.device)
+        self._corner_vertex = torch.as_tensor(np.asarray(part.uv_vertex), dtype=torch.long,
+                                              device=self.device)
         self._inv_area = torch.tensor(1.0 / part.vertex_areas / PRESSURE_SCALE,
                                       dtype=torch.float32, device=self.device)
         c_in = 2 + (1 if c["per_newton"] else 0) + (6 if c["geometry"] else 0)
@@ -113,15 +117,26 @@ class UVUNetPredictor(LearnedPredictor):
         return self.uvmap.sample(self.model(self.images(thickness, force)))
 
     def loss(self, thickness, force, target):
+        """Masked L2 over the chart's pixels (``loss: mse``, the paper's), or with ``loss:
+        relative`` the relative MEE at every UV corner (a seam vertex's copies each count), plus
+        the optional total variation."""
         out = self.model(self.images(thickness, force))
+        if self.config["loss"] == "relative":
+            tgt = self.normalised(target, force)[:, self._corner_vertex]
+            return relative_loss(self.uvmap.sample_corners(out), tgt) + self._tv(out)
         tgt = self.uvmap.rasterise(self.normalised(target, force))
         m = self.uvmap.support.to(out.dtype)  # the chart and its padding: sampling reads both
         loss = (((out - tgt) ** 2) * m).sum() / (m.sum() * out.shape[0] * out.shape[1])
-        if self.config["tv"]:
-            dx = (out[..., :, 1:] - out[..., :, :-1]).abs() * m[:, 1:] * m[:, :-1]
-            dy = (out[..., 1:, :] - out[..., :-1, :]).abs() * m[1:] * m[:-1]
-            loss = loss + self.config["tv"] * (dx.mean() + dy.mean())
-        return loss
+        return loss + self._tv(out)
+
+    def _tv(self, out):
+        """The total-variation term on the chart's support (0 unless ``tv`` is set)."""
+        if not self.config["tv"]:
+            return 0.0
+        m = self.uvmap.support.to(out.dtype)
+        dx = (out[..., :, 1:] - out[..., :, :-1]).abs() * m[:, 1:] * m[:, :-1]
+        dy = (out[..., 1:, :] - out[..., :-1, :]).abs() * m[1:] * m[:-1]
+        return self.config["tv"] * (dx.mean() + dy.mean())
 
     def corner_displacement(self, thickness, force) -> np.ndarray:
         """``(B, T, 3)`` displacement (m) at every UV corner, seam copies apart."""
