@@ -188,6 +188,7 @@ LOSS_EPS = 1e-6
 """Regularises the ``relative`` loss's norms (units of :meth:`LearnedPredictor.raw`, so about
 1e-6 of the full scale, well under any error that counts)."""
 
+
 def relative_loss(pred, target):
     """Mean over samples of ``mean_i |pred_i - target_i| / max_i |target_i|`` for ``(B, N, 3)``
     tensors: the relative MEE, smooth at zero error (``LOSS_EPS``)."""
