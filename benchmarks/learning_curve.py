@@ -25,7 +25,6 @@ import math
 import os
 import pathlib
 import platform
-import time
 
 
 def main() -> None:
