@@ -71,8 +71,7 @@ def main() -> None:
             done = p.meta["training"]["epochs"]
             recipe = p.meta["training"].get("config", {})  # older checkpoints lack it
             same = {k: recipe.get(k) for k in ("batch", "lr", "schedule", "seed")}
-            if (p.name != base["model"] or p.config != predictor.create(
-                    base["model"], ds.part, base["options"]).config
+            if (p.name != base["model"] or p.config != type(p).options(base["options"])
                     or p.meta["dataset"]["hash"] != ds.card["hash"] or done != cfg["epochs"]
                     or any(v is not None and v != base[k] for k, v in same.items())):
                 raise SystemExit(f"{path} was not trained with {args.config}'s model, options "

@@ -229,22 +229,29 @@ class LearnedPredictor(BasePredictor):
     def __init__(self, part, config: dict | None = None, device: str = "cpu"):
         import torch
 
-        allowed = {**self.defaults, "disp_scale_mm": DISP_SCALE_MM}
-        unknown = set(config or {}) - set(allowed)
-        if unknown:
-            raise ValueError(f"unknown {self.name} model options {sorted(unknown)}; allowed: "
-                             f"{sorted(allowed)}")
         self.part = part
-        self.config = {**allowed, **(config or {})}
+        self.config = self.options(config)
         self.per_newton = bool(self.config.get("per_newton", False))
-        if self.config.get("loss", "mse") not in LOSSES:
-            raise ValueError(f"loss must be one of {LOSSES}, got {self.config['loss']!r}")
-        if not float(self.config["disp_scale_mm"]) > 0:
-            raise ValueError(f"disp_scale_mm must be > 0, got {self.config['disp_scale_mm']}")
         self.scale = float(self.config["disp_scale_mm"]) * 1e-3
         self.device = torch.device(device)
         self.model = self.build_model().to(self.device)
         self.meta: dict = {}
+
+    @classmethod
+    def options(cls, config: dict | None = None) -> dict:
+        """The model options ``config`` over the defaults, checked (unknown keys, the loss, the
+        displacement scale) without building anything; raises ``ValueError``."""
+        allowed = {**cls.defaults, "disp_scale_mm": DISP_SCALE_MM}
+        unknown = set(config or {}) - set(allowed)
+        if unknown:
+            raise ValueError(f"unknown {cls.name} model options {sorted(unknown)}; allowed: "
+                             f"{sorted(allowed)}")
+        out = {**allowed, **(config or {})}
+        if out.get("loss", "mse") not in LOSSES:
+            raise ValueError(f"loss must be one of {LOSSES}, got {out['loss']!r}")
+        if not float(out["disp_scale_mm"]) > 0:
+            raise ValueError(f"disp_scale_mm must be > 0, got {out['disp_scale_mm']}")
+        return out
 
     # -- to implement
     def build_model(self):

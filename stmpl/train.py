@@ -73,6 +73,7 @@ def load_config(source) -> dict:
     if cfg["model"] not in predictor.names() or cfg["model"] == "fem":
         raise ValueError(f"model must be a learned predictor "
                          f"{[n for n in predictor.names() if n != 'fem']}, got {cfg['model']!r}")
+    predictor.REGISTRY[cfg["model"]].options(cfg["options"])  # checked; kept as written
     if not cfg["data"]:
         raise ValueError("data: the dataset folder to train on is missing")
     for k in ("epochs", "batch", "patience"):
