@@ -1,6 +1,7 @@
 """Predictor latency and throughput on the anny left arm, side by side.
 
-For each learned predictor (untrained weights: speed does not depend on them): the median time
+For each learned predictor (untrained weights, since speed does not depend on them, or the zoo's
+checkpoint where the model carries a linear FEM operator of the arm): the median time
 per scene of ``predict(scene)`` at batch 1 (the whole API: tensors, UV maps, Deformation) and of
 the bare forward pass, and scenes per second at batch 64. The FEM (reference resolution) is timed
 once for scale.
@@ -21,13 +22,18 @@ from _timing import median_time
 CONFIGS = {
     "naive": {},
     "uv_unet-paper": {},                            # 128 px, width 16, depth 5, dropout 0.5
-    "uv_unet-shipped": {"depth": 3, "dropout": 0.0, "per_newton": True},   # the zoo's
+    "uv_unet-plain": {"depth": 3, "dropout": 0.0, "per_newton": True},     # no prior
     "uv_unet-256": {"size": 256, "depth": 6},
     "gnn-mgn": {},                                  # MeshGraphNets: latent 128, 15 steps
     "gnn-64x8": {"latent": 64, "steps": 8},
     "gnn-32x8": {"latent": 32, "steps": 8, "per_newton": True},            # the first zoo GNN
-    "gnn-shipped": {"latent": 32, "steps": 6, "per_newton": True},         # the zoo's
+    "gnn-plain": {"latent": 32, "steps": 6, "per_newton": True},           # no prior
+    # with the linear FEM operator (its size depends on the arm, so the zoo's checkpoints)
+    "linear": "linear_arm",
+    "uv_unet-shipped": "uv_unet_arm",
+    "gnn-shipped": "gnn_arm",
 }
+"""Options of an untrained predictor, or the name of a zoo checkpoint."""
 
 
 def main() -> None:
@@ -56,7 +62,15 @@ def main() -> None:
     t1 = torch.tensor(scene.thickness[None], dtype=torch.float32, device=dev)
     f1 = torch.tensor(scene.force[None], dtype=torch.float32, device=dev)
     for label, opts in CONFIGS.items():
-        p = predictor.create(label.split("-")[0], arm, opts, device=dev)
+        if isinstance(opts, str):
+            from stmpl import zoo
+
+            if opts not in zoo.names():
+                print(f"| {label} | (zoo {opts} not found) | | | | |")
+                continue
+            p = zoo.load(opts, device=dev)
+        else:
+            p = predictor.create(label.split("-")[0], arm, opts, device=dev)
         p.model.eval()
         sync = torch.cuda.synchronize if dev.startswith("cuda") else (lambda: None)
 

@@ -588,9 +588,11 @@ class _Pardiso:
         self._K = K
 
     def solve(self, b):
+        """``x`` for ``b`` of shape ``(n,)`` or ``(n, k)`` (k right-hand sides at once)."""
         s = self._solver
         s.set_phase(33)
-        return s._call_pardiso(self._K, np.asfortranarray(b.reshape(-1, 1))).ravel()
+        x = s._call_pardiso(self._K, np.asfortranarray(b.reshape(len(b), -1)))
+        return x.reshape(b.shape)
 
 
 class _AMGCG:
@@ -607,6 +609,8 @@ class _AMGCG:
     def solve(self, b):
         from scipy.sparse.linalg import cg
 
+        if b.ndim == 2:
+            return np.stack([self.solve(c) for c in b.T], axis=1)
         x, info = cg(self._K, b, rtol=1e-10, maxiter=2000, M=self._M)
         if info != 0:
             raise RuntimeError(f"AMG-CG did not converge (info {info})")

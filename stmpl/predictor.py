@@ -51,7 +51,7 @@ def _import_models() -> None:
     """Learned predictors register themselves when their package is imported."""
     import importlib
 
-    for mod in ("models.naive", "models.uv_unet", "models.gnn"):
+    for mod in ("models.naive", "models.linear", "models.uv_unet", "models.gnn"):
         try:
             importlib.import_module(mod)
         except ImportError as e:  # a model whose optional dependency is missing

@@ -128,6 +128,12 @@ def train(config, resume: bool = True, progress: bool = True):
     torch.manual_seed(cfg["seed"])
     np.random.seed(cfg["seed"])
     p = predictor.create(cfg["model"], ds.part, cfg["options"], device=cfg["device"])
+    t_fit = time.perf_counter()
+    if hasattr(p, "fit"):  # a part computed from the dataset, not learned (a FEM operator)
+        p.fit(ds, progress=progress)
+    t_fit = time.perf_counter() - t_fit
+    if p.n_parameters() == 0:
+        return _finish(p, cfg, ds, out, [], float("nan"), {"fit_seconds": round(t_fit, 3)})
     opt = torch.optim.Adam(p.model.parameters(), lr=cfg["lr"])
     tr = _split_tensors(ds, "train", cfg, device)
     va = _split_tensors(ds, "val", cfg, device)
@@ -198,15 +204,21 @@ def train(config, resume: bool = True, progress: bool = True):
     if bar is not None:
         bar.close()
     p.model.load_state_dict(best_state)
+    return _finish(p, cfg, ds, out, history, best, {"fit_seconds": round(t_fit, 3)})
+
+
+def _finish(p, cfg, ds, out, history, best, extra) -> pathlib.Path:
+    """Evaluate the final model on val and test and write its checkpoint and history."""
     from stmpl.evaluate import evaluate_dataset
 
     metrics = {s: evaluate_dataset(p, ds, s, thickness_mm=None)
                for s in ("val", "test") if ds.card["samples_per_split"][s]}
     meta = {"dataset": {"folder": str(cfg["data"]), "hash": ds.card["hash"],
                         "name": ds.card["name"], "samples": ds.card["samples_per_split"]},
-            "training": {"config": cfg, "epochs": len(history), "best_val": best,
+            "training": {"config": cfg, "epochs": len(history),
+                         "best_val": best if np.isfinite(best) else None,
                          "seconds": history[-1].get("seconds", 0.0) if history else 0.0,
-                         "device": cfg["device"],
+                         "device": cfg["device"], **extra,
                          "history": history[-5:]},
             "metrics": metrics}
     path = p.save(out / f"{cfg['name']}.safetensors", meta)

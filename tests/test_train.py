@@ -99,3 +99,24 @@ def test_cosine_schedule_and_placement_share(tiny_dataset):
                                           for j in np.flatnonzero(a["placement"] == p)[:1])}
     n_kept = sum(int((a["placement"] == p).sum()) for p in kept)
     assert len(kept) == round(0.5 * len(places)) and n_kept == len(f)
+
+
+def test_linear_fem_is_fitted_not_trained(tiny_dataset, tmp_path, monkeypatch):
+    """``model: linear`` computes its operator from the dataset and skips the optimiser; the
+    checkpoint says so and beats Naive on the test split; a second fit reads the cache."""
+    cfg = _cfg(tiny_dataset, tmp_path / "lin", name="lin_tiny", model="linear")
+    path = train(cfg, progress=False)
+    meta = checkpoint.read_sidecar(path)
+    assert meta["kind"] == "linear" and meta["training"]["epochs"] == 0
+    assert meta["parameters"] == 0 and meta["operator"]["levels_mm"] == [5.0, 10.0]
+    naive = checkpoint.read_sidecar(train(_cfg(tiny_dataset, tmp_path / "nv"), progress=False))
+    assert meta["metrics"]["test"]["mee"][0] < 0.5 * naive["metrics"]["test"]["mee"][0]
+    import fem.compliance
+
+    def no_fem(*a, **k):
+        raise AssertionError("the cached operator was recomputed")
+
+    monkeypatch.setattr(fem.compliance, "compliance", no_fem)
+    again = train({**cfg, "out": str(tmp_path / "lin2")}, progress=False)
+    redo = checkpoint.read_sidecar(again)["metrics"]["test"]
+    assert redo["mee"] == meta["metrics"]["test"]["mee"]

@@ -25,6 +25,14 @@ from stmpl import tissue
 from stmpl.predictor import LearnedPredictor, force_pattern, register, total_force
 
 PRESSURE_SCALE = 1000.0
+PRIORS = ("none", "linear")
+PRIOR_SCALE = 0.1
+"""Scale of the linear prior's displacement as a node input, in the units of ``raw`` (with
+``per_newton`` and 20 mm/N, 0.1 is 2 mm/N)."""
+CORRECTION_SCALE = 0.05
+"""On top of the prior the network's output is a correction in units of this share of ``raw``'s:
+corrections are a few per cent of the answer, and at full scale Adam's first steps would throw
+the prediction far from the prior before it learned anything."""
 
 
 def mlp(c_in: int, hidden: int, c_out: int, norm: bool = True) -> nn.Sequential:
@@ -78,11 +86,16 @@ class Normaliser(nn.Module):
 
 class NormalisedGraphNet(nn.Module):
     """A :class:`MeshGraphNet` behind its input normalisers: raw node and edge features in SI
-    units in, the network's output out."""
+    units in, the network's output out. ``prior``: an optional linear FEM operator
+    (:class:`~models.linear.ComplianceOperator`) the predictor adds to the output, kept here so
+    the checkpoint carries it."""
 
-    def __init__(self, node_norm: Normaliser, edge_norm: Normaliser, net: "MeshGraphNet"):
+    def __init__(self, node_norm: Normaliser, edge_norm: Normaliser, net: "MeshGraphNet",
+                 prior: nn.Module | None = None):
         super().__init__()
         self.node_norm, self.edge_norm, self.net = node_norm, edge_norm, net
+        if prior is not None:
+            self.prior = prior
 
     def forward(self, x, edge_attr, edge_index):
         return self.net(self.node_norm(x), self.edge_norm(edge_attr), edge_index)
@@ -111,9 +124,30 @@ class GNNPredictor(LearnedPredictor):
     """Mesh GNN predictor. Options: ``latent`` (width), ``steps`` (message passing),
     ``per_newton`` (node inputs: the pressure per newton of the total and the total; output:
     the displacement per newton, ``disp_scale_mm`` then in mm/N), ``loss`` (``mse`` or
-    ``relative``, see :meth:`LearnedPredictor.loss`)."""
+    ``relative``, see :meth:`LearnedPredictor.loss`), ``prior`` (``none``, or ``linear``: the
+    precomputed linear FEM's displacement, :mod:`models.linear`, is a node input and the network
+    predicts only the correction to it; :meth:`fit` computes the operator from the dataset)."""
 
-    defaults = {"latent": 128, "steps": 15, "per_newton": False, "loss": "mse"}
+    defaults = {"latent": 128, "steps": 15, "per_newton": False, "loss": "mse", "prior": "none"}
+
+    @classmethod
+    def options(cls, config: dict | None = None) -> dict:
+        out = super().options(config)
+        if out["prior"] not in PRIORS:
+            raise ValueError(f"prior must be one of {PRIORS}, got {out['prior']!r}")
+        return out
+
+    @property
+    def prior(self) -> bool:
+        return self.config["prior"] == "linear"
+
+    def fit(self, dataset, progress: bool = True) -> None:
+        """With ``prior: linear``, compute the linear FEM operator for ``dataset`` (cached)."""
+        if self.prior:
+            from models.linear.model import fit_operator, operator_info
+
+            self.model.prior.set(**fit_operator(self.part, dataset, {}, progress))
+            self.meta["operator"] = operator_info(self.model.prior)
 
     def build_model(self) -> nn.Module:
         part = self.part
@@ -132,9 +166,18 @@ class GNNPredictor(LearnedPredictor):
         load = ([0.0, 0.0], [PRESSURE_SCALE, 1.0]) if self.per_newton else ([0.0], [PRESSURE_SCALE])
         node = Normaliser(load[0] + [lo, 0, 0, 0], load[1] + [hi - lo, 1, 1, 1])
         edge = Normaliser([0.0] * 4, [length] * 4)
-        net = MeshGraphNet(len(load[0]) + 4, 4, 3, int(self.config["latent"]),
+        prior = None
+        if self.prior:  # the linear FEM's answer, in the units of raw(), is one more input
+            from models.linear.model import ComplianceOperator
+
+            prior = ComplianceOperator()
+            node = Normaliser(list(node.shift) + [0.0] * 3, list(node.scale) + [PRIOR_SCALE] * 3)
+        net = MeshGraphNet(len(node.shift), 4, 3, int(self.config["latent"]),
                            int(self.config["steps"]))
-        return NormalisedGraphNet(node, edge, net)
+        if prior is not None:  # start from the linear FEM's answer: a silent decoder
+            nn.init.zeros_(net.decoder[-1].weight)
+            nn.init.zeros_(net.decoder[-1].bias)
+        return NormalisedGraphNet(node, edge, net, prior)
 
     def raw(self, thickness, force):
         B, N = thickness.shape
@@ -143,10 +186,14 @@ class GNNPredictor(LearnedPredictor):
                     total_force(force)[:, None, None].expand(B, N, 1)]
         else:
             load = [(force * self.inv_area)[..., None]]
-        x = torch.cat([*load, thickness[..., None], self.normals.expand(B, -1, -1)], -1)
+        base = []
+        if self.prior:
+            base = [self.normalised(self.model.prior(thickness, force), force)]
+        x = torch.cat([*load, thickness[..., None], self.normals.expand(B, -1, -1), *base], -1)
         x = x.reshape(B * N, x.shape[-1])
         E = self.edge_index.shape[1]
         offs = (torch.arange(B, device=x.device) * N).repeat_interleave(E)
         ei = self.edge_index.repeat(1, B) + offs
         ea = self.edge_attr.repeat(B, 1)
-        return self.model(x, ea, ei).reshape(B, N, 3)
+        out = self.model(x, ea, ei).reshape(B, N, 3)
+        return base[0] + CORRECTION_SCALE * out if base else out

@@ -27,6 +27,12 @@ from stmpl.predictor import (LearnedPredictor, force_pattern, register, relative
 
 PRESSURE_SCALE = 1000.0
 """Pa: pressure inputs are divided by this (the tissue's Young's modulus in the paper)."""
+PRIORS = ("none", "linear")
+PRIOR_SCALE = 0.1
+"""The linear prior's displacement as input channels, in the units of ``raw`` over this."""
+CORRECTION_SCALE = 0.05
+"""On top of the prior the output images hold a correction in units of this share of ``raw``'s
+(corrections are a few per cent of the answer; see the GNN's constant of the same name)."""
 
 
 class UNet(nn.Module):
@@ -69,16 +75,56 @@ class UNet(nn.Module):
         return torch.tanh(x)
 
 
+class WithPrior(nn.Module):
+    """A :class:`UNet` and the linear FEM operator its predictor adds (``prior: linear``), kept
+    together so the checkpoint carries both; calling it runs the UNet."""
+
+    def __init__(self, net: UNet, prior: nn.Module):
+        super().__init__()
+        self.net, self.prior = net, prior
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return self.net(x)
+
+
 @register("uv_unet")
 class UVUNetPredictor(LearnedPredictor):
     """UV-UNet predictor. Options: ``size`` (UV image pixels, 64..512), ``width``, ``depth``,
     ``dropout``, ``geometry`` (add position and normal channels), ``tv`` (total-variation weight
     in the loss), ``per_newton`` (inputs: the pressure per newton of the total and the total;
     output: the displacement per newton, ``disp_scale_mm`` then in mm/N), ``loss`` (``mse`` or
-    ``relative``, see :meth:`loss`)."""
+    ``relative``, see :meth:`loss`), ``prior`` (``none``, or ``linear``: the precomputed linear
+    FEM's displacement, :mod:`models.linear`, comes in as three more channels, the output images
+    hold only the correction, added to the linear answer at the vertices, so the prior itself
+    has no seam gap; :meth:`fit` computes the operator)."""
 
     defaults = {"size": 128, "width": 16, "depth": 5, "dropout": 0.5, "geometry": False,
-                "tv": 0.0, "per_newton": False, "loss": "mse"}
+                "tv": 0.0, "per_newton": False, "loss": "mse", "prior": "none"}
+
+    @classmethod
+    def options(cls, config: dict | None = None) -> dict:
+        out = super().options(config)
+        if out["prior"] not in PRIORS:
+            raise ValueError(f"prior must be one of {PRIORS}, got {out['prior']!r}")
+        return out
+
+    @property
+    def prior(self) -> bool:
+        return self.config["prior"] == "linear"
+
+    def fit(self, dataset, progress: bool = True) -> None:
+        """With ``prior: linear``, compute the linear FEM operator for ``dataset`` (cached)."""
+        if self.prior:
+            from models.linear.model import fit_operator, operator_info
+
+            self.model.prior.set(**fit_operator(self.part, dataset, {}, progress))
+            self.meta["operator"] = operator_info(self.model.prior)
+
+    def _base(self, thickness, force):
+        """The linear prior at the vertices ``(B, N, 3)`` in the units of :meth:`raw`, or None."""
+        if not self.prior:
+            return None
+        return self.normalised(self.model.prior(thickness, force), force)
 
     def build_model(self) -> nn.Module:
         from stmpl.uv import UVMap
@@ -97,7 +143,15 @@ class UVUNetPredictor(LearnedPredictor):
         self._inv_area = torch.tensor(1.0 / part.vertex_areas / PRESSURE_SCALE,
                                       dtype=torch.float32, device=self.device)
         c_in = 2 + (1 if c["per_newton"] else 0) + (6 if c["geometry"] else 0)
-        return UNet(c_in, 3, int(c["width"]), int(c["depth"]), float(c["dropout"]))
+        if not self.prior:
+            return UNet(c_in, 3, int(c["width"]), int(c["depth"]), float(c["dropout"]))
+        from models.linear.model import ComplianceOperator
+
+        net = UNet(c_in + 3, 3, int(c["width"]), int(c["depth"]), float(c["dropout"]))
+        last = net.up[-1][-1]                  # start from the linear FEM: a silent output
+        nn.init.zeros_(last.weight)
+        nn.init.zeros_(last.bias)
+        return WithPrior(net, ComplianceOperator())
 
     def images(self, thickness, force) -> torch.Tensor:
         """``(B, C, S, S)`` input images from ``(B, N)`` thickness (m) and force (N)."""
@@ -111,20 +165,31 @@ class UVUNetPredictor(LearnedPredictor):
         x = torch.stack(chans, -1)
         if self.config["geometry"]:
             x = torch.cat([x, self._geometry.expand(x.shape[0], -1, -1)], -1)
+        base = self._base(thickness, force)
+        if base is not None:
+            x = torch.cat([x, base / PRIOR_SCALE], -1)
         return self.uvmap.rasterise(x)
 
     def raw(self, thickness, force):
-        return self.uvmap.sample(self.model(self.images(thickness, force)))
+        out = self.uvmap.sample(self.model(self.images(thickness, force)))
+        base = self._base(thickness, force)
+        return out if base is None else base + CORRECTION_SCALE * out
 
     def loss(self, thickness, force, target):
         """Masked L2 over the chart's pixels (``loss: mse``, the paper's), or with ``loss:
         relative`` the relative MEE at every UV corner (a seam vertex's copies each count), plus
         the optional total variation."""
         out = self.model(self.images(thickness, force))
+        tgt = self.normalised(target, force)
+        base = self._base(thickness, force)
         if self.config["loss"] == "relative":
-            tgt = self.normalised(target, force)[:, self._corner_vertex]
-            return relative_loss(self.uvmap.sample_corners(out), tgt) + self._tv(out)
-        tgt = self.uvmap.rasterise(self.normalised(target, force))
+            pred = self.uvmap.sample_corners(out)
+            if base is not None:
+                pred = base[:, self._corner_vertex] + CORRECTION_SCALE * pred
+            return relative_loss(pred, tgt[:, self._corner_vertex]) + self._tv(out)
+        if base is not None:                                  # the correction's image
+            tgt = (tgt - base) / CORRECTION_SCALE
+        tgt = self.uvmap.rasterise(tgt)
         m = self.uvmap.support.to(out.dtype)  # the chart and its padding: sampling reads both
         loss = (((out - tgt) ** 2) * m).sum() / (m.sum() * out.shape[0] * out.shape[1])
         return loss + self._tv(out)
@@ -143,4 +208,7 @@ class UVUNetPredictor(LearnedPredictor):
         self.model.eval()
         with torch.no_grad():
             c = self.uvmap.sample_corners(self.model(self.images(thickness, force)))
+            base = self._base(thickness, force)
+            if base is not None:
+                c = base[:, self._corner_vertex] + CORRECTION_SCALE * c
             return (self.denormalised(c, force) * self.scale).double().cpu().numpy()

@@ -1,0 +1,185 @@
+"""Precomputed linear FEM: the compliance operator of the tissue shell (:mod:`fem.compliance`)
+applied to the load, ``u_i = sum_j G_ij(t_j) F_j``. No training: it is computed from the
+dataset's own body part, material, resolution and solver options at a few thickness levels and
+interpolated linearly between them. Exact for light loads; as strains grow the Neo-Hookean tissue
+stiffens and the linear answer overshoots (the learned models may take it as a prior and learn the
+rest).
+
+Its tensors are buffers, so a checkpoint carries the operator: sparse, the pairs ``(i, j)``
+whose response reaches ``tol`` of the largest at some level.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import pathlib
+import time
+
+import numpy as np
+import torch
+from torch import nn
+
+from stmpl.predictor import LearnedPredictor, register
+
+CACHE_VERSION = 1
+
+
+class ComplianceOperator(nn.Module):
+    """``(B, N) x (B, N) -> (B, N, 3)``: thickness (m) and normal force (N) per vertex to the
+    linear displacement (m).
+
+    Buffers: ``levels`` ``(L,)`` thickness levels, m (rising); ``index`` ``(2, nnz)`` pairs
+    ``[i; j]`` (response vertex, loaded vertex); ``values`` ``(L, nnz, 3)`` m/N. Column ``j``
+    takes the thickness at the loaded vertex ``j``, interpolated linearly between levels (exact
+    for a uniform layer)."""
+
+    def __init__(self):
+        super().__init__()
+        self.register_buffer("levels", torch.zeros(0))
+        self.register_buffer("index", torch.zeros(2, 0, dtype=torch.long))
+        self.register_buffer("values", torch.zeros(0, 0, 3))
+
+    def set(self, levels, index, values) -> None:
+        """Install an operator: ``levels`` ``(L,)`` m, ``index`` ``(2, nnz)``, ``values``
+        ``(L, nnz, 3)`` m/N."""
+        levels = torch.as_tensor(np.asarray(levels), dtype=torch.float32)
+        index = torch.as_tensor(np.asarray(index), dtype=torch.long)
+        values = torch.as_tensor(np.asarray(values), dtype=torch.float32)
+        if levels.ndim != 1 or len(levels) == 0 or torch.any(levels[1:] <= levels[:-1]):
+            raise ValueError("levels must be a non-empty rising 1-D array")
+        if index.ndim != 2 or index.shape[0] != 2 or values.shape != (len(levels),
+                                                                     index.shape[1], 3):
+            raise ValueError(f"index (2, nnz) and values (L, nnz, 3) do not fit: "
+                             f"{tuple(index.shape)}, {tuple(values.shape)}")
+        dev = self.levels.device
+        self.levels, self.index, self.values = levels.to(dev), index.to(dev), values.to(dev)
+
+    def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
+        for name in ("levels", "index", "values"):  # shapes come with the checkpoint
+            if prefix + name in state_dict:
+                setattr(self, name, torch.empty_like(state_dict[prefix + name]))
+        super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
+
+    @property
+    def ready(self) -> bool:
+        return len(self.levels) > 0
+
+    def weights(self, thickness: torch.Tensor) -> torch.Tensor:
+        """``(B, N, L)`` interpolation weights of each vertex's thickness over the levels."""
+        if not self.ready:
+            raise RuntimeError("the compliance operator is empty; fit the predictor first")
+        lv = self.levels
+        lo, hi = float(lv[0]), float(lv[-1])
+        tmin, tmax = float(thickness.min()), float(thickness.max())
+        tol = 1e-6 * hi
+        if tmin < lo - tol or tmax > hi + tol:
+            raise ValueError(f"thickness {tmin * 1e3:.3g}..{tmax * 1e3:.3g} mm lies outside the "
+                             f"operator's levels {lo * 1e3:g}..{hi * 1e3:g} mm")
+        L = len(lv)
+        if L == 1:
+            return torch.ones(*thickness.shape, 1, device=thickness.device)
+        t = thickness.clamp(lo, hi)                  # only rounding (checked above)
+        k = torch.searchsorted(lv, t.contiguous()).clamp(1, L - 1)
+        a = ((t - lv[k - 1]) / (lv[k] - lv[k - 1]))[..., None]
+        w = torch.zeros(*thickness.shape, L, device=thickness.device)
+        w.scatter_(-1, (k - 1)[..., None], 1 - a)
+        w.scatter_add_(-1, k[..., None], a)
+        return w
+
+    def forward(self, thickness: torch.Tensor, force: torch.Tensor) -> torch.Tensor:
+        i, j = self.index
+        fw = force[..., None] * self.weights(thickness)                 # (B, N, L)
+        c = torch.einsum("bkl,lkc->bkc", fw[:, j], self.values)          # (B, nnz, 3)
+        u = torch.zeros(force.shape[0], force.shape[1], 3, device=force.device, dtype=c.dtype)
+        return u.index_add_(1, i, c)
+
+
+def cache_dir() -> pathlib.Path:
+    """Where computed operators are kept: ``$STMPL_CACHE_DIR`` or ``~/.cache/stmpl``."""
+    root = os.environ.get("STMPL_CACHE_DIR") or pathlib.Path.home() / ".cache" / "stmpl"
+    return pathlib.Path(root) / "compliance"
+
+
+def operator_arrays(part, fem_config: dict, levels_m, tol: float = 1e-3,
+                    progress: bool = True, cache: bool = True) -> dict:
+    """The sparse operator of ``part`` at ``levels_m`` for a dataset's FEM set-up
+    (``fem_config``: its ``material``, ``resolution`` and ``solver`` entries), computed once and
+    cached by content. Returns ``levels``, ``index``, ``values``, ``dropped``, ``seconds``."""
+    from fem.compliance import compliance, sparsify
+    from fem.material import material
+    from fem.solver import SolverOptions
+    from stmpl.files import atomic_savez
+
+    levels = [float(x) for x in levels_m]
+    setup = {k: fem_config.get(k) for k in ("material", "resolution", "solver")}
+    h = hashlib.sha256(json.dumps([CACHE_VERSION, setup, levels, tol], sort_keys=True).encode())
+    for k in ("vertices", "faces"):
+        h.update(np.ascontiguousarray(getattr(part, k)).tobytes())
+    path = cache_dir() / f"{part.name}-{h.hexdigest()[:16]}.npz"
+    if cache and path.is_file():
+        try:
+            with np.load(path) as z:
+                return {k: z[k] for k in z.files}
+        except (OSError, ValueError, KeyError):
+            pass                                      # a broken cache entry is recomputed
+    mat = material(**(setup["material"] or {}))
+    opts = SolverOptions(**(setup["solver"] or {}))
+    res = setup["resolution"] or "reference"
+    n = part.n_vertices
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=n * len(levels), unit="col", desc="compliance operator",
+                   dynamic_ncols=True)
+    t0 = time.perf_counter()
+    G = np.stack([compliance(part, t, res, mat, opts,
+                             progress=bar.update if bar is not None else None)
+                  for t in levels])
+    if bar is not None:
+        bar.close()
+    index, values, dropped = sparsify(G, tol)
+    out = {"levels": np.asarray(levels), "index": index, "values": values.astype(np.float32),
+           "dropped": np.asarray(dropped), "seconds": np.asarray(time.perf_counter() - t0)}
+    if cache:
+        atomic_savez(path, out)
+    return out
+
+
+@register("linear")
+class LinearPredictor(LearnedPredictor):
+    """Precomputed linear FEM. Options: ``levels_mm`` (thickness levels, default the dataset's),
+    ``tol`` (sparsity: entries below this share of the largest are dropped). :meth:`fit` computes
+    the operator from a dataset; it has no trained parameters."""
+
+    defaults = {"levels_mm": None, "tol": 1e-3}
+
+    def build_model(self) -> nn.Module:
+        return ComplianceOperator()
+
+    def raw(self, thickness, force):
+        return self.model(thickness, force) / self.scale
+
+    def fit(self, dataset, progress: bool = True) -> None:
+        """Compute the operator for ``dataset``'s part and FEM set-up."""
+        self.model.set(**fit_operator(self.part, dataset, self.config, progress))
+        self.meta["operator"] = operator_info(self.model)
+
+
+def fit_operator(part, dataset, config: dict, progress: bool = True) -> dict:
+    """``levels``, ``index``, ``values`` for :meth:`ComplianceOperator.set`, at the config's
+    ``levels_mm`` (default the dataset's thickness levels)."""
+    cfg = dataset.card["config"]
+    levels = config.get("levels_mm") or cfg["thickness_mm"]
+    arrays = operator_arrays(part, cfg, sorted(float(x) * 1e-3 for x in levels),
+                             float(config.get("tol", 1e-3)), progress)
+    return {k: arrays[k] for k in ("levels", "index", "values")}
+
+
+def operator_info(op: ComplianceOperator) -> dict:
+    """JSON-ready summary of an installed operator."""
+    n = int(op.index.max()) + 1 if op.index.numel() else 0
+    return {"levels_mm": [round(float(x) * 1e3, 6) for x in op.levels],
+            "nnz": int(op.index.shape[1]), "density": op.index.shape[1] / max(n * n, 1)}

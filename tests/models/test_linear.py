@@ -1,0 +1,84 @@
+"""Precomputed linear FEM: the sparse operator applies the FEM's compliance, interpolates in
+thickness, refuses what it does not cover and travels in its checkpoint."""
+
+import numpy as np
+import pytest
+import torch
+
+from models.linear import ComplianceOperator
+from stmpl import predictor
+from stmpl.evaluate import scenes_of
+from stmpl.metrics import sample_metrics
+from stmpl.scene import Scene
+
+
+@pytest.fixture(scope="module")
+def ds(tiny_dataset):
+    from stmpl.data import Dataset
+
+    return Dataset(tiny_dataset)
+
+
+@pytest.fixture(scope="module")
+def lin(ds):
+    p = predictor.create("linear", ds.part)
+    p.fit(ds, progress=False)
+    return p
+
+
+def _operator(rng, n=6, levels=(0.005, 0.01)):
+    G = rng.normal(size=(len(levels), n, n, 3))
+    op = ComplianceOperator()
+    i, j = np.nonzero(np.ones((n, n)))
+    op.set(levels, np.stack([i, j]), G[:, i, j])
+    return op, G
+
+
+def test_operator_is_the_dense_product_interpolated_in_thickness(rng):
+    op, G = _operator(rng)
+    f = rng.uniform(0, 1, (2, 6))
+    t = np.stack([np.full(6, 0.005), np.full(6, 0.0075)])
+    u = op(torch.tensor(t, dtype=torch.float32), torch.tensor(f, dtype=torch.float32)).numpy()
+    np.testing.assert_allclose(u[0], np.einsum("ijc,j->ic", G[0], f[0]), rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(u[1], np.einsum("ijc,j->ic", (G[0] + G[1]) / 2, f[1]),
+                               rtol=1e-5, atol=1e-5)
+    # per-vertex thickness: each loaded vertex's column at its own thickness
+    tv = np.where(np.arange(6) < 3, 0.005, 0.01)
+    Gm = np.where((np.arange(6) < 3)[None, :, None], G[0], G[1])
+    u = op(torch.tensor(tv[None], dtype=torch.float32),
+           torch.tensor(f[:1], dtype=torch.float32)).numpy()[0]
+    np.testing.assert_allclose(u, np.einsum("ijc,j->ic", Gm, f[0]), rtol=1e-5, atol=1e-5)
+    with pytest.raises(ValueError, match=r"outside the operator's levels 5..10 mm"):
+        op(torch.full((1, 6), 0.012), torch.ones(1, 6))
+
+
+def test_linear_matches_light_fem_loads(ds, lin):
+    """At the lightest level (0.05 N) the tissue is still linear: the operator (skin refined
+    everywhere) is within a few per cent of the ground truth (refined near the load)."""
+    scenes, truth = scenes_of(ds, "train")
+    light = [k for k, s in enumerate(scenes) if np.isclose(s.meta["total"], 0.05)]
+    assert len(light) >= 8
+    pred = lin.predict([scenes[k] for k in light])
+    rel = [sample_metrics(truth[k], d.displacement)["rel_mee"] for d, k in zip(pred, light)]
+    assert np.mean(rel) < 5.0                       # per cent
+    # and it overshoots as the Neo-Hookean layer stiffens under heavier loads
+    heavy = [k for k, s in enumerate(scenes) if np.isclose(s.meta["total"], 0.2)]
+    pk = [np.linalg.norm(lin.predict(scenes[k]).displacement, axis=1).max()
+          / np.linalg.norm(truth[k], axis=1).max() for k in heavy]
+    assert np.median(pk) > 1.0
+
+
+def test_checkpoint_carries_the_operator(ds, lin, tmp_path):
+    path = lin.save(tmp_path / "lin.safetensors")
+    back = predictor.load(path)
+    assert back.n_parameters() == 0 and back.model.index.shape == lin.model.index.shape
+    s = scenes_of(ds, "test", limit=2)[0]
+    for a, b in zip(lin.predict(s), back.predict(s)):
+        np.testing.assert_array_equal(a.displacement, b.displacement)
+
+
+def test_thickness_outside_the_levels_is_refused(ds, lin):
+    n = ds.part.n_vertices
+    s = Scene(ds.part, np.full(n, 0.012), np.where(np.arange(n) == 40, 0.1, 0.0))
+    with pytest.raises(ValueError, match="outside the operator's levels"):
+        lin.predict(s)
