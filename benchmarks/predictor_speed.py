@@ -1,7 +1,7 @@
 """Predictor latency and throughput on the anny left arm, side by side.
 
-For each learned predictor (untrained weights, since speed does not depend on them, or the zoo's
-checkpoint where the model carries a linear FEM operator of the arm): the median time
+For each learned predictor (untrained weights: speed does not depend on them; the linear FEM
+operator, where one is used, is the zoo's ``linear_arm``): the median time
 per scene of ``predict(scene)`` at batch 1 (the whole API: tensors, UV maps, Deformation) and of
 the bare forward pass, and scenes per second at batch 64. The FEM (reference resolution) is timed
 once for scale.
@@ -28,12 +28,11 @@ CONFIGS = {
     "gnn-64x8": {"latent": 64, "steps": 8},
     "gnn-32x8": {"latent": 32, "steps": 8, "per_newton": True},            # the first zoo GNN
     "gnn-plain": {"latent": 32, "steps": 6, "per_newton": True},           # no prior
-    # with the linear FEM operator (its size depends on the arm, so the zoo's checkpoints)
-    "linear": "linear_arm",
-    "uv_unet-shipped": "uv_unet_arm",
-    "gnn-shipped": "gnn_arm",
+    # on the linear FEM operator of the arm (the zoo's linear_arm operator, installed)
+    "linear": {},
+    "uv_unet-shipped": {"depth": 3, "dropout": 0.0, "per_newton": True, "prior": "linear"},
+    "gnn-shipped": {"latent": 32, "steps": 6, "per_newton": True, "prior": "linear"},
 }
-"""Options of an untrained predictor, or the name of a zoo checkpoint."""
 
 
 def main() -> None:
@@ -50,6 +49,9 @@ def main() -> None:
     scene = Scene.from_load(arm, tissue.constant(arm, 0.0075),
                             loads.disk(arm, uv=(0.5, 0.5), radius=0.02, total=0.3))
     batch = [scene] * 64
+    from stmpl import zoo
+
+    operator = zoo.load("linear_arm", device=dev)   # the arm's linear FEM operator, 5 levels
     dev = args.device
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
           f"torch {torch.__version__}, {torch.get_num_threads()} threads, device {dev}"
@@ -62,15 +64,10 @@ def main() -> None:
     t1 = torch.tensor(scene.thickness[None], dtype=torch.float32, device=dev)
     f1 = torch.tensor(scene.force[None], dtype=torch.float32, device=dev)
     for label, opts in CONFIGS.items():
-        if isinstance(opts, str):
-            from stmpl import zoo
-
-            if opts not in zoo.names():
-                print(f"| {label} | (zoo {opts} not found) | | | | |")
-                continue
-            p = zoo.load(opts, device=dev)
-        else:
-            p = predictor.create(label.split("-")[0], arm, opts, device=dev)
+        p = predictor.create(label.split("-")[0], arm, opts, device=dev)
+        if label == "linear" or opts.get("prior") == "linear":
+            op = operator.model
+            (p.model if label == "linear" else p.model.prior).set(op.levels, op.index, op.values)
         p.model.eval()
         sync = torch.cuda.synchronize if dev.startswith("cuda") else (lambda: None)
 

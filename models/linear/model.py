@@ -16,6 +16,7 @@ import json
 import os
 import pathlib
 import time
+import warnings
 
 import numpy as np
 import torch
@@ -44,9 +45,9 @@ class ComplianceOperator(nn.Module):
     def set(self, levels, index, values) -> None:
         """Install an operator: ``levels`` ``(L,)`` m, ``index`` ``(2, nnz)``, ``values``
         ``(L, nnz, 3)`` m/N."""
-        levels = torch.as_tensor(np.asarray(levels), dtype=torch.float32)
-        index = torch.as_tensor(np.asarray(index), dtype=torch.long)
-        values = torch.as_tensor(np.asarray(values), dtype=torch.float32)
+        levels = torch.as_tensor(levels, dtype=torch.float32).cpu()
+        index = torch.as_tensor(index, dtype=torch.long).cpu()
+        values = torch.as_tensor(values, dtype=torch.float32).cpu()
         if levels.ndim != 1 or len(levels) == 0 or torch.any(levels[1:] <= levels[:-1]):
             raise ValueError("levels must be a non-empty rising 1-D array")
         if index.ndim != 2 or index.shape[0] != 2 or values.shape != (len(levels),
@@ -88,12 +89,38 @@ class ComplianceOperator(nn.Module):
         w.scatter_add_(-1, k[..., None], a)
         return w
 
+    def _matrices(self, n: int) -> list:
+        """Per level, the operator as a sparse CSR matrix ``(3 n, n)`` (rows ``3 i + c``), built
+        once per installed operator, device and vertex count."""
+        key = (self.values.data_ptr(), self.values.device, n)
+        if getattr(self, "_csr_key", None) != key:
+            i, j = self.index
+            if self.index.numel() and int(self.index.max()) >= n:
+                raise ValueError(f"the operator covers {int(self.index.max()) + 1} vertices, "
+                                 f"the input {n}")
+            rows = (3 * i[:, None] + torch.arange(3, device=i.device)).reshape(-1)
+            cols = j[:, None].expand(-1, 3).reshape(-1)
+            order = torch.argsort(rows * max(n, 1) + cols)
+            rows, cols = rows[order], cols[order]
+            crow = torch.zeros(3 * n + 1, dtype=torch.long, device=i.device)
+            crow[1:] = torch.cumsum(torch.bincount(rows, minlength=3 * n), 0)
+            with warnings.catch_warnings():  # "sparse CSR support is in beta"
+                warnings.simplefilter("ignore", UserWarning)
+                self._csr = [torch.sparse_csr_tensor(crow, cols, v.reshape(-1)[order],
+                                                     (3 * n, n), check_invariants=False)
+                             for v in self.values]
+            self._csr_key = key
+        return self._csr
+
     def forward(self, thickness: torch.Tensor, force: torch.Tensor) -> torch.Tensor:
-        i, j = self.index
+        B, N = force.shape
         fw = force[..., None] * self.weights(thickness)                 # (B, N, L)
-        c = torch.einsum("bkl,lkc->bkc", fw[:, j], self.values)          # (B, nnz, 3)
-        u = torch.zeros(force.shape[0], force.shape[1], 3, device=force.device, dtype=c.dtype)
-        return u.index_add_(1, i, c)
+        used = torch.nonzero(fw.abs().sum((0, 1))).flatten().tolist()   # levels that carry load
+        u = torch.zeros(3 * N, B, device=force.device, dtype=self.values.dtype)
+        mats = self._matrices(N)
+        for lv in used:
+            u = u + mats[lv] @ fw[..., lv].T.to(self.values.dtype)      # (3N, N) @ (N, B)
+        return u.T.reshape(B, N, 3)
 
 
 def cache_dir() -> pathlib.Path:
