@@ -49,10 +49,10 @@ def main() -> None:
     scene = Scene.from_load(arm, tissue.constant(arm, 0.0075),
                             loads.disk(arm, uv=(0.5, 0.5), radius=0.02, total=0.3))
     batch = [scene] * 64
+    dev = args.device
     from stmpl import zoo
 
     operator = zoo.load("linear_arm", device=dev)   # the arm's linear FEM operator, 5 levels
-    dev = args.device
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
           f"torch {torch.__version__}, {torch.get_num_threads()} threads, device {dev}"
           + (f" ({torch.cuda.get_device_name()})" if dev.startswith("cuda") else ""))
