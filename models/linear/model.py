@@ -77,7 +77,9 @@ class ComplianceOperator(nn.Module):
         tol = 1e-6 * hi
         if tmin < lo - tol or tmax > hi + tol:
             raise ValueError(f"thickness {tmin * 1e3:.3g}..{tmax * 1e3:.3g} mm lies outside the "
-                             f"operator's levels {lo * 1e3:g}..{hi * 1e3:g} mm")
+                             f"operator's levels {lo * 1e3:g}..{hi * 1e3:g} mm (the linear FEM "
+                             "was computed there; a linear model with wider levels_mm covers "
+                             "more)")
         L = len(lv)
         if L == 1:
             return torch.ones(*thickness.shape, 1, device=thickness.device)
