@@ -21,11 +21,11 @@ import torch
 from torch import nn
 from torch_geometric.nn import MessagePassing
 
+from models.linear.model import ComplianceOperator, LinearPrior
 from stmpl import tissue
 from stmpl.predictor import LearnedPredictor, force_pattern, register, total_force
 
 PRESSURE_SCALE = 1000.0
-PRIORS = ("none", "linear")
 PRIOR_SCALE = 0.1
 """Scale of the linear prior's displacement as a node input, in the units of ``raw`` (with
 ``per_newton`` and 20 mm/N, 0.1 is 2 mm/N)."""
@@ -120,7 +120,7 @@ class MeshGraphNet(nn.Module):
 
 
 @register("gnn")
-class GNNPredictor(LearnedPredictor):
+class GNNPredictor(LinearPrior, LearnedPredictor):
     """Mesh GNN predictor. Options: ``latent`` (width), ``steps`` (message passing),
     ``per_newton`` (node inputs: the pressure per newton of the total and the total; output:
     the displacement per newton, ``disp_scale_mm`` then in mm/N), ``loss`` (``mse`` or
@@ -129,25 +129,6 @@ class GNNPredictor(LearnedPredictor):
     predicts only the correction to it; :meth:`fit` computes the operator from the dataset)."""
 
     defaults = {"latent": 128, "steps": 15, "per_newton": False, "loss": "mse", "prior": "none"}
-
-    @classmethod
-    def options(cls, config: dict | None = None) -> dict:
-        out = super().options(config)
-        if out["prior"] not in PRIORS:
-            raise ValueError(f"prior must be one of {PRIORS}, got {out['prior']!r}")
-        return out
-
-    @property
-    def prior(self) -> bool:
-        return self.config["prior"] == "linear"
-
-    def fit(self, dataset, progress: bool = True) -> None:
-        """With ``prior: linear``, compute the linear FEM operator for ``dataset`` (cached)."""
-        if self.prior:
-            from models.linear.model import fit_operator, operator_info
-
-            self.model.prior.set(**fit_operator(self.part, dataset, {}, progress))
-            self.meta["operator"] = operator_info(self.model.prior)
 
     def build_model(self) -> nn.Module:
         part = self.part
@@ -168,8 +149,6 @@ class GNNPredictor(LearnedPredictor):
         edge = Normaliser([0.0] * 4, [length] * 4)
         prior = None
         if self.prior:  # the linear FEM's answer, in the units of raw(), is one more input
-            from models.linear.model import ComplianceOperator
-
             prior = ComplianceOperator()
             node = Normaliser(list(node.shift) + [0.0] * 3, list(node.scale) + [PRIOR_SCALE] * 3)
         net = MeshGraphNet(len(node.shift), 4, 3, int(self.config["latent"]),
@@ -186,9 +165,7 @@ class GNNPredictor(LearnedPredictor):
                     total_force(force)[:, None, None].expand(B, N, 1)]
         else:
             load = [(force * self.inv_area)[..., None]]
-        base = []
-        if self.prior:
-            base = [self.normalised(self.model.prior(thickness, force), force)]
+        base = [] if not self.prior else [self.base(thickness, force)]
         x = torch.cat([*load, thickness[..., None], self.normals.expand(B, -1, -1), *base], -1)
         x = x.reshape(B * N, x.shape[-1])
         E = self.edge_index.shape[1]

@@ -197,6 +197,39 @@ class LinearPredictor(LearnedPredictor):
         self.meta["operator"] = operator_info(self.model)
 
 
+PRIORS = ("none", "linear")
+
+
+class LinearPrior:
+    """Mixin for a :class:`LearnedPredictor` with the option ``prior`` (``none`` or ``linear``):
+    with ``linear`` its model holds a :class:`ComplianceOperator` as ``model.prior``,
+    :meth:`fit` computes it from the dataset, and :meth:`base` gives its answer."""
+
+    @classmethod
+    def options(cls, config: dict | None = None) -> dict:
+        out = super().options(config)
+        if out["prior"] not in PRIORS:
+            raise ValueError(f"prior must be one of {PRIORS}, got {out['prior']!r}")
+        return out
+
+    @property
+    def prior(self) -> bool:
+        return self.config["prior"] == "linear"
+
+    def fit(self, dataset, progress: bool = True) -> None:
+        """With ``prior: linear``, compute the linear FEM operator for ``dataset`` (cached)."""
+        if self.prior:
+            self.model.prior.set(**fit_operator(self.part, dataset, {}, progress))
+            self.meta["operator"] = operator_info(self.model.prior)
+
+    def base(self, thickness, force):
+        """The linear FEM's ``(B, N, 3)`` answer in the units of ``raw``, or None without the
+        prior."""
+        if not self.prior:
+            return None
+        return self.normalised(self.model.prior(thickness, force), force)
+
+
 def fit_operator(part, dataset, config: dict, progress: bool = True) -> dict:
     """``levels``, ``index``, ``values`` for :meth:`ComplianceOperator.set`, at the config's
     ``levels_mm`` (default the dataset's thickness levels)."""

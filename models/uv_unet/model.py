@@ -21,13 +21,13 @@ import numpy as np
 import torch
 from torch import nn
 
+from models.linear.model import ComplianceOperator, LinearPrior
 from stmpl import tissue
 from stmpl.predictor import (LearnedPredictor, force_pattern, register, relative_loss,
                              total_force)
 
 PRESSURE_SCALE = 1000.0
 """Pa: pressure inputs are divided by this (the tissue's Young's modulus in the paper)."""
-PRIORS = ("none", "linear")
 PRIOR_SCALE = 0.1
 """The linear prior's displacement as input channels, in the units of ``raw`` over this."""
 CORRECTION_SCALE = 0.05
@@ -88,7 +88,7 @@ class WithPrior(nn.Module):
 
 
 @register("uv_unet")
-class UVUNetPredictor(LearnedPredictor):
+class UVUNetPredictor(LinearPrior, LearnedPredictor):
     """UV-UNet predictor. Options: ``size`` (UV image pixels, 64..512), ``width``, ``depth``,
     ``dropout``, ``geometry`` (add position and normal channels), ``tv`` (total-variation weight
     in the loss), ``per_newton`` (inputs: the pressure per newton of the total and the total;
@@ -100,31 +100,6 @@ class UVUNetPredictor(LearnedPredictor):
 
     defaults = {"size": 128, "width": 16, "depth": 5, "dropout": 0.5, "geometry": False,
                 "tv": 0.0, "per_newton": False, "loss": "mse", "prior": "none"}
-
-    @classmethod
-    def options(cls, config: dict | None = None) -> dict:
-        out = super().options(config)
-        if out["prior"] not in PRIORS:
-            raise ValueError(f"prior must be one of {PRIORS}, got {out['prior']!r}")
-        return out
-
-    @property
-    def prior(self) -> bool:
-        return self.config["prior"] == "linear"
-
-    def fit(self, dataset, progress: bool = True) -> None:
-        """With ``prior: linear``, compute the linear FEM operator for ``dataset`` (cached)."""
-        if self.prior:
-            from models.linear.model import fit_operator, operator_info
-
-            self.model.prior.set(**fit_operator(self.part, dataset, {}, progress))
-            self.meta["operator"] = operator_info(self.model.prior)
-
-    def _base(self, thickness, force):
-        """The linear prior at the vertices ``(B, N, 3)`` in the units of :meth:`raw`, or None."""
-        if not self.prior:
-            return None
-        return self.normalised(self.model.prior(thickness, force), force)
 
     def build_model(self) -> nn.Module:
         from stmpl.uv import UVMap
@@ -145,8 +120,6 @@ class UVUNetPredictor(LearnedPredictor):
         c_in = 2 + (1 if c["per_newton"] else 0) + (6 if c["geometry"] else 0)
         if not self.prior:
             return UNet(c_in, 3, int(c["width"]), int(c["depth"]), float(c["dropout"]))
-        from models.linear.model import ComplianceOperator
-
         net = UNet(c_in + 3, 3, int(c["width"]), int(c["depth"]), float(c["dropout"]))
         last = net.up[-1][-1]                  # start from the linear FEM: a silent output
         nn.init.zeros_(last.weight)
@@ -165,14 +138,14 @@ class UVUNetPredictor(LearnedPredictor):
         x = torch.stack(chans, -1)
         if self.config["geometry"]:
             x = torch.cat([x, self._geometry.expand(x.shape[0], -1, -1)], -1)
-        base = self._base(thickness, force)
+        base = self.base(thickness, force)
         if base is not None:
             x = torch.cat([x, base / PRIOR_SCALE], -1)
         return self.uvmap.rasterise(x)
 
     def raw(self, thickness, force):
         out = self.uvmap.sample(self.model(self.images(thickness, force)))
-        base = self._base(thickness, force)
+        base = self.base(thickness, force)
         return out if base is None else base + CORRECTION_SCALE * out
 
     def loss(self, thickness, force, target):
@@ -181,7 +154,7 @@ class UVUNetPredictor(LearnedPredictor):
         the optional total variation."""
         out = self.model(self.images(thickness, force))
         tgt = self.normalised(target, force)
-        base = self._base(thickness, force)
+        base = self.base(thickness, force)
         if self.config["loss"] == "relative":
             pred = self.uvmap.sample_corners(out)
             if base is not None:
@@ -208,7 +181,7 @@ class UVUNetPredictor(LearnedPredictor):
         self.model.eval()
         with torch.no_grad():
             c = self.uvmap.sample_corners(self.model(self.images(thickness, force)))
-            base = self._base(thickness, force)
+            base = self.base(thickness, force)
             if base is not None:
                 c = base[:, self._corner_vertex] + CORRECTION_SCALE * c
             return (self.denormalised(c, force) * self.scale).double().cpu().numpy()
