@@ -12,6 +12,8 @@ kept as buffers, so the checkpoint carries them) bring them to order one. Node i
 pressure ``F_i / A_i`` over 1 kPa, thickness normalised over [2.5, 12.5] mm, the outward normal.
 Edge inputs: the rest-pose offset ``x_j - x_i`` over the mean edge length, and its length. Output:
 the displacement over ``disp_scale_mm``. A seam vertex is one node, so there is no seam by construction.
+With ``prior: linear`` the precomputed linear FEM's displacement is three more node inputs and the
+output is a correction to it (:class:`~models.linear.LinearPrior`).
 """
 
 from __future__ import annotations

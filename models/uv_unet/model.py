@@ -12,7 +12,9 @@ centre over its extent, normals). The output images hold the displacement over `
 (10 mm by default; the paper's 30 mm); they are
 sampled back at the vertices, a seam vertex's copies averaged. The loss is the mean squared error
 over the chart's pixels and the few padding pixels around it that bilinear sampling at edge
-vertices reads (the paper's L2, masked), plus an optional total-variation term.
+vertices reads (the paper's L2, masked), plus an optional total-variation term. With
+``prior: linear`` the precomputed linear FEM's displacement is three more channels and the output
+images hold a correction to it, added at the vertices (:class:`~models.linear.LinearPrior`).
 """
 
 from __future__ import annotations
