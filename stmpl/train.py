@@ -8,7 +8,8 @@ early stopping with the best weights kept, a progress bar, CPU or CUDA. After ev
 ``<out>/state.pt`` atomically, so a killed run resumes where it stopped. At the end the best
 model is evaluated on the validation and test splits and written as a checkpoint
 (``<out>/<name>.safetensors`` + sidecar) carrying its config, the dataset card's hash, and the
-metrics.
+metrics. A model with a part computed from the dataset rather than learned (the linear FEM
+operator) gets it from its ``fit(dataset)`` first; one with nothing to learn skips the optimiser.
 """
 
 from __future__ import annotations

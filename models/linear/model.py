@@ -56,11 +56,13 @@ class ComplianceOperator(nn.Module):
                              f"{tuple(index.shape)}, {tuple(values.shape)}")
         dev = self.levels.device
         self.levels, self.index, self.values = levels.to(dev), index.to(dev), values.to(dev)
+        self._csr_key = None
 
     def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
         for name in ("levels", "index", "values"):  # shapes come with the checkpoint
             if prefix + name in state_dict:
                 setattr(self, name, torch.empty_like(state_dict[prefix + name]))
+        self._csr_key = None
         super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
 
     @property
@@ -93,8 +95,9 @@ class ComplianceOperator(nn.Module):
 
     def _matrices(self, n: int) -> list:
         """Per level, the operator as a sparse CSR matrix ``(3 n, n)`` (rows ``3 i + c``), built
-        once per installed operator, device and vertex count."""
-        key = (self.values.data_ptr(), self.values.device, n)
+        once per installed operator (:meth:`set` and loading reset them), device and vertex
+        count."""
+        key = (self.values.device, n)
         if getattr(self, "_csr_key", None) != key:
             i, j = self.index
             if self.index.numel() and int(self.index.max()) >= n:

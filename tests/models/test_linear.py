@@ -50,6 +50,11 @@ def test_operator_is_the_dense_product_interpolated_in_thickness(rng):
     np.testing.assert_allclose(u, np.einsum("ijc,j->ic", Gm, f[0]), rtol=1e-5, atol=1e-5)
     with pytest.raises(ValueError, match=r"outside the operator's levels 5..10 mm"):
         op(torch.full((1, 6), 0.012), torch.ones(1, 6))
+    # a new operator of the same shape replaces the cached sparse matrices
+    op.set(op.levels, op.index, 2 * op.values)
+    u2 = op(torch.tensor(tv[None], dtype=torch.float32),
+            torch.tensor(f[:1], dtype=torch.float32)).numpy()[0]
+    np.testing.assert_allclose(u2, 2 * u, rtol=1e-5, atol=1e-5)
 
 
 def test_linear_matches_light_fem_loads(ds, lin):
