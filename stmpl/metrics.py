@@ -3,8 +3,10 @@
 The paper's (per sample, on the vertices whose true displacement exceeds 0.001 mm): MAE of x, y
 and z, the mean Euclidean error (MEE), and the share of vertices with Euclidean error at most
 0.1, 0.125, 0.15, 0.2 and 0.5 mm; reported as mean +- std over samples. Ours in addition: MEE
-relative to the sample's maximum true displacement, the maximum error, and the seam gap of
-predictors that predict per UV corner (the spread between a seam vertex's copies).
+relative to the sample's maximum true displacement, the maximum error, the peak error (the
+predicted largest displacement against the true one, signed %: a mean error can hide a peak that
+is too deep or too shallow), and the seam gap of predictors that predict per UV corner (the
+spread between a seam vertex's copies).
 
 Inputs in metres, outputs in mm and %.
 """
@@ -31,7 +33,7 @@ def sample_metrics(true: np.ndarray, pred: np.ndarray, seam: np.ndarray | None =
     out = {"active": int(active.sum()), "max_disp": float(mag.max())}
     if not active.any():
         return {**out, "mae_x": np.nan, "mae_y": np.nan, "mae_z": np.nan, "mee": np.nan,
-                "rel_mee": np.nan, "max_err": np.nan,
+                "rel_mee": np.nan, "max_err": np.nan, "peak_err": np.nan,
                 **{f"ee<={t:g}": np.nan for t in THRESHOLDS_MM},
                 **({"seam_mee": np.nan} if seam is not None else {})}
     err = (pred - true)[active] * 1e3
@@ -40,6 +42,7 @@ def sample_metrics(true: np.ndarray, pred: np.ndarray, seam: np.ndarray | None =
                mae_z=float(np.abs(err[:, 2]).mean()), mee=float(ee.mean()),
                max_err=float(ee.max()))
     out["rel_mee"] = 100.0 * out["mee"] / out["max_disp"]
+    out["peak_err"] = 100.0 * (np.linalg.norm(pred, axis=1).max() * 1e3 / out["max_disp"] - 1.0)
     for t in THRESHOLDS_MM:
         out[f"ee<={t:g}"] = 100.0 * float((ee <= t).mean())
     if seam is not None:
@@ -80,7 +83,7 @@ def summarise(rows: list[dict]) -> dict:
 
 
 COLUMNS = [("mae_x", "MAE x"), ("mae_y", "MAE y"), ("mae_z", "MAE z"), ("mee", "MEE"),
-           ("rel_mee", "MEE / max %"), ("max_err", "max err")] + \
+           ("rel_mee", "MEE / max %"), ("max_err", "max err"), ("peak_err", "peak err %")] + \
     [(f"ee<={t:g}", f"EE<={t:g} %") for t in THRESHOLDS_MM] + \
     [("seam_mee", "seam MEE"), ("seam_gap", "seam gap")]
 
@@ -102,8 +105,7 @@ def table(results: dict[str, dict], fmt: str = "markdown") -> str:
                                               for _, label in COLUMNS) + " |"
     lines = [head, "|---|--:|" + "--:|" * len(COLUMNS)]
     for name, s in results.items():
-        cells = [("–" if k not in s else f"{s[k][0]:.3f} ± {s[k][1]:.3f}")
-                 if "ee<=" not in k and k != "rel_mee"
-                 else f"{s[k][0]:.1f} ± {s[k][1]:.1f}" for k, _ in COLUMNS]
+        cells = ["–" if k not in s else f"{s[k][0]:.3f} ± {s[k][1]:.3f}" if "%" not in label
+                 else f"{s[k][0]:.1f} ± {s[k][1]:.1f}" for k, label in COLUMNS]
         lines.append(f"| {name} | {s['samples']} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

@@ -21,6 +21,11 @@ def test_sample_metrics_by_hand():
     assert m["rel_mee"] == pytest.approx(100 * 0.175 / 2.0)
     assert m["max_err"] == pytest.approx(0.3)
     assert m["ee<=0.1"] == 50.0 and m["ee<=0.5"] == 100.0
+    # the peak counts wherever it is: the inactive vertex's 9 mm against the true 2 mm
+    assert m["peak_err"] == pytest.approx(100 * (9.0 / 2.0 - 1))
+    pred[3] = 0.0
+    assert metrics.sample_metrics(true, pred)["peak_err"] == pytest.approx(
+        100 * (np.linalg.norm([0.05, 2.0]) / 2.0 - 1))
     with pytest.raises(ValueError, match="shape|both"):
         metrics.sample_metrics(true, pred[:3])
     with pytest.raises(ValueError, match="finite"):
