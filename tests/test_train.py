@@ -109,6 +109,7 @@ def test_linear_fem_is_fitted_not_trained(tiny_dataset, tmp_path, monkeypatch):
     meta = checkpoint.read_sidecar(path)
     assert meta["kind"] == "linear" and meta["training"]["epochs"] == 0
     assert meta["parameters"] == 0 and meta["operator"]["levels_mm"] == [5.0, 10.0]
+    assert 0 < meta["operator"]["dropped"] <= 1e-3 and meta["operator"]["compute_seconds"] > 0
     naive = checkpoint.read_sidecar(train(_cfg(tiny_dataset, tmp_path / "nv"), progress=False))
     assert meta["metrics"]["test"]["mee"][0] < 0.5 * naive["metrics"]["test"]["mee"][0]
     import fem.compliance

@@ -1,5 +1,5 @@
 """Precomputed linear FEM (the compliance operator) as a predictor, and as a prior for others."""
 
-from models.linear.model import ComplianceOperator, LinearPredictor, operator_arrays
+from models.linear.model import ComplianceOperator, LinearPredictor, LinearPrior, operator_arrays
 
-__all__ = ["ComplianceOperator", "LinearPredictor", "operator_arrays"]
+__all__ = ["ComplianceOperator", "LinearPredictor", "LinearPrior", "operator_arrays"]

@@ -188,6 +188,17 @@ class LinearPredictor(LearnedPredictor):
 
     defaults = {"levels_mm": None, "tol": 1e-3}
 
+    @classmethod
+    def options(cls, config: dict | None = None) -> dict:
+        out = super().options(config)
+        lv = out["levels_mm"]
+        if lv is not None and not (isinstance(lv, (list, tuple)) and len(lv) > 0 and all(
+                isinstance(x, (int, float)) and x > 0 for x in lv)):
+            raise ValueError(f"levels_mm must be a non-empty list of thicknesses in mm, got {lv!r}")
+        if not (isinstance(out["tol"], (int, float)) and 0 <= out["tol"] < 1):
+            raise ValueError(f"tol must be in [0, 1), got {out['tol']!r}")
+        return out
+
     def build_model(self) -> nn.Module:
         return ComplianceOperator()
 
@@ -196,8 +207,7 @@ class LinearPredictor(LearnedPredictor):
 
     def fit(self, dataset, progress: bool = True) -> None:
         """Compute the operator for ``dataset``'s part and FEM set-up."""
-        self.model.set(**fit_operator(self.part, dataset, self.config, progress))
-        self.meta["operator"] = operator_info(self.model)
+        install(self, self.model, fit_operator(self.part, dataset, self.config, progress))
 
 
 PRIORS = ("none", "linear")
@@ -222,8 +232,7 @@ class LinearPrior:
     def fit(self, dataset, progress: bool = True) -> None:
         """With ``prior: linear``, compute the linear FEM operator for ``dataset`` (cached)."""
         if self.prior:
-            self.model.prior.set(**fit_operator(self.part, dataset, {}, progress))
-            self.meta["operator"] = operator_info(self.model.prior)
+            install(self, self.model.prior, fit_operator(self.part, dataset, {}, progress))
 
     def base(self, thickness, force):
         """The linear FEM's ``(B, N, 3)`` answer in the units of ``raw``, or None without the
@@ -234,17 +243,20 @@ class LinearPrior:
 
 
 def fit_operator(part, dataset, config: dict, progress: bool = True) -> dict:
-    """``levels``, ``index``, ``values`` for :meth:`ComplianceOperator.set`, at the config's
-    ``levels_mm`` (default the dataset's thickness levels)."""
+    """:func:`operator_arrays` for ``dataset``'s part and FEM set-up at the config's
+    ``levels_mm`` (default the dataset's thickness levels) and ``tol``."""
     cfg = dataset.card["config"]
     levels = config.get("levels_mm") or cfg["thickness_mm"]
-    arrays = operator_arrays(part, cfg, sorted(float(x) * 1e-3 for x in levels),
-                             float(config.get("tol", 1e-3)), progress)
-    return {k: arrays[k] for k in ("levels", "index", "values")}
+    return operator_arrays(part, cfg, sorted(float(x) * 1e-3 for x in levels),
+                           float(config.get("tol", 1e-3)), progress)
 
 
-def operator_info(op: ComplianceOperator) -> dict:
-    """JSON-ready summary of an installed operator."""
-    n = int(op.index.max()) + 1 if op.index.numel() else 0
-    return {"levels_mm": [round(float(x) * 1e3, 6) for x in op.levels],
-            "nnz": int(op.index.shape[1]), "density": op.index.shape[1] / max(n * n, 1)}
+def install(predictor, op: ComplianceOperator, arrays: dict) -> None:
+    """Put :func:`operator_arrays` into ``op`` and record a summary in ``predictor.meta``
+    (levels, pairs kept, their density, the largest dropped entry, the compute time)."""
+    op.set(arrays["levels"], arrays["index"], arrays["values"])
+    n = predictor.part.n_vertices
+    predictor.meta["operator"] = {
+        "levels_mm": [round(float(x) * 1e3, 6) for x in op.levels],
+        "nnz": int(op.index.shape[1]), "density": op.index.shape[1] / (n * n),
+        "dropped": float(arrays["dropped"]), "compute_seconds": float(arrays["seconds"])}

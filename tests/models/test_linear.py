@@ -87,3 +87,10 @@ def test_thickness_outside_the_levels_is_refused(ds, lin):
     s = Scene(ds.part, np.full(n, 0.012), np.where(np.arange(n) == 40, 0.1, 0.0))
     with pytest.raises(ValueError, match="outside the operator's levels"):
         lin.predict(s)
+
+
+def test_options_are_checked(ds):
+    with pytest.raises(ValueError, match="levels_mm"):
+        predictor.create("linear", ds.part, {"levels_mm": [-5]})
+    with pytest.raises(ValueError, match="tol"):
+        predictor.create("linear", ds.part, {"tol": 2})
