@@ -128,8 +128,9 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
         nn.init.zeros_(last.bias)
         return WithPrior(net, ComplianceOperator())
 
-    def images(self, thickness, force) -> torch.Tensor:
-        """``(B, C, S, S)`` input images from ``(B, N)`` thickness (m) and force (N)."""
+    def images(self, thickness, force, base=None) -> torch.Tensor:
+        """``(B, C, S, S)`` input images from ``(B, N)`` thickness (m) and force (N), and with
+        the prior its answer ``base`` (:meth:`base`, computed once by the caller)."""
         lo, hi = tissue.THICKNESS_RANGE
         thick = (thickness - lo) / (hi - lo)
         if self.per_newton:  # pressure per newton of the total, and the total (N)
@@ -140,23 +141,22 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
         x = torch.stack(chans, -1)
         if self.config["geometry"]:
             x = torch.cat([x, self._geometry.expand(x.shape[0], -1, -1)], -1)
-        base = self.base(thickness, force)
         if base is not None:
             x = torch.cat([x, base / PRIOR_SCALE], -1)
         return self.uvmap.rasterise(x)
 
     def raw(self, thickness, force):
-        out = self.uvmap.sample(self.model(self.images(thickness, force)))
         base = self.base(thickness, force)
+        out = self.uvmap.sample(self.model(self.images(thickness, force, base)))
         return out if base is None else base + CORRECTION_SCALE * out
 
     def loss(self, thickness, force, target):
         """Masked L2 over the chart's pixels (``loss: mse``, the paper's), or with ``loss:
         relative`` the relative MEE at every UV corner (a seam vertex's copies each count), plus
         the optional total variation."""
-        out = self.model(self.images(thickness, force))
-        tgt = self.normalised(target, force)
         base = self.base(thickness, force)
+        out = self.model(self.images(thickness, force, base))
+        tgt = self.normalised(target, force)
         if self.config["loss"] == "relative":
             pred = self.uvmap.sample_corners(out)
             if base is not None:
@@ -182,8 +182,8 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
         """``(B, T, 3)`` displacement (m) at every UV corner, seam copies apart."""
         self.model.eval()
         with torch.no_grad():
-            c = self.uvmap.sample_corners(self.model(self.images(thickness, force)))
             base = self.base(thickness, force)
+            c = self.uvmap.sample_corners(self.model(self.images(thickness, force, base)))
             if base is not None:
                 c = base[:, self._corner_vertex] + CORRECTION_SCALE * c
             return (self.denormalised(c, force) * self.scale).double().cpu().numpy()
