@@ -1,4 +1,4 @@
-"""Accuracy of the zoo's models by force level: relative MEE and peak ratio on a test split.
+"""Accuracy of the zoo's models by force level (and by thickness): relative MEE and peak ratio.
 
 For every zoo model (or those named), on the test split of a dataset: the relative MEE (%) and
 the predicted / true largest displacement, averaged per total force. Shows where the linear FEM
@@ -21,8 +21,9 @@ from stmpl.data import Dataset
 from stmpl.metrics import sample_metrics
 
 
-def by_force(p, a: dict) -> dict:
-    """``{force N: (relative MEE %, peak ratio)}`` of predictor ``p`` over arrays ``a``."""
+def by_force(p, a: dict, key: str = "force") -> dict:
+    """``{force N: (relative MEE %, peak ratio)}`` of predictor ``p`` over arrays ``a`` (with
+    ``key="thickness"``, by thickness in mm instead)."""
     t, f = (torch.tensor(a[k], dtype=torch.float32, device=p.device)
             for k in ("thickness", "force"))
     with torch.no_grad():
@@ -31,7 +32,7 @@ def by_force(p, a: dict) -> dict:
     true = a["displacement"]
     rel = np.array([sample_metrics(true[i], u[i])["rel_mee"] for i in range(len(u))])
     peak = np.linalg.norm(u, axis=-1).max(1) / np.linalg.norm(true, axis=-1).max(1)
-    tot = np.round(a["total"], 3)
+    tot = np.round(a["total"], 3) if key == "force" else np.round(a["thickness"][:, 0] * 1e3, 2)
     return {float(x): (float(rel[tot == x].mean()), float(peak[tot == x].mean()))
             for x in np.unique(tot)} | {"all": (float(rel.mean()), float(peak.mean()))}
 
@@ -54,6 +55,13 @@ def main() -> None:
     for n, r in res.items():
         print(f"| {n} | " + " | ".join(f"{r[k][0]:.2f} / {r[k][1]:.3f}" for k in forces + ["all"])
               + " |")
+    thick = {n: by_force(zoo.load(n), a, "thickness") for n in res}
+    levels = [k for k in next(iter(thick.values())) if k != "all"]
+    print()
+    print("| model | " + " | ".join(f"{x:g} mm" for x in levels) + " |")
+    print("|---|" + "--:|" * len(levels))
+    for n, r in thick.items():
+        print(f"| {n} | " + " | ".join(f"{r[k][0]:.2f} / {r[k][1]:.3f}" for k in levels) + " |")
     if args.out:
         import matplotlib
 
