@@ -261,12 +261,14 @@ def deformation_figure(deformation, nodes: np.ndarray, tets: np.ndarray, node_u:
 
 
 def prediction_figure(deformations: dict, truth=None, path=None, size: int = 256,
-                      dpi: int = 100):
+                      dpi: int = 100, shared_error_scale: bool = False):
     """A PNG comparing predictions of one scene: per predictor (a row) the deformed skin around
     the load coloured by |u| (mm, true scale) and its UV image; with ``truth`` (a
     :class:`~stmpl.scene.Deformation`, e.g. the FEM's) also the UV image of the error |u - u*|
-    (mm) and its mean over the moving vertices in the title. ``deformations``: name ->
-    Deformation, all of the same scene."""
+    (mm) with its mean over the moving vertices and its largest value in the title, each row on
+    its own colour scale (one shared scale hides the errors of good models next to a poor one),
+    or with ``shared_error_scale`` on one. ``deformations``: name -> Deformation, all of the same
+    scene."""
     plt = _matplotlib()
 
     items = list(deformations.items())
@@ -310,9 +312,10 @@ def prediction_figure(deformations: dict, truth=None, path=None, size: int = 256
         elif truth is not None:
             err = np.linalg.norm(d.displacement - truth.displacement, axis=1) * 1e3
             active = truth.magnitude * 1e3 > 0.001
-            im = draw_uv(ax[2], part, err, size, "magma", 0.0, err_top)
+            im = draw_uv(ax[2], part, err, size, "magma", 0.0,
+                         err_top if shared_error_scale else max(err.max(), 1e-9))
             mee = err[active].mean() if active.any() else float("nan")
-            ax[2].set_title(f"error |u - u_fem|: MEE {mee:.3f} mm")
+            ax[2].set_title(f"error |u - u_fem|: MEE {mee:.3f}, max {err.max():.3f} mm")
             fig.colorbar(im, ax=ax[2], fraction=0.046, pad=0.04, label="mm")
     title = f"{part.name}"
     if scene.load is not None:
