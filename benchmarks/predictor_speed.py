@@ -31,7 +31,8 @@ CONFIGS = {
     # on the linear FEM operator of the arm (the zoo's linear_arm operator, installed)
     "linear": {},
     "uv_unet-shipped": {"depth": 3, "dropout": 0.0, "per_newton": True, "prior": "linear"},
-    "gnn-shipped": {"latent": 32, "steps": 6, "per_newton": True, "prior": "linear"},
+    "gnn-prior-32x6": {"latent": 32, "steps": 6, "per_newton": True, "prior": "linear"},
+    "gnn-shipped": {"latent": 32, "steps": 3, "per_newton": True, "prior": "linear"},
 }
 
 
