@@ -23,18 +23,11 @@ import torch
 from torch import nn
 from torch_geometric.nn import MessagePassing
 
-from models.linear.model import ComplianceOperator, LinearPrior
+from models.linear.model import PRIOR_SCALE, ComplianceOperator, LinearPrior
 from stmpl import tissue
 from stmpl.predictor import LearnedPredictor, force_pattern, register, total_force
 
 PRESSURE_SCALE = 1000.0
-PRIOR_SCALE = 0.1
-"""Scale of the linear prior's displacement as a node input, in the units of ``raw`` (with
-``per_newton`` and 20 mm/N, 0.1 is 2 mm/N)."""
-CORRECTION_SCALE = 0.05
-"""On top of the prior the network's output is a correction in units of this share of ``raw``'s:
-corrections are a few per cent of the answer, and at full scale Adam's first steps would throw
-the prediction far from the prior before it learned anything."""
 
 
 def mlp(c_in: int, hidden: int, c_out: int, norm: bool = True) -> nn.Sequential:
@@ -167,12 +160,12 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
                     total_force(force)[:, None, None].expand(B, N, 1)]
         else:
             load = [(force * self.inv_area)[..., None]]
-        base = [] if not self.prior else [self.base(thickness, force)]
-        x = torch.cat([*load, thickness[..., None], self.normals.expand(B, -1, -1), *base], -1)
+        base = self.base(thickness, force)
+        extra = [] if base is None else [base]
+        x = torch.cat([*load, thickness[..., None], self.normals.expand(B, -1, -1), *extra], -1)
         x = x.reshape(B * N, x.shape[-1])
         E = self.edge_index.shape[1]
         offs = (torch.arange(B, device=x.device) * N).repeat_interleave(E)
         ei = self.edge_index.repeat(1, B) + offs
         ea = self.edge_attr.repeat(B, 1)
-        out = self.model(x, ea, ei).reshape(B, N, 3)
-        return base[0] + CORRECTION_SCALE * out if base else out
+        return self.corrected(base, self.model(x, ea, ei).reshape(B, N, 3))

@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import pathlib
 import time
 import warnings
@@ -129,9 +128,10 @@ class ComplianceOperator(nn.Module):
 
 
 def cache_dir() -> pathlib.Path:
-    """Where computed operators are kept: ``$STMPL_CACHE_DIR`` or ``~/.cache/stmpl``."""
-    root = os.environ.get("STMPL_CACHE_DIR") or pathlib.Path.home() / ".cache" / "stmpl"
-    return pathlib.Path(root) / "compliance"
+    """Where computed operators are kept: ``compliance/`` in stmpl's cache directory."""
+    from stmpl.body.model import default_cache_dir
+
+    return default_cache_dir() / "compliance"
 
 
 def operator_arrays(part, fem_config: dict, levels_m, tol: float = 1e-3,
@@ -211,12 +211,20 @@ class LinearPredictor(LearnedPredictor):
 
 
 PRIORS = ("none", "linear")
+PRIOR_SCALE = 0.1
+"""The prior's displacement as a network input, in the units of ``raw`` over this (with
+``per_newton`` and 20 mm/N, 0.1 is 2 mm/N)."""
+CORRECTION_SCALE = 0.05
+"""On top of the prior the network's output is a correction in units of this share of ``raw``'s:
+corrections are a few per cent of the answer, and at full scale Adam's first steps would throw
+the prediction far from the prior before it learned anything."""
 
 
 class LinearPrior:
     """Mixin for a :class:`LearnedPredictor` with the option ``prior`` (``none`` or ``linear``):
     with ``linear`` its model holds a :class:`ComplianceOperator` as ``model.prior``,
-    :meth:`fit` computes it from the dataset, and :meth:`base` gives its answer."""
+    :meth:`fit` computes it from the dataset, :meth:`base` gives its answer and
+    :meth:`corrected` adds the network's correction to it."""
 
     @classmethod
     def options(cls, config: dict | None = None) -> dict:
@@ -240,6 +248,12 @@ class LinearPrior:
         if not self.prior:
             return None
         return self.normalised(self.model.prior(thickness, force), force)
+
+    @staticmethod
+    def corrected(base, out):
+        """The prior ``base`` plus the network's output ``out`` read as a correction (the
+        output alone without a prior); any ``(..., 3)`` shapes that broadcast."""
+        return out if base is None else base + CORRECTION_SCALE * out
 
 
 def fit_operator(part, dataset, config: dict, progress: bool = True) -> dict:

@@ -23,18 +23,13 @@ import numpy as np
 import torch
 from torch import nn
 
-from models.linear.model import ComplianceOperator, LinearPrior
+from models.linear.model import CORRECTION_SCALE, PRIOR_SCALE, ComplianceOperator, LinearPrior
 from stmpl import tissue
 from stmpl.predictor import (LearnedPredictor, force_pattern, register, relative_loss,
                              total_force)
 
 PRESSURE_SCALE = 1000.0
 """Pa: pressure inputs are divided by this (the tissue's Young's modulus in the paper)."""
-PRIOR_SCALE = 0.1
-"""The linear prior's displacement as input channels, in the units of ``raw`` over this."""
-CORRECTION_SCALE = 0.05
-"""On top of the prior the output images hold a correction in units of this share of ``raw``'s
-(corrections are a few per cent of the answer; see the GNN's constant of the same name)."""
 
 
 class UNet(nn.Module):
@@ -147,8 +142,8 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
 
     def raw(self, thickness, force):
         base = self.base(thickness, force)
-        out = self.uvmap.sample(self.model(self.images(thickness, force, base)))
-        return out if base is None else base + CORRECTION_SCALE * out
+        return self.corrected(base, self.uvmap.sample(self.model(self.images(thickness, force,
+                                                                             base))))
 
     def loss(self, thickness, force, target):
         """Masked L2 over the chart's pixels (``loss: mse``, the paper's), or with ``loss:
@@ -158,9 +153,8 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
         out = self.model(self.images(thickness, force, base))
         tgt = self.normalised(target, force)
         if self.config["loss"] == "relative":
-            pred = self.uvmap.sample_corners(out)
-            if base is not None:
-                pred = base[:, self._corner_vertex] + CORRECTION_SCALE * pred
+            pred = self.corrected(None if base is None else base[:, self._corner_vertex],
+                                  self.uvmap.sample_corners(out))
             return relative_loss(pred, tgt[:, self._corner_vertex]) + self._tv(out)
         if base is not None:                                  # the correction's image
             tgt = (tgt - base) / CORRECTION_SCALE
@@ -184,6 +178,5 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
         with torch.no_grad():
             base = self.base(thickness, force)
             c = self.uvmap.sample_corners(self.model(self.images(thickness, force, base)))
-            if base is not None:
-                c = base[:, self._corner_vertex] + CORRECTION_SCALE * c
+            c = self.corrected(None if base is None else base[:, self._corner_vertex], c)
             return (self.denormalised(c, force) * self.scale).double().cpu().numpy()
