@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from stmpl import zoo
-from stmpl.data import Dataset
+from stmpl.dataset import Dataset
 from stmpl.metrics import sample_metrics
 
 
@@ -45,7 +45,7 @@ def main() -> None:
     args = ap.parse_args()
     ds = Dataset(args.data)
     a = ds.arrays("test")
-    res = {n: by_force(zoo.load(n), a) for n in (args.models or zoo.names())}
+    res = {n: by_force(zoo.read(n), a) for n in (args.models or zoo.names())}
     forces = [k for k in next(iter(res.values())) if k != "all"]
     print(f"{args.data} test split ({len(a['total'])} samples): relative MEE % / predicted-to-true "
           "peak")
@@ -55,7 +55,7 @@ def main() -> None:
     for n, r in res.items():
         print(f"| {n} | " + " | ".join(f"{r[k][0]:.2f} / {r[k][1]:.3f}" for k in forces + ["all"])
               + " |")
-    thick = {n: by_force(zoo.load(n), a, "thickness") for n in res}
+    thick = {n: by_force(zoo.read(n), a, "thickness") for n in res}
     levels = [k for k in next(iter(thick.values())) if k != "all"]
     print()
     print("| model | " + " | ".join(f"{x:g} mm" for x in levels) + " |")

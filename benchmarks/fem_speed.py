@@ -114,7 +114,7 @@ def main() -> None:
     ap.add_argument("--levels", type=int, default=10)
     args = ap.parse_args()
     from fem.simulate import REFERENCE, RESOLUTIONS
-    from fem.solver import available_linear_solvers
+    from fem.linear_solvers import available_linear_solvers
 
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores; "
           f"linear solvers here: {', '.join(available_linear_solvers())}")

@@ -37,14 +37,13 @@ def main() -> None:
     ap.add_argument("--trained", nargs="+", default=[], metavar="SHARE=CHECKPOINT",
                     help="shares already trained elsewhere with the same config and steps")
     args = ap.parse_args()
-    import numpy as np
     import torch
 
-    from stmpl.data import Dataset
+    from stmpl.dataset import Dataset
     from stmpl.evaluate import evaluate_dataset
-    from stmpl.train import _split_tensors, load_config, train
+    from stmpl.train import _split_tensors, read_config, train
 
-    base = load_config(args.config)
+    base = read_config(args.config)
     if args.data:
         base["data"] = args.data
     out = pathlib.Path(args.out or pathlib.Path("runs") / "curve" / base["name"])
@@ -63,11 +62,11 @@ def main() -> None:
     for frac in sorted(set(args.fractions) | set(trained)):
         cfg = {**base, "train_fraction": frac, "name": f"{base['name']}-f{frac:g}",
                "out": str(out / f"f{frac:g}"), "patience": 10 ** 6}
-        n = len(_split_tensors(ds, "train", load_config(cfg), torch.device("cpu"))[0])
+        n = len(_split_tensors(ds, "train", read_config(cfg), torch.device("cpu"))[0])
         cfg["epochs"] = max(1, math.ceil(args.steps / math.ceil(n / cfg["batch"])))
         if frac in trained:
             path = trained[frac]
-            p = predictor.load(path)
+            p = predictor.read(path)
             done = p.meta["training"]["epochs"]
             recipe = p.meta["training"].get("config", {})  # older checkpoints lack it
             same = {k: recipe.get(k) for k in ("batch", "lr", "schedule", "seed")}
@@ -78,7 +77,7 @@ def main() -> None:
                                  f"and data for {cfg['epochs']} epochs (it has {done})")
         else:
             path = train(cfg, progress=True)
-            p = predictor.load(path)
+            p = predictor.read(path)
         seconds = p.meta["training"]["seconds"]
         m = {s: evaluate_dataset(p, ds, s) for s in ("val", "test")}
         rows.append({"fraction": frac, "placements": max(1, round(frac * n_places)),

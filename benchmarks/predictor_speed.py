@@ -53,7 +53,7 @@ def main() -> None:
     dev = args.device
     from stmpl import zoo
 
-    operator = zoo.load("linear_arm", device=dev)   # the arm's linear FEM operator, 5 levels
+    operator = zoo.read("linear_arm", device=dev)   # the arm's linear FEM operator, 5 levels
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
           f"torch {torch.__version__}, {torch.get_num_threads()} threads, device {dev}"
           + (f" ({torch.cuda.get_device_name()})" if dev.startswith("cuda") else ""))

@@ -23,7 +23,7 @@ DISKS = (((0.42, 0.55), 0.02, 0.2), ((0.3, 0.7), 0.025, 0.4), ((0.5, 0.45), 0.03
 def main() -> None:
     arm = AnnyBody().part("left_arm")
     fem = predictor.create("fem")
-    models = {n: zoo.load(n) for n in zoo.names()}
+    models = {n: zoo.read(n) for n in zoo.names()}
     print("| thickness mm | load | " + " | ".join(models) + " |")
     print("|---|---|" + "--:|" * len(models))
     rows = []

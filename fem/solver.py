@@ -20,16 +20,18 @@ non-physical).
 
 from __future__ import annotations
 
-import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
 from fem.elements import ELEMENTS, TRI_EDGES, TRI_POINTS, TRI_WEIGHTS, quadratic, tri_shape
 from fem.material import NeoHookean, det3
+from fem.kernel import element_data, kernel
+from fem.linear_solvers import LINEAR_SOLVERS, IndefiniteTangent, make_linear_solver
 from fem.mesh import ShellMesh
+from fem.solution import Solution
 
 
 @dataclass(frozen=True)
@@ -46,7 +48,8 @@ class SolverOptions:
         max_compression: reject states whose skin moves inward by more than this share of the
             local thickness (1.0: skin reaches bone).
         linear_solver: ``"auto"``, ``"pardiso"``, ``"superlu"`` or ``"cg"`` (AMG-preconditioned).
-        load: ``"traction"`` or ``"nodal"`` (see :meth:`ShellMesh.nodal_forces`).
+        force_mode: how per-vertex forces become nodal forces, ``"traction"`` or ``"nodal"``
+            (see :meth:`ShellMesh.nodal_forces`).
         rims: ``"fixed"`` holds the part's cut rims (all layers) where the tissue would go on
             into the rest of the body; ``"free"`` leaves the cut faces traction-free.
     """
@@ -58,59 +61,20 @@ class SolverOptions:
     max_substeps: int = 3
     max_compression: float = 1.0
     linear_solver: str = "auto"
-    load: str = "traction"
+    force_mode: str = "traction"
     rims: str = "fixed"
 
     def __post_init__(self) -> None:
         if self.linear_solver not in ("auto", *LINEAR_SOLVERS):
             raise ValueError(f"unknown linear_solver {self.linear_solver!r}; choose auto or one "
                              f"of {sorted(LINEAR_SOLVERS)}")
-        if self.load not in ("traction", "nodal"):
-            raise ValueError(f"unknown load mode {self.load!r}; use 'traction' or 'nodal'")
+        if self.force_mode not in ("traction", "nodal"):
+            raise ValueError(f"unknown force_mode {self.force_mode!r}; use 'traction' or "
+                             "'nodal'")
         if self.rims not in ("fixed", "free"):
             raise ValueError(f"rims must be 'fixed' or 'free', got {self.rims!r}")
         if not (self.rtol > 0 and self.max_iter >= 1 and self.max_compression > 0):
             raise ValueError("rtol, max_iter and max_compression must be positive")
-
-
-@dataclass(frozen=True, eq=False)
-class Solution:
-    """One solve's outcome. ``displacement`` is ``(M, 3)`` in metres at the mesh nodes when
-    ``ok``, else ``None``; ``state`` is the solver's full unknown (edge nodes too, for P2), the
-    start of a warm-started solve.
-
-    ``reason`` says why a solve failed (``""`` when ok). Diagnostics: Newton ``iterations``,
-    relative ``residual``, ``min_det_F`` of the last accepted state, wall ``time`` in s,
-    ``total_force`` (sum of per-vertex force magnitudes, N) and ``substeps`` used.
-    """
-
-    ok: bool
-    reason: str
-    displacement: np.ndarray | None
-    iterations: int
-    residual: float
-    min_det_F: float
-    time: float
-    total_force: float
-    substeps: int = 0
-    max_displacement: float = float("nan")
-    max_compression: float = float("nan")
-    state: np.ndarray | None = None
-    info: dict = field(default_factory=dict)
-
-    def diagnostics(self) -> dict:
-        """JSON-ready scalars."""
-        return {"ok": self.ok, "reason": self.reason, "iterations": self.iterations,
-                "residual": self.residual, "min_det_F": self.min_det_F, "time": self.time,
-                "total_force": self.total_force, "substeps": self.substeps,
-                "max_displacement": self.max_displacement,
-                "max_compression": self.max_compression}
-
-    def part_displacement(self, mesh: ShellMesh) -> np.ndarray:
-        """``(N, 3)`` displacement of the body part's vertices, m."""
-        if not self.ok:
-            raise RuntimeError(f"the solve failed ({self.reason}); there is no displacement")
-        return self.displacement[mesh.part_nodes]
 
 
 class Solver:
@@ -258,30 +222,16 @@ class Solver:
         r = self._scatter_force(P)
         g = np.matmul(self.G, np.asarray(H).reshape(T, Q, 3, 3))      # (T, Q, n, 3) H^T grad N
         aW, bW, cW = (np.asarray(x).reshape(T, Q) * self.W for x in (a, b, c))
-        if _kernel is not None:
+        if kernel is not None:
             data = np.zeros(self._nnz)
             for pos in self._pos2d:
-                _kernel(g, self.GG, aW, bW, cW, pos, data)
+                kernel(g, self.GG, aW, bW, cW, pos, data)
         else:
-            data = self._element_data_numpy(g, aW, bW, cW)
+            data = element_data(g, self.GG, aW, bW, cW, self._local, self._pos, self._sel,
+                                self._nnz)
         nf = len(self.free)
         K = sp.csr_matrix((data, self._indices, self._indptr), shape=(nf, nf))
         return r - f, K
-
-    def _element_data_numpy(self, g, aW, bW, cW) -> np.ndarray:
-        """The tangent's CSR data from ``g`` ``(T, Q, n, 3)`` and weighted parts ``(T, Q)``."""
-        A, I, B, Kc = self._local
-        vals = 0.0
-        for q in range(g.shape[1]):
-            gq = g[:, q]
-            vals = vals + (bW[:, q, None] * gq[:, A, I] * gq[:, B, Kc]
-                           + cW[:, q, None] * gq[:, A, Kc] * gq[:, B, I]
-                           + (I == Kc) * (aW[:, q, None] * self.GG[:, q][:, A, B]))
-        flat = vals.ravel()
-        data = np.zeros(self._nnz)
-        for pos, sel in zip(self._pos, self._sel):
-            data += np.bincount(pos, weights=flat[sel], minlength=self._nnz)
-        return data
 
     def tangent_full(self, u: np.ndarray) -> sp.csr_matrix:
         """The full symmetric tangent on free DOFs (for checks)."""
@@ -293,8 +243,8 @@ class Solver:
     def external_forces(self, force: np.ndarray) -> np.ndarray:
         """``(n_all, 3)`` consistent nodal forces for per-vertex normal forces ``(N,)`` (N)."""
         mesh = self.mesh
-        if self.order == 1 or self.options.load == "nodal":
-            f = mesh.nodal_forces(force, self.options.load)
+        if self.order == 1 or self.options.force_mode == "nodal":
+            f = mesh.nodal_forces(force, self.options.force_mode)
             return np.concatenate([f, np.zeros((len(self.edges), 3))])
         # P2: integrate the linear pressure against the 6-node skin triangles
         p = mesh.interp @ (np.asarray(force, float) / mesh.part.vertex_areas)
@@ -347,7 +297,7 @@ class Solver:
                 return self._fail(res, iters, t0, force, substeps)
             substeps += 1
             step /= 2
-        return self._finish(last, u, iters, t0, force, substeps)
+        return self._checked_solution(last, u, iters, t0, force, substeps)
 
     def continuation(self, force: np.ndarray, totals) -> list[Solution]:
         """Solve the load pattern ``force`` ``(N,)`` scaled to each total in ``totals`` (N, rising),
@@ -468,7 +418,7 @@ class Solver:
         return Solution(False, res["reason"], None, iters, res["residual"], float("nan"),
                         time.perf_counter() - t0, float(force.sum()), substeps)
 
-    def _finish(self, res, u, iters, t0, force, substeps) -> Solution:
+    def _checked_solution(self, res, u, iters, t0, force, substeps) -> Solution:
         detF = float(det3(self._F(u)).min())
         m = self.mesh
         skin_u = u[: m.n_skin]
@@ -485,172 +435,3 @@ class Solver:
             return Solution(False, f"non-physical: the skin moves inward {comp:.2f} x the "
                             f"thickness (limit {self.options.max_compression})", None, **base)
         return Solution(True, "", u[: m.n_nodes], state=u, **base)
-
-
-# ---------------------------------------------------------------------- compiled kernel
-def _make_kernel():
-    """A Numba kernel that adds the upper entries of every element matrix,
-    ``K_aibk = sum_q (aW d_ik G_a.G_b + bW g_ai g_bk + cW g_ak g_bi)``, straight into the CSR
-    data (4x faster than the NumPy path here); ``None`` when Numba is absent."""
-    try:
-        from numba import njit
-    except ImportError:
-        return None
-
-    @njit(cache=True, nogil=True)
-    def kernel(g, GG, aW, bW, cW, pos, data):  # pragma: no cover - compiled
-        T, Q, n = g.shape[0], g.shape[1], g.shape[2]
-        for t in range(T):
-            for qp in range(Q):
-                e = 0
-                for p in range(3 * n):
-                    A, i = p // 3, p % 3
-                    for q in range(p, 3 * n):
-                        B, k = q // 3, q % 3
-                        j = pos[t, e]
-                        e += 1
-                        if j < 0:
-                            continue
-                        v = (bW[t, qp] * g[t, qp, A, i] * g[t, qp, B, k]
-                             + cW[t, qp] * g[t, qp, A, k] * g[t, qp, B, i])
-                        if i == k:
-                            v += aW[t, qp] * GG[t, qp, A, B]
-                        data[j] += v
-
-    return kernel
-
-
-_kernel = _make_kernel()
-
-
-# ---------------------------------------------------------------------- linear solvers
-class _SuperLU:
-    """SciPy's SuperLU with a minimum-degree ordering on ``A^T + A`` (always available)."""
-
-    name, upper = "superlu", False
-
-    def factor(self, K):
-        from scipy.sparse.linalg import splu
-
-        self._lu = splu(K.tocsc(), permc_spec="MMD_AT_PLUS_A",
-                        options={"SymmetricMode": True}, diag_pivot_thresh=0.0)
-        neg = int(np.sum(self._lu.U.diagonal() <= 0))
-        if neg:
-            raise IndefiniteTangent(f"{neg} non-positive pivots")
-
-    def solve(self, b):
-        return self._lu.solve(b)
-
-
-class IndefiniteTangent(ArithmeticError):
-    """The tangent is not positive definite (the layer buckles or snaps through)."""
-
-
-class _Pardiso:
-    """MKL PARDISO through pypardiso, in symmetric positive definite (Cholesky) mode: the fastest
-    factorisation here, and a failed one (error -4, zero or negative pivot) reports an
-    indefinite tangent. The symbolic analysis is done once per pattern and reused."""
-
-    name, upper = "pardiso", True
-
-    def __init__(self):
-        import pypardiso
-
-        self._error = pypardiso.pardiso_wrapper.PyPardisoError
-        self._solver = pypardiso.PyPardisoSolver(mtype=2)
-        # pypardiso globs the environment for MKL on every construction (0.5 s): once is enough
-        os.environ.setdefault("PYPARDISO_MKL_RT", self._solver.libmkl._name)
-        self._analysed = None
-
-    def __del__(self):
-        try:  # release PARDISO's internal memory (factors) with the solver
-            if self._analysed is not None:
-                self._solver.free_memory(everything=True)
-        except Exception:  # noqa: BLE001 - interpreter shutdown
-            pass
-
-    def factor(self, K):
-        s = self._solver
-        s._check_A(K)
-        key = (K.shape, K.nnz)  # one Solver keeps one pattern
-        b = np.zeros((K.shape[0], 1), order="F")
-        try:
-            if self._analysed != key:
-                s.set_phase(11)
-                s._call_pardiso(K, b)
-                self._analysed = key
-            s.set_phase(22)
-            s._call_pardiso(K, b)
-        except self._error as e:
-            if "-4" in str(e):
-                raise IndefiniteTangent("Cholesky factorisation met a non-positive pivot") from e
-            raise RuntimeError(f"PARDISO failed: {e}") from e
-        self._K = K
-
-    def solve(self, b):
-        """``x`` for ``b`` of shape ``(n,)`` or ``(n, k)`` (k right-hand sides at once)."""
-        s = self._solver
-        s.set_phase(33)
-        x = s._call_pardiso(self._K, np.asfortranarray(b.reshape(len(b), -1)))
-        return x.reshape(b.shape)
-
-
-class _AMGCG:
-    """Conjugate gradients preconditioned by smoothed-aggregation AMG (pyamg)."""
-
-    name, upper = "cg", False
-
-    def factor(self, K):
-        import pyamg
-
-        self._K = K
-        self._M = pyamg.smoothed_aggregation_solver(K, symmetry="symmetric").aspreconditioner()
-
-    def solve(self, b):
-        from scipy.sparse.linalg import cg
-
-        if b.ndim == 2:
-            return np.stack([self.solve(c) for c in b.T], axis=1)
-        x, info = cg(self._K, b, rtol=1e-10, maxiter=2000, M=self._M)
-        if info != 0:
-            raise RuntimeError(f"AMG-CG did not converge (info {info})")
-        return x
-
-
-LINEAR_SOLVERS = {"pardiso": _Pardiso, "superlu": _SuperLU, "cg": _AMGCG}
-
-
-def available_linear_solvers() -> list[str]:
-    """Names of the linear solvers that import on this machine, fastest first."""
-    out = []
-    for name, mod in (("pardiso", "pypardiso"), ("superlu", None), ("cg", "pyamg")):
-        if mod is None:
-            out.append(name)
-            continue
-        try:
-            __import__(mod)
-            out.append(name)
-        except Exception:  # noqa: BLE001 - a broken optional install counts as absent
-            pass
-    return out
-
-
-def make_linear_solver(name: str = "auto"):
-    """A linear solver by name; ``"auto"`` takes PARDISO if it loads (MKL found), else SciPy's
-    SuperLU, with a warning since it is several times slower."""
-    if name == "auto":
-        try:
-            return LINEAR_SOLVERS["pardiso"]()
-        except (ImportError, OSError) as e:
-            import warnings
-
-            warnings.warn(f"PARDISO is not available ({e}); the FEM falls back to SciPy's "
-                          "SuperLU, several times slower", RuntimeWarning, stacklevel=2)
-            return LINEAR_SOLVERS["superlu"]()
-    if name not in LINEAR_SOLVERS:
-        raise ValueError(f"unknown linear solver {name!r}")
-    try:
-        return LINEAR_SOLVERS[name]()
-    except (ImportError, OSError) as e:
-        raise ImportError(f"linear solver {name!r} needs a package that is not installed: "
-                          f"{e}") from e

@@ -4,19 +4,27 @@ from __future__ import annotations
 
 import argparse
 import logging
-import pathlib
 import sys
+from importlib.metadata import entry_points
 
 log = logging.getLogger("stmpl")
 
+COMMANDS = "stmpl.commands"
+"""Entry-point group of commands other packages add: a function taking the subparsers."""
+
+
+def _body_spec(args) -> dict:
+    """The body spec (:mod:`stmpl.body.spec`) the command-line options describe."""
+    if args.smpl:
+        return {"model": "smpl", "path": args.smpl, "uv_path": args.smpl_uv,
+                "betas": [0.0, args.beta2] if args.beta2 is not None else None}
+    return {"model": "anny", "phenotype": {"weight": args.weight}}
+
 
 def _body(args):
-    from stmpl.body import AnnyBody, SMPLBody
+    from stmpl.body.spec import body_from_spec
 
-    if args.smpl:
-        return SMPLBody(args.smpl, uv_path=args.smpl_uv,
-                        betas=[0.0, args.beta2] if args.beta2 is not None else None)
-    return AnnyBody(phenotype={"weight": args.weight})
+    return body_from_spec(_body_spec(args))
 
 
 def _thickness(args, body, part):
@@ -48,23 +56,6 @@ def _load(args, part):
                         args.angle, total)
 
 
-def cmd_generate(args) -> int:
-    from fem.generate import generate
-
-    card = generate(args.config, args.out, workers=args.workers, backend=args.backend,
-                    scheduler=args.scheduler, progress=not args.quiet,
-                    max_shards=args.max_shards)
-    if not card:
-        print("stopped early (--max-shards); run again to finish")
-        return 0
-    sp = card["samples_per_split"]
-    print(f"{card['samples']} samples (train {sp['train']}, val {sp['val']}, test "
-          f"{sp['test']}) from {card['placements']} placements; {card['failures']} of "
-          f"{card['attempted']} solves failed {card['failures_by_reason'] or ''}; "
-          f"median {card['timing']['solve_seconds_median_per_sample']:.2f} s per sample")
-    return 0
-
-
 def cmd_train(args) -> int:
     from stmpl.train import train
 
@@ -74,10 +65,13 @@ def cmd_train(args) -> int:
 
 
 def cmd_evaluate(args) -> int:
+    from stmpl.dataset import Dataset
     from stmpl.evaluate import evaluate
+    from stmpl.spec import predictor_from_spec
 
-    print(evaluate(args.predictors, args.data, args.split, args.out, args.limit, args.device),
-          end="")
+    ds = Dataset(args.data)
+    predictors = {spec: predictor_from_spec(spec, args.device) for spec in args.predictors}
+    print(evaluate(predictors, ds, args.split, args.out, args.limit), end="")
     if args.out:
         print(f"wrote {args.out} (.md, .csv)")
     return 0
@@ -131,39 +125,27 @@ def _scene(args):
 
 
 def cmd_simulate(args) -> int:
-    import numpy as np
-
-    from fem.simulate import simulate
-    from stmpl.scene import Deformation
+    from stmpl import predictor
     from stmpl.viz import deformation_figure
 
     scene = _scene(args)
-    part = scene.part
-    if args.levels < 1:
-        raise ValueError(f"--levels must be >= 1, got {args.levels}")
-    totals = args.force * np.arange(1, args.levels + 1) / args.levels
-    mesh, sols = simulate(part, scene.thickness, scene.force, totals, args.res)
-    print(f"shell: {mesh.n_nodes} nodes, {len(mesh.tets)} tets ({args.res}); {mesh.quality()}")
-    for s in sols:
-        state = "ok" if s.ok else f"FAILED: {s.reason}"
-        print(f"  {s.total_force:6.3f} N  {state}  {s.iterations} Newton steps  "
-              f"max |u| {1e3 * s.max_displacement:.2f} mm  {s.time:.2f} s")
-    last = sols[-1]
-    if not last.ok:
-        raise ValueError(f"the FEM solve failed at {last.total_force:.3g} N ({last.reason}); "
-                         "try a smaller --force")
-    deformation = Deformation(scene, last.part_displacement(mesh),
-                              {"predictor": "fem", "resolution": args.res,
-                               **last.diagnostics()})
+    fem = predictor.create("fem", res=args.res, levels=args.levels)
+    d = fem.predict(scene)                         # a failed solve raises, naming the reason
+    shell = fem.last_shell
+    print(f"shell: {d.info['mesh']['nodes']} nodes, {d.info['mesh']['tets']} tets ({args.res}); "
+          f"{shell.mesh.quality()}")
+    for s in d.info["levels"]:
+        print(f"  {s['total_force']:6.3f} N  ok  {s['iterations']} Newton steps  "
+              f"max |u| {1e3 * s['max_displacement']:.2f} mm  {s['time']:.2f} s")
     if args.out:
-        deformation_figure(deformation, mesh.nodes, mesh.tets, last.displacement, args.out,
+        deformation_figure(d, shell.mesh.nodes, shell.mesh.tets, shell.displacement, args.out,
                            size=args.size)
         print(f"wrote {args.out}")
     if args.save:
-        deformation.save(args.save)
+        d.save(args.save)
         print(f"wrote {args.save}")
     if args.vtu:
-        mesh.to_vtu(args.vtu, point_data={"displacement": last.displacement})
+        shell.mesh.to_vtu(args.vtu, point_data={"displacement": shell.displacement})
         print(f"wrote {args.vtu}")
     return 0
 
@@ -176,17 +158,15 @@ DEFAULT_MODEL = "zoo:gnn_arm"
 def cmd_predict(args) -> int:
     import numpy as np
 
-    from stmpl.evaluate import resolve
+    from stmpl.spec import label, predictor_from_spec
     from stmpl.viz import prediction_figure
 
     scene = _scene(args)
     specs = args.model or [DEFAULT_MODEL]
     out = {}
     for spec in specs:
-        p = resolve(spec, args.device)
-        d = p.predict(scene)
-        name = (spec.split(":", 1)[1] if spec.startswith("zoo:") else
-                pathlib.Path(spec).stem if spec.endswith(".safetensors") else spec)
+        d = predictor_from_spec(spec, args.device).predict(scene)
+        name = label(spec)
         out[name] = d
         print(f"{name:<24} max |u| {1e3 * d.magnitude.max():6.3f} mm  "
               f"{1e3 * d.info['seconds']:8.2f} ms")
@@ -222,6 +202,35 @@ def cmd_parts(args) -> int:
         print(f"{name:<12}{p.n_vertices:>10}{p.n_faces:>8}{len(p.seam_vertices):>6}"
               f"{len(p.rims):>6}  {p.uv_scale:.3f}")
     return 0
+
+
+def _positive(text: str) -> int:
+    """An argparse type: an integer >= 1."""
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        raise argparse.ArgumentTypeError(f"must be an integer >= 1, got {text!r}")
+    return n
+
+
+def device(text: str) -> str:
+    """An argparse type: a torch device this machine has (``cpu``, ``cuda``, ``cuda:N``,
+    ``mps``)."""
+    import re
+
+    if not re.fullmatch(r"cpu|cuda(:[0-9]+)?|mps", text):
+        raise argparse.ArgumentTypeError(f"unknown device {text!r}; use cpu, cuda, cuda:N or mps")
+    if text != "cpu":
+        import torch
+
+        ok = torch.backends.mps.is_available() if text == "mps" else (
+            torch.cuda.is_available() and int(text.partition(":")[2] or 0)
+            < torch.cuda.device_count())
+        if not ok:
+            raise argparse.ArgumentTypeError(f"device {text} is not available on this machine")
+    return text
 
 
 def _body_args(p) -> None:
@@ -283,20 +292,11 @@ def parser() -> argparse.ArgumentParser:
     pr.add_argument("--compare", action="store_true", help="also solve the FEM and report errors")
     pr.add_argument("--res", default="reference", help="FEM resolution for --compare")
     pr.add_argument("--levels", type=int, default=3, help="FEM continuation levels (--compare)")
-    pr.add_argument("--device", default="cpu")
+    pr.add_argument("--device", default="cpu", type=device,
+                    help="torch device for learned models (default cpu)")
     pr.add_argument("--out", help="PNG picture to write")
     pr.add_argument("--save", help="deformation file to write (.npz)")
     pr.set_defaults(func=cmd_predict)
-
-    ge = sub.add_parser("generate", help="generate a FEM dataset from a config (resumable)")
-    ge.add_argument("config", help="dataset config (YAML), e.g. configs/data/small.yaml")
-    ge.add_argument("--out", help="output folder (default data/<config name>)")
-    ge.add_argument("--workers", type=int, help="parallel workers (default from the config)")
-    ge.add_argument("--backend", choices=["serial", "processes", "dask"])
-    ge.add_argument("--scheduler", help="Dask scheduler address (implies --backend dask)")
-    ge.add_argument("--max-shards", type=int, help="stop after this many new shards")
-    ge.add_argument("--quiet", action="store_true", help="no progress bar")
-    ge.set_defaults(func=cmd_generate)
 
     tr = sub.add_parser("train", help="train a learned predictor from a config (resumable)")
     tr.add_argument("config", help="training config (YAML), e.g. configs/train/naive.yaml")
@@ -309,8 +309,9 @@ def parser() -> argparse.ArgumentParser:
                     help="fem, fem:<resolution>, zoo:<name>, or .safetensors checkpoints")
     ev.add_argument("--data", required=True, help="dataset folder")
     ev.add_argument("--split", default="test", choices=["train", "val", "test"])
-    ev.add_argument("--limit", type=int, help="first N samples only")
-    ev.add_argument("--device", default="cpu")
+    ev.add_argument("--limit", type=_positive, help="first N samples only")
+    ev.add_argument("--device", default="cpu", type=device,
+                    help="torch device for learned models (default cpu)")
     ev.add_argument("--out", help="write the table here (.md and .csv)")
     ev.set_defaults(func=cmd_evaluate)
 
@@ -329,7 +330,31 @@ def parser() -> argparse.ArgumentParser:
     pa = sub.add_parser("parts", help="list the body model's parts and their sizes")
     _body_args(pa)
     pa.set_defaults(func=cmd_parts)
+    for ep in sorted(entry_points(group=COMMANDS), key=lambda e: e.name):
+        ep.load()(sub)                             # e.g. `generate`, from the fem package
     return ap
+
+
+def _expected() -> tuple:
+    from stmpl.predictor import PredictionFailed
+
+    return (ValueError, OSError, LookupError, PredictionFailed)
+
+
+# Failures a user can act on (bad input, a missing or unwritable file, an unknown name, a failed
+# solve, an unusable device) end with one line on stderr and exit code 2; ``-v`` adds the
+# traceback. Anything else is a bug and keeps its traceback.
+
+
+def _message(exc: BaseException) -> str:
+    """One line naming the problem: the exception's own text (a file error with its path)."""
+    if isinstance(exc, OSError) and exc.filename is not None and exc.strerror:
+        text = f"{exc.strerror}: {exc.filename}"
+    elif isinstance(exc, KeyError) and exc.args:
+        text = str(exc.args[0])
+    else:
+        text = str(exc) or type(exc).__name__
+    return " ".join(text.split())
 
 
 def main(argv=None) -> int:
@@ -338,8 +363,12 @@ def main(argv=None) -> int:
                         format="%(levelname)s %(name)s: %(message)s")
     try:
         return args.func(args)
-    except (ValueError, FileNotFoundError, KeyError) as exc:
-        print(f"stmpl {args.command}: error: {exc}", file=sys.stderr)
+    except _expected() as exc:
+        if args.verbose:
+            import traceback
+
+            traceback.print_exc()
+        print(f"stmpl {args.command}: error: {_message(exc)}", file=sys.stderr)
         return 2
 
 

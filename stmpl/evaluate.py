@@ -12,6 +12,9 @@ def scenes_of(ds, split: str, thickness_mm=None, limit: int | None = None):
     """``(scenes, true displacements (S, N, 3) m)`` of a dataset split."""
     from stmpl.scene import Scene
 
+    if limit is not None and (isinstance(limit, bool) or not isinstance(limit, int)
+                              or limit < 1):
+        raise ValueError(f"limit must be a number of samples >= 1, got {limit!r}")
     a = ds.arrays(split)
     keep = np.arange(len(a["total"]))
     if thickness_mm is not None:
@@ -60,35 +63,19 @@ def evaluate_dataset(predictor, ds, split: str = "test", thickness_mm=None,
     return {k: (list(v) if isinstance(v, tuple) else v) for k, v in s.items()}
 
 
-def resolve(spec: str, device: str = "cpu"):
-    """A predictor from a command-line spec: ``fem``, ``fem:medium``, ``zoo:<name>`` or a
-    checkpoint path."""
-    from stmpl import predictor, zoo
-
-    if spec.startswith("zoo:"):
-        return zoo.load(spec[4:], device=device)
-    if spec == "fem" or spec.startswith("fem:"):
-        return predictor.create("fem", res=spec.split(":", 1)[1] if ":" in spec else
-                                "reference")
-    path = pathlib.Path(spec)
-    if path.suffix == ".safetensors" or path.exists():
-        return predictor.load(path, device=device)
-    raise ValueError(f"unknown predictor {spec!r}: give fem, fem:<resolution>, zoo:<name> or a "
-                     ".safetensors checkpoint")
-
-
-def evaluate(specs: list[str], data, split: str = "test", out=None, limit: int | None = None,
-             device: str = "cpu") -> str:
-    """Evaluate each predictor spec on ``data``'s split; returns the markdown table and, with
-    ``out`` (a path without suffix or ending in .md), writes ``.md`` and ``.csv`` beside it."""
-    from stmpl.data import Dataset
+def evaluate(predictors: dict, data, split: str = "test", out=None,
+             limit: int | None = None) -> str:
+    """Evaluate each predictor (``{label: predictor}``) on ``data``'s split (a dataset folder or
+    a :class:`~stmpl.dataset.Dataset`); returns the markdown table and, with ``out`` (a path
+    without suffix or ending in .md), writes ``.md`` and ``.csv`` beside it."""
+    from stmpl.dataset import Dataset
     from stmpl.metrics import table
 
-    ds = Dataset(data)
+    ds = data if isinstance(data, Dataset) else Dataset(data)
     results = {}
-    for spec in specs:
-        s = evaluate_dataset(resolve(spec, device), ds, split, limit=limit)
-        results[spec] = {k: tuple(v) if isinstance(v, list) else v for k, v in s.items()}
+    for name, p in predictors.items():
+        s = evaluate_dataset(p, ds, split, limit=limit)
+        results[name] = {k: tuple(v) if isinstance(v, list) else v for k, v in s.items()}
     md = table(results)
     if out is not None:
         out = pathlib.Path(out)

@@ -42,6 +42,9 @@ class Load:
     force: np.ndarray
     area: float
     parts: tuple = field(default=())
+    part_id: str = ""
+    """The :attr:`~stmpl.body.part.BodyPart.fingerprint` of the part the load was built on (a
+    scene refuses a load of another part)."""
 
     @property
     def count(self) -> int:
@@ -76,8 +79,9 @@ def place(part: BodyPart, at=None, *, uv=None, tolerance: float = 0.01) -> surfa
 
 
 def from_vertices(part: BodyPart, vertices, total: float, kind: str = "vertices",
-                  params: dict | None = None) -> Load:
-    """Spread ``total`` (N) equally over the given vertices."""
+                  params: dict | None = None, whole: bool = True) -> Load:
+    """Spread ``total`` (N) equally over the given vertices. ``whole=False`` (the primitives)
+    refuses a load that covers every vertex of the part: a shape larger than the part."""
     total = _check_total(total)
     idx = np.unique(np.asarray(vertices, dtype=np.int64))
     if idx.size == 0:
@@ -85,11 +89,15 @@ def from_vertices(part: BodyPart, vertices, total: float, kind: str = "vertices"
                          f"make it larger or move it ({params})")
     if idx.min() < 0 or idx.max() >= part.n_vertices:
         raise ValueError(f"{kind} load: vertex indices must be in [0, {part.n_vertices})")
+    if not whole and idx.size == part.n_vertices:
+        raise ValueError(f"{kind} load covers the whole part {part.name!r} (all "
+                         f"{part.n_vertices} vertices): it is larger than the part; make it "
+                         f"smaller ({params})")
     force = np.zeros(part.n_vertices)
     force[idx] = total / idx.size
     _check_force(force)
     return Load(kind, dict(params or {}), idx, total, force,
-                float(part.vertex_areas[idx].sum()))
+                float(part.vertex_areas[idx].sum()), part_id=part.fingerprint)
 
 
 def disk(part: BodyPart, at=None, radius: float = 0.02, total: float = 1.0, *, uv=None) -> Load:
@@ -98,7 +106,7 @@ def disk(part: BodyPart, at=None, radius: float = 0.02, total: float = 1.0, *, u
     src = place(part, at, uv=uv)
     d = surface.geodesic_distance(part, src, local=max(0.05, 1.25 * radius))
     return from_vertices(part, np.nonzero(d <= radius)[0], total, "disk",
-                         {"centre": src.position.tolist(), "radius": float(radius)})
+                         {"centre": src.position.tolist(), "radius": float(radius)}, whole=False)
 
 
 def ellipse(part: BodyPart, at=None, semi_axes=(0.03, 0.015), angle: float = 0.0,
@@ -142,7 +150,7 @@ def seam_disk(part: BodyPart, at: float = 0.5, radius: float = 0.02, total: floa
     v = int(sv[int(round(at * (len(sv) - 1)))])
     load = disk(part, v, radius, total)
     return Load("seam_disk", {**load.params, "at": float(at), "seam_vertex": v}, load.vertices,
-                load.total, load.force, load.area)
+                load.total, load.force, load.area, part_id=load.part_id)
 
 
 def band(part: BodyPart, at: float = 0.5, width: float = 0.03, total: float = 1.0) -> Load:
@@ -153,7 +161,7 @@ def band(part: BodyPart, at: float = 0.5, width: float = 0.03, total: float = 1.
     s = part.axial
     s0 = s.min() + at * (s.max() - s.min())
     return from_vertices(part, np.nonzero(np.abs(s - s0) <= width / 2)[0], total, "band",
-                         {"at": float(at), "width": float(width)})
+                         {"at": float(at), "width": float(width)}, whole=False)
 
 
 def letter(part: BodyPart, char: str = "A", uv=(0.5, 0.5), height: float = 0.08,
@@ -176,19 +184,23 @@ def letter(part: BodyPart, char: str = "A", uv=(0.5, 0.5), height: float = 0.08,
     hit = np.unique(part.uv_vertex[dist <= stroke / 2])
     return from_vertices(part, hit, total, "letter",
                          {"char": char, "uv": [float(x) for x in uv], "height": float(height),
-                          "stroke": float(stroke), "angle": float(angle)})
+                          "stroke": float(stroke), "angle": float(angle)}, whole=False)
 
 
 def combine(part: BodyPart, *loads: Load) -> Load:
     """Several loads at once: forces add up."""
     if not loads:
         raise ValueError("combine needs at least one load")
+    for i, ld in enumerate(loads):
+        if ld.part_id and ld.part_id != part.fingerprint:
+            raise ValueError(f"combine: load {i} ({ld.kind}) was built on another part than "
+                             f"{part.name!r}")
     force = sum(ld.force for ld in loads)
     _check_force(force)
     idx = np.nonzero(force > 0)[0]
     return Load("combined", {"loads": [ld.to_dict() for ld in loads]}, idx,
                 float(sum(ld.total for ld in loads)), force, float(part.vertex_areas[idx].sum()),
-                parts=tuple(loads))
+                parts=tuple(loads), part_id=part.fingerprint)
 
 
 PRIMITIVES = {"disk": disk, "ellipse": ellipse, "seam_disk": seam_disk, "band": band,
@@ -197,11 +209,15 @@ PRIMITIVES = {"disk": disk, "ellipse": ellipse, "seam_disk": seam_disk, "band": 
 
 
 def _glyph_segments(char: str) -> np.ndarray:
-    from matplotlib.font_manager import FontProperties
+    from matplotlib.font_manager import FontProperties, findfont, get_font
     from matplotlib.textpath import TextPath
 
-    path = TextPath((0, 0), char, size=1.0, prop=FontProperties(family="DejaVu Sans",
-                                                                weight="bold"))
+    prop = FontProperties(family="DejaVu Sans", weight="bold")
+    font = get_font(findfont(prop))
+    if font.get_char_index(ord(char)) == 0:       # the font would draw its "missing" box
+        raise ValueError(f"character {char!r} (U+{ord(char):04X}) is not in the letter font "
+                         f"({font.family_name}); use a letter, digit or sign it has")
+    path = TextPath((0, 0), char, size=1.0, prop=prop)
     polys = [np.asarray(p) for p in path.to_polygons(closed_only=True) if len(p) > 2]
     if not polys:
         raise ValueError(f"character {char!r} has no outline in the font")

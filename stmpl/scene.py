@@ -57,6 +57,13 @@ class Scene:
             i = int(np.argmax(f))
             raise ValueError(f"Scene.force must be <= {FORCE_RANGE[1]:g} N per vertex (the "
                              f"normalisation range); vertex {i} has {f[i]:g} N")
+        if self.load is not None:
+            if not isinstance(self.load, Load):
+                raise TypeError(f"Scene.load must be a Load, got {type(self.load).__name__}")
+            if self.load.part_id and self.load.part_id != self.part.fingerprint:
+                raise ValueError(f"the {self.load.kind} load was built on another part than "
+                                 f"the scene's {self.part.name!r} ({n} vertices): build it on "
+                                 "the scene's part")
         t.setflags(write=False)
         f = f.copy()
         f.setflags(write=False)
@@ -82,27 +89,24 @@ class Scene:
                 "load": self.load.to_dict() if self.load else None, "meta": self.meta}
 
     def save(self, path) -> pathlib.Path:
-        """Write the scene to ``path`` (``.npz``)."""
+        """Write the scene to ``path`` (``.npz``); :meth:`read` reads it back."""
         arrays = {f"part/{k}": v for k, v in self.part.arrays().items()}
         arrays.update(thickness=self.thickness, force=self.force)
         return _save(path, arrays, self.header())
 
+    @classmethod
+    def read(cls, path) -> "Scene":
+        """Read a scene written by :meth:`save` (``.npz``; its load's summary is not kept)."""
+        arrays, header = _read_file(path, FORMAT)
+        try:
+            part = BodyPart.from_arrays(header["part"], {k[5:]: v for k, v in arrays.items()
+                                                         if k.startswith("part/")},
+                                        header.get("source"))
+            return cls(part, arrays["thickness"], arrays["force"], None, header.get("meta", {}))
+        except KeyError as exc:
+            raise ValueError(f"scene file {path} lacks {exc}") from exc
 
-def _read_scene(cls, path) -> "Scene":
-    """Read a scene written by :meth:`Scene.save` (``.npz``)."""
-    arrays, header = _load(path, FORMAT)
-    part = BodyPart.from_arrays(header["part"], {k[5:]: v for k, v in arrays.items()
-                                                 if k.startswith("part/")},
-                                header.get("source"))
-    try:
-        return cls(part, arrays["thickness"], arrays["force"], None, header.get("meta", {}))
-    except KeyError as exc:
-        raise ValueError(f"scene file {path} lacks array {exc}") from exc
 
-
-# Attached after the class: a ``def load`` in the class body would shadow the dataclass field
-# ``load``'s default (None), and a scene made without a load would carry the method instead.
-Scene.load = classmethod(_read_scene)
 
 
 
@@ -148,11 +152,12 @@ class Deformation:
         return _save(path, arrays, {**self.scene.header(), "info": self.info})
 
     @classmethod
-    def load(cls, path) -> "Deformation":
-        arrays, header = _load(path, FORMAT)
+    def read(cls, path) -> "Deformation":
+        """Read a deformation written by :meth:`save` (``.npz``)."""
+        arrays, header = _read_file(path, FORMAT)
         if "displacement" not in arrays:
             raise ValueError(f"{path} holds a scene, not a deformation (no displacement)")
-        scene = Scene.load(path)
+        scene = Scene.read(path)
         return cls(scene, arrays["displacement"], header.get("info", {}))
 
 
@@ -161,7 +166,7 @@ def _save(path, arrays: dict, header: dict) -> pathlib.Path:
     return atomic_savez(path, arrays, compressed=True)
 
 
-def _load(path, fmt: str) -> tuple[dict, dict]:
+def _read_file(path, fmt: str) -> tuple[dict, dict]:
     path = pathlib.Path(path)
     if not path.exists():
         raise FileNotFoundError(f"scene file not found: {path}")

@@ -94,10 +94,14 @@ def smooth(part: BodyPart, values, iterations: int = 10, step: float = 0.5) -> n
     return v
 
 
-def normalise(thickness) -> np.ndarray:
-    """Map thickness (m) to [0, 1] over :data:`THICKNESS_RANGE`."""
+def normalise(thickness):
+    """Map thickness (m) to [0, 1] over :data:`THICKNESS_RANGE`: NumPy arrays and torch tensors
+    keep their type and dtype (the learned models' thickness input); other sequences become
+    float arrays."""
     lo, hi = THICKNESS_RANGE
-    return (np.asarray(thickness, float) - lo) / (hi - lo)
+    if not hasattr(thickness, "dtype"):
+        thickness = np.asarray(thickness, float)
+    return (thickness - lo) / (hi - lo)
 
 
 def denormalise(x) -> np.ndarray:

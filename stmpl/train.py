@@ -15,12 +15,11 @@ operator) gets it from its ``fit(dataset)`` first; one with nothing to learn ski
 from __future__ import annotations
 
 import json
-import os
 import pathlib
+import re
 import time
 
 import numpy as np
-import yaml
 
 DEFAULTS = {
     "name": None,
@@ -53,39 +52,37 @@ def learning_rate(cfg: dict, step: int, total: int) -> float:
     return cfg["lr"]
 
 
-def load_config(source) -> dict:
+DEVICE = re.compile(r"cpu|cuda(:[0-9]+)?|mps")
+
+
+def read_config(source) -> dict:
     """A checked, completed training config from a YAML path or a dict."""
-    if isinstance(source, (str, os.PathLike)):
-        path = pathlib.Path(source)
-        if not path.is_file():
-            raise FileNotFoundError(f"config file not found: {path}")
-        raw = yaml.safe_load(path.read_text()) or {}
-        default_name = path.stem
-    else:
-        raw, default_name = dict(source), "model"
-    unknown = set(raw) - set(DEFAULTS)
-    if unknown:
-        raise ValueError(f"unknown training config keys {sorted(unknown)}; allowed: "
-                         f"{sorted(DEFAULTS)}")
-    cfg = {**DEFAULTS, **raw}
-    cfg["name"] = cfg["name"] or default_name
+    from stmpl import config as checked
     from stmpl import predictor
 
-    if cfg["model"] not in predictor.names() or cfg["model"] == "fem":
-        raise ValueError(f"model must be a learned predictor "
-                         f"{[n for n in predictor.names() if n != 'fem']}, got {cfg['model']!r}")
-    predictor.REGISTRY[cfg["model"]].options(cfg["options"])  # checked; kept as written
-    if not cfg["data"]:
-        raise ValueError("data: the dataset folder to train on is missing")
+    cfg = checked.read(source, DEFAULTS, "training config", name="model")
+    learned = [n for n in predictor.names() if n != "fem"]
+    if cfg["model"] not in learned:
+        raise ValueError(f"model must be a learned predictor {learned}, got {cfg['model']!r}")
+    if not isinstance(cfg["options"], dict):
+        raise ValueError(f"options must be a mapping of model options, got {cfg['options']!r}")
+    predictor.get(cfg["model"]).options(cfg["options"])  # checked; kept as written
+    if not cfg["data"] or not isinstance(cfg["data"], str):
+        raise ValueError(f"data: the dataset folder to train on is missing, got {cfg['data']!r}")
     for k in ("epochs", "batch", "patience"):
-        if not (isinstance(cfg[k], int) and cfg[k] >= 1):
-            raise ValueError(f"{k} must be an integer >= 1, got {cfg[k]!r}")
-    if not (isinstance(cfg["lr"], (int, float)) and cfg["lr"] > 0):
-        raise ValueError(f"lr must be > 0, got {cfg['lr']!r}")
-    if not (isinstance(cfg["train_fraction"], (int, float)) and 0 < cfg["train_fraction"] <= 1):
-        raise ValueError(f"train_fraction must be in (0, 1], got {cfg['train_fraction']!r}")
-    if cfg["schedule"] not in SCHEDULES:
-        raise ValueError(f"schedule must be one of {SCHEDULES}, got {cfg['schedule']!r}")
+        checked.integer(cfg[k], k, 1)
+    checked.integer(cfg["seed"], "seed", 0)
+    if cfg["max_train"] is not None:
+        checked.integer(cfg["max_train"], "max_train", 1)
+    checked.number(cfg["lr"], "lr", 0, low_open=True)
+    checked.number(cfg["train_fraction"], "train_fraction", 0, 1, low_open=True)
+    checked.one_of(cfg["schedule"], "schedule", SCHEDULES)
+    if cfg["thickness_mm"] is not None and (not isinstance(cfg["thickness_mm"], list) or not all(
+            checked.number(t, "thickness_mm", 0, low_open=True) for t in cfg["thickness_mm"])):
+        raise ValueError(f"thickness_mm must be a list of thicknesses in mm, got "
+                         f"{cfg['thickness_mm']!r}")
+    if not isinstance(cfg["device"], str) or not DEVICE.fullmatch(cfg["device"]):
+        raise ValueError(f"device must be cpu, cuda, cuda:N or mps, got {cfg['device']!r}")
     cfg["out"] = cfg["out"] or str(pathlib.Path("runs") / cfg["name"])
     return cfg
 
@@ -116,15 +113,15 @@ def train(config, resume: bool = True, progress: bool = True):
     import torch
 
     from stmpl import predictor
-    from stmpl.data import Dataset
+    from stmpl.dataset import Dataset
     from stmpl.files import atomic_path
 
-    cfg = load_config(config)
+    cfg = read_config(config)
     out = pathlib.Path(cfg["out"])
     out.mkdir(parents=True, exist_ok=True)
     ds = Dataset(cfg["data"])
     if cfg["device"].startswith("cuda") and not torch.cuda.is_available():
-        raise ValueError("device cuda was asked for but CUDA is not available")
+        raise ValueError(f"device {cfg['device']} was asked for but CUDA is not available here")
     device = torch.device(cfg["device"])
     torch.manual_seed(cfg["seed"])
     np.random.seed(cfg["seed"])
@@ -134,7 +131,8 @@ def train(config, resume: bool = True, progress: bool = True):
         p.fit(ds, progress=progress)
     t_fit = time.perf_counter() - t_fit
     if p.n_parameters() == 0:
-        return _finish(p, cfg, ds, out, [], float("nan"), {"fit_seconds": round(t_fit, 3)})
+        return _write_checkpoint(p, cfg, ds, out, [], float("nan"),
+                                 {"fit_seconds": round(t_fit, 3)})
     opt = torch.optim.Adam(p.model.parameters(), lr=cfg["lr"])
     tr = _split_tensors(ds, "train", cfg, device)
     va = _split_tensors(ds, "val", cfg, device)
@@ -144,7 +142,11 @@ def train(config, resume: bool = True, progress: bool = True):
     state_path = out / "state.pt"
     start, best, best_state, bad, history = 0, np.inf, None, 0, []
     if resume and state_path.exists():
-        st = torch.load(state_path, map_location=device, weights_only=False)
+        try:
+            st = torch.load(state_path, map_location=device, weights_only=False)
+        except Exception as e:  # noqa: BLE001 - torch raises many kinds for a broken file
+            raise ValueError(f"{state_path} is truncated or corrupt ({type(e).__name__}); "
+                             "delete it or use --restart to train from the start") from e
         free = ("epochs", "out")  # a run may be extended, and its folder moved
         same = {k: v for k, v in st["config"].items() if k not in free}
         if same != {k: v for k, v in cfg.items() if k not in free}:
@@ -205,10 +207,10 @@ def train(config, resume: bool = True, progress: bool = True):
     if bar is not None:
         bar.close()
     p.model.load_state_dict(best_state)
-    return _finish(p, cfg, ds, out, history, best, {"fit_seconds": round(t_fit, 3)})
+    return _write_checkpoint(p, cfg, ds, out, history, best, {"fit_seconds": round(t_fit, 3)})
 
 
-def _finish(p, cfg, ds, out, history, best, extra) -> pathlib.Path:
+def _write_checkpoint(p, cfg, ds, out, history, best, extra) -> pathlib.Path:
     """Evaluate the final model on val and test and write its checkpoint and history."""
     from stmpl.evaluate import evaluate_dataset
 

@@ -109,10 +109,10 @@ def scene_figure(scene, path=None, size: int = 256, dpi: int = 110):
     if scene.load is not None:
         title += " | " + scene.load.summary()
     fig.suptitle(title)
-    return _finish(fig, path, dpi)
+    return _save_figure(fig, path, dpi)
 
 
-def _finish(fig, path, dpi: int):
+def _save_figure(fig, path, dpi: int):
     """Lay out ``fig``; save and close it when a ``path`` is given. Returns the figure."""
     top = 1.0 - 0.45 / fig.get_figheight() if fig._suptitle is not None else 1.0
     fig.tight_layout(rect=(0.0, 0.0, 1.0, top))   # room for the suptitle
@@ -126,7 +126,6 @@ def _finish(fig, path, dpi: int):
 def vertex_colors(values: np.ndarray, cmap="inferno", vmin=None, vmax=None) -> np.ndarray:
     """``(N, 4)`` uint8 RGBA colours of per-vertex values."""
     import matplotlib
-    import matplotlib.cm as cm
     import matplotlib.colors as mcolors
 
     values = np.asarray(values, float)
@@ -257,7 +256,7 @@ def deformation_figure(deformation, nodes: np.ndarray, tets: np.ndarray, node_u:
         title += " | " + scene.load.summary()
     title += f" | max |u| {mag.max():.2f} mm"
     fig.suptitle(title)
-    return _finish(fig, path, dpi)
+    return _save_figure(fig, path, dpi)
 
 
 def prediction_figure(deformations: dict, truth=None, path=None, size: int = 256,
@@ -321,4 +320,4 @@ def prediction_figure(deformations: dict, truth=None, path=None, size: int = 256
     if scene.load is not None:
         title += " | " + scene.load.summary()
     fig.suptitle(title)
-    return _finish(fig, path, dpi)
+    return _save_figure(fig, path, dpi)

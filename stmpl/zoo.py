@@ -1,14 +1,16 @@
 """The model zoo: named, shipped checkpoints (``zoo/`` beside the package, or ``$STMPL_ZOO``).
 
-``zoo/manifest.json`` lists each model: its name, file, SHA-256, size, kind, config, the card of
-the dataset it learned from (name, hash, sample counts), its metrics and how it was trained. A
-file is verified against the manifest before it is loaded (and again against its own sidecar),
-so a tampered or truncated checkpoint is refused with an error that names it.
+``zoo/manifest.json`` lists each model: its name, file, SHA-256, size, the digest of its sidecar,
+kind, config, the card of the dataset it learned from (name, hash, sample counts), its metrics
+and how it was trained. A model is verified as a whole against the manifest before it is read:
+the tensor file's size and SHA-256 and the sidecar's digest (so an edited displacement scale is
+caught as surely as an altered tensor), then the sidecar against itself
+(:mod:`stmpl.checkpoint`). A mismatch is refused with an error that names the file.
 
 >>> from stmpl import zoo
 >>> zoo.names()                       # doctest: +SKIP
-['gnn_arm', 'naive_arm', 'uv_unet_arm']
->>> predictor = zoo.load("uv_unet_arm")  # doctest: +SKIP
+['gnn_arm', 'linear_arm', 'naive_arm', 'uv_unet_arm']
+>>> predictor = zoo.read("uv_unet_arm")  # doctest: +SKIP
 """
 
 from __future__ import annotations
@@ -16,12 +18,23 @@ from __future__ import annotations
 import json
 import os
 import pathlib
+import re
 import shutil
 
 MANIFEST = "manifest.json"
 FORMAT = "stmpl-zoo/1"
 MAX_BYTES = 10 * 2 ** 20
 """The largest checkpoint the zoo accepts (10 MiB): the repository ships its models."""
+NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
+"""A model name: letters, digits, ``_``, ``.``, ``-``; no path (it names files in the zoo)."""
+
+
+def check_name(name: str) -> str:
+    """``name`` if it is a valid model name (:data:`NAME`, not ``..``-like); else ``ValueError``."""
+    if not isinstance(name, str) or not NAME.fullmatch(name) or ".." in name:
+        raise ValueError(f"zoo model name {name!r} is not allowed: use letters, digits, _, . and "
+                         "- (it names files inside the zoo folder, so no paths)")
+    return name
 
 
 def root(path=None) -> pathlib.Path:
@@ -64,9 +77,10 @@ def entry(name: str, path=None) -> dict:
 
 
 def verify(name: str, path=None) -> pathlib.Path:
-    """The checkpoint file of ``name`` after checking its size and SHA-256 against the
-    manifest; raises ``ValueError`` naming the file when it differs."""
-    from stmpl.checkpoint import sha256
+    """The checkpoint file of ``name`` after checking it as a whole against the manifest: the
+    tensor file's size and SHA-256 and the sidecar's digest; raises ``ValueError`` naming the
+    file that differs."""
+    from stmpl.checkpoint import read_sidecar, sha256, sidecar_path
 
     e = entry(name, path)
     f = root(path) / e["file"]
@@ -79,14 +93,21 @@ def verify(name: str, path=None) -> pathlib.Path:
     if sha256(f) != e["sha256"]:
         raise ValueError(f"zoo model {name!r}: {f.name} does not match the manifest's SHA-256 "
                          "(tampered or corrupt)")
+    if "digest" not in e:
+        raise ValueError(f"zoo model {name!r}: the manifest has no digest of its sidecar; add "
+                         "it again with `stmpl zoo add`")
+    side = read_sidecar(f)                      # the sidecar against its own digest
+    if side["digest"] != e["digest"] or side.get("sha256") != e["sha256"]:
+        raise ValueError(f"zoo model {name!r}: {sidecar_path(f).name} does not match the "
+                         "manifest (an edited or replaced sidecar)")
     return f
 
 
-def load(name: str, device: str = "cpu", path=None):
+def read(name: str, device: str = "cpu", path=None):
     """The predictor of zoo model ``name``, verified, on ``device``."""
     from stmpl import predictor
 
-    return predictor.load(verify(name, path), device=device)
+    return predictor.read(verify(name, path), device=device)
 
 
 def add(checkpoint, name: str, trained: dict | None = None, path=None,
@@ -95,12 +116,13 @@ def add(checkpoint, name: str, trained: dict | None = None, path=None,
     manifest with ``trained`` (how it was made: command, time, machine). ``evaluate_on``: more
     dataset folders (e.g. the out-of-distribution sets) whose test split is measured and kept in
     the entry's metrics under the dataset's name. Returns the entry."""
-    from stmpl.checkpoint import load as load_checkpoint
+    from stmpl.checkpoint import read as read_checkpoint
     from stmpl.checkpoint import sidecar_path
     from stmpl.files import atomic_write_text
 
+    check_name(name)
     src = pathlib.Path(checkpoint)
-    _, meta = load_checkpoint(src)  # checks the file against its sidecar
+    _, meta = read_checkpoint(src)  # checks the file against its sidecar
     if meta["bytes"] > MAX_BYTES:
         raise ValueError(f"{src} is {meta['bytes'] / 2**20:.1f} MiB; the zoo takes at most "
                          f"{MAX_BYTES / 2**20:.0f} MiB per model")
@@ -113,6 +135,7 @@ def add(checkpoint, name: str, trained: dict | None = None, path=None,
         shutil.copyfile(src, dst)
         shutil.copyfile(sidecar_path(src), sidecar_path(dst))
     e = {"file": dst.name, "sha256": meta["sha256"], "bytes": meta["bytes"],
+         "digest": meta["digest"],
          "kind": meta["kind"], "part": meta.get("part"), "parameters": meta.get("parameters"),
          "config": meta.get("config"), "dataset": meta.get("dataset"),
          "metrics": meta.get("metrics"), "training": meta.get("training"),
@@ -121,10 +144,10 @@ def add(checkpoint, name: str, trained: dict | None = None, path=None,
         e["training"] = {k: v for k, v in e["training"].items() if k != "history"}
     if evaluate_on:
         from stmpl import predictor
-        from stmpl.data import Dataset
+        from stmpl.dataset import Dataset
         from stmpl.evaluate import evaluate_dataset
 
-        p = predictor.load(dst)
+        p = predictor.read(dst)
         e["metrics"] = dict(e["metrics"] or {})
         for folder in evaluate_on:
             ds = Dataset(folder)

@@ -10,7 +10,7 @@ def test_scene_command_writes_picture_scene_and_mesh(tmp_path, capsys, arm):
                "--save", str(tmp_path / "s.npz"), "--export", str(tmp_path / "s.ply")])
     assert rc == 0
     assert (tmp_path / "s.png").stat().st_size > 20_000
-    s = Scene.load(tmp_path / "s.npz")
+    s = Scene.read(tmp_path / "s.npz")
     assert s.force.sum() == pytest.approx(5.0)
     np.testing.assert_allclose(s.thickness, 0.0075)  # weight 0.5 -> 7.5 mm
     assert "disk: 5 N on" in capsys.readouterr().out
@@ -40,7 +40,7 @@ def test_simulate_command_solves_draws_and_saves(tmp_path, capsys, arm):
     assert rc == 0
     out = capsys.readouterr().out
     assert out.count(" ok ") == 2 and "wrote" in out
-    d = Deformation.load(tmp_path / "d.npz")
+    d = Deformation.read(tmp_path / "d.npz")
     assert 1e-4 < d.magnitude.max() < 7.5e-3          # pressed in, not through the layer
     loaded = d.scene.force > 0
     assert np.all(np.einsum("ni,ni->n", d.displacement[loaded],
@@ -70,7 +70,7 @@ def test_predict_command_runs_a_checkpoint_against_the_fem(tmp_path, capsys, arm
     assert "tiny_unet" in out and "fem (coarse)" in out and "MEE" in out
     assert main(["predict", "--model", str(ckpt), "--force", "0.1",
                  "--save", str(tmp_path / "d.npz")]) == 0
-    d = Deformation.load(tmp_path / "d.npz")
+    d = Deformation.read(tmp_path / "d.npz")
     np.testing.assert_allclose(d.displacement, p.predict(d.scene).displacement, atol=1e-9)
     assert main(["predict", "--model", "zoo:nope", "--force", "0.1"]) == 2
     assert "zoo" in capsys.readouterr().err  # no zoo there, or no model "nope" in it

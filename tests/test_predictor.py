@@ -32,7 +32,7 @@ def _make(name, ds):
 
 @pytest.fixture(scope="module")
 def ds(tiny_dataset):
-    from stmpl.data import Dataset
+    from stmpl.dataset import Dataset
 
     return Dataset(tiny_dataset)
 
@@ -71,7 +71,9 @@ def test_fem_predictor_reproduces_the_dataset(ds):
 def test_fem_predictor_raises_on_failure(ds):
     s = Scene(ds.part, np.full(ds.part.n_vertices, 0.005),
               np.where(np.arange(ds.part.n_vertices) == 40, 15.0, 0.0))
-    with pytest.raises(predictor.FEMFailed, match="FEM failed"):
+    from fem.predictor import FEMFailed
+
+    with pytest.raises(FEMFailed, match="FEM solve failed"):
         predictor.create("fem", res={"subdivisions": 0, "layers": 1, "order": 1},
                          options=None).predict(s)
 
@@ -209,7 +211,7 @@ def test_gnn_normalisers_travel_in_the_checkpoint(ds, tmp_path):
     from stmpl import tissue
 
     p = _make("gnn/per_newton", ds)
-    q = predictor.load(p.save(tmp_path / "g.safetensors"))
+    q = predictor.read(p.save(tmp_path / "g.safetensors"))
     lo, hi = tissue.THICKNESS_RANGE
     np.testing.assert_allclose(q.model.node_norm.shift.numpy(), [0, 0, lo, 0, 0, 0], atol=1e-9)
     np.testing.assert_allclose(q.model.node_norm.scale.numpy(), [1000, 1, hi - lo, 1, 1, 1],
@@ -268,7 +270,7 @@ def test_linear_prior_starts_at_the_linear_fem(kind, ds, tmp_path):
     scenes, _ = scenes_of(ds, "test", limit=3)
     for a, b in zip(p.predict(scenes), lin.predict(scenes)):
         np.testing.assert_allclose(a.displacement, b.displacement, rtol=1e-5, atol=1e-9)
-    q = predictor.load(p.save(tmp_path / "g.safetensors"))
+    q = predictor.read(p.save(tmp_path / "g.safetensors"))
     assert q.model.prior.index.shape == p.model.prior.index.shape
     for a, b in zip(p.predict(scenes), q.predict(scenes)):
         np.testing.assert_array_equal(a.displacement, b.displacement)

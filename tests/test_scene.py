@@ -28,7 +28,7 @@ def test_scene_is_frozen_and_read_only(scene):
 
 
 def test_scene_and_deformation_save_load_round_trip(scene, tmp_path):
-    back = Scene.load(scene.save(tmp_path / "s.npz"))
+    back = Scene.read(scene.save(tmp_path / "s.npz"))
     assert back.load is None          # a scene read back (or made from arrays) has no Load
     assert Scene(back.part, back.thickness, back.force).load is None
     np.testing.assert_array_equal(back.force, scene.force)
@@ -38,13 +38,13 @@ def test_scene_and_deformation_save_load_round_trip(scene, tmp_path):
     u = np.zeros((scene.part.n_vertices, 3))
     u[:, 2] = -0.001
     d = Deformation(scene, u, {"predictor": "test"})
-    d2 = Deformation.load(d.save(tmp_path / "d.npz"))
+    d2 = Deformation.read(d.save(tmp_path / "d.npz"))
     np.testing.assert_array_equal(d2.displacement, u)
     assert d2.info == {"predictor": "test"}
     np.testing.assert_allclose(d.mesh().vertices, scene.part.vertices + u)
     np.testing.assert_allclose(d.magnitude, 0.001)
     with pytest.raises(ValueError, match="not a deformation"):
-        Deformation.load(tmp_path / "s.npz")
+        Deformation.read(tmp_path / "s.npz")
 
 
 @pytest.mark.parametrize("field,value,message", [
@@ -69,11 +69,11 @@ def test_bad_deformations_and_files(scene, tmp_path):
     with pytest.raises(ValueError, match="non-finite"):
         Deformation(scene, np.full((scene.part.n_vertices, 3), np.nan))
     with pytest.raises(FileNotFoundError):
-        Scene.load(tmp_path / "missing.npz")
+        Scene.read(tmp_path / "missing.npz")
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
     with pytest.raises(ValueError, match="not a readable stmpl scene"):
-        Scene.load(tmp_path / "junk.npz")
+        Scene.read(tmp_path / "junk.npz")
     good = scene.save(tmp_path / "s.npz").read_bytes()
     (tmp_path / "cut.npz").write_bytes(good[: len(good) // 2])
     with pytest.raises(ValueError, match="not a readable"):
-        Scene.load(tmp_path / "cut.npz")
+        Scene.read(tmp_path / "cut.npz")

@@ -4,9 +4,9 @@ import numpy as np
 import pytest
 
 from stmpl import checkpoint, predictor
-from stmpl.data import Dataset
+from stmpl.dataset import Dataset
 from stmpl.evaluate import evaluate, scenes_of
-from stmpl.train import load_config, train
+from stmpl.train import read_config, train
 
 
 def _cfg(data, out, **kw):
@@ -20,7 +20,7 @@ def test_naive_trains_checkpoints_and_reloads(tiny_dataset, tmp_path):
     ds = Dataset(tiny_dataset)
     assert meta["kind"] == "naive" and meta["dataset"]["hash"] == ds.card["hash"]
     assert meta["metrics"]["test"]["mee"][0] > 0
-    p = predictor.load(path)
+    p = predictor.read(path)
     scenes, truth = scenes_of(ds, "test", limit=5)
     d = p.predict(scenes)
     # alpha was learned: the prediction correlates with the truth better than zero does
@@ -28,9 +28,9 @@ def test_naive_trains_checkpoints_and_reloads(tiny_dataset, tmp_path):
     zero = np.mean([np.linalg.norm(u) for u in truth])
     assert err < zero
     # the same weights give the same answer after a reload
-    q = predictor.load(path)
+    q = predictor.read(path)
     np.testing.assert_array_equal(q.predict(scenes[0]).displacement, d[0].displacement)
-    md = evaluate([str(path)], tiny_dataset, "test", out=tmp_path / "eval")
+    md = evaluate({"naive_tiny": q}, tiny_dataset, "test", out=tmp_path / "eval")
     assert "naive_tiny" in md and (tmp_path / "eval.csv").exists()
 
 
@@ -57,26 +57,56 @@ def test_tampered_or_truncated_checkpoints_are_refused(tiny_dataset, tmp_path):
     data[-1] ^= 0x01
     path.write_bytes(bytes(data))
     with pytest.raises(ValueError, match="SHA-256"):
-        predictor.load(path)
+        predictor.read(path)
     path.write_bytes(bytes(data[:-10]))
     with pytest.raises(ValueError, match="truncated"):
-        predictor.load(path)
+        predictor.read(path)
     path.with_suffix(".json").unlink()
     with pytest.raises(FileNotFoundError, match="sidecar"):
-        predictor.load(path)
+        predictor.read(path)
+
+
+def test_an_edited_sidecar_is_refused(tiny_dataset, tmp_path):
+    """The sidecar holds what the predictor reads (its config, the displacement scale): an edit
+    there changes every prediction, so it is refused like an edited tensor file."""
+    path = train(_cfg(tiny_dataset, tmp_path / "run", epochs=2), progress=False)
+    side = path.with_suffix(".json")
+    meta = json.loads(side.read_text())
+    meta["config"]["disp_scale_mm"] = 20.0
+    side.write_text(json.dumps(meta, indent=1))
+    with pytest.raises(ValueError, match="sidecar .* was edited"):
+        predictor.read(path)
+    meta["digest"] = checkpoint.digest(meta)     # a consistent forgery passes the file alone...
+    side.write_text(json.dumps(meta))
+    assert predictor.read(path).scale == pytest.approx(0.02)
+
+
+def test_a_truncated_training_state_is_named(tiny_dataset, tmp_path, capsys):
+    from stmpl.cli import main
+
+    train(_cfg(tiny_dataset, tmp_path / "run", epochs=2), progress=False)
+    state = tmp_path / "run" / "state.pt"
+    state.write_bytes(state.read_bytes()[:100])
+    with pytest.raises(ValueError, match="state.pt is truncated or corrupt"):
+        train(_cfg(tiny_dataset, tmp_path / "run", epochs=3), progress=False)
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text(json.dumps(_cfg(tiny_dataset, tmp_path / "run", epochs=3)))
+    assert main(["train", str(cfg), "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "state.pt is truncated or corrupt" in err and "Traceback" not in err
 
 
 def test_training_config_is_checked(tiny_dataset):
     with pytest.raises(ValueError, match="unknown training config keys"):
-        load_config({"model": "naive", "data": "x", "epoch": 3})
+        read_config({"model": "naive", "data": "x", "epoch": 3})
     with pytest.raises(ValueError, match="model must be a learned predictor"):
-        load_config({"model": "fem", "data": "x"})
+        read_config({"model": "fem", "data": "x"})
     with pytest.raises(ValueError, match="lr"):
-        load_config({"model": "naive", "data": "x", "lr": -1})
+        read_config({"model": "naive", "data": "x", "lr": -1})
     with pytest.raises(ValueError, match="schedule"):
-        load_config({"model": "naive", "data": "x", "schedule": "step"})
+        read_config({"model": "naive", "data": "x", "schedule": "step"})
     with pytest.raises(ValueError, match="train_fraction"):
-        load_config({"model": "naive", "data": "x", "train_fraction": 0})
+        read_config({"model": "naive", "data": "x", "train_fraction": 0})
 
 
 def test_cosine_schedule_and_placement_share(tiny_dataset):
@@ -84,14 +114,14 @@ def test_cosine_schedule_and_placement_share(tiny_dataset):
 
     from stmpl.train import _split_tensors, learning_rate
 
-    cfg = load_config({"model": "naive", "data": "x", "lr": 0.1, "schedule": "cosine"})
+    cfg = read_config({"model": "naive", "data": "x", "lr": 0.1, "schedule": "cosine"})
     assert learning_rate(cfg, 0, 100) == pytest.approx(0.1)
     assert learning_rate(cfg, 50, 100) == pytest.approx(0.05)
     assert learning_rate(cfg, 100, 100) == pytest.approx(0.0, abs=1e-12)
     ds = Dataset(tiny_dataset)
     a = ds.arrays("train")
     places = np.unique(a["placement"])
-    half = load_config({"model": "naive", "data": "x", "train_fraction": 0.5})
+    half = read_config({"model": "naive", "data": "x", "train_fraction": 0.5})
     t, f, u = _split_tensors(ds, "train", half, torch.device("cpu"))
     # whole placements are kept, with all their samples, and about half of them
     kept = {int(p) for p in places if any(np.allclose(f[i].numpy(), a["force"][j])

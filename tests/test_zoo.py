@@ -6,14 +6,15 @@ import numpy as np
 import pytest
 
 from stmpl import predictor, zoo
-from stmpl.evaluate import resolve, scenes_of
+from stmpl.evaluate import scenes_of
+from stmpl.spec import predictor_from_spec
 
 
 @pytest.fixture
 def zoo_dir(tiny_dataset, tmp_path):
     import torch
 
-    from stmpl.data import Dataset
+    from stmpl.dataset import Dataset
 
     ds = Dataset(tiny_dataset)
     torch.manual_seed(0)
@@ -39,7 +40,7 @@ def test_add_list_load_round_trip(zoo_dir):
 
     assert tiny["dataset_hash"] == ds.card["hash"]
     assert tiny["mee"][0] == pytest.approx(evaluate_dataset(p, ds, "test")["mee"][0])
-    q = zoo.load("unet_tiny", path=folder)
+    q = zoo.read("unet_tiny", path=folder)
     scenes, _ = scenes_of(ds, "test", limit=2)
     for a, b in zip(p.predict(scenes), q.predict(scenes)):
         np.testing.assert_array_equal(a.displacement, b.displacement)
@@ -49,9 +50,9 @@ def test_zoo_env_and_spec(zoo_dir, monkeypatch):
     folder, ds, _ = zoo_dir
     monkeypatch.setenv("STMPL_ZOO", str(folder))
     assert zoo.root() == folder
-    assert resolve("zoo:unet_tiny").name == "uv_unet"
+    assert predictor_from_spec("zoo:unet_tiny").name == "uv_unet"
     with pytest.raises(KeyError, match="no model 'nope'.*unet_tiny"):
-        zoo.load("nope")
+        zoo.read("nope")
 
 
 def test_tampered_truncated_missing_are_refused(zoo_dir):
@@ -60,20 +61,54 @@ def test_tampered_truncated_missing_are_refused(zoo_dir):
     data = f.read_bytes()
     f.write_bytes(data[:-10])
     with pytest.raises(ValueError, match="unet_tiny.*truncated"):
-        zoo.load("unet_tiny", path=folder)
+        zoo.read("unet_tiny", path=folder)
     flipped = bytearray(data)
     flipped[len(data) // 2] ^= 0xFF
     f.write_bytes(bytes(flipped))
     with pytest.raises(ValueError, match="SHA-256"):
-        zoo.load("unet_tiny", path=folder)
+        zoo.read("unet_tiny", path=folder)
     f.unlink()
     with pytest.raises(FileNotFoundError, match="missing"):
-        zoo.load("unet_tiny", path=folder)
+        zoo.read("unet_tiny", path=folder)
     (folder / "manifest.json").write_text("{not json")
     with pytest.raises(ValueError, match="corrupt"):
         zoo.names(folder)
     with pytest.raises(FileNotFoundError, match="no model zoo"):
         zoo.names(folder / "elsewhere")
+
+
+def test_an_edited_sidecar_is_refused_even_with_a_new_digest(zoo_dir, capsys):
+    """The manifest covers the whole model: the sidecar (the displacement scale lives there) as
+    well as the tensors."""
+    from stmpl import checkpoint
+    from stmpl.cli import main
+
+    folder, _, _ = zoo_dir
+    side = folder / "unet_tiny.json"
+    meta = json.loads(side.read_text())
+    meta["config"]["disp_scale_mm"] = 30.0
+    side.write_text(json.dumps(meta))
+    with pytest.raises(ValueError, match="was edited"):
+        zoo.read("unet_tiny", path=folder)
+    meta["digest"] = checkpoint.digest(meta)
+    side.write_text(json.dumps(meta))
+    with pytest.raises(ValueError, match="unet_tiny.json does not match the manifest"):
+        zoo.read("unet_tiny", path=folder)
+    assert main(["zoo", "verify", "--zoo", str(folder)]) == 2
+    assert "does not match the manifest" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("name", ["../outside", "a/b", "..", "", ".hidden"])
+def test_zoo_names_stay_inside_the_zoo(zoo_dir, tmp_path, name, capsys):
+    from stmpl.cli import main
+
+    folder, _, p = zoo_dir
+    ckpt = p.save(tmp_path / "other.safetensors")
+    with pytest.raises(ValueError, match="is not allowed"):
+        zoo.add(ckpt, name, path=folder)
+    assert main(["zoo", "add", name, "--checkpoint", str(ckpt), "--zoo", str(folder)]) == 2
+    assert "is not allowed" in capsys.readouterr().err
+    assert zoo.names(folder) == ["unet_tiny"] and not (tmp_path / "outside.safetensors").exists()
 
 
 def test_oversized_checkpoints_are_refused(zoo_dir, monkeypatch, tmp_path):
@@ -115,7 +150,7 @@ def test_the_shipped_zoo_verifies_and_beats_naive_on_a_fem_solve(arm):
     active = np.linalg.norm(truth, axis=1) > 1e-6
     rel = {}
     for name in names:
-        p = zoo.load(name)
+        p = zoo.read(name)
         assert p.part.n_vertices == arm.n_vertices
         np.testing.assert_allclose(p.part.vertices, arm.vertices, atol=1e-6)
         err = np.linalg.norm(p.predict(scene).displacement - truth, axis=1)[active]

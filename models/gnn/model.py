@@ -18,16 +18,22 @@ output is a correction to it (:class:`~models.linear.LinearPrior`).
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 import torch
 from torch import nn
-from torch_geometric.nn import MessagePassing
 
-from models.linear.model import PRIOR_SCALE, ComplianceOperator, LinearPrior
-from stmpl import tissue
-from stmpl.predictor import LearnedPredictor, force_pattern, register, total_force
+with warnings.catch_warnings():  # torch_geometric's pooling layers use torch.jit.script on import
+    warnings.filterwarnings("ignore", message=r".*torch\.jit\.script.*deprecated",
+                            category=DeprecationWarning)
+    from torch_geometric.nn import MessagePassing
 
-PRESSURE_SCALE = 1000.0
+from models.features import (PRESSURE_SCALE, PRIOR_SCALE, THICKNESS_SCALE, THICKNESS_SHIFT,
+                             load_channels)
+from models.learned import LearnedPredictor
+from models.linear.operator import ComplianceOperator
+from models.prior import LinearPrior
 
 
 def mlp(c_in: int, hidden: int, c_out: int, norm: bool = True) -> nn.Sequential:
@@ -114,7 +120,6 @@ class MeshGraphNet(nn.Module):
         return self.decoder(h)
 
 
-@register("gnn")
 class GNNPredictor(LinearPrior, LearnedPredictor):
     """Mesh GNN predictor. Options: ``latent`` (width), ``steps`` (message passing),
     ``per_newton`` (node inputs: the pressure per newton of the total and the total; output:
@@ -123,6 +128,7 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
     precomputed linear FEM's displacement, :mod:`models.linear`, is a node input and the network
     predicts only the correction to it; :meth:`fit` computes the operator from the dataset)."""
 
+    name = "gnn"
     defaults = {"latent": 128, "steps": 15, "per_newton": False, "loss": "mse", "prior": "none"}
 
     def build_model(self) -> nn.Module:
@@ -138,9 +144,9 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         self.normals = torch.tensor(part.normals, dtype=torch.float32, device=dev)
         self.inv_area = torch.tensor(1.0 / part.vertex_areas, dtype=torch.float32, device=dev)
         # node features: pressure (Pa, or Pa per N), [total force N], thickness m, normal
-        lo, hi = tissue.THICKNESS_RANGE
         load = ([0.0, 0.0], [PRESSURE_SCALE, 1.0]) if self.per_newton else ([0.0], [PRESSURE_SCALE])
-        node = Normaliser(load[0] + [lo, 0, 0, 0], load[1] + [hi - lo, 1, 1, 1])
+        node = Normaliser(load[0] + [THICKNESS_SHIFT, 0, 0, 0],
+                          load[1] + [THICKNESS_SCALE, 1, 1, 1])
         edge = Normaliser([0.0] * 4, [length] * 4)
         prior = None
         if self.prior:  # the linear FEM's answer, in the units of raw(), is one more input
@@ -155,14 +161,10 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
 
     def raw(self, thickness, force):
         B, N = thickness.shape
-        if self.per_newton:
-            load = [(force_pattern(force) * self.inv_area)[..., None],
-                    total_force(force)[:, None, None].expand(B, N, 1)]
-        else:
-            load = [(force * self.inv_area)[..., None]]
+        load = torch.stack(load_channels(force, self.inv_area, self.per_newton), -1)
         base = self.base(thickness, force)
         extra = [] if base is None else [base]
-        x = torch.cat([*load, thickness[..., None], self.normals.expand(B, -1, -1), *extra], -1)
+        x = torch.cat([load, thickness[..., None], self.normals.expand(B, -1, -1), *extra], -1)
         x = x.reshape(B * N, x.shape[-1])
         E = self.edge_index.shape[1]
         offs = (torch.arange(B, device=x.device) * N).repeat_interleave(E)

@@ -1,5 +1,7 @@
-"""Precomputed linear FEM (the compliance operator) as a predictor, and as a prior for others."""
+"""Precomputed linear FEM (the compliance operator) as a predictor; :mod:`models.prior` uses it
+as the prior of the learned models."""
 
-from models.linear.model import ComplianceOperator, LinearPredictor, LinearPrior, operator_arrays
+from models.linear.model import LinearPredictor
+from models.linear.operator import ComplianceOperator, operator_arrays
 
-__all__ = ["ComplianceOperator", "LinearPredictor", "LinearPrior", "operator_arrays"]
+__all__ = ["ComplianceOperator", "LinearPredictor", "operator_arrays"]

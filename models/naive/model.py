@@ -8,7 +8,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
-from stmpl.predictor import LearnedPredictor, register
+from models.learned import LearnedPredictor
 
 
 class NaiveModel(nn.Module):
@@ -23,10 +23,10 @@ class NaiveModel(nn.Module):
         return (thickness * force)[..., None] * self.alpha / self.scale
 
 
-@register("naive")
 class NaivePredictor(LearnedPredictor):
     """Predictor around :class:`NaiveModel` (no options)."""
 
+    name = "naive"
     defaults: dict = {}
 
     def build_model(self) -> nn.Module:

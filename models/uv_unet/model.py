@@ -23,13 +23,10 @@ import numpy as np
 import torch
 from torch import nn
 
-from models.linear.model import CORRECTION_SCALE, PRIOR_SCALE, ComplianceOperator, LinearPrior
-from stmpl import tissue
-from stmpl.predictor import (LearnedPredictor, force_pattern, register, relative_loss,
-                             total_force)
-
-PRESSURE_SCALE = 1000.0
-"""Pa: pressure inputs are divided by this (the tissue's Young's modulus in the paper)."""
+from models.features import PRESSURE_SCALE, PRIOR_SCALE, load_channels, normalised_thickness
+from models.learned import LearnedPredictor, relative_loss
+from models.linear.operator import ComplianceOperator
+from models.prior import CORRECTION_SCALE, LinearPrior
 
 
 class UNet(nn.Module):
@@ -84,7 +81,6 @@ class WithPrior(nn.Module):
         return self.net(x)
 
 
-@register("uv_unet")
 class UVUNetPredictor(LinearPrior, LearnedPredictor):
     """UV-UNet predictor. Options: ``size`` (UV image pixels, 64..512), ``width``, ``depth``,
     ``dropout``, ``geometry`` (add position and normal channels), ``tv`` (total-variation weight
@@ -95,6 +91,7 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
     hold only the correction, added to the linear answer at the vertices, so the prior itself
     has no seam gap; :meth:`fit` computes the operator)."""
 
+    name = "uv_unet"
     defaults = {"size": 128, "width": 16, "depth": 5, "dropout": 0.5, "geometry": False,
                 "tv": 0.0, "per_newton": False, "loss": "mse", "prior": "none"}
 
@@ -126,13 +123,8 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
     def images(self, thickness, force, base=None) -> torch.Tensor:
         """``(B, C, S, S)`` input images from ``(B, N)`` thickness (m) and force (N), and with
         the prior its answer ``base`` (:meth:`base`, computed once by the caller)."""
-        lo, hi = tissue.THICKNESS_RANGE
-        thick = (thickness - lo) / (hi - lo)
-        if self.per_newton:  # pressure per newton of the total, and the total (N)
-            total = total_force(force)[:, None].expand_as(force)
-            chans = [force_pattern(force) * self._inv_area, total, thick]
-        else:
-            chans = [force * self._inv_area, thick]
+        chans = [*load_channels(force, self._inv_area, self.per_newton),
+                 normalised_thickness(thickness)]
         x = torch.stack(chans, -1)
         if self.config["geometry"]:
             x = torch.cat([x, self._geometry.expand(x.shape[0], -1, -1)], -1)

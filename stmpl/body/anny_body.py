@@ -6,9 +6,12 @@ stmpl caches the parts it cuts from it, so later runs never touch Anny at all.
 
 from __future__ import annotations
 
+import contextlib
 import logging
 import math
 import os
+import sys
+import tempfile
 
 import numpy as np
 import torch
@@ -26,6 +29,37 @@ _ARM = ("upperarm01", "upperarm02", "lowerarm01", "lowerarm02")
 def _arm(side: str) -> PartSpec:
     return PartSpec(bones=tuple(f"{b}.{side}" for b in _ARM),
                     axis_bones=(f"upperarm01.{side}", f"lowerarm01.{side}", f"wrist.{side}"))
+
+
+WARP_NOISE = ("Warp CUDA warning", "Warp CUDA error: Failed to get driver entry point")
+"""Lines NVIDIA Warp's native library writes to stderr when it initialises on a machine without
+a CUDA driver: noise on a CPU machine, dropped (anything else it writes is kept)."""
+
+
+@contextlib.contextmanager
+def _without_native_lines(prefixes: tuple):
+    """Run the block with file descriptor 2 (native code's stderr) captured, then write back
+    every captured line that does not start with one of ``prefixes``."""
+    sys.stderr.flush()
+    try:
+        saved = os.dup(2)
+    except OSError:  # pragma: no cover - no stderr to capture
+        yield
+        return
+    with tempfile.TemporaryFile() as tmp:
+        os.dup2(tmp.fileno(), 2)
+        try:
+            yield
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+            tmp.seek(0)
+            kept = [ln for ln in tmp.read().decode(errors="replace").splitlines(keepends=True)
+                    if not ln.startswith(prefixes)]
+            if kept:
+                sys.stderr.write("".join(kept))
+                sys.stderr.flush()
 
 
 class AnnyBody(CachedBodyModel):
@@ -70,12 +104,13 @@ class AnnyBody(CachedBodyModel):
                 warp.config.log_level = warp.LOG_ERROR
             except ImportError:  # pragma: no cover
                 pass
-            import anny
-
             cache = os.path.expanduser(os.environ.get("ANNY_CACHE_DIR", "~/.cache/anny"))
             if not os.path.isdir(cache) or not os.listdir(cache):
                 log.warning("building anny's assets once into %s (about a minute)", cache)
-            self._anny = anny.Anny()
+            with _without_native_lines(WARP_NOISE):
+                import anny
+
+                self._anny = anny.Anny()
         return self._anny
 
     def rest_mesh(self) -> BodyMesh:

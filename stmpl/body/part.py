@@ -127,6 +127,17 @@ class BodyPart:
         v = self.vertices if vertices is None else vertices
         return trimesh.Trimesh(v, self.faces, process=False)
 
+    @cached_property
+    def fingerprint(self) -> str:
+        """16 hex digits identifying the mesh: the SHA-256 of the name, vertices and faces."""
+        import hashlib
+
+        h = hashlib.sha256(self.name.encode())
+        for a in (np.ascontiguousarray(self.vertices, np.float64),
+                  np.ascontiguousarray(self.faces, np.int64)):
+            h.update(a.tobytes())
+        return h.hexdigest()[:16]
+
     def arrays(self) -> dict[str, np.ndarray]:
         """Arrays for saving (``np.savez``); inverse of :meth:`from_arrays`."""
         out = {k: getattr(self, k) for k in ("vertices", "faces", "normals", "uv", "face_uv",
@@ -289,3 +300,31 @@ def _check_shape(name: str, arr, shape: tuple) -> None:
     if not ok:
         want = "(" + ", ".join("N" if s is None else str(s) for s in shape) + ")"
         raise ValueError(f"BodyPart.{name} must have shape {want}, got {tuple(a.shape)}")
+
+
+def difference(part: BodyPart, reference: BodyPart, atol: float = 1e-6) -> str:
+    """What sets ``part`` apart from ``reference``, in words (``""`` when they are the same mesh,
+    vertices equal as ``np.allclose`` with ``atol`` m has it): the name, the vertex count, the
+    faces, or how far the vertices lie apart and which body each came from."""
+    def where(p):
+        src = p.source or {}
+        ph = (src.get("options") or {}).get("phenotype")
+        body = src.get("body", "an unknown body")
+        return f"{body} {ph}" if ph else str(body)
+
+    if part.name != reference.name:
+        return f"the scene's part is {part.name!r}, the model's {reference.name!r}"
+    if part.n_vertices != reference.n_vertices:
+        return (f"the scene's {part.name} has {part.n_vertices} vertices, the model's "
+                f"{reference.n_vertices} (another body model or resolution)")
+    if part.faces.shape != reference.faces.shape or not np.array_equal(part.faces,
+                                                                       reference.faces):
+        return (f"the scene's {part.name} has other faces (another mesh of {part.n_vertices} "
+                "vertices)")
+    if not np.allclose(part.vertices, reference.vertices, atol=atol):
+        gap = float(np.abs(part.vertices - reference.vertices).max())
+        a, b = where(part), where(reference)
+        body = f" (the scene's from {a}, the model's from {b})" if a != b else ""
+        return (f"the same {part.n_vertices}-vertex {part.name} mesh, but its vertices lie up to "
+                f"{gap * 1e3:.3g} mm from the model's: another body shape{body}")
+    return ""

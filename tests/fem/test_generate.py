@@ -11,9 +11,11 @@ import numpy as np
 import pytest
 import yaml
 
-from fem.generate import generate, load_config, plan, split_of
+from fem.config import read_config
+from fem.generate import generate
+from fem.placements import plan, split_of
 from fem.simulate import simulate
-from stmpl.data import Dataset
+from stmpl.dataset import Dataset
 
 
 def _cfg(**over):
@@ -44,21 +46,21 @@ def _same(a, b):
 
 
 def test_config_is_checked():
-    with pytest.raises(ValueError, match="unknown config keys"):
-        load_config({**_cfg(), "forcez": [1.0]})
+    with pytest.raises(ValueError, match="unknown dataset config keys"):
+        read_config({**_cfg(), "forcez": [1.0]})
     with pytest.raises(ValueError, match="thickness_mm"):
-        load_config(_cfg(thickness_mm=[50.0]))
+        read_config(_cfg(thickness_mm=[50.0]))
     with pytest.raises(ValueError, match="forces"):
-        load_config(_cfg(forces=[1.0, 0.5]))
+        read_config(_cfg(forces=[1.0, 0.5]))
     with pytest.raises(ValueError, match="placement kind"):
-        load_config(_cfg(placements={"poke": {}}))
+        read_config(_cfg(placements={"poke": {}}))
     with pytest.raises(ValueError, match="placements.disk takes keys"):
-        load_config(_cfg(placements={"disk": {"centers": 3}}))
+        read_config(_cfg(placements={"disk": {"centers": 3}}))
     with pytest.raises(ValueError, match="resolution"):
-        load_config(_cfg(resolution="ultra"))
+        read_config(_cfg(resolution="ultra"))
     with pytest.raises(FileNotFoundError):
-        load_config("no/such/config.yaml")
-    cfg = load_config(_cfg(placements={"band": {"at": [1.5]}}))
+        read_config("no/such/config.yaml")
+    cfg = read_config(_cfg(placements={"band": {"at": [1.5]}}))
     with pytest.raises(ValueError, match="impossible load placement band"):
         plan(cfg)
 
@@ -72,7 +74,7 @@ def test_splits_go_by_placement():
 
 def test_serial_run_card_and_samples(tmp_path):
     card = generate(_cfg(), tmp_path / "d", progress=False)
-    p = plan(load_config(_cfg()))
+    p = plan(read_config(_cfg()))
     assert card["placements"] == 5 and card["tasks"] == 10
     assert card["samples"] + card["failures"] == card["attempted"] == 30
     assert card["samples"] == sum(card["samples_per_split"].values())
@@ -86,7 +88,7 @@ def test_serial_run_card_and_samples(tmp_path):
     # a stored sample is the solver's answer for that load
     i = [j for j, k in enumerate(a["kind"]) if k == "disk"][2]
     pl = p.placements[a["placement"][i]]
-    from fem.generate import make_load
+    from fem.placements import make_load
 
     load = make_load(ds.part, pl)
     th = a["thickness"][i].astype(float)
@@ -129,10 +131,13 @@ def test_a_killed_run_resumes_without_loss_or_duplicates(tmp_path):
     (out / "shard-00009.h5.x.tmp").write_bytes(b"half a file")  # a torn write
     generate(path, out, progress=False)
     assert not list(out.glob("*.tmp"))
-    generate(cfg, tmp_path / "whole", progress=False)
+    resumed = json.loads((out / "card.json").read_text())
+    whole = generate(cfg, tmp_path / "whole", progress=False)
     a, b = _samples(out), _samples(tmp_path / "whole")
     assert len(np.unique(np.stack([a["task"], a["total"]], 1), axis=0)) == len(a["task"])
     _same(a, b)
+    if all(np.array_equal(a[k], b[k]) for k in a):   # bit-identical samples: one hash
+        assert resumed["hash"] == whole["hash"]
     # the same folder refuses a different config
     with pytest.raises(ValueError, match="different config"):
         generate(_cfg(forces=[0.05]), out, progress=False)
@@ -148,17 +153,40 @@ def test_dask_local_cluster_with_two_workers_matches_serial(tmp_path):
 
 
 def test_dataset_errors_name_the_problem(tmp_path):
+    import h5py
+
     with pytest.raises(FileNotFoundError, match="card.json"):
         Dataset(tmp_path)
     generate(_cfg(thickness_mm=[7.5], forces=[0.05]), tmp_path / "d", progress=False)
-    shard = sorted((tmp_path / "d").glob("shard-*.h5"))[0]
-    data = bytearray(shard.read_bytes())
-    data[-100] ^= 0xFF
-    shard.write_bytes(bytes(data))
-    with pytest.raises(ValueError, match="do not match"):
-        Dataset(tmp_path / "d").verify()
+    Dataset(tmp_path / "d").verify()
     with pytest.raises(ValueError, match="split must be"):
         Dataset(tmp_path / "d").arrays("training")
+    first, second = sorted((tmp_path / "d").glob("shard-*.h5"))[:2]
+    original = first.read_bytes()
+    with h5py.File(first, "r+") as h:           # an edited sample: its file still reads
+        h["displacement"][0, 0, 0] = 2 * h["displacement"][0, 0, 0] + 1e-6
+    with pytest.raises(ValueError, match=f"{first.name} does not match card.json"):
+        Dataset(tmp_path / "d").arrays("train")
+    first.write_bytes(original)
+    second.write_bytes(second.read_bytes()[:200])  # a truncated shard
+    with pytest.raises(ValueError, match=f"{second.name} is corrupt"):
+        Dataset(tmp_path / "d").verify()
+
+
+def test_the_hash_is_of_the_content(tmp_path):
+    """The same samples give the same hash (timings differ between runs); an edited card or part
+    does not pass."""
+    cfg = _cfg(thickness_mm=[7.5], forces=[0.05, 0.1])
+    a = generate(cfg, tmp_path / "a", progress=False)
+    b = generate({**cfg, "parallel": {"backend": "serial", "workers": 1}, "name": "other"},
+                 tmp_path / "b", progress=False)
+    assert a["timing"]["solve_seconds_total"] != b["timing"]["solve_seconds_total"]
+    assert a["hash"] == b["hash"] and len(a["hash"]) == 16
+    card = json.loads((tmp_path / "b" / "card.json").read_text())
+    card["hash"] = "0" * 16
+    (tmp_path / "b" / "card.json").write_text(json.dumps(card))
+    with pytest.raises(ValueError, match="does not match card.json"):
+        Dataset(tmp_path / "b").arrays()
 
 
 def test_cli_generate_stops_early_and_finishes(tmp_path, capsys):

@@ -2,7 +2,6 @@ import numpy as np
 import pytest
 
 from fem.mesh import check_surface, midpoint_subdivide, shell_mesh, tet_volumes
-from stmpl.body.part import BodyPart
 from stmpl.body.primitives import sheet, tube
 
 

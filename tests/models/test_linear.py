@@ -14,7 +14,7 @@ from stmpl.scene import Scene
 
 @pytest.fixture(scope="module")
 def ds(tiny_dataset):
-    from stmpl.data import Dataset
+    from stmpl.dataset import Dataset
 
     return Dataset(tiny_dataset)
 
@@ -75,7 +75,7 @@ def test_linear_matches_light_fem_loads(ds, lin):
 
 def test_checkpoint_carries_the_operator(ds, lin, tmp_path):
     path = lin.save(tmp_path / "lin.safetensors")
-    back = predictor.load(path)
+    back = predictor.read(path)
     assert back.n_parameters() == 0 and back.model.index.shape == lin.model.index.shape
     s = scenes_of(ds, "test", limit=2)[0]
     for a, b in zip(lin.predict(s), back.predict(s)):

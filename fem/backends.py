@@ -1,0 +1,68 @@
+"""Where shards are solved: ``serial`` (this process), ``processes`` (worker processes on this
+machine) or ``dask`` (a ``LocalCluster`` by default, or a running scheduler's address to spread
+over machines). Each yields solved shards as they finish.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+
+from fem.placements import Plan
+from fem.worker import payload, solve_shard
+
+
+def _watch_parent(parent: int) -> None:
+    """Worker initialiser: leave when the generating process is gone (killed), rather than
+    finish orphaned shards that nobody will write."""
+    import threading
+
+    def watch():
+        while True:
+            time.sleep(0.5)
+            if os.getppid() != parent:
+                os._exit(1)
+
+    threading.Thread(target=watch, daemon=True).start()
+
+
+def run(p: Plan, todo: list[int], par: dict, threads: int):
+    """Yield solved shards as they finish, from the chosen backend."""
+    if not todo:
+        return
+    if par["backend"] == "serial" or (par["backend"] == "processes" and par["workers"] == 1):
+        for k in todo:
+            yield solve_shard(payload(p, k, None))
+        return
+    if par["backend"] == "processes":
+        import concurrent.futures as cf
+        import multiprocessing as mp
+
+        with cf.ProcessPoolExecutor(par["workers"], mp_context=mp.get_context("spawn"),
+                                    initializer=_watch_parent, initargs=(os.getpid(),)) as ex:
+            futs = [ex.submit(solve_shard, payload(p, k, threads)) for k in todo]
+            try:
+                for f in cf.as_completed(futs):
+                    yield f.result()
+            except BaseException:
+                for f in futs:
+                    f.cancel()
+                raise
+        return
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    cluster = None
+    if par["scheduler"]:
+        client = Client(par["scheduler"])
+    else:
+        cluster = LocalCluster(n_workers=par["workers"], threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        client = Client(cluster)
+    try:
+        futs = [client.submit(solve_shard, payload(p, k, threads), pure=False) for k in todo]
+        for f in as_completed(futs):
+            yield f.result()
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()

@@ -1,0 +1,112 @@
+"""The dataset config (``configs/data/*.yaml``): its keys, their defaults and checks, and the
+hash of what decides the samples. Read with :func:`read_config`; unknown keys are errors.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+
+import numpy as np
+
+from stmpl import config as checked
+from stmpl.body.spec import check_spec
+
+DEFAULTS = {
+    "name": None,
+    "body": {"model": "anny"},
+    "part": "left_arm",
+    "thickness_mm": [5.0, 7.5, 10.0],
+    "material": {"name": "neo_hookean", "E": 1000.0, "nu": 0.4},
+    "resolution": "reference",
+    "forces": [0.25, 0.5, 0.75, 1.0],
+    "max_pressure": 2000.0,
+    "placements": {},
+    "splits": [0.8, 0.1, 0.1],
+    "seed": 0,
+    "shard_tasks": 4,
+    "solver": {},
+    "parallel": {"backend": "processes", "workers": 2, "scheduler": None},
+}
+PLACEMENT_KEYS = {
+    "disk": {"centres", "radii"},
+    "ellipse": {"centres", "semi_axes", "angles"},
+    "seam_disk": {"at", "radii"},
+    "band": {"at", "widths"},
+    "letter": {"chars", "uv", "heights", "strokes", "angles"},
+}
+BACKENDS = ("serial", "processes", "dask")
+
+
+def read_config(source) -> dict:
+    """A checked, completed dataset config from a YAML path or a dict."""
+    cfg = checked.read(source, DEFAULTS, "dataset config", merge=("parallel",), name="dataset")
+    check(cfg)
+    return cfg
+
+
+def _numbers(values, name: str) -> np.ndarray:
+    """A 1-D float array of ``values`` (a non-empty list of numbers, no bools)."""
+    if not isinstance(values, (list, tuple)) or not values or any(
+            isinstance(x, bool) or not isinstance(x, (int, float)) for x in values):
+        raise ValueError(f"{name} must be a non-empty list of numbers, got {values!r}")
+    return np.asarray(values, dtype=float)
+
+
+def check(cfg: dict) -> None:
+    """Raise ``ValueError`` naming the first key of ``cfg`` that is out of place."""
+    from stmpl.tissue import THICKNESS_RANGE
+
+    check_spec(cfg["body"])
+    if not isinstance(cfg["part"], str):
+        raise ValueError(f"part must be a part name, got {cfg['part']!r}")
+    th = _numbers(cfg["thickness_mm"], "thickness_mm")
+    lo, hi = (1e3 * x for x in THICKNESS_RANGE)
+    if not np.all((th >= lo) & (th <= hi)):
+        raise ValueError(f"thickness_mm must be a list of values in [{lo}, {hi}] mm, got "
+                         f"{cfg['thickness_mm']}")
+    f = _numbers(cfg["forces"], "forces")
+    if not np.all(np.isfinite(f)) or f.min() <= 0 or np.any(np.diff(f) <= 0):
+        raise ValueError(f"forces must be a rising list of totals > 0 N, got {cfg['forces']}")
+    checked.number(cfg["max_pressure"], "max_pressure", 0, low_open=True, unit="Pa")
+    pl = cfg["placements"]
+    if not isinstance(pl, dict) or not pl:
+        raise ValueError("placements must name at least one load kind: "
+                         f"{sorted(PLACEMENT_KEYS)}")
+    for kind, spec in pl.items():
+        if kind not in PLACEMENT_KEYS:
+            raise ValueError(f"unknown placement kind {kind!r}; use {sorted(PLACEMENT_KEYS)}")
+        if not isinstance(spec, dict) or set(spec) - PLACEMENT_KEYS[kind]:
+            raise ValueError(f"placements.{kind} takes keys {sorted(PLACEMENT_KEYS[kind])}, "
+                             f"got {spec!r}")
+        if "centres" in spec:
+            checked.integer(spec["centres"], f"placements.{kind}.centres", 1)
+    s = _numbers(cfg["splits"], "splits")
+    if s.shape != (3,) or s.min() < 0 or abs(s.sum() - 1) > 1e-9:
+        raise ValueError(f"splits must be three shares (train, val, test) summing to 1, got "
+                         f"{cfg['splits']}")
+    checked.integer(cfg["seed"], "seed", 0)
+    checked.integer(cfg["shard_tasks"], "shard_tasks", 1)
+    par = cfg["parallel"]
+    if not isinstance(par, dict) or set(par) - set(DEFAULTS["parallel"]):
+        raise ValueError(f"parallel takes keys {sorted(DEFAULTS['parallel'])}, got {par!r}")
+    checked.one_of(par["backend"], "parallel.backend", BACKENDS)
+    checked.integer(par["workers"], "parallel.workers", 1)
+    if not isinstance(cfg["material"], dict) or not isinstance(cfg["solver"], dict):
+        raise ValueError("material and solver must be mappings")
+    from fem.material import material
+    from fem.simulate import resolution
+    from fem.solver import SolverOptions
+
+    for key, make in (("material", material), ("solver", SolverOptions)):
+        try:
+            make(**cfg[key])
+        except TypeError as e:
+            raise ValueError(f"{key}: {e}") from e
+    resolution(cfg["resolution"])
+
+
+def config_hash(cfg: dict) -> str:
+    """Hash of everything that decides the samples (not how they are computed in parallel)."""
+    key = {k: v for k, v in cfg.items() if k not in ("parallel", "name")}
+    return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]

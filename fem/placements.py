@@ -1,0 +1,124 @@
+"""What a dataset config asks to solve: load placements on the part (spread evenly, built once
+and checked before any solving), their split (train / val / test by placement) and the tasks
+(one placement at one thickness, solved by continuation over the force levels).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+
+import numpy as np
+
+from stmpl.body.part import BodyPart
+from stmpl.body.spec import part_from_spec
+
+
+def farthest_points(part: BodyPart, count: int) -> np.ndarray:
+    """``count`` vertex indices spread evenly over the part (farthest-point sampling from the
+    vertex nearest the centroid; deterministic)."""
+    if count > part.n_vertices:
+        raise ValueError(f"{count} centres asked for on {part.name}, which has only "
+                         f"{part.n_vertices} vertices (each centre is a distinct vertex)")
+    x = part.vertices
+    first = int(np.argmin(np.linalg.norm(x - x.mean(0), axis=1)))
+    out, d = [first], np.linalg.norm(x - x[first], axis=1)
+    for _ in range(count - 1):
+        nxt = int(np.argmax(d))
+        out.append(nxt)
+        d = np.minimum(d, np.linalg.norm(x - x[nxt], axis=1))
+    return np.array(out[:count])
+
+
+def placements(cfg: dict, part: BodyPart) -> list[dict]:
+    """Every load placement of the config as ``{"kind", "params"}`` (params for the
+    :mod:`stmpl.loads` primitive, total force left out), kinds in alphabetical order."""
+    out = []
+    for kind in sorted(cfg["placements"]):  # canonical order: a YAML round trip keeps task ids
+        spec = cfg["placements"][kind]
+        if kind in ("disk", "ellipse"):
+            centres = [int(v) for v in farthest_points(part, int(spec.get("centres", 8)))]
+        if kind == "disk":
+            out += [{"kind": kind, "params": {"at": c, "radius": float(r)}}
+                    for c in centres for r in spec.get("radii", [0.02])]
+        elif kind == "ellipse":
+            out += [{"kind": kind, "params": {"at": c, "semi_axes": [float(a), float(b)],
+                                              "angle": float(t)}}
+                    for c in centres for a, b in spec.get("semi_axes", [[0.03, 0.015]])
+                    for t in spec.get("angles", [0.0])]
+        elif kind == "seam_disk":
+            out += [{"kind": kind, "params": {"at": float(a), "radius": float(r)}}
+                    for a in spec.get("at", [0.5]) for r in spec.get("radii", [0.02])]
+        elif kind == "band":
+            out += [{"kind": kind, "params": {"at": float(a), "width": float(w)}}
+                    for a in spec.get("at", [0.5]) for w in spec.get("widths", [0.03])]
+        elif kind == "letter":
+            out += [{"kind": kind, "params": {"char": str(c), "uv": [float(u), float(v)],
+                                              "height": float(h), "stroke": float(s),
+                                              "angle": float(t)}}
+                    for c in spec.get("chars", ["A"]) for u, v in spec.get("uv", [[0.5, 0.5]])
+                    for h in spec.get("heights", [0.08]) for s in spec.get("strokes", [0.01])
+                    for t in spec.get("angles", [0.0])]
+    return out
+
+
+def make_load(part: BodyPart, placement: dict, total: float = 1.0):
+    """The :class:`~stmpl.loads.Load` of a placement; names the placement if it is impossible."""
+    from stmpl import loads
+
+    params = dict(placement["params"])
+    if "uv" in params:
+        params["uv"] = tuple(params["uv"])
+    try:
+        return loads.PRIMITIVES[placement["kind"]](part, total=total, **params)
+    except (ValueError, IndexError) as e:
+        raise ValueError(f"impossible load placement {placement['kind']} "
+                         f"{json.dumps(placement['params'])}: {e}") from e
+
+
+def split_of(n_placements: int, shares, seed: int) -> np.ndarray:
+    """``(P,)`` split index (0 train, 1 val, 2 test) per placement, shuffled with ``seed``."""
+    order = np.random.default_rng(seed).permutation(n_placements)
+    def count(share):  # every split with a share gets a placement once there are three
+        n = int(round(share * n_placements))
+        return max(n, 1) if share > 0 and n_placements >= 3 else n
+
+    n_val, n_test = count(shares[1]), count(shares[2])
+    n_train = n_placements - n_val - n_test
+    out = np.empty(n_placements, dtype=np.int8)
+    out[order[:n_train]] = 0
+    out[order[n_train:n_train + n_val]] = 1
+    out[order[n_train + n_val:]] = 2
+    return out
+
+
+@dataclass(frozen=True)
+class Plan:
+    """All tasks of a config: ``tasks[i] = (placement index, thickness index)``."""
+
+    cfg: dict
+    part: BodyPart
+    placements: list
+    split: np.ndarray
+    tasks: list
+
+    @property
+    def n_shards(self) -> int:
+        return -(-len(self.tasks) // self.cfg["shard_tasks"])
+
+    def shard_tasks(self, k: int) -> list[int]:
+        n = self.cfg["shard_tasks"]
+        return list(range(k * n, min((k + 1) * n, len(self.tasks))))
+
+
+def plan(cfg: dict, part: BodyPart | None = None) -> Plan:
+    """Expand a config into tasks; every placement is built once here so a bad one fails now,
+    before any solving."""
+    part = part if part is not None else part_from_spec(cfg["body"], cfg["part"])
+    pls = placements(cfg, part)
+    for p in pls:
+        ld = make_load(part, p)
+        p["vertices"], p["area"] = int(ld.count), float(ld.area)
+    split = split_of(len(pls), cfg["splits"], cfg["seed"])
+    tasks = [(i, j) for i in range(len(pls)) for j in range(len(cfg["thickness_mm"]))]
+    return Plan(cfg, part, pls, split, tasks)

@@ -1,0 +1,80 @@
+"""The ground truth as a predictor: the tissue-shell FEM behind :class:`stmpl.predictor.Predictor`
+(registered as ``fem`` through the ``stmpl.predictors`` entry point)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from fem.mesh import ShellMesh
+from fem.simulate import resolution, simulate
+from fem.solver import Solution
+from stmpl.predictor import BasePredictor, PredictionFailed
+from stmpl.scene import Scene
+
+
+class FEMFailed(PredictionFailed):
+    """The FEM could not solve a scene; the message says why."""
+
+
+@dataclass(frozen=True)
+class Shell:
+    """The last solved tissue shell: its mesh and the solution per continuation level (for
+    pictures of the section and ParaView files)."""
+
+    mesh: ShellMesh
+    solutions: list[Solution]
+
+    @property
+    def displacement(self) -> np.ndarray:
+        """``(M, 3)`` displacement of the mesh nodes at the last level, m."""
+        return self.solutions[-1].displacement
+
+
+class FEMPredictor(BasePredictor):
+    """The tissue-shell FEM (see :mod:`fem`) as a predictor.
+
+    Args:
+        res: mesh resolution name or :class:`fem.simulate.Resolution` (default the reference).
+        levels: continuation levels from rest to each scene's force.
+        material, options: passed to the solver.
+
+    A failed solve raises :class:`FEMFailed` (never a displacement). ``Deformation.info`` holds
+    the last level's diagnostics and ``levels``, one diagnostics dict per continuation level;
+    :attr:`last_shell` keeps the last scene's mesh and solutions.
+    """
+
+    name = "fem"
+
+    def __init__(self, res="reference", levels: int = 1, material=None, options=None):
+        self.res = resolution(res)
+        if isinstance(levels, bool) or int(levels) != levels or levels < 1:
+            raise ValueError(f"levels must be an integer >= 1, got {levels!r}")
+        self.levels, self.material, self.options = int(levels), material, options
+        self.last_shell: Shell | None = None
+        self._last: dict = {}
+
+    def predict_batch(self, scenes: list[Scene]) -> list[np.ndarray]:
+        out = []
+        for s in scenes:
+            total = float(s.force.sum())
+            if total <= 0:
+                out.append(np.zeros((s.part.n_vertices, 3)))
+                self._last[id(s)] = {"fem": "no load"}
+                continue
+            totals = total * np.arange(1, self.levels + 1) / self.levels
+            mesh, sols = simulate(s.part, s.thickness, s.force, totals, self.res, self.material,
+                                  self.options)
+            sol = sols[-1]
+            if not sol.ok:
+                raise FEMFailed(f"the FEM solve failed at {sol.total_force:.3g} N: {sol.reason}")
+            self.last_shell = Shell(mesh, sols)
+            self._last[id(s)] = {**{k: v for k, v in sol.diagnostics().items() if k != "reason"},
+                                 "levels": [x.diagnostics() for x in sols],
+                                 "mesh": {"nodes": mesh.n_nodes, "tets": int(len(mesh.tets))}}
+            out.append(sol.part_displacement(mesh))
+        return out
+
+    def info(self, scene: Scene) -> dict:
+        return {"resolution": self.res.to_dict(), **self._last.pop(id(scene), {})}

@@ -1,0 +1,94 @@
+"""One shard's work, done in a worker process (or a Dask worker on another machine): solve its
+tasks by continuation over the force levels and return the samples and the failures as plain
+arrays. Workers get the body part in their payload, so they need no body model and no shared
+disk.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+
+import numpy as np
+
+from fem.placements import Plan, make_load
+from stmpl.body.part import BodyPart
+
+
+def solve_shard(payload: dict) -> dict:
+    """Solve the tasks of one shard (runs in a worker). Returns per-sample arrays, failures and
+    timings; plain NumPy and JSON types only."""
+    threads = payload.get("threads")
+    if threads:
+        for var in ("MKL_NUM_THREADS", "OMP_NUM_THREADS"):
+            os.environ.setdefault(var, str(threads))
+    from fem.material import material
+    from fem.simulate import simulate
+    from fem.solver import SolverOptions
+    from stmpl.dataset import DOUBLES, FLOATS, INTS, STRINGS
+
+    t0 = time.perf_counter()
+    cfg = payload["cfg"]
+    part = BodyPart.from_arrays(payload["part_name"], payload["part_arrays"],
+                                payload["part_source"])
+    mat = material(**cfg["material"])
+    opts = SolverOptions(**cfg["solver"])
+    forces = np.asarray(cfg["forces"], dtype=float)
+    rec = {k: [] for k in FLOATS + INTS + DOUBLES + STRINGS}
+    failures = []
+    for task, (pi, ti), placement, split in payload["tasks"]:
+        th_mm = cfg["thickness_mm"][ti]
+        load = make_load(part, placement)
+        thickness = np.full(part.n_vertices, th_mm * 1e-3)
+        pressure = forces / load.area
+        levels = forces[pressure <= cfg["max_pressure"]]
+        for f in forces[pressure > cfg["max_pressure"]]:
+            failures.append({"task": task, "placement": pi, "thickness_mm": th_mm,
+                             "total": float(f), "reason": f"over max_pressure: "
+                             f"{f / load.area:.0f} Pa > {cfg['max_pressure']:.0f} Pa"})
+        if len(levels) == 0:
+            continue
+        try:
+            mesh, sols = simulate(part, thickness, load.force, levels, cfg["resolution"], mat,
+                                  opts)
+        except ValueError as e:  # a shell that cannot be meshed (folds) is a failure too
+            for f in levels:
+                failures.append({"task": task, "placement": pi, "thickness_mm": th_mm,
+                                 "total": float(f), "reason": f"mesh: {e}"})
+            continue
+        for f, s in zip(levels, sols):
+            if not s.ok:
+                failures.append({"task": task, "placement": pi, "thickness_mm": th_mm,
+                                 "total": float(f), "reason": s.reason})
+                continue
+            rec["task"].append(task)
+            rec["placement"].append(pi)
+            rec["thickness_level"].append(ti)
+            rec["thickness"].append(thickness.astype(np.float32))
+            rec["force"].append((load.force * f).astype(np.float32))
+            rec["displacement"].append(s.part_displacement(mesh).astype(np.float32))
+            rec["total"].append(float(f))
+            rec["split"].append(int(split))
+            rec["kind"].append(placement["kind"])
+            rec["params"].append(json.dumps(placement["params"]))
+            rec["iterations"].append(s.iterations)
+            rec["residual"].append(s.residual)
+            rec["solve_time"].append(s.time)
+            rec["min_det_F"].append(s.min_det_F)
+            rec["max_compression"].append(s.max_compression)
+    return {"shard": payload["shard"], "records": rec, "failures": failures,
+            "tasks": [t[0] for t in payload["tasks"]], "wall": time.perf_counter() - t0,
+            "pid": os.getpid()}
+
+
+def payload(p: Plan, k: int, threads: int | None) -> dict:
+    """What a worker needs to solve shard ``k`` of plan ``p`` (plain, picklable data)."""
+    tasks = []
+    for t in p.shard_tasks(k):
+        pi, ti = p.tasks[t]
+        pl = {"kind": p.placements[pi]["kind"], "params": p.placements[pi]["params"]}
+        tasks.append((t, (pi, ti), pl, int(p.split[pi])))
+    return {"shard": k, "cfg": p.cfg, "part_name": p.part.name,
+            "part_arrays": p.part.arrays(), "part_source": p.part.source, "tasks": tasks,
+            "threads": threads}

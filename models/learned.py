@@ -1,0 +1,181 @@
+"""The machinery every learned predictor shares: the base class (options, loss, forward in
+normalised units, prediction in batches), the losses, and checkpoint writing and reading. The
+models (``models/<kind>/model.py``) implement only their network and its inputs.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from models.features import MIN_TOTAL_N, total_force
+from stmpl.predictor import BasePredictor
+
+DISP_SCALE_MM = 10.0
+"""Default displacement normalisation, mm: [-10, 10] mm maps to [-1, 1]. The paper's 30 mm
+suits its 1..10 N; the forces E = 1 kPa tissue can carry give at most a few mm, and a UNet's
+tanh output squeezed into 1/10 of its range learns the far field poorly. Every learned model
+takes it as the option ``disp_scale_mm``; the checkpoint keeps it."""
+
+
+LOSSES = ("mse", "relative")
+LOSS_EPS = 1e-6
+"""Regularises the ``relative`` loss's norms (units of :meth:`LearnedPredictor.raw`, so about
+1e-6 of the full scale, well under any error that counts)."""
+
+
+def relative_loss(pred, target):
+    """Mean over samples of ``mean_i |pred_i - target_i| / max_i |target_i|`` for ``(B, N, 3)``
+    tensors: the relative MEE, smooth at zero error (``LOSS_EPS``)."""
+    import torch
+
+    norm = torch.sqrt(((pred - target) ** 2).sum(-1) + LOSS_EPS ** 2)      # (B, N)
+    peak = target.norm(dim=-1).amax(-1)                                    # (B,)
+    return (norm.mean(-1) / (peak + LOSS_EPS)).mean()
+
+
+def torch_device(name):
+    """``torch.device(name)`` if this machine has it; else ``ValueError`` naming it."""
+    import torch
+
+    try:
+        dev = torch.device(name)
+    except (RuntimeError, TypeError) as e:
+        raise ValueError(f"unknown device {name!r}; use cpu, cuda, cuda:N or mps") from e
+    if dev.type == "cuda" and not torch.cuda.is_available():
+        raise ValueError(f"device {name} is not available: this machine has no CUDA")
+    return dev
+
+
+class LearnedPredictor(BasePredictor):
+    """A predictor with a torch model trained on FEM data, for one body part.
+
+    Subclasses set ``kind`` and implement :meth:`build_model` and :meth:`raw`; they may
+    override :meth:`loss`. With the option ``per_newton`` the network predicts the displacement
+    per newton of the scene's total force and :meth:`forward` multiplies it back. A checkpoint
+    stores the model's tensors and the part's arrays, so it rebuilds the predictor with nothing
+    else.
+    """
+
+    defaults: dict = {}
+
+    def __init__(self, part, config: dict | None = None, device: str = "cpu"):
+        self.part = part
+        self.config = self.options(config)
+        self.per_newton = bool(self.config.get("per_newton", False))
+        self.scale = float(self.config["disp_scale_mm"]) * 1e-3
+        self.device = torch_device(device)
+        self.model = self.build_model().to(self.device)
+        self.meta: dict = {}
+
+    @classmethod
+    def options(cls, config: dict | None = None) -> dict:
+        """The model options ``config`` over the defaults, checked (unknown keys, the loss, the
+        displacement scale) without building anything; raises ``ValueError``."""
+        allowed = {**cls.defaults, "disp_scale_mm": DISP_SCALE_MM}
+        unknown = set(config or {}) - set(allowed)
+        if unknown:
+            raise ValueError(f"unknown {cls.name} model options {sorted(unknown)}; allowed: "
+                             f"{sorted(allowed)}")
+        out = {**allowed, **(config or {})}
+        if out.get("loss", "mse") not in LOSSES:
+            raise ValueError(f"loss must be one of {LOSSES}, got {out['loss']!r}")
+        if not float(out["disp_scale_mm"]) > 0:
+            raise ValueError(f"disp_scale_mm must be > 0, got {out['disp_scale_mm']}")
+        return out
+
+    # -- to implement
+    def build_model(self):
+        raise NotImplementedError
+
+    def raw(self, thickness, force):
+        """The network's ``(B, N, 3)`` output from ``thickness`` ``(B, N)`` (m) and ``force``
+        ``(B, N)`` (N), torch tensors on ``self.device``: the displacement in units of
+        ``self.scale`` (m), or with ``per_newton`` in units of ``self.scale`` per newton of
+        the scene's total force."""
+        raise NotImplementedError
+
+    def forward(self, thickness, force):
+        """``(B, N, 3)`` displacement in units of ``self.scale`` (m)."""
+        return self.denormalised(self.raw(thickness, force), force)
+
+    def denormalised(self, r, force):
+        """Network output ``(B, ..., 3)`` in the units of :meth:`raw` -> units of ``self.scale``
+        (the inverse of :meth:`normalised` without the scale)."""
+        return r * total_force(force)[:, None, None] if self.per_newton else r
+
+    def normalised(self, target, force):
+        """The target ``(B, N, 3)`` (m) in the units of :meth:`raw`."""
+        t = target / self.scale
+        if self.per_newton:
+            t = t / total_force(force).clamp_min(MIN_TOTAL_N)[:, None, None]
+        return t
+
+    def loss(self, thickness, force, target):
+        """Training loss for a batch; ``target`` ``(B, N, 3)`` in m. Option ``loss``: ``mse``
+        (default, the paper's L2), the mean squared error over the vertices of :meth:`raw`
+        against the normalised target (with ``per_newton`` each sample's error counts per
+        newton, so a light press weighs as much as a heavy one); ``relative``, each sample's
+        mean Euclidean error over its peak displacement (the relative MEE the targets use)."""
+        pred, tgt = self.raw(thickness, force), self.normalised(target, force)
+        if self.config.get("loss", "mse") == "mse":
+            return ((pred - tgt) ** 2).mean()
+        return relative_loss(pred, tgt)
+
+    # -- shared
+    def check(self, scenes) -> None:
+        from stmpl.body.part import difference
+
+        for i, s in enumerate(scenes):
+            why = difference(s.part, self.part)
+            if why:
+                raise ValueError(f"scene {i} is on another body part than this {self.name} "
+                                 f"predictor was trained on: {why}")
+
+    def predict_batch(self, scenes) -> list[np.ndarray]:
+        import torch
+
+        t = torch.tensor(np.stack([s.thickness for s in scenes]), dtype=torch.float32,
+                         device=self.device)
+        f = torch.tensor(np.stack([s.force for s in scenes]), dtype=torch.float32,
+                         device=self.device)
+        self.model.eval()
+        with torch.no_grad():
+            u = self.forward(t, f) * self.scale
+        return list(u.double().cpu().numpy())
+
+    def n_parameters(self) -> int:
+        return sum(p.numel() for p in self.model.parameters())
+
+    def save(self, path, meta: dict | None = None):
+        """Write a checkpoint (``.safetensors`` + sidecar) with ``meta`` (card hash, metrics)."""
+        import torch
+
+        from stmpl import checkpoint
+
+        tensors = {f"model.{k}": v for k, v in self.model.state_dict().items()}
+        for k, v in self.part.arrays().items():
+            tensors[f"part.{k}"] = torch.as_tensor(np.asarray(v))
+        side = {"kind": self.name, "config": self.config, "part": self.part.name,
+                "part_source": self.part.source, "disp_scale_m": self.scale,
+                "parameters": self.n_parameters(), **self.meta, **(meta or {})}
+        return checkpoint.write(path, tensors, side)
+
+    @classmethod
+    def from_checkpoint(cls, path, device: str = "cpu"):
+        from stmpl import checkpoint
+        from stmpl.body.part import BodyPart
+
+        tensors, meta = checkpoint.read(path)
+        if meta["kind"] != cls.name:
+            raise ValueError(f"checkpoint {path} holds a {meta['kind']!r} model, not "
+                             f"{cls.name!r}")
+        arrays = {k[5:]: v.numpy() for k, v in tensors.items() if k.startswith("part.")}
+        part = BodyPart.from_arrays(meta["part"], arrays, meta.get("part_source"))
+        p = cls(part, meta["config"], device=device)
+        state = {k[6:]: v for k, v in tensors.items() if k.startswith("model.")}
+        try:
+            p.model.load_state_dict(state)
+        except RuntimeError as e:
+            raise ValueError(f"checkpoint {path} does not fit its model config: {e}") from e
+        p.meta = {k: v for k, v in meta.items() if k not in ("config", "kind")}
+        return p

@@ -1,0 +1,194 @@
+"""The precomputed linear FEM as a torch module: the compliance operator of the tissue shell
+(:mod:`fem.compliance`), sparse, applied to a load as ``u_i = sum_j G_ij(t_j) F_j``. Computed
+once per body part and FEM set-up at a few thickness levels (cached in stmpl's cache directory)
+and interpolated linearly between them. Used by the ``linear`` predictor and as the prior of the
+GNN and the UV-UNet (:mod:`models.prior`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import pathlib
+import time
+import warnings
+
+import numpy as np
+import torch
+from torch import nn
+
+CACHE_VERSION = 1
+
+
+class ComplianceOperator(nn.Module):
+    """``(B, N) x (B, N) -> (B, N, 3)``: thickness (m) and normal force (N) per vertex to the
+    linear displacement (m).
+
+    Buffers: ``levels`` ``(L,)`` thickness levels, m (rising); ``index`` ``(2, nnz)`` pairs
+    ``[i; j]`` (response vertex, loaded vertex); ``values`` ``(L, nnz, 3)`` m/N. Column ``j``
+    takes the thickness at the loaded vertex ``j``, interpolated linearly between levels (exact
+    for a uniform layer)."""
+
+    def __init__(self):
+        super().__init__()
+        self.register_buffer("levels", torch.zeros(0))
+        self.register_buffer("index", torch.zeros(2, 0, dtype=torch.long))
+        self.register_buffer("values", torch.zeros(0, 0, 3))
+
+    def set(self, levels, index, values) -> None:
+        """Install an operator: ``levels`` ``(L,)`` m, ``index`` ``(2, nnz)``, ``values``
+        ``(L, nnz, 3)`` m/N."""
+        levels = torch.as_tensor(levels, dtype=torch.float32).cpu()
+        index = torch.as_tensor(index, dtype=torch.long).cpu()
+        values = torch.as_tensor(values, dtype=torch.float32).cpu()
+        if levels.ndim != 1 or len(levels) == 0 or torch.any(levels[1:] <= levels[:-1]):
+            raise ValueError("levels must be a non-empty rising 1-D array")
+        if index.ndim != 2 or index.shape[0] != 2 or values.shape != (len(levels),
+                                                                     index.shape[1], 3):
+            raise ValueError(f"index (2, nnz) and values (L, nnz, 3) do not fit: "
+                             f"{tuple(index.shape)}, {tuple(values.shape)}")
+        dev = self.levels.device
+        self.levels, self.index, self.values = levels.to(dev), index.to(dev), values.to(dev)
+        self._csr_key = None
+
+    def _load_from_state_dict(self, state_dict, prefix, *args, **kwargs):
+        for name in ("levels", "index", "values"):  # shapes come with the checkpoint
+            if prefix + name in state_dict:
+                setattr(self, name, torch.empty_like(state_dict[prefix + name]))
+        self._csr_key = None
+        super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
+
+    @property
+    def ready(self) -> bool:
+        return len(self.levels) > 0
+
+    def weights(self, thickness: torch.Tensor) -> torch.Tensor:
+        """``(B, N, L)`` interpolation weights of each vertex's thickness over the levels."""
+        if not self.ready:
+            raise RuntimeError("the compliance operator is empty; fit the predictor first")
+        lv = self.levels
+        lo, hi = float(lv[0]), float(lv[-1])
+        tmin, tmax = float(thickness.min()), float(thickness.max())
+        tol = 1e-6 * hi
+        if tmin < lo - tol or tmax > hi + tol:
+            raise ValueError(f"thickness {tmin * 1e3:.3g}..{tmax * 1e3:.3g} mm lies outside the "
+                             f"operator's levels {lo * 1e3:g}..{hi * 1e3:g} mm (the linear FEM "
+                             "was computed there; a linear model with wider levels_mm covers "
+                             "more)")
+        L = len(lv)
+        if L == 1:
+            return torch.ones(*thickness.shape, 1, device=thickness.device)
+        t = thickness.clamp(lo, hi)                  # only rounding (checked above)
+        k = torch.searchsorted(lv, t.contiguous()).clamp(1, L - 1)
+        a = ((t - lv[k - 1]) / (lv[k] - lv[k - 1]))[..., None]
+        w = torch.zeros(*thickness.shape, L, device=thickness.device)
+        w.scatter_(-1, (k - 1)[..., None], 1 - a)
+        w.scatter_add_(-1, k[..., None], a)
+        return w
+
+    def _matrices(self, n: int) -> list:
+        """Per level, the operator as a sparse CSR matrix ``(3 n, n)`` (rows ``3 i + c``), built
+        once per installed operator (:meth:`set` and loading reset them), device and vertex
+        count."""
+        key = (self.values.device, n)
+        if getattr(self, "_csr_key", None) != key:
+            i, j = self.index
+            if self.index.numel() and int(self.index.max()) >= n:
+                raise ValueError(f"the operator covers {int(self.index.max()) + 1} vertices, "
+                                 f"the input {n}")
+            rows = (3 * i[:, None] + torch.arange(3, device=i.device)).reshape(-1)
+            cols = j[:, None].expand(-1, 3).reshape(-1)
+            order = torch.argsort(rows * max(n, 1) + cols)
+            rows, cols = rows[order], cols[order]
+            crow = torch.zeros(3 * n + 1, dtype=torch.long, device=i.device)
+            crow[1:] = torch.cumsum(torch.bincount(rows, minlength=3 * n), 0)
+            with warnings.catch_warnings():  # "sparse CSR support is in beta"
+                warnings.simplefilter("ignore", UserWarning)
+                self._csr = [torch.sparse_csr_tensor(crow, cols, v.reshape(-1)[order],
+                                                     (3 * n, n), check_invariants=False)
+                             for v in self.values]
+            self._csr_key = key
+        return self._csr
+
+    def forward(self, thickness: torch.Tensor, force: torch.Tensor) -> torch.Tensor:
+        B, N = force.shape
+        fw = force[..., None] * self.weights(thickness)                 # (B, N, L)
+        used = torch.nonzero(fw.abs().sum((0, 1))).flatten().tolist()   # levels that carry load
+        u = torch.zeros(3 * N, B, device=force.device, dtype=self.values.dtype)
+        mats = self._matrices(N)
+        for lv in used:
+            u = u + mats[lv] @ fw[..., lv].T.to(self.values.dtype)      # (3N, N) @ (N, B)
+        return u.T.reshape(B, N, 3)
+
+
+def cache_dir() -> pathlib.Path:
+    """Where computed operators are kept: ``compliance/`` in stmpl's cache directory."""
+    from stmpl.body.model import default_cache_dir
+
+    return default_cache_dir() / "compliance"
+
+
+def operator_arrays(part, fem_config: dict, levels_m, tol: float = 1e-3,
+                    progress: bool = True, cache: bool = True) -> dict:
+    """The sparse operator of ``part`` at ``levels_m`` for a dataset's FEM set-up
+    (``fem_config``: its ``material``, ``resolution`` and ``solver`` entries), computed once and
+    cached by content. Returns ``levels``, ``index``, ``values``, ``dropped``, ``seconds``."""
+    from fem.compliance import compliance, sparsify
+    from fem.material import material
+    from fem.solver import SolverOptions
+    from stmpl.files import atomic_savez
+
+    levels = [float(x) for x in levels_m]
+    setup = {k: fem_config.get(k) for k in ("material", "resolution", "solver")}
+    h = hashlib.sha256(json.dumps([CACHE_VERSION, setup, levels, tol], sort_keys=True).encode())
+    for k in ("vertices", "faces"):
+        h.update(np.ascontiguousarray(getattr(part, k)).tobytes())
+    path = cache_dir() / f"{part.name}-{h.hexdigest()[:16]}.npz"
+    if cache and path.is_file():
+        try:
+            with np.load(path) as z:
+                return {k: z[k] for k in z.files}
+        except (OSError, ValueError, KeyError):
+            pass                                      # a broken cache entry is recomputed
+    mat = material(**(setup["material"] or {}))
+    opts = SolverOptions(**(setup["solver"] or {}))
+    res = setup["resolution"] or "reference"
+    n = part.n_vertices
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=n * len(levels), unit="col", desc="compliance operator",
+                   dynamic_ncols=True)
+    t0 = time.perf_counter()
+    G = np.stack([compliance(part, t, res, mat, opts,
+                             progress=bar.update if bar is not None else None)
+                  for t in levels])
+    if bar is not None:
+        bar.close()
+    index, values, dropped = sparsify(G, tol)
+    out = {"levels": np.asarray(levels), "index": index, "values": values.astype(np.float32),
+           "dropped": np.asarray(dropped), "seconds": np.asarray(time.perf_counter() - t0)}
+    if cache:
+        atomic_savez(path, out)
+    return out
+
+
+def fit_operator(part, dataset, config: dict, progress: bool = True) -> dict:
+    """:func:`operator_arrays` for ``dataset``'s part and FEM set-up at the config's
+    ``levels_mm`` (default the dataset's thickness levels) and ``tol``."""
+    cfg = dataset.card["config"]
+    levels = config.get("levels_mm") or cfg["thickness_mm"]
+    return operator_arrays(part, cfg, sorted(float(x) * 1e-3 for x in levels),
+                           float(config.get("tol", 1e-3)), progress)
+
+
+def install(predictor, op: ComplianceOperator, arrays: dict) -> None:
+    """Put :func:`operator_arrays` into ``op`` and record a summary in ``predictor.meta``
+    (levels, pairs kept, their density, the largest dropped entry, the compute time)."""
+    op.set(arrays["levels"], arrays["index"], arrays["values"])
+    n = predictor.part.n_vertices
+    predictor.meta["operator"] = {
+        "levels_mm": [round(float(x) * 1e3, 6) for x in op.levels],
+        "nnz": int(op.index.shape[1]), "density": op.index.shape[1] / (n * n),
+        "dropped": float(arrays["dropped"]), "compute_seconds": float(arrays["seconds"])}

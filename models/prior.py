@@ -1,0 +1,50 @@
+"""The linear FEM as a prior of a learned model (option ``prior``): the model holds a
+:class:`~models.linear.operator.ComplianceOperator` as ``model.prior``, takes its answer as an
+input (:data:`models.features.PRIOR_SCALE`) and learns only the correction to it.
+"""
+
+from __future__ import annotations
+
+from models.linear.operator import fit_operator, install
+
+PRIORS = ("none", "linear")
+CORRECTION_SCALE = 0.05
+"""On top of the prior the network's output is a correction in units of this share of ``raw``'s:
+corrections are a few per cent of the answer, and at full scale Adam's first steps would throw
+the prediction far from the prior before it learned anything."""
+
+
+class LinearPrior:
+    """Mixin for a :class:`LearnedPredictor` with the option ``prior`` (``none`` or ``linear``):
+    with ``linear`` its model holds a :class:`ComplianceOperator` as ``model.prior``,
+    :meth:`fit` computes it from the dataset, :meth:`base` gives its answer and
+    :meth:`corrected` adds the network's correction to it."""
+
+    @classmethod
+    def options(cls, config: dict | None = None) -> dict:
+        out = super().options(config)
+        if out["prior"] not in PRIORS:
+            raise ValueError(f"prior must be one of {PRIORS}, got {out['prior']!r}")
+        return out
+
+    @property
+    def prior(self) -> bool:
+        return self.config["prior"] == "linear"
+
+    def fit(self, dataset, progress: bool = True) -> None:
+        """With ``prior: linear``, compute the linear FEM operator for ``dataset`` (cached)."""
+        if self.prior:
+            install(self, self.model.prior, fit_operator(self.part, dataset, {}, progress))
+
+    def base(self, thickness, force):
+        """The linear FEM's ``(B, N, 3)`` answer in the units of ``raw``, or None without the
+        prior."""
+        if not self.prior:
+            return None
+        return self.normalised(self.model.prior(thickness, force), force)
+
+    @staticmethod
+    def corrected(base, out):
+        """The prior ``base`` plus the network's output ``out`` read as a correction (the
+        output alone without a prior); any ``(..., 3)`` shapes that broadcast."""
+        return out if base is None else base + CORRECTION_SCALE * out

@@ -1,0 +1,58 @@
+"""Bodies and parts from a spec: the mapping a dataset config's ``body`` entry holds and the
+command line builds, ``{"model": "anny" | "smpl" | "tube" | "sheet", ...}``. The one place a
+body is built from a description.
+
+>>> part_from_spec({"model": "anny", "phenotype": {"weight": 0.25}}, "left_arm")
+>>> part_from_spec({"model": "tube", "radius": 0.04, "length": 0.2}, "tube")
+"""
+
+from __future__ import annotations
+
+from stmpl.body.part import BodyPart
+
+KEYS = {"anny": {"model", "phenotype"}, "smpl": {"model", "path", "uv_path", "betas"},
+        "tube": {"model", "radius", "length", "n_around", "n_along", "taper"},
+        "sheet": {"model", "width", "height", "nx", "ny"}}
+"""The keys each body model takes."""
+PRIMITIVES = ("tube", "sheet")
+
+
+def check_spec(spec) -> dict:
+    """``spec`` if it names a known model with only that model's keys; else ``ValueError``."""
+    if not isinstance(spec, dict) or spec.get("model") not in KEYS:
+        raise ValueError(f"body.model must be one of {sorted(KEYS)}, got {spec!r}")
+    bad = set(spec) - KEYS[spec["model"]]
+    if bad:
+        raise ValueError(f"unknown body keys {sorted(bad)} for model {spec['model']!r}; it "
+                         f"takes {sorted(KEYS[spec['model']] - {'model'})}")
+    if spec["model"] == "smpl" and not spec.get("path"):
+        raise ValueError("body.path: an SMPL-format body needs the model file's path")
+    return spec
+
+
+def body_from_spec(spec: dict):
+    """The body model of an ``anny`` or ``smpl`` spec (an analytic tube or sheet is a part, not
+    a body: use :func:`part_from_spec`)."""
+    spec = dict(check_spec(spec))
+    model = spec.pop("model")
+    if model in PRIMITIVES:
+        raise ValueError(f"a {model} is a single part, not a body with parts")
+    if model == "smpl":
+        from stmpl.body.smpl_body import SMPLBody
+
+        return SMPLBody(spec["path"], uv_path=spec.get("uv_path"), betas=spec.get("betas"))
+    from stmpl.body.anny_body import AnnyBody
+
+    return AnnyBody(phenotype=spec.get("phenotype") or {})
+
+
+def part_from_spec(spec: dict, part: str) -> BodyPart:
+    """The part called ``part`` of the body ``spec`` describes (for a tube or sheet, the
+    primitive itself)."""
+    check_spec(spec)
+    if spec["model"] in PRIMITIVES:
+        from stmpl.body import primitives
+
+        kwargs = {k: v for k, v in spec.items() if k != "model"}
+        return getattr(primitives, spec["model"])(**kwargs)
+    return body_from_spec(spec).part(part)
