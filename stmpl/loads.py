@@ -126,7 +126,7 @@ def ellipse(part: BodyPart, at=None, semi_axes=(0.03, 0.015), angle: float = 0.0
     inside = (x / a) ** 2 + (y / b) ** 2 <= 1.0
     return from_vertices(part, np.nonzero(inside)[0], total, "ellipse",
                          {"centre": src.position.tolist(), "semi_axes": [a, b],
-                          "angle": float(angle)})
+                          "angle": float(angle)}, whole=False)
 
 
 def seam_vertices_ordered(part: BodyPart) -> np.ndarray:

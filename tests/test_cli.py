@@ -51,7 +51,8 @@ def test_simulate_command_solves_draws_and_saves(tmp_path, capsys, arm):
 def test_simulate_command_reports_a_failed_solve(capsys, arm):
     assert main(["simulate", "--force", "8", "--levels", "1", "--res", "coarse",
                  "--radius", "10"]) == 2
-    assert "FEM solve failed" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "FEM solve failed" in err and "Traceback" not in err and err.count("\n") == 1
 
 
 def test_predict_command_runs_a_checkpoint_against_the_fem(tmp_path, capsys, arm):
@@ -74,3 +75,44 @@ def test_predict_command_runs_a_checkpoint_against_the_fem(tmp_path, capsys, arm
     np.testing.assert_allclose(d.displacement, p.predict(d.scene).displacement, atol=1e-9)
     assert main(["predict", "--model", "zoo:nope", "--force", "0.1"]) == 2
     assert "zoo" in capsys.readouterr().err  # no zoo there, or no model "nope" in it
+
+
+def _fails(argv, capsys, message):
+    """``stmpl argv`` ends with exit code 2 and one error line naming the problem (argparse
+    adds its usage line before it), no traceback."""
+    try:
+        rc = main(argv)
+    except SystemExit as e:       # argparse's own refusals
+        rc = e.code
+    err = capsys.readouterr().err
+    assert rc == 2, err
+    assert message in err and "Traceback" not in err, err
+    lines = [ln for ln in err.splitlines() if ln.strip() and not ln.startswith(("usage:", " "))]
+    assert len(lines) == 1, err
+
+
+def test_expected_failures_end_in_one_line(tmp_path, capsys, arm):
+    blocker = tmp_path / "a-file"
+    blocker.write_text("not a folder")
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("model: naive\ndata: [x\n")
+    _fails(["scene", "--force", "0.3", "--out", str(blocker / "x.png")], capsys, str(blocker))
+    _fails(["train", str(broken)], capsys, "broken.yaml is not valid YAML")
+    _fails(["train", str(tmp_path / "missing.yaml")], capsys, "training config file not found")
+    _fails(["evaluate", "fem", "--data", str(tmp_path / "nothing")], capsys,
+           "dataset folder not found")
+    _fails(["evaluate", "fem", "--data", str(tmp_path), "--limit", "-1"], capsys,
+           "must be an integer >= 1, got '-1'")
+    _fails(["predict", "--device", "tpu"], capsys, "unknown device 'tpu'")
+    _fails(["predict", "--device", "cuda:7"], capsys, "device cuda:7 is not available")
+    _fails(["predict", "--model", str(tmp_path / "none.safetensors")], capsys,
+           "checkpoint not found")
+    _fails(["scene", "--load", "letter", "--char", "\u6f22"], capsys, "not in the letter font")
+
+
+def test_verbose_shows_the_traceback(tmp_path, capsys):
+    broken = tmp_path / "broken.yaml"
+    broken.write_text("model: naive\ndata: [x\n")
+    assert main(["-v", "train", str(broken)]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" in err and "not valid YAML" in err

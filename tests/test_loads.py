@@ -91,7 +91,25 @@ def test_combine_adds_forces(plate):
     (lambda p: loads.band(p), "no limb axis"),
     (lambda p: loads.letter(p, "AB"), "one visible character"),
     (lambda p: loads.letter(p, "A", uv=(2, 2)), "off the chart"),
+    (lambda p: loads.letter(p, "\u6f22"), "not in the letter font"),   # a glyph it lacks
+    (lambda p: loads.disk(p, [0, 0, 0], 1.0, 1.0), "covers the whole part"),
+    (lambda p: loads.ellipse(p, [0, 0, 0], (1.0, 0.9), 0, 1.0), "covers the whole part"),
 ])
 def test_bad_loads_are_named(plate, call, message):
     with pytest.raises(ValueError, match=message):
         call(plate)
+
+
+def test_a_load_stays_on_its_part(plate):
+    """A load remembers the mesh it was built on: a scene or a sum on another mesh of the same
+    size refuses it instead of pressing the wrong vertices."""
+    from stmpl.scene import Scene
+
+    other = sheet(0.2, 0.2, 81, 81).with_vertices(plate.vertices * 1.5)
+    ld = loads.disk(plate, [0, 0, 0], 0.02, 1.0)
+    assert ld.part_id == plate.fingerprint != other.fingerprint
+    with pytest.raises(ValueError, match="built on another part"):
+        Scene.from_load(other, np.full(other.n_vertices, 0.005), ld)
+    with pytest.raises(ValueError, match="load 0 .* another part"):
+        loads.combine(other, ld)
+    assert Scene.from_load(plate, np.full(plate.n_vertices, 0.005), ld).total_force == 1.0

@@ -78,11 +78,17 @@ def test_fem_predictor_raises_on_failure(ds):
                          options=None).predict(s)
 
 
-def test_learned_predictor_refuses_another_part(ds):
+def test_learned_predictor_refuses_another_part_and_says_what_differs(ds):
     p = predictor.create("naive", ds.part)
     other = tube(n_around=8, n_along=4)
     s = Scene(other, np.full(other.n_vertices, 0.005), np.zeros(other.n_vertices))
-    with pytest.raises(ValueError, match="another body part"):
+    with pytest.raises(ValueError, match=f"another body part.*has {other.n_vertices} vertices, "
+                                         f"the model's {ds.part.n_vertices}"):
+        p.predict(s)
+    wider = ds.part.with_vertices(ds.part.vertices * 1.1)       # same mesh, another shape
+    s = Scene(wider, np.full(wider.n_vertices, 0.005), np.zeros(wider.n_vertices))
+    with pytest.raises(ValueError, match=r"same \d+-vertex tube mesh, but its vertices lie up "
+                                         r"to [\d.]+ mm from the model's"):
         p.predict(s)
 
 

@@ -1,0 +1,63 @@
+"""The dataset config: what it refuses, by name, before anything is solved."""
+
+import pytest
+
+from fem.config import read_config
+from fem.generate import generate
+from fem.placements import plan
+
+
+def _cfg(**over):
+    cfg = {"name": "tiny",
+           "body": {"model": "tube", "radius": 0.04, "length": 0.2, "n_around": 16,
+                    "n_along": 12},
+           "part": "tube", "thickness_mm": [5.0], "forces": [0.05, 0.1],
+           "resolution": {"subdivisions": 1, "layers": 1, "refine_radius": 0.03, "order": 1},
+           "placements": {"disk": {"centres": 4, "radii": [0.02]}},
+           "parallel": {"backend": "serial", "workers": 1}}
+    cfg.update(over)
+    return cfg
+
+
+@pytest.mark.parametrize("over,message", [
+    ({"max_pressure": True}, "max_pressure must be a number > 0 Pa, got True"),
+    ({"max_pressure": -5}, "max_pressure must be a number > 0"),
+    ({"shard_tasks": True}, "shard_tasks must be an integer >= 1"),
+    ({"seed": 1.5}, "seed must be an integer"),
+    ({"forces": [0.1, True]}, "forces must be a non-empty list of numbers"),
+    ({"placements": {"disk": {"centres": 2.5}}}, "placements.disk.centres must be an integer"),
+    ({"parallel": {"backend": "threads"}}, "parallel.backend must be one of"),
+    ({"parallel": {"workers": 0}}, "parallel.workers must be an integer >= 1"),
+    ({"body": {"model": "tube", "radius": 0.04, "colour": "red"}}, "unknown body keys"),
+    ({"material": {"name": "neo_hookean", "G": 3}}, "material:"),
+    ({"solver": {"load": "nodal"}}, "solver:"),
+])
+def test_bad_values_are_named(over, message):
+    with pytest.raises(ValueError, match=message):
+        read_config(_cfg(**over))
+
+
+def test_broken_yaml_is_named(tmp_path):
+    f = tmp_path / "broken.yaml"
+    f.write_text("name: x\nforces: [0.1, 0.2\n")
+    with pytest.raises(ValueError, match="broken.yaml is not valid YAML"):
+        read_config(f)
+    f.write_text("- a\n- list\n")
+    with pytest.raises(ValueError, match="must be a mapping"):
+        read_config(f)
+
+
+def test_more_centres_than_vertices_is_refused():
+    """Farthest-point sampling cannot place more distinct centres than there are vertices (it
+    used to repeat one vertex, and that placement then landed in train, val and test)."""
+    cfg = read_config(_cfg(placements={"disk": {"centres": 16 * 12 + 1, "radii": [0.02]}}))
+    with pytest.raises(ValueError, match="193 centres asked for on tube, which has only 192"):
+        plan(cfg)
+    assert len(plan(read_config(_cfg(placements={"disk": {"centres": 192,
+                                                           "radii": [0.02]}}))).placements) == 192
+
+
+def test_nothing_to_solve_is_refused_before_anything_is_written(tmp_path):
+    with pytest.raises(ValueError, match="nothing to solve: even the smallest force"):
+        generate(_cfg(max_pressure=1.0), tmp_path / "d", progress=False)
+    assert not (tmp_path / "d").exists()
