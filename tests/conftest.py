@@ -56,3 +56,40 @@ def tiny_dataset(tmp_path_factory):
     out = tmp_path_factory.mktemp("data") / "tiny"
     generate(TINY_DATA, out, progress=False)
     return out
+
+
+TINY_MODELS = {"naive": {}, "linear": {}, "uv_unet": {"size": 64, "width": 4, "depth": 3},
+               "gnn": {"latent": 16, "steps": 2}}
+"""Options of tiny, fast versions of each learned model."""
+VARIANTS = {"": {}, "per_newton": {"per_newton": True},
+            "prior": {"per_newton": True, "prior": "linear", "loss": "relative"}}
+
+
+@pytest.fixture(scope="session")
+def ds(tiny_dataset):
+    """The tiny dataset, opened."""
+    from stmpl.dataset import Dataset
+
+    return Dataset(tiny_dataset)
+
+
+@pytest.fixture
+def make():
+    """A factory of seeded tiny predictors on a dataset's part: ``make("gnn/prior", ds)``
+    (``kind/variant``; ``fem`` is a coarse FEM). Models with a computed part are fitted."""
+
+    def _make(name, ds):
+        from stmpl import predictor
+
+        if name == "fem":
+            return predictor.create("fem", res={"subdivisions": 1, "layers": 1, "order": 1})
+        import torch
+
+        torch.manual_seed(0)
+        kind, _, variant = name.partition("/")
+        p = predictor.create(kind, ds.part, {**TINY_MODELS[kind], **VARIANTS[variant]})
+        if hasattr(p, "fit"):
+            p.fit(ds, progress=False)
+        return p
+
+    return _make

@@ -116,3 +116,18 @@ def test_verbose_shows_the_traceback(tmp_path, capsys):
     assert main(["-v", "train", str(broken)]) == 2
     err = capsys.readouterr().err
     assert "Traceback" in err and "not valid YAML" in err
+
+
+def test_a_permission_error_is_one_line(tmp_path, capsys, arm, monkeypatch):
+    """An output the user may not write (simulated: the tests run as root, who may write
+    anywhere) ends in one line naming the file."""
+    import stmpl.viz
+
+    target = tmp_path / "locked.png"
+
+    def refuse(fig, path, dpi):
+        raise PermissionError(13, "Permission denied", str(path))
+
+    monkeypatch.setattr(stmpl.viz, "_save_figure", refuse)
+    _fails(["scene", "--force", "0.3", "--out", str(target)], capsys,
+           f"Permission denied: {target}")

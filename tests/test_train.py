@@ -151,3 +151,18 @@ def test_linear_fem_is_fitted_not_trained(tiny_dataset, tmp_path, monkeypatch):
     again = train({**cfg, "out": str(tmp_path / "lin2")}, progress=False)
     redo = checkpoint.read_sidecar(again)["metrics"]["test"]
     assert redo["mee"] == meta["metrics"]["test"]["mee"]
+
+
+def test_an_edited_dataset_is_refused_before_training(tiny_dataset, tmp_path):
+    """Training checks the shards against the card: an edited sample stops it, by name."""
+    import shutil
+
+    import h5py
+
+    data = tmp_path / "data"
+    shutil.copytree(tiny_dataset, data)
+    shard = sorted(data.glob("shard-*.h5"))[1]
+    with h5py.File(shard, "r+") as h:
+        h["force"][0, :] = 0.0
+    with pytest.raises(ValueError, match=f"{shard.name} does not match card.json"):
+        train(_cfg(data, tmp_path / "run", epochs=1), progress=False)

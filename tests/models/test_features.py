@@ -1,0 +1,28 @@
+"""The inputs both networks take (models/features.py), against their closed forms."""
+
+import numpy as np
+import pytest
+import torch
+
+from models import features
+from stmpl import tissue
+
+
+def test_load_channels():
+    force = torch.tensor([[0.0, 0.2, 0.3], [0.0, 0.0, 0.0]])
+    inv_area = torch.tensor([1.0, 2.0, 4.0])
+    (pressure,) = features.load_channels(force, inv_area, per_newton=False)
+    np.testing.assert_allclose(pressure.numpy(), [[0, 0.4, 1.2], [0, 0, 0]], rtol=1e-6)
+    pattern, total = features.load_channels(force, inv_area, per_newton=True)
+    np.testing.assert_allclose(pattern.numpy(), [[0, 0.8, 2.4], [0, 0, 0]], rtol=1e-6)
+    np.testing.assert_allclose(total.numpy(), [[0.5] * 3, [0.0] * 3], rtol=1e-6)
+    assert torch.all(torch.isfinite(pattern))            # an unloaded scene: zeros, not NaN
+
+
+def test_thickness_over_its_range():
+    lo, hi = tissue.THICKNESS_RANGE
+    t = torch.tensor([[lo, (lo + hi) / 2, hi]], dtype=torch.float32)
+    np.testing.assert_allclose(features.normalised_thickness(t).numpy(), [[0, 0.5, 1]],
+                               atol=1e-6)
+    assert features.normalised_thickness(t).dtype == torch.float32
+    assert features.THICKNESS_SHIFT == lo and features.THICKNESS_SCALE == pytest.approx(hi - lo)

@@ -1,0 +1,50 @@
+"""The learned machinery every model shares: the relative loss and per-newton outputs."""
+
+import numpy as np
+import pytest
+
+from stmpl import predictor
+from stmpl.evaluate import scenes_of
+from stmpl.scene import Scene
+
+TINY_MODELS = {"naive": {}, "linear": {}, "uv_unet": {"size": 64, "width": 4, "depth": 3},
+               "gnn": {"latent": 16, "steps": 2}}
+
+
+def test_relative_loss_is_the_relative_mee(ds):
+    """``loss: relative`` is each sample's mean Euclidean error over its peak: a prediction 10 %
+    too large everywhere scores 0.1 * mean |u| / max |u|; an unknown loss is refused."""
+    import torch
+
+    p = predictor.create("gnn", ds.part, {**TINY_MODELS["gnn"], "per_newton": True,
+                                          "loss": "relative"})
+    scenes, truth = scenes_of(ds, "test", limit=2)
+    t = torch.tensor(np.stack([s.thickness for s in scenes]), dtype=torch.float32)
+    f = torch.tensor(np.stack([s.force for s in scenes]), dtype=torch.float32)
+    u = torch.tensor(truth, dtype=torch.float32)
+    p.raw = lambda thickness, force: p.normalised(1.1 * u, force)
+    mag = np.linalg.norm(truth, axis=-1)
+    expected = np.mean(0.1 * mag.mean(-1) / mag.max(-1))
+    assert float(p.loss(t, f, u)) == pytest.approx(expected, rel=2e-3)
+    with pytest.raises(ValueError, match="loss must be one of"):
+        predictor.create("gnn", ds.part, {**TINY_MODELS["gnn"], "loss": "l1"})
+
+
+@pytest.mark.parametrize("name", ["uv_unet/per_newton", "gnn/per_newton"])
+def test_per_newton_models_scale_with_the_total_force(name, ds, make):
+    """A per-newton model predicts u / F_total from the force pattern and the total: an unloaded
+    scene gets exactly zero, and its target is the displacement per newton."""
+    import torch
+
+    p = make(name, ds)
+    scenes, truth = scenes_of(ds, "test", limit=1)
+    s = scenes[0]
+    zero = p.predict(Scene(s.part, s.thickness, np.zeros_like(s.force)))
+    assert np.all(zero.displacement == 0.0)
+    f = torch.tensor(s.force[None], dtype=torch.float32)
+    u = torch.tensor(truth[:1], dtype=torch.float32)
+    np.testing.assert_allclose(p.normalised(u, f).numpy() * s.force.sum() * p.scale,
+                               truth[:1], rtol=1e-4, atol=1e-9)
+    raw = p.raw(torch.tensor(s.thickness[None], dtype=torch.float32), f)
+    np.testing.assert_allclose(p.forward(torch.tensor(s.thickness[None], dtype=torch.float32), f)
+                               .detach().numpy(), raw.detach().numpy() * s.force.sum(), rtol=1e-5)

@@ -1,0 +1,36 @@
+"""The linear FEM as a prior: untrained, a prior model answers exactly the linear FEM."""
+
+import numpy as np
+import pytest
+
+from stmpl import predictor
+from stmpl.evaluate import scenes_of
+
+TINY_MODELS = {"naive": {}, "linear": {}, "uv_unet": {"size": 64, "width": 4, "depth": 3},
+               "gnn": {"latent": 16, "steps": 2}}
+
+
+@pytest.mark.parametrize("kind", ["gnn", "uv_unet"])
+def test_linear_prior_starts_at_the_linear_fem(kind, ds, tmp_path, make):
+    """``prior: linear``: untrained, the network's output is silent and the predictor answers
+    exactly the linear FEM (for the UNet without a seam gap); its checkpoint carries the
+    operator (it loads with nothing else), and an unknown prior is refused."""
+    p = make(f"{kind}/prior", ds)
+    lin = make("linear", ds)
+    scenes, _ = scenes_of(ds, "test", limit=3)
+    for a, b in zip(p.predict(scenes), lin.predict(scenes)):
+        np.testing.assert_allclose(a.displacement, b.displacement, rtol=1e-5, atol=1e-9)
+    q = predictor.read(p.save(tmp_path / "g.safetensors"))
+    assert q.model.prior.index.shape == p.model.prior.index.shape
+    for a, b in zip(p.predict(scenes), q.predict(scenes)):
+        np.testing.assert_array_equal(a.displacement, b.displacement)
+    if kind == "uv_unet":
+        import torch
+
+        t = torch.tensor(np.stack([s.thickness for s in scenes]), dtype=torch.float32)
+        f = torch.tensor(np.stack([s.force for s in scenes]), dtype=torch.float32)
+        c = p.corner_displacement(t, f)                    # (B, corners, 3)
+        np.testing.assert_allclose(c, np.stack([d.displacement for d in lin.predict(scenes)])
+                                   [:, ds.part.uv_vertex], rtol=1e-5, atol=1e-9)
+    with pytest.raises(ValueError, match="prior must be one of"):
+        predictor.create(kind, ds.part, {**TINY_MODELS[kind], "prior": "fem"})

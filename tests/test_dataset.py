@@ -1,0 +1,91 @@
+"""The dataset format (stmpl/dataset.py): its hash is its content, and every read checks the
+shards against the card."""
+
+import json
+
+import numpy as np
+import pytest
+
+from fem.generate import generate
+from stmpl.dataset import Dataset, content_hash, part_hash
+
+
+def _cfg(**over):
+    cfg = {"name": "tiny",
+           "body": {"model": "tube", "radius": 0.04, "length": 0.2, "n_around": 16,
+                    "n_along": 12},
+           "part": "tube", "thickness_mm": [5.0, 10.0],
+           "resolution": {"subdivisions": 1, "layers": 1, "refine_radius": 0.03, "order": 1},
+           "forces": [0.05, 0.1, 0.2],
+           "placements": {"disk": {"centres": 4, "radii": [0.02]},
+                          "band": {"at": [0.5], "widths": [0.03]}},
+           "shard_tasks": 2, "parallel": {"backend": "serial", "workers": 1}}
+    cfg.update(over)
+    return cfg
+
+
+def test_dataset_errors_name_the_problem(tmp_path):
+    import h5py
+
+    with pytest.raises(FileNotFoundError, match="card.json"):
+        Dataset(tmp_path)
+    generate(_cfg(thickness_mm=[7.5], forces=[0.05]), tmp_path / "d", progress=False)
+    Dataset(tmp_path / "d").verify()
+    with pytest.raises(ValueError, match="split must be"):
+        Dataset(tmp_path / "d").arrays("training")
+    first, second = sorted((tmp_path / "d").glob("shard-*.h5"))[:2]
+    original = first.read_bytes()
+    with h5py.File(first, "r+") as h:           # an edited sample: its file still reads
+        h["displacement"][0, 0, 0] = 2 * h["displacement"][0, 0, 0] + 1e-6
+    with pytest.raises(ValueError, match=f"{first.name} does not match card.json"):
+        Dataset(tmp_path / "d").arrays("train")
+    first.write_bytes(original)
+    second.write_bytes(second.read_bytes()[:200])  # a truncated shard
+    with pytest.raises(ValueError, match=f"{second.name} is corrupt"):
+        Dataset(tmp_path / "d").verify()
+
+
+def test_the_hash_is_of_the_content(tmp_path):
+    """The same samples give the same hash (timings differ between runs); an edited card or part
+    does not pass."""
+    cfg = _cfg(thickness_mm=[7.5], forces=[0.05, 0.1])
+    a = generate(cfg, tmp_path / "a", progress=False)
+    b = generate({**cfg, "parallel": {"backend": "serial", "workers": 1}, "name": "other"},
+                 tmp_path / "b", progress=False)
+    assert a["timing"]["solve_seconds_total"] != b["timing"]["solve_seconds_total"]
+    assert a["hash"] == b["hash"] and len(a["hash"]) == 16
+    card = json.loads((tmp_path / "b" / "card.json").read_text())
+    card["hash"] = "0" * 16
+    (tmp_path / "b" / "card.json").write_text(json.dumps(card))
+    with pytest.raises(ValueError, match="does not match card.json"):
+        Dataset(tmp_path / "b").arrays()
+
+
+def test_the_card_hash_is_the_part_and_the_shards(ds):
+    """The card's hash is recomputed from what is on disk: the part's and each shard's content
+    hashes (those are in the card too, one per shard)."""
+    ds.verify()
+    shards = [s["content"] for s in ds.card["shards"]]
+    assert len(shards) == len(ds.shards) and len(set(shards)) == len(shards)
+    assert content_hash(part_hash(ds.part), shards) == ds.card["hash"]
+    assert content_hash(part_hash(ds.part), shards[::-1]) != ds.card["hash"]
+
+
+def test_missing_and_foreign_folders_are_named(tmp_path):
+    with pytest.raises(FileNotFoundError, match="dataset folder not found"):
+        Dataset(tmp_path / "nowhere")
+    (tmp_path / "card.json").write_text(json.dumps({"format": "something/9"}))
+    with pytest.raises(ValueError, match="has format 'something/9'"):
+        Dataset(tmp_path)
+    (tmp_path / "card.json").write_text("{broken")
+    with pytest.raises(ValueError, match="card.json is corrupt"):
+        Dataset(tmp_path)
+
+
+def test_splits_select_by_the_split_column(ds):
+    a = ds.arrays()
+    for i, name in enumerate(("train", "val", "test")):
+        part = ds.arrays(name)
+        n = ds.card["samples_per_split"][name]
+        assert len(part["total"]) == int((a["split"] == i).sum()) == n
+        np.testing.assert_array_equal(part["split"], i)

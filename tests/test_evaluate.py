@@ -1,0 +1,37 @@
+"""Evaluation on a dataset split: the seam measures, sample limits, the tables it writes."""
+
+import numpy as np
+import pytest
+
+
+
+
+def test_evaluate_reports_seam_measures(ds, make):
+    from stmpl.evaluate import evaluate_dataset
+    from stmpl.metrics import sample_metrics
+
+    unet = evaluate_dataset(make("uv_unet", ds), ds, "test", limit=4)
+    gnn = evaluate_dataset(make("gnn", ds), ds, "test", limit=4)
+    assert unet["seam_gap"][0] > 0 and gnn["seam_gap"] == [0.0, 0.0]
+    assert np.isfinite(unet["seam_mee"][0]) and np.isfinite(gnn["seam_mee"][0])
+    # seam MEE is the MEE restricted to the seam's active vertices
+    true = np.zeros((4, 3))
+    true[:, 2] = 1e-3
+    pred = true.copy()
+    pred[1, 2] += 2e-3
+    m = sample_metrics(true, pred, seam=np.array([1, 3]))
+    assert m["seam_mee"] == pytest.approx(1.0) and m["mee"] == pytest.approx(0.5)
+
+
+def test_limits_and_tables(ds, make, tmp_path):
+    from stmpl.evaluate import evaluate, scenes_of
+
+    for bad in (0, -1, 2.5, True):
+        with pytest.raises(ValueError, match="limit must be a number of samples >= 1"):
+            scenes_of(ds, "test", limit=bad)
+    scenes, truth = scenes_of(ds, "test", limit=3)
+    assert len(scenes) == 3 and truth.shape == (3, ds.part.n_vertices, 3)
+    md = evaluate({"naive": make("naive", ds)}, ds, "test", out=tmp_path / "t.md", limit=3)
+    assert "| naive | 3 |" in md
+    assert (tmp_path / "t.md").read_text().startswith(f"Dataset {ds.folder}")
+    assert (tmp_path / "t.csv").read_text().splitlines()[1].startswith("naive,3,")
