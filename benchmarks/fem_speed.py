@@ -30,21 +30,21 @@ def _run(name: str, thickness: float, radius: float, force: float, top: float, l
          placements: tuple) -> dict:
     import time
 
-    from fem.simulate import RESOLUTIONS, load_mesh
+    from fem.simulate import RESOLUTIONS, mesh_for_load
     from fem.solver import Solver
     from stmpl import AnnyBody, loads
 
     part = AnnyBody().part("left_arm")
     res = RESOLUTIONS[name]
     warm = loads.disk(part, at=PLACEMENTS[0], radius=radius, total=0.01)  # load compiled code
-    Solver(load_mesh(part, np.full(part.n_vertices, thickness), warm.force, "coarse")).solve(
+    Solver(mesh_for_load(part, np.full(part.n_vertices, thickness), warm.force, "coarse")).solve(
         warm.force)
     out = {"name": name, "res": res.to_dict(), "rest": [], "level": [], "iters_rest": [],
            "iters_level": [], "u": [], "dofs": [], "tets": [], "failed": []}
     for n, at in enumerate(PLACEMENTS):
         ld = loads.disk(part, at=at, radius=radius, total=force)
         t0 = time.perf_counter()
-        mesh = load_mesh(part, np.full(part.n_vertices, thickness), ld.force, res)
+        mesh = mesh_for_load(part, np.full(part.n_vertices, thickness), ld.force, res)
         solver = Solver(mesh, order=res.order)
         setup = time.perf_counter() - t0
         sol = solver.solve(ld.force)
@@ -74,7 +74,7 @@ def _assembly_vs_skfem() -> list[str]:
     import time
 
     from fem.material import lame
-    from fem.simulate import RESOLUTIONS, load_mesh
+    from fem.simulate import RESOLUTIONS, mesh_for_load
     from fem.skfem_forms import assemble
     from fem.solver import Solver
     from stmpl import AnnyBody, loads
@@ -85,7 +85,7 @@ def _assembly_vs_skfem() -> list[str]:
     out = []
     for name in ("coarse", "fine"):
         res = RESOLUTIONS[name]
-        mesh = load_mesh(part, np.full(part.n_vertices, 0.0075), ld.force, res)
+        mesh = mesh_for_load(part, np.full(part.n_vertices, 0.0075), ld.force, res)
         S = Solver(mesh, order=res.order)
         u = np.zeros((S.n_all, 3))
         S.assemble(u, u)

@@ -1,5 +1,6 @@
 """FEM ground truth: tissue-shell tetrahedral meshes, Neo-Hookean material, Newton solver and
-dataset generation. ``stmpl`` never imports it at module level.
+dataset generation, and the ``fem`` predictor. ``stmpl`` never imports it: it plugs in through
+entry points (``pyproject.toml``).
 
 >>> from fem import simulate
 >>> mesh, sols = simulate(part, thickness, force, totals=[0.1, 0.2], res="reference")

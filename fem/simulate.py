@@ -63,7 +63,7 @@ def resolution(res: str | Resolution | dict) -> Resolution:
     raise TypeError(f"resolution must be a name, a dict or a Resolution, got {type(res)}")
 
 
-def load_mesh(part: BodyPart, thickness: np.ndarray, force: np.ndarray,
+def mesh_for_load(part: BodyPart, thickness: np.ndarray, force: np.ndarray,
               res: str | Resolution | dict = "reference") -> ShellMesh:
     """The tissue shell for one load pattern ``force`` ``(N,)``, refined around its vertices."""
     r = resolution(res)
@@ -84,7 +84,7 @@ def simulate(part: BodyPart, thickness: np.ndarray, force: np.ndarray, totals=No
     the pattern's own total), by continuation. Returns the mesh and one :class:`Solution` per
     level; failed levels carry their reason and no displacement."""
     force = np.asarray(force, dtype=float)
-    mesh = load_mesh(part, thickness, force, res)
+    mesh = mesh_for_load(part, thickness, force, res)
     solver = Solver(mesh, material if material is not None else NeoHookean(), options=options,
                     order=resolution(res).order)
     totals = [float(force.sum())] if totals is None else [float(t) for t in totals]

@@ -1,7 +1,7 @@
 import numpy as np
 import pytest
 
-from fem.simulate import RESOLUTIONS, Resolution, load_mesh, resolution, simulate
+from fem.simulate import RESOLUTIONS, Resolution, mesh_for_load, resolution, simulate
 from stmpl.body.primitives import tube
 
 
@@ -27,4 +27,4 @@ def test_simulate_refines_around_the_load_and_continues():
     with pytest.raises(ValueError, match="rise"):
         simulate(part, th, force, totals=[0.1, 0.05])
     with pytest.raises(ValueError, match="no loaded vertex"):
-        load_mesh(part, th, np.zeros(part.n_vertices))
+        mesh_for_load(part, th, np.zeros(part.n_vertices))
