@@ -47,6 +47,15 @@ TINY_DATA = {
 }
 
 
+@pytest.fixture
+def tiny_config():
+    """A factory of small dataset configs on the tube: ``tiny_config(forces=[0.05])`` is
+    :data:`TINY_DATA` with those keys replaced."""
+    import copy
+
+    return lambda **over: {**copy.deepcopy(TINY_DATA), **over}
+
+
 @pytest.fixture(scope="session")
 def tiny_dataset(tmp_path_factory):
     """A real FEM dataset on an analytic tube (10 placements x 2 thicknesses x 3 forces), made

@@ -10,26 +10,12 @@ from fem.generate import generate
 from stmpl.dataset import Dataset, content_hash, part_hash
 
 
-def _cfg(**over):
-    cfg = {"name": "tiny",
-           "body": {"model": "tube", "radius": 0.04, "length": 0.2, "n_around": 16,
-                    "n_along": 12},
-           "part": "tube", "thickness_mm": [5.0, 10.0],
-           "resolution": {"subdivisions": 1, "layers": 1, "refine_radius": 0.03, "order": 1},
-           "forces": [0.05, 0.1, 0.2],
-           "placements": {"disk": {"centres": 4, "radii": [0.02]},
-                          "band": {"at": [0.5], "widths": [0.03]}},
-           "shard_tasks": 2, "parallel": {"backend": "serial", "workers": 1}}
-    cfg.update(over)
-    return cfg
-
-
-def test_dataset_errors_name_the_problem(tmp_path):
+def test_dataset_errors_name_the_problem(tmp_path, tiny_config):
     import h5py
 
     with pytest.raises(FileNotFoundError, match="card.json"):
         Dataset(tmp_path)
-    generate(_cfg(thickness_mm=[7.5], forces=[0.05]), tmp_path / "d", progress=False)
+    generate(tiny_config(thickness_mm=[7.5], forces=[0.05]), tmp_path / "d", progress=False)
     Dataset(tmp_path / "d").verify()
     with pytest.raises(ValueError, match="split must be"):
         Dataset(tmp_path / "d").arrays("training")
@@ -45,10 +31,10 @@ def test_dataset_errors_name_the_problem(tmp_path):
         Dataset(tmp_path / "d").verify()
 
 
-def test_the_hash_is_of_the_content(tmp_path):
+def test_the_hash_is_of_the_content(tmp_path, tiny_config):
     """The same samples give the same hash (timings differ between runs); an edited card or part
     does not pass."""
-    cfg = _cfg(thickness_mm=[7.5], forces=[0.05, 0.1])
+    cfg = tiny_config(thickness_mm=[7.5], forces=[0.05, 0.1])
     a = generate(cfg, tmp_path / "a", progress=False)
     b = generate({**cfg, "parallel": {"backend": "serial", "workers": 1}, "name": "other"},
                  tmp_path / "b", progress=False)
