@@ -70,9 +70,12 @@ def names() -> list[str]:
 def get(name: str) -> type:
     """The predictor class called ``name`` (its entry point is imported on first use)."""
     if name not in REGISTRY:
-        ep = _declared().get(name)
+        declared = _declared()
+        ep = declared.get(name)
         if ep is None:
-            raise ValueError(f"unknown predictor {name!r}; known: {names()}")
+            hint = "" if declared else (" (no predictor is declared: install stmpl, e.g. "
+                                        "`pip install -e .`, so its entry points exist)")
+            raise ValueError(f"unknown predictor {name!r}; known: {names()}{hint}")
         cls = ep.load()
         REGISTRY.setdefault(name, cls)
         cls.name = name

@@ -59,3 +59,12 @@ def test_every_predictor_plugs_in_by_entry_point():
     for name in ("fem", "naive", "linear", "uv_unet", "gnn"):
         cls = predictor.get(name)
         assert cls.name == name and cls.__module__.split(".")[0] in ("fem", "models")
+
+
+def test_without_entry_points_the_error_says_to_install(monkeypatch):
+    from stmpl import predictor
+
+    monkeypatch.setattr(predictor, "_declared", lambda: {})
+    monkeypatch.setattr(predictor, "REGISTRY", {})
+    with pytest.raises(ValueError, match="unknown predictor 'gnn'.*install stmpl"):
+        predictor.get("gnn")
