@@ -181,8 +181,9 @@ def cmd_predict(args) -> int:
         active = truth.magnitude * 1e3 > 0.001
         for name, d in out.items():
             err = np.linalg.norm(d.displacement - truth.displacement, axis=1)[active] * 1e3
-            print(f"  {name}: MEE {err.mean():.4f} mm = {100 * err.mean() / (1e3 * truth.magnitude.max()):.2f} % "
-                  f"of the max, max error {err.max():.3f} mm")
+            rel = 100 * err.mean() / (1e3 * truth.magnitude.max())
+            print(f"  {name}: MEE {err.mean():.4f} mm = {rel:.2f} % of the max, max error "
+                  f"{err.max():.3f} mm")
     if args.out:
         prediction_figure(out, truth, args.out)
         print(f"wrote {args.out}")

@@ -45,6 +45,8 @@ class Load:
     part_id: str = ""
     """The :attr:`~stmpl.body.part.BodyPart.fingerprint` of the part the load was built on (a
     scene refuses a load of another part)."""
+    source: object = field(default=None, repr=False)
+    """What made the load, when it is more than a shape: a :class:`~stmpl.contact.Contact`."""
 
     @property
     def count(self) -> int:
@@ -208,25 +210,32 @@ PRIMITIVES = {"disk": disk, "ellipse": ellipse, "seam_disk": seam_disk, "band": 
 """Load primitives by name (configs and the command line resolve through this)."""
 
 
-def _glyph_segments(char: str) -> np.ndarray:
+def glyph_contours(text: str) -> list[np.ndarray]:
+    """The closed outlines ``(K, 2)`` of ``text`` set in a bold sans-serif font (DejaVu Sans Bold,
+    which matplotlib ships), in units of the text's height, centred on the origin; a character
+    the font lacks is refused (it would be drawn as a box)."""
     from matplotlib.font_manager import FontProperties, findfont, get_font
     from matplotlib.textpath import TextPath
 
     prop = FontProperties(family="DejaVu Sans", weight="bold")
     font = get_font(findfont(prop))
-    if font.get_char_index(ord(char)) == 0:       # the font would draw its "missing" box
-        raise ValueError(f"character {char!r} (U+{ord(char):04X}) is not in the letter font "
-                         f"({font.family_name}); use a letter, digit or sign it has")
-    path = TextPath((0, 0), char, size=1.0, prop=prop)
+    for char in text:
+        if not char.isspace() and font.get_char_index(ord(char)) == 0:
+            raise ValueError(f"character {char!r} (U+{ord(char):04X}) is not in the letter font "
+                             f"({font.family_name}); use letters, digits or signs it has")
+    path = TextPath((0, 0), text, size=1.0, prop=prop)
     polys = [np.asarray(p) for p in path.to_polygons(closed_only=True) if len(p) > 2]
     if not polys:
-        raise ValueError(f"character {char!r} has no outline in the font")
+        raise ValueError(f"text {text!r} has no outline in the font")
     pts = np.concatenate(polys)
     lo, hi = pts.min(0), pts.max(0)
-    scale = 1.0 / (hi[1] - lo[1])
-    centre = (lo + hi) / 2
-    segs = [np.stack([p[:-1], p[1:]], 1) for p in polys]
-    return (np.concatenate(segs) - centre) * scale
+    scale, centre = 1.0 / (hi[1] - lo[1]), (lo + hi) / 2
+    return [(p - centre) * scale for p in polys]
+
+
+def _glyph_segments(char: str) -> np.ndarray:
+    """``(S, 2, 2)`` outline segments of ``char`` (:func:`glyph_contours`)."""
+    return np.concatenate([np.stack([p[:-1], p[1:]], 1) for p in glyph_contours(char)])
 
 
 def _check_total(total) -> float:

@@ -32,7 +32,12 @@ def test_readme_python_examples_run_and_hold(arm, tmp_path, monkeypatch):
     assert moved[scene.force > 0].mean() > moved[scene.force == 0].mean()   # the dent is there
     mesh = trimesh.load(tmp_path / "pressed_arm.ply", process=False)
     np.testing.assert_allclose(mesh.vertices, arm.vertices + d.displacement, atol=1e-6)
-    assert len(spaces) == 2 and spaces[1]["gnn"].part.n_vertices == arm.n_vertices
+    pressing = spaces[1]                           # an object from a mesh file pressed on the arm
+    touch, pressed = pressing["touch"], pressing["pressed"]
+    assert pressed.scene.load.source is touch and touch.objects[0].name == "bar"
+    glb = trimesh.load(tmp_path / "pressed_by_bar.glb", force="mesh", process=False)
+    assert len(glb.vertices) == arm.n_vertices
+    assert len(spaces) == 3 and spaces[2]["gnn"].part.n_vertices == arm.n_vertices
 
 
 def test_the_two_setup_commands():

@@ -1,0 +1,123 @@
+"""Contact from object meshes (stmpl/contact.py), against closed forms on a flat sheet."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from stmpl import contact as C
+from stmpl import objects
+from stmpl.body import sheet
+from stmpl.scene import Scene
+
+
+@pytest.fixture(scope="module")
+def plate():
+    return sheet(0.2, 0.2, 81, 81)  # 2.5 mm spacing, z = 0, normal +z
+
+
+def _tip(plate, depth=0.002, radius=0.01, at=(0.0, 0.0, 0.0), total=0.3):
+    tip = objects.sphere(radius)
+    return C.Pressing(tip, objects.press(plate, tip, list(at), depth=depth), total, "tip")
+
+
+def test_a_sphere_touches_its_cap(plate):
+    """A sphere of radius r pressed d deep touches the disk of radius sqrt(2 r d - d^2) and its
+    deepest vertex lies d inside it."""
+    c = C.contact(plate, _tip(plate), tolerance=0.0)
+    cap = np.sqrt(2 * 0.01 * 0.002 - 0.002 ** 2)
+    r = np.linalg.norm(plate.vertices[:, :2], axis=1)
+    expect = np.flatnonzero(r < cap - 1e-4)           # the icosphere is a little inside r
+    assert set(expect) <= set(c.vertices) and r[c.vertices].max() < cap + 1e-4
+    assert c.penetration.max() == pytest.approx(0.002, abs=5e-5)
+    np.testing.assert_allclose(c.force[c.vertices], 0.3 / len(c.vertices))
+    assert c.force.sum() == pytest.approx(0.3) and c.pressure == pytest.approx(0.3 / c.area)
+    assert c.open_objects == ()
+
+
+def test_tolerance_widens_the_contact(plate):
+    near = C.contact(plate, _tip(plate, depth=-0.001), tolerance=0.0015)   # 1 mm above
+    assert near.penetration.max() == 0 and len(near.vertices) >= 1
+    with pytest.raises(ValueError, match="no contact: object 'tip' is 1.0 mm from the skin"):
+        C.contact(plate, _tip(plate, depth=-0.001), tolerance=0.0005)
+
+
+def test_splits(plate):
+    eq, ar, dp = (C.contact(plate, _tip(plate), tolerance=0.0005, split=s)
+                  for s in ("equal", "area", "depth"))
+    for c in (eq, ar, dp):
+        assert c.force.sum() == pytest.approx(0.3)
+    v = ar.vertices
+    np.testing.assert_allclose(ar.force[v] / ar.force[v].sum(),
+                               plate.vertex_areas[v] / plate.vertex_areas[v].sum())
+    deepest = dp.vertices[np.argmax(dp.penetration[dp.vertices])]
+    assert dp.force[deepest] == dp.force.max() > eq.force[deepest]
+    w = dp.penetration[v] + 0.0005
+    np.testing.assert_allclose(dp.force[v], 0.3 * w / w.sum(), rtol=1e-6)
+
+
+def test_objects_add_up_and_the_scene_knows_its_source(plate):
+    a = _tip(plate, at=(0.03, 0.0, 0.0), total=0.2)
+    b = _tip(plate, at=(-0.03, 0.0, 0.0), total=0.1)
+    c = C.contact(plate, [a, b])
+    assert c.total == pytest.approx(0.3) and c.force.sum() == pytest.approx(0.3)
+    assert set(c.touched[0]).isdisjoint(c.touched[1])
+    scene = Scene.from_load(plate, np.full(plate.n_vertices, 0.005), c.load())
+    assert scene.load.kind == "contact" and scene.load.source is c
+    assert [o["name"] for o in scene.load.to_dict()["params"]["objects"]] == ["tip", "tip"]
+    np.testing.assert_array_equal(scene.force, c.force)
+
+
+def test_an_open_mesh_is_used_and_named(plate):
+    tip = objects.sphere(0.01)
+    cut = tip.copy()
+    cut.update_faces(cut.face_normals[:, 2] < 0.9)            # a hole on top
+    assert not cut.is_watertight
+    pose = objects.press(plate, tip, [0.0, 0.0, 0.0], depth=0.002)
+    closed = C.contact(plate, C.Pressing(tip, pose, 0.3, "tip"), tolerance=0.0)
+    opened = C.contact(plate, C.Pressing(cut, pose, 0.3, "cut"), tolerance=0.0)
+    assert opened.open_objects == ("cut",)
+    np.testing.assert_array_equal(opened.vertices, closed.vertices)   # a small hole is harmless
+
+
+def test_winding_number_of_a_closed_mesh():
+    box = trimesh.creation.box([1.0, 1.0, 1.0])
+    w = C.winding_number(box, np.array([[0.0, 0, 0], [0.4, 0.4, 0.4], [0.6, 0, 0], [3, 3, 3]]))
+    np.testing.assert_allclose(w, [1, 1, 0, 0], atol=1e-9)
+
+
+@pytest.mark.parametrize("make,message", [
+    (lambda m: C.Pressing(m, np.full((4, 4), np.nan)), "pose is not finite"),
+    (lambda m: C.Pressing(m, np.diag([2.0, 1, 1, 1])), "not a rigid transform"),
+    (lambda m: C.Pressing(m, np.eye(3)), r"\(4, 4\) matrix"),
+    (lambda m: C.Pressing(m, total=-1), "total force must be finite and > 0"),
+    (lambda m: C.Pressing(trimesh.Trimesh(np.zeros((3, 3)), [[0, 1, 2]])), "degenerate"),
+    (lambda m: C.Pressing(trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), int))),
+     "no faces"),
+    (lambda m: C.pose_matrix([0, 0, np.inf]), "position must be 3 finite numbers"),
+])
+def test_bad_objects_are_named(make, message):
+    with pytest.raises(ValueError, match=message):
+        make(objects.sphere(0.01))
+
+
+def test_mesh_files(tmp_path, plate):
+    tip = objects.sphere(0.01)
+    for ext in (".stl", ".ply", ".obj", ".glb"):
+        f = tmp_path / f"tip{ext}"
+        tip.export(f)
+        back = C.read_mesh(f)
+        assert back.volume == pytest.approx(tip.volume, rel=1e-6), ext
+    (tmp_path / "junk.obj").write_text("this is not a mesh\n")
+    with pytest.raises(ValueError, match="junk.obj (is not a readable mesh|holds no triangle)"):
+        C.read_mesh(tmp_path / "junk.obj")
+    (tmp_path / "tip.txt").write_text("v 0 0 0\n")
+    with pytest.raises(ValueError, match="not a mesh file stmpl reads"):
+        C.read_mesh(tmp_path / "tip.txt")
+    with pytest.raises(FileNotFoundError, match="mesh file not found"):
+        C.read_mesh(tmp_path / "none.stl")
+
+
+def test_pose_matrix_rotation_vector():
+    P = C.pose_matrix([1, 2, 3], [0, 0, np.pi / 2])
+    np.testing.assert_allclose(P[:3, :3] @ [1, 0, 0], [0, 1, 0], atol=1e-12)
+    np.testing.assert_allclose(P[:3, 3], [1, 2, 3])
