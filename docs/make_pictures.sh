@@ -9,4 +9,9 @@ stmpl scene --load band --force 0.5 --width 30 --along 0.4 --out arm_band.png
 stmpl scene --load letter --char A --force 0.3 --height 170 --width 18 --at 0.5 0.5 \
     --out arm_letter_A.png
 # FEM: 0.4 N on a 2 cm disk, reference mesh, 4 continuation levels
-stmpl simulate --load disk --force 0.4 --levels 4 --radius 20 --at 0.5 0.5 --out arm_fem_disk.png
+stmpl solve --load disk --force 0.4 --levels 4 --radius 20 --at 0.5 0.5 --out arm_fem_disk.png
+# The main job: the default grasp and the letters, each against the FEM
+stmpl simulate --compare --model zoo:gnn_arm --model zoo:uv_unet_arm --model zoo:linear_arm \
+    --model zoo:naive_arm --out-dir /tmp/stmpl_grasp && cp /tmp/stmpl_grasp/simulate.png simulate_grasp.png
+stmpl simulate --letters ECCV --force 0.3 --depth 3 --compare --out-dir /tmp/stmpl_eccv \
+    && cp /tmp/stmpl_eccv/simulate.png simulate_eccv.png

@@ -124,7 +124,7 @@ def _scene(args):
     return Scene.from_load(part, _thickness(args, body, part), load, body=body.name)
 
 
-def cmd_simulate(args) -> int:
+def cmd_solve(args) -> int:
     from stmpl import predictor
     from stmpl.viz import deformation_figure
 
@@ -275,7 +275,15 @@ def parser() -> argparse.ArgumentParser:
     sc.add_argument("--export", help="mesh coloured by force to write (.ply/.obj/.glb)")
     sc.set_defaults(func=cmd_scene)
 
-    si = sub.add_parser("simulate", help="solve a loaded scene with the FEM and draw it")
+    sm = sub.add_parser("simulate", help="the main job: an object (by default anny's right hand) "
+                        "pressed on the body, predicted (and with --compare solved by the FEM); "
+                        "writes the deformed body and a picture")
+    from stmpl import simulate
+
+    simulate.add_arguments(sm)
+    sm.set_defaults(func=simulate.run)
+
+    si = sub.add_parser("solve", help="solve a primitive load with the FEM and draw its section")
     _scene_args(si, force=0.3)
     si.add_argument("--levels", type=int, default=3, help="continuation levels up to --force")
     si.add_argument("--res", default="reference",
@@ -283,7 +291,7 @@ def parser() -> argparse.ArgumentParser:
     si.add_argument("--out", help="PNG picture to write")
     si.add_argument("--save", help="deformation file to write (.npz)")
     si.add_argument("--vtu", help="the deformed tissue shell for ParaView (.vtu)")
-    si.set_defaults(func=cmd_simulate)
+    si.set_defaults(func=cmd_solve)
 
     pr = sub.add_parser("predict", help="predict a loaded scene with learned models (zoo or "
                         "checkpoint) and draw it; --compare solves the FEM beside them")

@@ -5,8 +5,8 @@ optional thickness filter (the paper's "seen levels" ablation), an optional shar
 placements (``train_fraction``, for learning curves), and the optimiser settings. The loop: Adam
 (constant or cosine learning rate), shuffled mini-batches (seeded), validation loss every epoch,
 early stopping with the best weights kept, a progress bar, CPU or CUDA. After every epoch the
-full state goes to ``<out>/state.pt`` atomically, so a killed run resumes where it stopped. At the end the best
-model is evaluated on the validation and test splits and written as a checkpoint
+full state goes to ``<out>/state.pt`` atomically, so a killed run resumes where it stopped. At
+the end the best model is evaluated on the validation and test splits and written as a checkpoint
 (``<out>/<name>.safetensors`` + sidecar) carrying its config, the dataset card's hash, and the
 metrics. A model with a part computed from the dataset rather than learned (the linear FEM
 operator) gets it from its ``fit(dataset)`` first; one with nothing to learn skips the optimiser.

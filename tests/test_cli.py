@@ -34,7 +34,7 @@ def test_parts_command(capsys, arm):
 def test_simulate_command_solves_draws_and_saves(tmp_path, capsys, arm):
     from stmpl.scene import Deformation
 
-    rc = main(["simulate", "--force", "0.1", "--levels", "2", "--res", "medium",
+    rc = main(["solve", "--force", "0.1", "--levels", "2", "--res", "medium",
                "--out", str(tmp_path / "f.png"), "--save", str(tmp_path / "d.npz"),
                "--vtu", str(tmp_path / "s.vtu")])
     assert rc == 0
@@ -49,7 +49,7 @@ def test_simulate_command_solves_draws_and_saves(tmp_path, capsys, arm):
 
 
 def test_simulate_command_reports_a_failed_solve(capsys, arm):
-    assert main(["simulate", "--force", "8", "--levels", "1", "--res", "coarse",
+    assert main(["solve", "--force", "8", "--levels", "1", "--res", "coarse",
                  "--radius", "10"]) == 2
     err = capsys.readouterr().err
     assert "FEM solve failed" in err and "Traceback" not in err and err.count("\n") == 1

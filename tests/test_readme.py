@@ -57,5 +57,6 @@ def test_readme_main_command_runs_on_the_shipped_default(tmp_path, capsys, arm, 
     monkeypatch.chdir(tmp_path)
     assert main(argv[1:]) == 0
     out = capsys.readouterr().out
-    picture = [a for a in argv if a.endswith(".png")][0]
-    assert "gnn_arm" in out and os.path.getsize(tmp_path / picture) > 20_000
+    assert "gnn_arm" in out and "right hand" in out
+    for f in ("simulate.png", "pressed.glb", "pressed.ply"):
+        assert os.path.getsize(tmp_path / "simulate_out" / f) > 20_000, f

@@ -1,0 +1,132 @@
+"""Shaded 3D pictures of a pressed body: the deformed part coloured by its displacement, the
+objects that press it drawn see-through, one panel per method.
+
+Triangles of every mesh are projected through one camera, lit by a light from the viewer and
+drawn back to front in one collection (a painter's algorithm: no OpenGL, so it works on a
+headless machine). The camera looks at the contact along the skin's mean outward normal there.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from stmpl.viz import _matplotlib, view_basis
+
+
+def refine(triangles: np.ndarray, values: np.ndarray, levels: int = 2):
+    """Split every triangle ``(T, 3, 3)`` with corner ``values`` ``(T, 3)`` into four at its
+    edge midpoints, ``levels`` times (a triangle soup, for smooth colours): ``(T 4^L, 3, 3)``,
+    ``(T 4^L, 3)``."""
+    t, v = np.asarray(triangles, float), np.asarray(values, float)
+    for _ in range(levels):
+        m = 0.5 * (t + t[:, [1, 2, 0]])                     # midpoints ab, bc, ca
+        mv = 0.5 * (v + v[:, [1, 2, 0]])
+        t = np.concatenate([np.stack([t[:, 0], m[:, 0], m[:, 2]], 1),
+                            np.stack([m[:, 0], t[:, 1], m[:, 1]], 1),
+                            np.stack([m[:, 2], m[:, 1], t[:, 2]], 1), m])
+        v = np.concatenate([np.stack([v[:, 0], mv[:, 0], mv[:, 2]], 1),
+                            np.stack([mv[:, 0], v[:, 1], mv[:, 1]], 1),
+                            np.stack([mv[:, 2], mv[:, 1], v[:, 2]], 1), mv])
+    return t, v
+
+
+def draw_meshes(ax, basis: np.ndarray, meshes: list) -> None:
+    """Draw ``meshes`` seen through ``basis`` (camera rows: right, up, towards the viewer):
+    each a tuple ``(triangles (T, 3, 3), rgba (T, 4) or (4,), cull)``; triangles turned away are
+    dropped where ``cull`` is true (closed, opaque meshes)."""
+    from matplotlib.collections import PolyCollection
+
+    polys, colours, depth = [], [], []
+    for triangles, rgba, cull in meshes:
+        tri = np.asarray(triangles) @ basis.T
+        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+        keep = n[:, 2] > 0 if cull else np.ones(len(tri), bool)
+        c = np.broadcast_to(np.asarray(rgba, float), (len(tri), 4)).copy()
+        c[:, :3] *= (0.4 + 0.6 * np.abs(n[:, 2]))[:, None]
+        polys.append(tri[keep, :, :2])
+        colours.append(c[keep])
+        depth.append(tri[keep, :, 2].mean(1))
+    order = np.argsort(np.concatenate(depth))
+    ax.add_collection(PolyCollection(np.concatenate(polys)[order],
+                                     facecolors=np.concatenate(colours)[order],
+                                     edgecolors="none"))
+    ax.set_aspect("equal")
+    ax.axis("off")
+
+
+def contact_camera(deformation) -> tuple[np.ndarray, np.ndarray, float]:
+    """``(basis, centre (3,), reach m)``: a camera on the loaded skin of a deformation's scene."""
+    scene = deformation.scene
+    part = scene.part
+    w = np.asarray(scene.force, float)
+    basis = view_basis(part, w if w.sum() > 0 else None)
+    centre = (part.vertices * w[:, None]).sum(0) / max(w.sum(), 1e-300)
+    loaded = part.vertices[w > 0]
+    reach = max(0.05, 1.6 * float(np.linalg.norm(loaded - centre, axis=1).max(initial=0.0)))
+    return basis, centre, reach
+
+
+def contact_figure(deformations: dict, truth=None, objects=(), path=None, dpi: int = 110,
+                   title: str | None = None):
+    """A PNG of one pressed scene: a panel per method (``deformations``: name ->
+    :class:`~stmpl.scene.Deformation`; ``truth``, e.g. the FEM's, first) showing the deformed
+    skin in 3D coloured by |u| (mm, one scale for all panels) with the ``objects``
+    (``trimesh`` meshes in body coordinates) drawn see-through, the method's time and, against
+    ``truth``, its relative mean error and its peak."""
+    import matplotlib
+
+    plt = _matplotlib()
+    rows = ([("FEM", truth)] if truth is not None else []) + list(deformations.items())
+    if not rows:
+        raise ValueError("no deformations to draw")
+    part = rows[0][1].scene.part
+    basis, centre, reach = contact_camera(rows[0][1])
+    top = max(max(d.magnitude.max() for _, d in rows) * 1e3, 1e-6)
+    cmap = matplotlib.colormaps["inferno"]
+    fig = plt.figure(figsize=(max(4.4 * len(rows) + 1.0, 10.0), 5.2))
+    grid = fig.add_gridspec(1, len(rows) + 1, width_ratios=[1] * len(rows) + [0.05],
+                            left=0.01, right=0.94, bottom=0.03, top=0.76, wspace=0.05)
+    axes = [fig.add_subplot(grid[0, k]) for k in range(len(rows))]
+    cx, cy = (centre @ basis.T)[:2]
+    for (name, d), ax in zip(rows, axes):
+        tri, val = refine(d.vertices[part.faces], d.magnitude[part.faces] * 1e3)
+        meshes = [(tri, cmap(val.mean(1) / top), False)]
+        for m in objects:
+            meshes.append((np.asarray(m.vertices)[np.asarray(m.faces)], (0.6, 0.8, 1.0, 0.3),
+                           True))
+        draw_meshes(ax, basis, meshes)
+        mag = d.magnitude * 1e3
+        ax.set_xlim(cx - reach, cx + reach)
+        ax.set_ylim(cy - reach, cy + reach)
+        ms = d.info.get("seconds")
+        head = f"{name}" + (f", {_duration(ms)}" if ms is not None else "")
+        lines = [head, f"deepest {mag.max():.2f} mm"]
+        if truth is not None and d is not truth:
+            err = np.linalg.norm(d.displacement - truth.displacement, axis=1)
+            active = truth.magnitude > 1e-6
+            peak = truth.magnitude.max()
+            lines.append(f"error {100 * err[active].mean() / peak:.2f} % of the deepest, "
+                         f"peak {100 * (d.magnitude.max() - peak) / peak:+.1f} %")
+        ax.set_title("\n".join(lines), fontsize=10)
+    sm = matplotlib.cm.ScalarMappable(matplotlib.colors.Normalize(0, top), cmap)
+    fig.colorbar(sm, cax=fig.add_subplot(grid[0, -1]), label="displacement |u| (mm)")
+    fig.suptitle(title or _title(rows[0][1].scene), y=0.97)
+    if path is not None:
+        import pathlib
+
+        pathlib.Path(path).parent.mkdir(parents=True, exist_ok=True)
+        fig.savefig(path, dpi=dpi)
+        plt.close(fig)
+    return fig
+
+
+def _duration(seconds: float) -> str:
+    return f"{seconds * 1e3:.1f} ms" if seconds < 1 else f"{seconds:.1f} s"
+
+
+def _title(scene) -> str:
+    load = scene.load
+    text = load.source.summary() if load is not None and load.source is not None else (
+        load.summary() if load is not None else f"{scene.total_force:g} N")
+    return f"{scene.part.name}, {1e3 * float(np.median(scene.thickness)):.1f} mm tissue\n{text}"

@@ -1,0 +1,146 @@
+"""The main job, ``stmpl simulate``: an object pressed on a body part (by default anny's right
+hand grasping the left forearm), predicted by the shipped GNN (and any other model), with
+``--compare`` the FEM beside it; it writes the deformed body (GLB with the object in place, and
+PLY) and a picture, and prints each method's time.
+
+>>> stmpl simulate                                     # the default grasp, GNN
+>>> stmpl simulate --grip pinch --along 0.5 --compare  # a pinch, checked by the FEM
+>>> stmpl simulate --letters ECCV --force 0.3 --model zoo:uv_unet_arm
+>>> stmpl simulate --object tool.stl --at 0.45 0.5 --depth 3
+"""
+
+from __future__ import annotations
+
+import pathlib
+import time
+
+import numpy as np
+
+DEFAULT_MODEL = "zoo:gnn_arm"
+
+
+def add_arguments(sp) -> None:
+    """The options of ``stmpl simulate`` on the argparse (sub)parser ``sp``."""
+    from stmpl.hand import GRIPS
+
+    what = sp.add_argument_group("what presses (default: anny's right hand grasps the limb)")
+    what.add_argument("--grip", default="whole", choices=sorted(GRIPS),
+                      help="hand grip: whole hand, thumb and two fingers, or a pinch")
+    what.add_argument("--along", type=float, default=0.7,
+                      help="grasp or strap position along the limb, 0..1 (default 0.7)")
+    what.add_argument("--around", type=float, default=0.0,
+                      help="grasp angle around the limb from the body's front, rad")
+    what.add_argument("--hand-height", type=float, default=0.5,
+                      help="the hand's body: anny height phenotype 0..1 (hand size)")
+    what.add_argument("--object", help="a mesh file (OBJ, PLY, STL, GLB; metres) pressed at --at")
+    what.add_argument("--sphere", type=float, metavar="R", help="a sphere of radius R mm (a "
+                      "fingertip is about 8) pressed at --at")
+    what.add_argument("--letters", metavar="TEXT", help="extruded block letters pressed at --at")
+    what.add_argument("--strap", action="store_true", help="a strap closed around the limb at "
+                      "--along")
+    what.add_argument("--at", type=float, nargs=2, metavar=("U", "V"), default=(0.45, 0.5),
+                      help="where an object is pressed, in chart coordinates")
+    what.add_argument("--spin", type=float, default=0.0, help="object turn about the normal, rad")
+    what.add_argument("--depth", type=float, default=2.0,
+                      help="how deep the object reaches into the skin, mm (default 2)")
+    what.add_argument("--force", type=float, default=0.4, help="total force, N (default 0.4)")
+    sp.add_argument("--part", default="left_arm", help="body part (default left_arm)")
+    sp.add_argument("--thickness", type=float, default=7.5, help="tissue thickness, mm")
+    sp.add_argument("--model", action="append", help=f"zoo:<name> or a checkpoint; repeat to "
+                    f"compare (default {DEFAULT_MODEL})")
+    sp.add_argument("--compare", action="store_true", help="also solve the FEM, report errors")
+    sp.add_argument("--res", default="reference", help="FEM resolution for --compare")
+    sp.add_argument("--levels", type=int, default=3, help="FEM continuation levels")
+    sp.add_argument("--out-dir", default="simulate_out", help="folder for the results")
+
+
+def pressings(args, part) -> list:
+    """The :class:`~stmpl.contact.Pressing` objects the options describe."""
+    from stmpl import contact, objects
+
+    mm = 1e-3
+    chosen = [k for k in ("object", "sphere", "letters") if getattr(args, k)] + (
+        ["strap"] if args.strap else [])
+    if len(chosen) > 1:
+        raise ValueError(f"choose one object, got {', '.join('--' + k for k in chosen)}")
+    if args.strap:
+        return [objects.strap(part, args.along, total=args.force,
+                              squeeze=args.depth * mm)]
+    if chosen:
+        k = chosen[0]
+        mesh = (contact.read_mesh(args.object) if k == "object" else
+                objects.sphere(args.sphere * mm) if k == "sphere" else
+                objects.letters(args.letters))
+        name = pathlib.Path(args.object).stem if k == "object" else (
+            f"sphere {args.sphere:g} mm" if k == "sphere" else f"letters {args.letters}")
+        pose = objects.press(part, mesh, uv=tuple(args.at), depth=args.depth * mm,
+                             spin=args.spin)
+        return [contact.Pressing(mesh, pose, args.force, name)]
+    from stmpl.hand import Hand, grasp
+
+    hand = Hand(phenotype={"height": args.hand_height})
+    g = grasp(part, hand, args.along, args.around, args.grip, args.depth * mm)
+    return [g.pressing(args.force, f"right hand ({args.grip})")]
+
+
+def run(args) -> int:
+    """``stmpl simulate``: build the scene, predict, compare, write and print."""
+    from stmpl import contact, predictor, tissue
+    from stmpl.body.spec import part_from_spec
+    from stmpl.render import contact_figure
+    from stmpl.scene import Scene
+    from stmpl.spec import label, predictor_from_spec
+
+    t0 = time.perf_counter()
+    part = part_from_spec({"model": "anny"}, args.part)
+    objs = pressings(args, part)
+    touch = contact.contact(part, objs)
+    scene = Scene.from_load(part, tissue.constant(part, args.thickness * 1e-3), touch.load())
+    print(f"{touch.summary()}  [{time.perf_counter() - t0:.1f} s to set up]")
+    out: dict = {}
+    for spec in args.model or [DEFAULT_MODEL]:
+        p = predictor_from_spec(spec)
+        p.predict(scene)                                      # warm-up, not timed
+        out[label(spec)] = d = p.predict(scene)
+        print(f"{label(spec):<16} deepest {1e3 * d.magnitude.max():6.3f} mm  "
+              f"{1e3 * d.info['seconds']:8.2f} ms")
+    truth = None
+    if args.compare:
+        truth = predictor.create("fem", res=args.res, levels=args.levels).predict(scene)
+        print(f"{'FEM (' + args.res + ')':<16} deepest {1e3 * truth.magnitude.max():6.3f} mm  "
+              f"{truth.info['seconds']:8.2f} s")
+        active = truth.magnitude > 1e-6
+        peak = truth.magnitude.max()
+        for name, d in out.items():
+            err = np.linalg.norm(d.displacement - truth.displacement, axis=1)
+            print(f"  {name}: error {100 * err[active].mean() / peak:.2f} % of the deepest, "
+                  f"peak {100 * (d.magnitude.max() - peak) / peak:+.1f} %, largest error "
+                  f"{1e3 * err.max():.3f} mm")
+    folder = pathlib.Path(args.out_dir)
+    folder.mkdir(parents=True, exist_ok=True)
+    first = next(iter(out.values()))
+    write_meshes(first, [o.posed() for o in objs], folder / "pressed")
+    contact_figure(out, truth, [o.posed() for o in objs], folder / "simulate.png")
+    print(f"wrote {folder / 'pressed.glb'} (body and object), {folder / 'pressed.ply'}, "
+          f"{folder / 'simulate.png'}")
+    return 0
+
+
+def write_meshes(deformation, objects, base) -> None:
+    """``base.glb``: the deformed part coloured by |u| with the objects in place; ``base.ply``:
+    the deformed part alone."""
+    import matplotlib
+    import trimesh
+
+    mag = deformation.magnitude
+    colours = matplotlib.colormaps["inferno"](mag / max(mag.max(), 1e-12))
+    body = trimesh.Trimesh(deformation.vertices, deformation.scene.part.faces,
+                           vertex_colors=(255 * colours).astype(np.uint8), process=False)
+    body.export(pathlib.Path(base).with_suffix(".ply"))
+    world = trimesh.Scene()
+    world.add_geometry(body, node_name="body")
+    for k, m in enumerate(objects):
+        m = m.copy()
+        m.visual.face_colors = [150, 190, 255, 120]
+        world.add_geometry(m, node_name=f"object{k}")
+    world.export(pathlib.Path(base).with_suffix(".glb"))

@@ -1,0 +1,31 @@
+"""Shaded 3D pictures (stmpl/render.py)."""
+
+import numpy as np
+import pytest
+
+from stmpl.render import contact_figure, refine
+
+
+def test_refine_keeps_area_and_interpolates_linearly():
+    tri = np.array([[[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]])
+    vals = tri[..., 0] + 2 * tri[..., 1]                  # a linear field
+    t, v = refine(tri, vals, levels=2)
+    assert t.shape == (16, 3, 3) and v.shape == (16, 3)
+    area = 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
+    assert area.sum() == pytest.approx(0.5)
+    np.testing.assert_allclose(v, t[..., 0] + 2 * t[..., 1])
+
+
+def test_contact_figure(tmp_path, arm):
+    from stmpl import Scene, contact, objects, tissue, zoo
+
+    bar = objects.rod(0.01, 0.08)
+    touch = contact.contact(arm, contact.Pressing(
+        bar, objects.press(arm, bar, uv=(0.45, 0.5), depth=0.004), 0.3, "bar"))
+    scene = Scene.from_load(arm, tissue.constant(arm, 0.0075), touch.load())
+    d = zoo.read("linear_arm").predict(scene)
+    fig = contact_figure({"linear": d}, None, [touch.objects[0].posed()], tmp_path / "c.png")
+    assert (tmp_path / "c.png").stat().st_size > 30_000
+    assert "bar 0.3 N" in fig._suptitle.get_text()
+    with pytest.raises(ValueError, match="no deformations"):
+        contact_figure({})

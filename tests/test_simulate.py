@@ -1,0 +1,40 @@
+"""`stmpl simulate`, the main job: an object pressed on the arm, predicted, written, drawn."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from stmpl.cli import main
+
+
+def test_the_default_grasp(tmp_path, capsys, arm):
+    assert main(["simulate", "--out-dir", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "right hand (whole)" in out and "gnn_arm" in out and " ms" in out
+    body = trimesh.load(tmp_path / "pressed.ply", process=False)
+    moved = np.linalg.norm(body.vertices - arm.vertices, axis=1)
+    assert 1e-4 < moved.max() < 3e-3                       # a dent of under a millimetre or so
+    world = trimesh.load(tmp_path / "pressed.glb")
+    assert sorted(len(g.vertices) for g in world.geometry.values())[0] == arm.n_vertices
+    assert len(world.geometry) == 2                         # the arm and the hand
+    assert (tmp_path / "simulate.png").stat().st_size > 30_000
+
+
+def test_letters_against_the_fem(tmp_path, capsys, arm):
+    assert main(["simulate", "--letters", "ECCV", "--force", "0.3", "--depth", "3", "--compare",
+                 "--res", "coarse", "--levels", "1", "--out-dir", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "letters ECCV" in out and "FEM (coarse)" in out
+    line = [ln for ln in out.splitlines() if ln.strip().startswith("gnn_arm: error")][0]
+    assert float(line.split("error ")[1].split(" %")[0]) < 10   # a coarse FEM, a fine model
+
+
+@pytest.mark.parametrize("argv,message", [
+    (["--sphere", "8", "--letters", "A"], "choose one object"),
+    (["--object", "missing.stl"], "mesh file not found"),
+    (["--sphere", "8", "--depth", "-5"], "no contact"),
+])
+def test_bad_requests_end_in_one_line(tmp_path, capsys, arm, argv, message):
+    assert main(["simulate", *argv, "--out-dir", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and "Traceback" not in err
