@@ -41,6 +41,9 @@ def add_arguments(sp) -> None:
     what.add_argument("--at", type=float, nargs=2, metavar=("U", "V"), default=(0.45, 0.5),
                       help="where an object is pressed, in chart coordinates")
     what.add_argument("--spin", type=float, default=0.0, help="object turn about the normal, rad")
+    what.add_argument("--pose", type=float, nargs=6, metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
+                      help="the object's pose in body coordinates instead of --at/--depth: "
+                      "position (mm) and rotation vector (rad)")
     what.add_argument("--depth", type=float, default=2.0,
                       help="how deep the object reaches into the skin, mm (default 2)")
     what.add_argument("--force", type=float, default=0.4, help="total force, N (default 0.4)")
@@ -63,6 +66,8 @@ def pressings(args, part) -> list:
         ["strap"] if args.strap else [])
     if len(chosen) > 1:
         raise ValueError(f"choose one object, got {', '.join('--' + k for k in chosen)}")
+    if args.pose is not None and not chosen[:1] in (["object"], ["sphere"], ["letters"]):
+        raise ValueError("--pose places an --object, --sphere or --letters")
     if args.strap:
         return [objects.strap(part, args.along, total=args.force,
                               squeeze=args.depth * mm)]
@@ -73,8 +78,11 @@ def pressings(args, part) -> list:
                 objects.letters(args.letters))
         name = pathlib.Path(args.object).stem if k == "object" else (
             f"sphere {args.sphere:g} mm" if k == "sphere" else f"letters {args.letters}")
-        pose = objects.press(part, mesh, uv=tuple(args.at), depth=args.depth * mm,
-                             spin=args.spin)
+        if args.pose is not None:
+            pose = contact.pose_matrix(np.asarray(args.pose[:3]) * mm, args.pose[3:])
+        else:
+            pose = objects.press(part, mesh, uv=tuple(args.at), depth=args.depth * mm,
+                                 spin=args.spin)
         return [contact.Pressing(mesh, pose, args.force, name)]
     from stmpl.hand import Hand, grasp
 

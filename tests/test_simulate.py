@@ -38,3 +38,19 @@ def test_bad_requests_end_in_one_line(tmp_path, capsys, arm, argv, message):
     assert main(["simulate", *argv, "--out-dir", str(tmp_path)]) == 2
     err = capsys.readouterr().err
     assert message in err and "Traceback" not in err
+
+
+def test_an_object_file_at_a_pose(tmp_path, capsys, arm):
+    """A user's mesh file placed by --pose in body coordinates: a 1 cm sphere whose centre is
+    8 mm inside the skin at a vertex touches that vertex."""
+    from stmpl import objects
+
+    objects.sphere(0.01).apply_translation([0, 0, -0.01]).export(tmp_path / "ball.stl")
+    k = 200
+    centre = (arm.vertices[k] - 0.008 * arm.normals[k]) * 1e3         # mm
+    assert main(["simulate", "--object", str(tmp_path / "ball.stl"), "--pose", *map(str, centre),
+                 "0", "0", "0", "--force", "0.2", "--out-dir", str(tmp_path / "o")]) == 0
+    assert "ball 0.2 N on" in capsys.readouterr().out
+    assert main(["simulate", "--pose", "0", "0", "0", "0", "0", "0",
+                 "--out-dir", str(tmp_path / "o")]) == 2
+    assert "--pose places an --object" in capsys.readouterr().err
