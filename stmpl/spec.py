@@ -6,15 +6,17 @@ from __future__ import annotations
 import pathlib
 
 
-def predictor_from_spec(spec: str, device: str = "cpu"):
-    """The predictor ``spec`` names (see the module docstring)."""
+def predictor_from_spec(spec: str, device: str = "cpu", res: str = "reference",
+                        levels: int = 1):
+    """The predictor ``spec`` names (see the module docstring); ``res`` and ``levels`` are the
+    FEM's resolution (unless the spec names one) and continuation levels."""
     from stmpl import predictor, zoo
 
     if spec.startswith("zoo:"):
         return zoo.read(spec[4:], device=device)
     if spec == "fem" or spec.startswith("fem:"):
-        return predictor.create("fem", res=spec.split(":", 1)[1] if ":" in spec else
-                                "reference")
+        return predictor.create("fem", res=spec.split(":", 1)[1] if ":" in spec else res,
+                                levels=levels)
     path = pathlib.Path(spec)
     if path.suffix == ".safetensors" or path.exists():
         return predictor.read(path, device=device)

@@ -168,6 +168,14 @@ class BodyPart:
                    if "body_index" in arrays else None,
                    source=dict(source or {}))
 
+    def subdivided(self, levels: int = 1) -> "BodyPart":
+        """A finer copy: every triangle split into four at its edge midpoints, ``levels`` times
+        (:func:`subdivide`)."""
+        part = self
+        for _ in range(int(levels)):
+            part = subdivide(part)
+        return part
+
     def with_vertices(self, vertices: np.ndarray) -> "BodyPart":
         """A copy with other rest positions (normals recomputed)."""
         return dataclasses.replace(self, vertices=vertices,
@@ -175,6 +183,59 @@ class BodyPart:
 
 
 # --- construction ------------------------------------------------------------------------------
+def _midpoints(pairs: np.ndarray, offset: int):
+    """Unique sorted ``pairs`` ``(K, 2)`` -> ``(unique (E, 2), index of each pair's midpoint
+    (K,) = offset + its unique row)``."""
+    key, inv = np.unique(np.sort(pairs, axis=1), axis=0, return_inverse=True)
+    return key, offset + inv.reshape(-1)
+
+
+def subdivide(part: BodyPart) -> BodyPart:
+    """``part`` with every triangle split into four at its edge midpoints (the surface itself
+    unchanged): new vertices at the midpoints of the edges, their normals the normalised mean of
+    the ends', UV corners at the midpoints of the UV edges (a seam edge gets one on each side of
+    the chart), rims with their midpoints in order. The old vertices keep their indices; a new
+    vertex has no body vertex (``body_index`` -1)."""
+    n, t = part.n_vertices, len(part.uv)
+    f, fu = part.faces, part.face_uv
+    corner_pairs = [(0, 1), (1, 2), (2, 0)]
+    vpairs = np.concatenate([f[:, list(p)] for p in corner_pairs])             # (3M, 2)
+    edges, vmid = _midpoints(vpairs, n)
+    upairs = np.concatenate([fu[:, list(p)] for p in corner_pairs])
+    uedges, umid = _midpoints(upairs, t)
+    m = len(f)
+    ab, bc, ca = vmid[:m], vmid[m:2 * m], vmid[2 * m:]
+    uab, ubc, uca = umid[:m], umid[m:2 * m], umid[2 * m:]
+    a, b, c = f.T
+    ua, ub, uc = fu.T
+    faces = np.concatenate([np.stack(x, 1) for x in
+                            ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))])
+    face_uv = np.concatenate([np.stack(x, 1) for x in
+                              ((ua, uab, uca), (uab, ub, ubc), (uca, ubc, uc), (uab, ubc, uca))])
+    normals = part.normals[edges].sum(1)
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    # each new UV corner belongs to the midpoint vertex of its two corners' vertices
+    uv_vertex = np.concatenate([part.uv_vertex, np.zeros(len(uedges), np.int64)])
+    uv_vertex[umid] = vmid
+    edge_of = {tuple(e): n + i for i, e in enumerate(edges)}
+
+    def finer(rim):                      # each rim vertex, then the midpoint to the next one
+        out = []
+        for p, q in zip(rim, np.roll(rim, -1)):
+            out.append(p)
+            if tuple(sorted((p, q))) in edge_of:         # a closed loop wraps around
+                out.append(edge_of[tuple(sorted((p, q)))])
+        return np.asarray(out, dtype=np.int64)
+
+    rims = tuple(finer(r) for r in part.rims)
+    body_index = None if part.body_index is None else np.concatenate(
+        [part.body_index, -np.ones(len(edges), np.int64)])
+    source = {**part.source, "subdivisions": int(part.source.get("subdivisions", 0)) + 1}
+    return BodyPart(part.name, np.concatenate([part.vertices, part.vertices[edges].mean(1)]),
+                    faces, np.concatenate([part.normals, normals]),
+                    np.concatenate([part.uv, part.uv[uedges].mean(1)]), face_uv, uv_vertex,
+                    part.uv_scale, rims, part.axis, body_index, source)
+
 def extract_part(name: str, vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray,
                  face_uv: np.ndarray, vertex_mask: np.ndarray, axis: np.ndarray | None = None,
                  source: dict | None = None) -> BodyPart:

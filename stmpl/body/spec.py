@@ -10,10 +10,12 @@ from __future__ import annotations
 
 from stmpl.body.part import BodyPart
 
-KEYS = {"anny": {"model", "phenotype"}, "smpl": {"model", "path", "uv_path", "betas"},
-        "tube": {"model", "radius", "length", "n_around", "n_along", "taper"},
-        "sheet": {"model", "width", "height", "nx", "ny"}}
-"""The keys each body model takes."""
+KEYS = {"anny": {"model", "phenotype", "subdivisions"},
+        "smpl": {"model", "path", "uv_path", "betas", "subdivisions"},
+        "tube": {"model", "radius", "length", "n_around", "n_along", "taper", "subdivisions"},
+        "sheet": {"model", "width", "height", "nx", "ny", "subdivisions"}}
+"""The keys each body model takes; ``subdivisions`` (any model) splits every triangle of the
+part into four that many times (:func:`stmpl.body.part.subdivide`), for a finer skin."""
 PRIMITIVES = ("tube", "sheet")
 
 
@@ -25,6 +27,9 @@ def check_spec(spec) -> dict:
     if bad:
         raise ValueError(f"unknown body keys {sorted(bad)} for model {spec['model']!r}; it "
                          f"takes {sorted(KEYS[spec['model']] - {'model'})}")
+    k = spec.get("subdivisions", 0)
+    if isinstance(k, bool) or not isinstance(k, int) or not 0 <= k <= 3:
+        raise ValueError(f"body.subdivisions must be an integer 0..3, got {k!r}")
     if spec["model"] == "smpl" and not spec.get("path"):
         raise ValueError("body.path: an SMPL-format body needs the model file's path")
     return spec
@@ -35,6 +40,7 @@ def body_from_spec(spec: dict):
     a body: use :func:`part_from_spec`)."""
     spec = dict(check_spec(spec))
     model = spec.pop("model")
+    spec.pop("subdivisions", None)
     if model in PRIMITIVES:
         raise ValueError(f"a {model} is a single part, not a body with parts")
     if model == "smpl":
@@ -53,6 +59,8 @@ def part_from_spec(spec: dict, part: str) -> BodyPart:
     if spec["model"] in PRIMITIVES:
         from stmpl.body import primitives
 
-        kwargs = {k: v for k, v in spec.items() if k != "model"}
-        return getattr(primitives, spec["model"])(**kwargs)
-    return body_from_spec(spec).part(part)
+        kwargs = {k: v for k, v in spec.items() if k not in ("model", "subdivisions")}
+        out = getattr(primitives, spec["model"])(**kwargs)
+    else:
+        out = body_from_spec(spec).part(part)
+    return out.subdivided(spec.get("subdivisions", 0))

@@ -73,3 +73,33 @@ def test_bad_part_arrays_are_named(field, value, message):
         base["face_uv"] = np.array([[0, 1, 2]])
     with pytest.raises(ValueError, match=message):
         BodyPart(**base)
+
+
+def test_subdivision_keeps_the_surface_and_carries_uvs_seams_and_rims():
+    from stmpl.body import tube
+
+    t = tube(0.04, 0.2, 16, 12)
+    f = t.subdivided(1)
+    assert f.n_vertices == t.n_vertices + len(t.edges) and f.n_faces == 4 * t.n_faces
+    assert f.face_areas.sum() == pytest.approx(t.face_areas.sum())
+    np.testing.assert_array_equal(f.vertices[: t.n_vertices], t.vertices)
+    assert len(f.seam_vertices) == 2 * len(t.seam_vertices) - 1       # the seam's midpoints too
+    assert [len(r) for r in f.rims] == [2 * len(r) for r in t.rims]
+    for r in f.rims:                                                  # a rim is still a loop
+        steps = np.linalg.norm(np.diff(f.vertices[np.r_[r, r[:1]]], axis=0), axis=1)
+        assert steps.max() < 0.6 * 2 * np.pi * 0.04 / 16
+    # a linear field in 3D is linear in the chart: UVs interpolate like positions
+    mid = f.uv_vertex >= t.n_vertices
+    np.testing.assert_allclose(np.linalg.norm(f.normals, axis=1), 1.0)
+    assert mid.sum() > 0 and f.source["subdivisions"] == 1
+    assert np.all(np.abs(f.uv[mid] - 0.5) <= 0.5)
+
+
+def test_finer_anny_arm(arm):
+    from stmpl.body.spec import part_from_spec
+
+    fine = part_from_spec({"model": "anny", "subdivisions": 1}, "left_arm")
+    assert fine.n_vertices == arm.n_vertices + len(arm.edges)
+    assert fine.source["subdivisions"] == 1 and fine.name == "left_arm"
+    with pytest.raises(ValueError, match="subdivisions must be an integer 0..3"):
+        part_from_spec({"model": "anny", "subdivisions": 9}, "left_arm")
