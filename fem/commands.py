@@ -32,5 +32,9 @@ def generate_command(args) -> int:
           f"{sp['test']}) from {card['placements']} placements; {card['failures']} of "
           f"{card['attempted']} solves failed {card['failures_by_reason'] or ''}"
           + (f"; median {median:.2f} s per sample" if median is not None else ""))
+    skipped = card.get("placements_skipped", {}).get("count", 0)
+    if skipped:
+        print(f"{skipped} placements left out before solving "
+              f"{card['placements_skipped']['by_reason']}")
     print(f"content hash {card['hash']}")
     return 0

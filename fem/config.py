@@ -34,6 +34,7 @@ PLACEMENT_KEYS = {
     "seam_disk": {"at", "radii"},
     "band": {"at", "widths"},
     "letter": {"chars", "uv", "heights", "strokes", "angles"},
+    "grasp": {"along", "around", "grips", "hand_heights", "depth"},
 }
 BACKENDS = ("serial", "processes", "dask")
 

@@ -86,6 +86,8 @@ def write_card(out: pathlib.Path, p: Plan, chash: str, runs: list) -> dict:
         "part": {"name": p.part.name, "vertices": p.part.n_vertices, "faces": p.part.n_faces,
                  "source": p.part.source},
         "placements": len(p.placements),
+        "placements_skipped": {"count": len(p.skipped),
+                               "by_reason": _count(p.skipped, lambda x: x["reason"])},
         "placements_per_split": {s: int((p.split == i).sum()) for i, s in enumerate(SPLITS)},
         "tasks": len(p.tasks),
         "samples": int(len(split)),

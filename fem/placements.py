@@ -52,6 +52,13 @@ def placements(cfg: dict, part: BodyPart) -> list[dict]:
         elif kind == "band":
             out += [{"kind": kind, "params": {"at": float(a), "width": float(w)}}
                     for a in spec.get("at", [0.5]) for w in spec.get("widths", [0.03])]
+        elif kind == "grasp":
+            out += [{"kind": kind, "params": {"along": float(a), "around": float(r),
+                                              "grip": str(g), "hand_height": float(h),
+                                              "depth": float(spec.get("depth", 0.002))}}
+                    for a in spec.get("along", [0.7]) for r in spec.get("around", [0.0])
+                    for g in spec.get("grips", ["whole"])
+                    for h in spec.get("hand_heights", [0.5])]
         elif kind == "letter":
             out += [{"kind": kind, "params": {"char": str(c), "uv": [float(u), float(v)],
                                               "height": float(h), "stroke": float(s),
@@ -67,6 +74,8 @@ def make_load(part: BodyPart, placement: dict, total: float = 1.0):
     from stmpl import loads
 
     params = dict(placement["params"])
+    if placement["kind"] == "grasp":          # the touched vertices were found by plan()
+        return loads.from_vertices(part, placement["touched"], total, "grasp", params)
     if "uv" in params:
         params["uv"] = tuple(params["uv"])
     try:
@@ -101,6 +110,8 @@ class Plan:
     placements: list
     split: np.ndarray
     tasks: list
+    skipped: list = ()
+    """Placements left out before solving (grasps that touch no vertex), with the reason."""
 
     @property
     def n_shards(self) -> int:
@@ -115,10 +126,34 @@ def plan(cfg: dict, part: BodyPart | None = None) -> Plan:
     """Expand a config into tasks; every placement is built once here so a bad one fails now,
     before any solving."""
     part = part if part is not None else part_from_spec(cfg["body"], cfg["part"])
-    pls = placements(cfg, part)
-    for p in pls:
+    pls, skipped, hands = [], [], {}
+    for p in placements(cfg, part):
+        if p["kind"] == "grasp":
+            try:
+                p["touched"] = grasp_contact(part, p["params"], hands)
+            except ValueError as e:              # a grasp that reaches no vertex: counted
+                skipped.append({**p, "reason": str(e).split(":")[0]})
+                continue
         ld = make_load(part, p)
         p["vertices"], p["area"] = int(ld.count), float(ld.area)
+        pls.append(p)
+    if not pls:
+        raise ValueError(f"no placement of the config touches the part ({len(skipped)} grasps "
+                         "found no contact)")
     split = split_of(len(pls), cfg["splits"], cfg["seed"])
     tasks = [(i, j) for i in range(len(pls)) for j in range(len(cfg["thickness_mm"]))]
-    return Plan(cfg, part, pls, split, tasks)
+    return Plan(cfg, part, pls, split, tasks, skipped)
+
+
+def grasp_contact(part: BodyPart, params: dict, hands: dict) -> list[int]:
+    """The vertices anny's right hand touches in the grasp ``params`` describe (hands of each
+    size are built once, in ``hands``); ``ValueError`` when it touches none."""
+    from stmpl import contact
+    from stmpl.hand import Hand, grasp
+
+    h = params["hand_height"]
+    if h not in hands:
+        hands[h] = Hand(phenotype={"height": h})
+    g = grasp(part, hands[h], params["along"], params["around"], params["grip"],
+              params["depth"])
+    return [int(v) for v in contact.contact(part, g.pressing(1.0)).vertices]

@@ -87,7 +87,7 @@ def payload(p: Plan, k: int, threads: int | None) -> dict:
     tasks = []
     for t in p.shard_tasks(k):
         pi, ti = p.tasks[t]
-        pl = {"kind": p.placements[pi]["kind"], "params": p.placements[pi]["params"]}
+        pl = {k: v for k, v in p.placements[pi].items() if k in ("kind", "params", "touched")}
         tasks.append((t, (pi, ti), pl, int(p.split[pi])))
     return {"shard": k, "cfg": p.cfg, "part_name": p.part.name,
             "part_arrays": p.part.arrays(), "part_source": p.part.source, "tasks": tasks,

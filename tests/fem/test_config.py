@@ -61,3 +61,40 @@ def test_nothing_to_solve_is_refused_before_anything_is_written(tmp_path):
     with pytest.raises(ValueError, match="nothing to solve: even the smallest force"):
         generate(_cfg(max_pressure=1.0), tmp_path / "d", progress=False)
     assert not (tmp_path / "d").exists()
+
+
+def test_grasp_placements(arm):
+    """Grasp placements: anny's hand around the arm, each load the vertices it touches (found
+    once, before solving); a grasp that touches nothing is left out and counted."""
+    from fem.placements import make_load
+
+    cfg = read_config({"name": "g", "body": {"model": "anny"}, "part": "left_arm",
+                       "thickness_mm": [7.5], "forces": [0.1],
+                       "placements": {"grasp": {"along": [0.7], "around": [0.0],
+                                                "grips": ["whole"], "hand_heights": [0.5]}}})
+    p = plan(cfg, arm)
+    assert len(p.placements) == 1 and p.skipped == []
+    pl = p.placements[0]
+    assert pl["params"] == {"along": 0.7, "around": 0.0, "grip": "whole", "hand_height": 0.5,
+                            "depth": 0.002}
+    ld = make_load(arm, pl, total=0.4)
+    assert ld.kind == "grasp" and ld.count == len(pl["touched"]) == pl["vertices"] >= 3
+    assert ld.force.sum() == pytest.approx(0.4)
+    with pytest.raises(ValueError, match="placements.grasp takes keys"):
+        read_config({**cfg, "placements": {"grasp": {"hands": [1]}}})
+
+
+def test_grasps_without_contact_are_counted_not_solved(tmp_path, monkeypatch):
+    import fem.placements as P
+
+    def fake(part, params, hands):            # the first grasp misses, the second holds
+        if params["along"] < 0.5:
+            raise ValueError("no contact: object 'hand' is 2.5 mm from the skin")
+        return [10, 11, 12]
+
+    monkeypatch.setattr(P, "grasp_contact", fake)
+    cfg = _cfg(placements={"grasp": {"along": [0.3, 0.7]}}, splits=[0.0, 0.0, 1.0])
+    card = generate(cfg, tmp_path / "g", progress=False)
+    assert card["placements"] == 1 and card["placements_skipped"] == {
+        "count": 1, "by_reason": {"no contact": 1}}
+    assert card["samples"] == 2 and card["samples_per_kind"] == {"grasp": 2}
