@@ -69,7 +69,7 @@ def pressings(args, part) -> list:
         ["strap"] if args.strap else [])
     if len(chosen) > 1:
         raise ValueError(f"choose one object, got {', '.join('--' + k for k in chosen)}")
-    if args.pose is not None and not chosen[:1] in (["object"], ["sphere"], ["letters"]):
+    if args.pose is not None and chosen[:1] not in (["object"], ["sphere"], ["letters"]):
         raise ValueError("--pose places an --object, --sphere or --letters")
     if args.strap:
         return [objects.strap(part, args.along, total=args.force,
