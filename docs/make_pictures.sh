@@ -15,3 +15,5 @@ stmpl simulate --compare --model zoo:gnn_arm --model zoo:uv_unet_arm --model zoo
     --model zoo:naive_arm --out-dir /tmp/stmpl_grasp && cp /tmp/stmpl_grasp/simulate.png simulate_grasp.png
 stmpl simulate --letters ECCV --force 0.3 --depth 3 --compare --out-dir /tmp/stmpl_eccv \
     && cp /tmp/stmpl_eccv/simulate.png simulate_eccv.png
+stmpl simulate --grip pinch --along 0.5 --around 0.5 --subdivide 1 --model fem --res medium \
+    --out-dir /tmp/stmpl_pinch && cp /tmp/stmpl_pinch/simulate.png simulate_pinch.png
