@@ -86,6 +86,10 @@ def cmd_zoo(args) -> int:
         for name in args.names or zoo.names(args.zoo):
             f = zoo.verify(name, args.zoo)
             print(f"{name}: {f.name} ok")
+    elif args.action == "measure":
+        if not args.evaluate_on:
+            raise ValueError("zoo measure needs --evaluate-on DATA [DATA ...]")
+        zoo.measure(args.names, args.evaluate_on, args.zoo)
     else:  # add
         if not args.checkpoint or len(args.names) != 1:
             raise ValueError("zoo add needs --checkpoint FILE and one NAME")
@@ -324,16 +328,19 @@ def parser() -> argparse.ArgumentParser:
     ev.add_argument("--out", help="write the table here (.md and .csv)")
     ev.set_defaults(func=cmd_evaluate)
 
-    zo = sub.add_parser("zoo", help="the shipped models: list, verify, add")
-    zo.add_argument("action", choices=["list", "verify", "add"])
-    zo.add_argument("names", nargs="*", help="model names (verify: default all; add: one)")
+    zo = sub.add_parser("zoo", help="the shipped models: list, verify, add, measure on more "
+                        "datasets")
+    zo.add_argument("action", choices=["list", "verify", "add", "measure"])
+    zo.add_argument("names", nargs="*", help="model names (verify, measure: default all; add: "
+                    "one)")
     zo.add_argument("--zoo", help="zoo folder (default $STMPL_ZOO or the repository's zoo/)")
     zo.add_argument("--checkpoint", help="add: the .safetensors checkpoint to add")
     zo.add_argument("--command-line", help="add: the command that trained it")
     zo.add_argument("--machine", help="add: the machine it trained on")
     zo.add_argument("--time", help="add: how long it trained")
     zo.add_argument("--evaluate-on", nargs="+", metavar="DATA",
-                    help="add: also measure these datasets' test splits (e.g. data/ood_bands)")
+                    help="add, measure: measure these datasets' test splits (e.g. "
+                    "data/ood_grasps)")
     zo.set_defaults(func=cmd_zoo)
 
     pa = sub.add_parser("parts", help="list the body model's parts and their sizes")

@@ -158,6 +158,36 @@ def add(checkpoint, name: str, trained: dict | None = None, path=None,
     return e
 
 
+def measure(names: list[str] | None, datasets: list, path=None, progress=print) -> dict:
+    """Measure zoo models (default all) on more datasets' test splits and keep the results in
+    their manifest entries under each dataset's name (the files and the rest of the entries are
+    untouched). Returns ``{name: {dataset: summary}}``."""
+    from stmpl import predictor
+    from stmpl.dataset import Dataset
+    from stmpl.evaluate import evaluate_dataset
+    from stmpl.files import atomic_write_text
+
+    if not datasets:
+        raise ValueError("measure needs at least one dataset folder")
+    sets = [Dataset(d) for d in datasets]
+    m = manifest(path)
+    out: dict = {}
+    for name in names or sorted(m["models"]):
+        p = predictor.read(verify(name, path))
+        e = m["models"][name]
+        e["metrics"] = dict(e.get("metrics") or {})
+        for ds in sets:
+            res = {**evaluate_dataset(p, ds, "test"), "dataset_hash": ds.card["hash"]}
+            e["metrics"][ds.card["name"]] = res
+            out.setdefault(name, {})[ds.card["name"]] = res
+            if progress:
+                progress(f"{name} on {ds.card['name']}: MEE {res['mee'][0]:.4f} mm, "
+                         f"rel. {res['rel_mee'][0]:.2f} %, peak {res['peak_err'][0]:+.1f} "
+                         f"+- {res['peak_err'][1]:.1f} %")
+    atomic_write_text(root(path) / MANIFEST, json.dumps(m, indent=1, sort_keys=True))
+    return out
+
+
 def table(path=None) -> str:
     """A markdown table of the zoo: name, kind, size, training dataset, and the MEE (mm) and
     relative MEE (%) on the test split of every dataset it was measured on."""

@@ -157,3 +157,20 @@ def test_the_shipped_zoo_verifies_and_beats_naive_on_a_fem_solve(arm):
         rel[name] = 100 * err.mean() / np.linalg.norm(truth, axis=1).max()
         assert rel[name] < 3 * zoo.entry(name)["metrics"]["test"]["rel_mee"][0], rel
     assert rel["uv_unet_arm"] < rel["naive_arm"] and rel["gnn_arm"] < rel["naive_arm"], rel
+
+
+def test_measure_adds_a_column_and_keeps_the_rest(zoo_dir, tiny_dataset, capsys):
+    from stmpl.cli import main
+
+    folder, ds, p = zoo_dir
+    before = zoo.entry("unet_tiny", folder)
+    assert main(["zoo", "measure", "--zoo", str(folder), "--evaluate-on", str(tiny_dataset)]) == 0
+    assert "unet_tiny on tiny: MEE" in capsys.readouterr().out
+    after = zoo.entry("unet_tiny", folder)
+    assert {k: v for k, v in after.items() if k != "metrics"} == \
+        {k: v for k, v in before.items() if k != "metrics"}
+    assert after["metrics"]["tiny"]["mee"] == before["metrics"]["tiny"]["mee"]   # the same set
+    assert after["metrics"]["test"] == before["metrics"]["test"]
+    zoo.verify("unet_tiny", folder)                  # the model files are untouched
+    assert main(["zoo", "measure", "--zoo", str(folder)]) == 2
+    assert "needs --evaluate-on" in capsys.readouterr().err
