@@ -181,16 +181,10 @@ def limb_point(part: BodyPart, along: float, around: float) -> tuple:
     and angle ``around`` (rad, from the body's front, right-handed about the axis)."""
     if part.axis is None:
         raise ValueError(f"part {part.name!r} has no limb axis: a hand grasps a limb")
-    if not 0.0 <= along <= 1.0 or not np.isfinite(around):
-        raise ValueError(f"along must lie in [0, 1] and around be finite, got {along}, {around}")
-    line = part.axis
-    seg_len = np.linalg.norm(np.diff(line, axis=0), axis=1)
-    start = np.r_[0.0, np.cumsum(seg_len)[:-1]]
+    if not np.isfinite(around):
+        raise ValueError(f"around must be finite, got {around}")
+    centre, z, s0 = part.limb_frame(along)
     s = part.axial
-    s0 = s.min() + along * (s.max() - s.min())
-    k = int(np.clip(np.searchsorted(start, s0, "right") - 1, 0, len(seg_len) - 1))
-    t = float(np.clip((s0 - start[k]) / seg_len[k], 0.0, 1.0))
-    centre, z = line[k] + t * (line[k + 1] - line[k]), (line[k + 1] - line[k]) / seg_len[k]
     front = np.array([0.0, -1.0, 0.0])                          # anny faces -y
     ref = front - z * (front @ z)
     ref /= np.linalg.norm(ref)

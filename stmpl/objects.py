@@ -118,18 +118,8 @@ def strap(part: BodyPart, at: float = 0.5, width: float = 0.03, squeeze: float =
     object, so the strap is thicker than it squeezes: ``thickness`` > 2 ``squeeze``.)"""
     if part.axis is None:
         raise ValueError(f"part {part.name!r} has no limb axis: a strap goes around a limb")
-    if not 0.0 <= at <= 1.0:
-        raise ValueError(f"strap at must be in [0, 1] (fraction along the limb), got {at}")
-    s = part.axial
-    s0 = s.min() + at * (s.max() - s.min())
-    ring = np.abs(s - s0) <= max(width, 0.01) / 2
-    line = part.axis                                        # arc length s runs from line[0]
-    seg_len = np.linalg.norm(np.diff(line, axis=0), axis=1)
-    start = np.r_[0.0, np.cumsum(seg_len)[:-1]]
-    k = int(np.clip(np.searchsorted(start, s0, "right") - 1, 0, len(seg_len) - 1))
-    t = float(np.clip((s0 - start[k]) / seg_len[k], 0.0, 1.0))
-    a, b = line[k], line[k + 1]
-    centre, direction = a + t * (b - a), (b - a) / seg_len[k]
+    centre, direction, s0 = part.limb_frame(at)
+    ring = np.abs(part.axial - s0) <= max(width, 0.01) / 2
     off = part.vertices[ring] - centre
     radius = float(np.median(np.linalg.norm(off - np.outer(off @ direction, direction), axis=1)))
     if not 0 < 2 * squeeze < thickness:

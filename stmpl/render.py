@@ -100,7 +100,7 @@ def contact_figure(deformations: dict, truth=None, objects=(), path=None, dpi: i
         ax.set_xlim(cx - reach, cx + reach)
         ax.set_ylim(cy - reach, cy + reach)
         ms = d.info.get("seconds")
-        head = f"{name}" + (f", {_duration(ms)}" if ms is not None else "")
+        head = f"{name}" + (f", {duration(ms)}" if ms is not None else "")
         lines = [head, f"deepest {mag.max():.2f} mm"]
         if truth is not None and d is not truth:
             err = np.linalg.norm(d.displacement - truth.displacement, axis=1)
@@ -121,7 +121,8 @@ def contact_figure(deformations: dict, truth=None, objects=(), path=None, dpi: i
     return fig
 
 
-def _duration(seconds: float) -> str:
+def duration(seconds: float) -> str:
+    """``12.3 ms`` or ``4.5 s``."""
     return f"{seconds * 1e3:.1f} ms" if seconds < 1 else f"{seconds:.1f} s"
 
 

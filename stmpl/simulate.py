@@ -98,7 +98,7 @@ def run(args) -> int:
     """``stmpl simulate``: build the scene, predict, compare, write and print."""
     from stmpl import contact, predictor, tissue
     from stmpl.body.spec import part_from_spec
-    from stmpl.render import contact_figure
+    from stmpl.render import contact_figure, duration
     from stmpl.scene import Scene
     from stmpl.spec import label, predictor_from_spec
 
@@ -115,12 +115,12 @@ def run(args) -> int:
             p.predict(scene)                                  # warm-up, not timed
         out[label(spec)] = d = p.predict(scene)
         print(f"{label(spec):<16} deepest {1e3 * d.magnitude.max():6.3f} mm  "
-              f"{_duration(d.info['seconds'])}")
+              f"{duration(d.info['seconds']):>10}")
     truth = None
     if args.compare:
         truth = predictor.create("fem", res=args.res, levels=args.levels).predict(scene)
         print(f"{'FEM (' + args.res + ')':<16} deepest {1e3 * truth.magnitude.max():6.3f} mm  "
-              f"{_duration(truth.info['seconds'])}")
+              f"{duration(truth.info['seconds']):>10}")
         active = truth.magnitude > 1e-6
         peak = truth.magnitude.max()
         for name, d in out.items():
@@ -138,21 +138,17 @@ def run(args) -> int:
     return 0
 
 
-def _duration(seconds: float) -> str:
-    return f"{1e3 * seconds:8.2f} ms" if seconds < 1 else f"{seconds:8.2f} s"
-
-
 def write_meshes(deformation, objects, base) -> None:
     """``base.glb``: the deformed part coloured by |u| with the objects in place; ``base.ply``:
     the deformed part alone."""
-    import matplotlib
     import trimesh
 
-    mag = deformation.magnitude
-    colours = matplotlib.colormaps["inferno"](mag / max(mag.max(), 1e-12))
-    body = trimesh.Trimesh(deformation.vertices, deformation.scene.part.faces,
-                           vertex_colors=(255 * colours).astype(np.uint8), process=False)
-    body.export(pathlib.Path(base).with_suffix(".ply"))
+    from stmpl.viz import export_mesh, vertex_colors
+
+    part, mag = deformation.scene.part, deformation.magnitude
+    export_mesh(part, pathlib.Path(base).with_suffix(".ply"), mag, deformation.vertices)
+    body = part.mesh(deformation.vertices)
+    body.visual.vertex_colors = vertex_colors(mag, "inferno")
     world = trimesh.Scene()
     world.add_geometry(body, node_name="body")
     for k, m in enumerate(objects):

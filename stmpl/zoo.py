@@ -145,14 +145,8 @@ def add(checkpoint, name: str, trained: dict | None = None, path=None,
     if evaluate_on:
         from stmpl import predictor
         from stmpl.dataset import Dataset
-        from stmpl.evaluate import evaluate_dataset
 
-        p = predictor.read(dst)
-        e["metrics"] = dict(e["metrics"] or {})
-        for folder in evaluate_on:
-            ds = Dataset(folder)
-            e["metrics"][ds.card["name"]] = {**evaluate_dataset(p, ds, "test"),
-                                             "dataset_hash": ds.card["hash"]}
+        _measure(predictor.read(dst), e, [Dataset(d) for d in evaluate_on])
     m["models"][name] = e
     atomic_write_text(f, json.dumps(m, indent=1, sort_keys=True))
     return e
@@ -164,7 +158,6 @@ def measure(names: list[str] | None, datasets: list, path=None, progress=print) 
     untouched). Returns ``{name: {dataset: summary}}``."""
     from stmpl import predictor
     from stmpl.dataset import Dataset
-    from stmpl.evaluate import evaluate_dataset
     from stmpl.files import atomic_write_text
 
     if not datasets:
@@ -173,18 +166,27 @@ def measure(names: list[str] | None, datasets: list, path=None, progress=print) 
     m = manifest(path)
     out: dict = {}
     for name in names or sorted(m["models"]):
-        p = predictor.read(verify(name, path))
-        e = m["models"][name]
-        e["metrics"] = dict(e.get("metrics") or {})
-        for ds in sets:
-            res = {**evaluate_dataset(p, ds, "test"), "dataset_hash": ds.card["hash"]}
-            e["metrics"][ds.card["name"]] = res
-            out.setdefault(name, {})[ds.card["name"]] = res
+        out[name] = _measure(predictor.read(verify(name, path)), m["models"][name], sets)
+        for ds_name, res in out[name].items():
             if progress:
-                progress(f"{name} on {ds.card['name']}: MEE {res['mee'][0]:.4f} mm, "
+                progress(f"{name} on {ds_name}: MEE {res['mee'][0]:.4f} mm, "
                          f"rel. {res['rel_mee'][0]:.2f} %, peak {res['peak_err'][0]:+.1f} "
                          f"+- {res['peak_err'][1]:.1f} %")
     atomic_write_text(root(path) / MANIFEST, json.dumps(m, indent=1, sort_keys=True))
+    return out
+
+
+def _measure(p, entry: dict, sets: list) -> dict:
+    """Evaluate predictor ``p`` on each dataset's test split into ``entry["metrics"]`` under
+    the dataset's name (with its hash); returns those results."""
+    from stmpl.evaluate import evaluate_dataset
+
+    entry["metrics"] = dict(entry.get("metrics") or {})
+    out = {}
+    for ds in sets:
+        out[ds.card["name"]] = {**evaluate_dataset(p, ds, "test"),
+                                "dataset_hash": ds.card["hash"]}
+    entry["metrics"].update(out)
     return out
 
 

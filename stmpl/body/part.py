@@ -168,6 +168,22 @@ class BodyPart:
                    if "body_index" in arrays else None,
                    source=dict(source or {}))
 
+    def limb_frame(self, along: float) -> tuple[np.ndarray, np.ndarray, float]:
+        """``(centre (3,), direction (3,), arc length s0 m)``: the point of the limb axis at
+        fraction ``along`` of the part's extent along it, and the axis direction there."""
+        if self.axis is None:
+            raise ValueError(f"part {self.name!r} has no limb axis (not a limb)")
+        if not 0.0 <= along <= 1.0:
+            raise ValueError(f"along must lie in [0, 1] (fraction along the limb), got {along}")
+        s = self.axial
+        s0 = s.min() + along * (s.max() - s.min())
+        line = self.axis                                 # arc length runs from line[0]
+        seg_len = np.linalg.norm(np.diff(line, axis=0), axis=1)
+        start = np.r_[0.0, np.cumsum(seg_len)[:-1]]
+        k = int(np.clip(np.searchsorted(start, s0, "right") - 1, 0, len(seg_len) - 1))
+        t = float(np.clip((s0 - start[k]) / seg_len[k], 0.0, 1.0))
+        return line[k] + t * (line[k + 1] - line[k]), (line[k + 1] - line[k]) / seg_len[k], s0
+
     def subdivided(self, levels: int = 1) -> "BodyPart":
         """A finer copy: every triangle split into four at its edge midpoints, ``levels`` times
         (:func:`subdivide`)."""
