@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import logging
 import sys
+import warnings
 from importlib.metadata import entry_points
 
 log = logging.getLogger("stmpl")
@@ -377,8 +378,15 @@ def main(argv=None) -> int:
     args = parser().parse_args(argv)
     logging.basicConfig(level=logging.INFO if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
+
+    def one_line(message, *_, **__):          # a warning is one line, like an error
+        print(f"stmpl {args.command}: warning: {message}", file=sys.stderr)
+
     try:
-        return args.func(args)
+        with warnings.catch_warnings():
+            if not args.verbose:
+                warnings.showwarning = one_line
+            return args.func(args)
     except _expected() as exc:
         if args.verbose:
             import traceback

@@ -14,6 +14,7 @@ The core knows no implementation. Predictors plug in as Python entry points of t
 from __future__ import annotations
 
 import time
+import warnings
 from importlib.metadata import entry_points
 from typing import Protocol, Sequence, runtime_checkable
 
@@ -34,6 +35,12 @@ class Predictor(Protocol):
     def predict(self, scenes: Scene | Sequence[Scene]) -> Deformation | list[Deformation]:
         """A Deformation for a scene, or a list of them for a sequence of scenes."""
         ...
+
+
+class ImpossibleAnswer(RuntimeWarning):
+    """A prediction moved the skin further inward than the tissue is thick (through the fixed
+    surface beneath): physically impossible, flagged (``Deformation.info["physical"]``) and
+    warned about, never passed off as an answer."""
 
 
 class PredictionFailed(RuntimeError):
@@ -122,8 +129,17 @@ class BasePredictor:
             u = np.asarray(u, dtype=float)
             if not np.all(np.isfinite(u)):
                 raise PredictionFailed(f"{self.name} predicted non-finite displacements")
+            compression = float((-np.einsum("ij,ij->i", u, s.part.normals) / s.thickness).max())
+            physical = compression <= 1.0
+            if not physical:
+                warnings.warn(f"{self.name}: the skin moves inward {compression:.2f} x the "
+                              "tissue's thickness (through the fixed surface beneath): a "
+                              "physically impossible answer; the scene lies outside what it "
+                              "can answer",
+                              ImpossibleAnswer, stacklevel=2)
             result.append(Deformation(s, u, {"predictor": self.name, "seconds": dt,
-                                             **self.info(s)}))
+                                             "max_compression": compression,
+                                             "physical": physical, **self.info(s)}))
         return result[0] if single else result
 
     def check(self, scenes: list[Scene]) -> None:

@@ -96,7 +96,10 @@ def pressings(args, part) -> list:
 
 def run(args) -> int:
     """``stmpl simulate``: build the scene, predict, compare, write and print."""
+    import warnings
+
     from stmpl import contact, predictor, tissue
+    from stmpl.predictor import ImpossibleAnswer
     from stmpl.body.spec import part_from_spec
     from stmpl.render import contact_figure, duration
     from stmpl.scene import Scene
@@ -112,10 +115,17 @@ def run(args) -> int:
     for spec in args.model or [DEFAULT_MODEL]:
         p = predictor_from_spec(spec, res=args.res, levels=args.levels)
         if not spec.startswith("fem"):
-            p.predict(scene)                                  # warm-up, not timed
-        out[label(spec)] = d = p.predict(scene)
+            with warnings.catch_warnings():                   # said once, below
+                warnings.simplefilter("ignore", ImpossibleAnswer)
+                p.predict(scene)                              # warm-up, not timed
+        with warnings.catch_warnings():                       # printed as a line instead
+            warnings.simplefilter("ignore", ImpossibleAnswer)
+            out[label(spec)] = d = p.predict(scene)
         print(f"{label(spec):<16} deepest {1e3 * d.magnitude.max():6.3f} mm  "
               f"{duration(d.info['seconds']):>10}")
+        if not d.info.get("physical", True):
+            print(f"  WARNING: {label(spec)} pushes the skin {d.info['max_compression']:.1f} x "
+                  "the tissue's thickness inward: impossible; do not use this answer")
     truth = None
     if args.compare:
         truth = predictor.create("fem", res=args.res, levels=args.levels).predict(scene)

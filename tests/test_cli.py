@@ -131,3 +131,12 @@ def test_a_permission_error_is_one_line(tmp_path, capsys, arm, monkeypatch):
     monkeypatch.setattr(stmpl.viz, "_save_figure", refuse)
     _fails(["scene", "--force", "0.3", "--out", str(target)], capsys,
            f"Permission denied: {target}")
+
+
+def test_an_impossible_prediction_is_said_in_one_line(capsys, arm):
+    """5 N on a disk is ten times the shipped models' range: the GNN's answer pushes the skin
+    through the tissue, and the command says so."""
+    assert main(["predict", "--force", "5"]) == 0
+    err = capsys.readouterr().err
+    assert "warning: gnn: the skin moves inward" in err and "physically impossible" in err
+    assert len([ln for ln in err.splitlines() if "warning" in ln]) == 1

@@ -103,3 +103,19 @@ def test_reference_outputs(name):
     assert np.linalg.norm(u) == pytest.approx(ref["norm_m"], rel=1e-5)
 
 
+
+
+def test_an_impossible_answer_is_flagged(ds, make):
+    """A prediction that pushes the skin through the fixed surface beneath is flagged and
+    warned about (here a Naive model with an absurd alpha pushing along the inward normals)."""
+    import torch
+
+    p = make("naive", ds)
+    s = scenes_of(ds, "train", limit=1)[0][0]
+    ok = p.predict(s)
+    assert ok.info["physical"] and ok.info["max_compression"] <= 1.0
+    with torch.no_grad():
+        p.model.alpha.copy_(torch.tensor([-5e4, 0.0, 0.0]))
+    with pytest.warns(predictor.ImpossibleAnswer, match="physically impossible"):
+        bad = p.predict(s)
+    assert not bad.info["physical"] and bad.info["max_compression"] > 1.0
