@@ -158,6 +158,8 @@ class LearnedPredictor(BasePredictor):
         side = {"kind": self.name, "config": self.config, "part": self.part.name,
                 "part_source": self.part.source, "disp_scale_m": self.scale,
                 "parameters": self.n_parameters(), **self.meta, **(meta or {})}
+        if self.envelope is not None:
+            side["envelope"] = self.envelope.to_dict()
         return checkpoint.write(path, tensors, side)
 
     @classmethod
@@ -177,5 +179,12 @@ class LearnedPredictor(BasePredictor):
             p.model.load_state_dict(state)
         except RuntimeError as e:
             raise ValueError(f"checkpoint {path} does not fit its model config: {e}") from e
-        p.meta = {k: v for k, v in meta.items() if k not in ("config", "kind")}
+        p.meta = {k: v for k, v in meta.items() if k not in ("config", "kind", "envelope")}
+        if "envelope" in meta:
+            from stmpl.envelope import Envelope
+
+            try:
+                p.envelope = Envelope.from_dict(meta["envelope"])
+            except ValueError as e:
+                raise ValueError(f"checkpoint {path}: {e}") from e
         return p

@@ -30,15 +30,20 @@ def scenes_of(ds, split: str, thickness_mm=None, limit: int | None = None):
 
 def evaluate_dataset(predictor, ds, split: str = "test", thickness_mm=None,
                      limit: int | None = None, batch: int = 64) -> dict:
-    """Summary (mean, std per measure; JSON-ready) of ``predictor`` on a dataset split.
+    """Summary (mean, std per measure; JSON-ready) of ``predictor`` on a dataset split;
+    ``inside_envelope``: the share (%) of scenes inside the predictor's envelope (NaN without
+    one).
 
     Seam measures: ``seam_mee`` (MEE on the UV seam's vertices) for every predictor, and
     ``seam_gap`` (how far a seam vertex's UV copies disagree, before they are averaged) for
     predictors that predict per UV corner (``corner_displacement``); a per-vertex predictor
     (GNN, Naive, FEM) gets 0: one value per vertex has no gap by construction."""
+    import warnings
+
     import torch
 
     from stmpl.metrics import sample_metrics, seam_gap, summarise
+    from stmpl.predictor import OutsideEnvelope
 
     scenes, truth = scenes_of(ds, split, thickness_mm, limit)
     if not scenes:
@@ -48,7 +53,9 @@ def evaluate_dataset(predictor, ds, split: str = "test", thickness_mm=None,
     rows, seconds = [], []
     for i in range(0, len(scenes), batch):
         chunk = scenes[i:i + batch]
-        out = predictor.predict(chunk)
+        with warnings.catch_warnings():    # measured, not warned: see inside_envelope
+            warnings.simplefilter("ignore", OutsideEnvelope)
+            out = predictor.predict(chunk)
         if hasattr(predictor, "corner_displacement"):
             t, f = (torch.tensor(np.stack([getattr(s, k) for s in chunk]), dtype=torch.float32,
                                  device=predictor.device) for k in ("thickness", "force"))
@@ -56,7 +63,9 @@ def evaluate_dataset(predictor, ds, split: str = "test", thickness_mm=None,
         else:
             corners = [d.displacement[part.uv_vertex] for d in out]
         for d, u, c in zip(out, truth[i:i + batch], corners):
-            rows.append({**sample_metrics(u, d.displacement, seam), "seam_gap": seam_gap(part, c)})
+            env = d.info.get("envelope")
+            rows.append({**sample_metrics(u, d.displacement, seam), "seam_gap": seam_gap(part, c),
+                         "inside_envelope": np.nan if env is None else 100.0 * env["inside"]})
             seconds.append(d.info.get("seconds", np.nan))
     s = summarise(rows)
     s["seconds_per_scene"] = (float(np.nanmean(seconds)), float(np.nanstd(seconds)))

@@ -43,6 +43,12 @@ class ImpossibleAnswer(RuntimeWarning):
     warned about, never passed off as an answer."""
 
 
+class OutsideEnvelope(RuntimeWarning):
+    """A scene lies outside the data a predictor's answers are backed by (its
+    :class:`~stmpl.envelope.Envelope`): answered, flagged (``Deformation.info["envelope"]``) and
+    warned about once per call; with ``strict=True`` refused instead."""
+
+
 class PredictionFailed(RuntimeError):
     """A predictor could not answer a scene (e.g. a FEM solve that did not converge); the message
     says why. Never returned as a result."""
@@ -111,8 +117,18 @@ class BasePredictor:
     ``(N, 3)`` displacement (m) per scene."""
 
     name = "base"
+    envelope = None
+    """The :class:`~stmpl.envelope.Envelope` of the data behind the answers, or ``None`` (the
+    FEM, which fails loudly instead)."""
+    strict = False
+    """Refuse scenes outside the envelope (``PredictionFailed``) instead of warning."""
 
-    def predict(self, scenes: Scene | Sequence[Scene]) -> Deformation | list[Deformation]:
+    def predict(self, scenes: Scene | Sequence[Scene],
+                strict: bool | None = None) -> Deformation | list[Deformation]:
+        """A Deformation per scene. Scenes outside the predictor's envelope are answered with
+        ``info["envelope"]["inside"] = False`` and one :class:`OutsideEnvelope` warning per
+        call; with ``strict`` (default: the predictor's ``strict``) they raise
+        ``PredictionFailed`` before anything is predicted."""
         single = isinstance(scenes, Scene)
         batch = [scenes] if single else list(scenes)
         if not batch:
@@ -121,11 +137,23 @@ class BasePredictor:
             if not isinstance(s, Scene):
                 raise TypeError(f"scene {i} is a {type(s).__name__}, not a Scene")
         self.check(batch)
+        outside = self.outside(batch)
+        strict = self.strict if strict is None else strict
+        bad = [i for i, why in enumerate(outside) if why]
+        if bad:
+            first = outside[bad[0]]
+            which = (f"{len(bad)} of {len(batch)} scenes lie" if len(batch) > 1 else
+                     "the scene lies")
+            msg = (f"{self.name}: {which} outside the data its answers are backed by: "
+                   + "; ".join(first))
+            if strict:
+                raise PredictionFailed(msg + " (strict: refused)")
+            warnings.warn(msg, OutsideEnvelope, stacklevel=2)
         t0 = time.perf_counter()
         out = self.predict_batch(batch)
         dt = (time.perf_counter() - t0) / len(batch)
         result = []
-        for s, u in zip(batch, out):
+        for s, u, why in zip(batch, out, outside):
             u = np.asarray(u, dtype=float)
             if not np.all(np.isfinite(u)):
                 raise PredictionFailed(f"{self.name} predicted non-finite displacements")
@@ -139,8 +167,17 @@ class BasePredictor:
                               ImpossibleAnswer, stacklevel=2)
             result.append(Deformation(s, u, {"predictor": self.name, "seconds": dt,
                                              "max_compression": compression,
-                                             "physical": physical, **self.info(s)}))
+                                             "physical": physical,
+                                             "envelope": None if self.envelope is None else
+                                             {"inside": not why, "outside": why},
+                                             **self.info(s)}))
         return result[0] if single else result
+
+    def outside(self, scenes: list[Scene]) -> list[list[str]]:
+        """Per scene, why it lies outside :attr:`envelope` (``[]`` inside or without one)."""
+        if self.envelope is None:
+            return [[] for _ in scenes]
+        return [self.envelope.reasons(s) for s in scenes]
 
     def check(self, scenes: list[Scene]) -> None:
         """Raise if the predictor cannot take these scenes (e.g. another body part)."""

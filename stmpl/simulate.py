@@ -99,7 +99,7 @@ def run(args) -> int:
     import warnings
 
     from stmpl import contact, predictor, tissue
-    from stmpl.predictor import ImpossibleAnswer
+    from stmpl.predictor import ImpossibleAnswer, OutsideEnvelope, PredictionFailed
     from stmpl.body.spec import part_from_spec
     from stmpl.render import contact_figure, duration
     from stmpl.scene import Scene
@@ -114,21 +114,28 @@ def run(args) -> int:
     out: dict = {}
     for spec in args.model or [DEFAULT_MODEL]:
         p = predictor_from_spec(spec, res=args.res, levels=args.levels)
-        if not spec.startswith("fem"):
-            with warnings.catch_warnings():                   # said once, below
-                warnings.simplefilter("ignore", ImpossibleAnswer)
-                p.predict(scene)                              # warm-up, not timed
-        with warnings.catch_warnings():                       # printed as a line instead
+        with warnings.catch_warnings():                       # printed as lines instead
             warnings.simplefilter("ignore", ImpossibleAnswer)
+            warnings.simplefilter("ignore", OutsideEnvelope)
+            if not spec.startswith("fem"):
+                p.predict(scene)                              # warm-up, not timed
             out[label(spec)] = d = p.predict(scene)
         print(f"{label(spec):<16} deepest {1e3 * d.magnitude.max():6.3f} mm  "
               f"{duration(d.info['seconds']):>10}")
+        env = d.info.get("envelope")
+        if env and not env["inside"]:
+            print(f"  NOTE: {label(spec)} answers outside the data it was trained and checked "
+                  f"on: {'; '.join(env['outside'])}. Check it with --compare")
         if not d.info.get("physical", True):
             print(f"  WARNING: {label(spec)} pushes the skin {d.info['max_compression']:.1f} x "
                   "the tissue's thickness inward: impossible; do not use this answer")
     truth = None
     if args.compare:
-        truth = predictor.create("fem", res=args.res, levels=args.levels).predict(scene)
+        try:
+            truth = predictor.create("fem", res=args.res, levels=args.levels).predict(scene)
+        except PredictionFailed as e:
+            print(f"{'FEM (' + args.res + ')':<16} failed: {e}; no errors to show")
+    if truth is not None:
         print(f"{'FEM (' + args.res + ')':<16} deepest {1e3 * truth.magnitude.max():6.3f} mm  "
               f"{duration(truth.info['seconds']):>10}")
         active = truth.magnitude > 1e-6

@@ -90,6 +90,15 @@ def read_config(source) -> dict:
 def _split_tensors(ds, split, cfg, device):
     import torch
 
+    a, keep = _selection(ds, split, cfg)
+
+    def t(x):
+        return torch.tensor(np.asarray(x)[keep], dtype=torch.float32, device=device)
+    return t(a["thickness"]), t(a["force"]), t(a["displacement"])
+
+
+def _selection(ds, split, cfg):
+    """A split's arrays and the indices of the samples the config trains on."""
     a = ds.arrays(split)
     keep = np.arange(len(a["total"]))
     if cfg["thickness_mm"] is not None:
@@ -103,9 +112,19 @@ def _split_tensors(ds, split, cfg, device):
         keep = keep[np.isin(a["placement"][keep], chosen)]
     if split == "train" and cfg["max_train"]:
         keep = keep[: int(cfg["max_train"])]
-    def t(x):
-        return torch.tensor(np.asarray(x)[keep], dtype=torch.float32, device=device)
-    return t(a["thickness"]), t(a["force"]), t(a["displacement"])
+    return a, keep
+
+
+def envelope(ds, cfg):
+    """The :class:`~stmpl.envelope.Envelope` of the training scenes the config selects."""
+    from stmpl.envelope import Envelope
+
+    a, keep = _selection(ds, "train", cfg)
+    if len(keep) == 0:
+        raise ValueError(f"dataset {cfg['data']} has no training samples (after the "
+                         "thickness filter)")
+    return Envelope.of(ds.part, a["thickness"][keep], a["force"][keep], name="training",
+                       source=f"{ds.card['name']} ({ds.card['hash']}), train split")
 
 
 def train(config, resume: bool = True, progress: bool = True):
@@ -126,6 +145,7 @@ def train(config, resume: bool = True, progress: bool = True):
     torch.manual_seed(cfg["seed"])
     np.random.seed(cfg["seed"])
     p = predictor.create(cfg["model"], ds.part, cfg["options"], device=cfg["device"])
+    p.envelope = envelope(ds, cfg)
     t_fit = time.perf_counter()
     if hasattr(p, "fit"):  # a part computed from the dataset, not learned (a FEM operator)
         p.fit(ds, progress=progress)

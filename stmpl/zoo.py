@@ -103,11 +103,23 @@ def verify(name: str, path=None) -> pathlib.Path:
     return f
 
 
+PROMISE = {"rel_mee": 1.0, "peak_err": 5.0}
+"""What a learned model promises inside its envelope: relative MEE <= 1 % and the mean peak
+error within +-5 % (the targets of the tables)."""
+
+
 def read(name: str, device: str = "cpu", path=None):
-    """The predictor of zoo model ``name``, verified, on ``device``."""
+    """The predictor of zoo model ``name``, verified, on ``device``; its envelope gains the
+    boxes of the test sets it kept its promise on (the manifest's ``envelope``)."""
     from stmpl import predictor
 
-    return predictor.read(verify(name, path), device=device)
+    p = predictor.read(verify(name, path), device=device)
+    kept = {k: v for k, v in (entry(name, path).get("envelope") or {}).items() if v["kept"]}
+    if kept and p.envelope is not None:
+        for k, v in kept.items():
+            p.envelope.boxes[k] = v["box"]
+            p.envelope.info[k] = v["info"]
+    return p
 
 
 def add(checkpoint, name: str, trained: dict | None = None, path=None,
@@ -186,8 +198,51 @@ def _measure(p, entry: dict, sets: list) -> dict:
     for ds in sets:
         out[ds.card["name"]] = {**evaluate_dataset(p, ds, "test"),
                                 "dataset_hash": ds.card["hash"]}
+        box = _validate(p, ds)
+        if box is not None:
+            entry["envelope"] = {**(entry.get("envelope") or {}), ds.card["name"]: box}
     entry["metrics"].update(out)
     return out
+
+
+def _validate(p, ds) -> dict | None:
+    """The box by which dataset ``ds``'s test split widens ``p``'s training envelope (along the
+    load's layout, :data:`~stmpl.envelope.SHAPE_AXES`, from the scenes as intense as training
+    ones), with the model's relative MEE and peak error on those scenes and whether they keep
+    :data:`PROMISE`; ``None`` if ``p`` has no training envelope or no scene qualifies."""
+    import warnings
+
+    import numpy as np
+
+    from stmpl.envelope import Envelope
+    from stmpl.evaluate import scenes_of
+    from stmpl.metrics import sample_metrics
+    from stmpl.predictor import OutsideEnvelope
+
+    if p.envelope is None or "training" not in p.envelope.boxes:
+        return None
+    scenes, truth = scenes_of(ds, "test")
+    name = ds.card["name"]
+    env = Envelope({"training": p.envelope.boxes["training"]})
+    mask = env.widen(name, ds.part, np.stack([s.thickness for s in scenes]),
+                     np.stack([s.force for s in scenes]),
+                     source=f"{name} ({ds.card['hash']}), test split")
+    idx = np.flatnonzero(mask)
+    if len(idx) == 0:
+        return None
+    rows = []
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", OutsideEnvelope)   # these scenes are the question
+        for i in range(0, len(idx), 64):
+            chunk = idx[i:i + 64]
+            for k, d in zip(chunk, p.predict([scenes[k] for k in chunk])):
+                rows.append(sample_metrics(truth[k], d.displacement))
+    rel = float(np.nanmean([r["rel_mee"] for r in rows]))
+    peak = np.array([r["peak_err"] for r in rows], dtype=float)
+    peak = peak[np.isfinite(peak)]
+    kept = rel <= PROMISE["rel_mee"] and abs(float(peak.mean())) <= PROMISE["peak_err"]
+    return {"box": env.boxes[name], "info": env.info[name], "rel_mee": rel,
+            "peak_err": [float(peak.mean()), float(peak.std())], "kept": bool(kept)}
 
 
 def table(path=None) -> str:

@@ -54,3 +54,16 @@ def test_an_object_file_at_a_pose(tmp_path, capsys, arm):
     assert main(["simulate", "--pose", "0", "0", "0", "0", "0", "0",
                  "--out-dir", str(tmp_path / "o")]) == 2
     assert "--pose places an --object" in capsys.readouterr().err
+
+
+def test_a_press_past_the_envelope_is_said_and_a_failed_fem_is_one_line(tmp_path, capsys, arm):
+    """5 N on a fingertip-sized patch: the GNN answers with a note that the scene lies outside
+    its data and a warning that the answer is impossible; the FEM fails and says why in one
+    line; the command still writes the models' answers."""
+    assert main(["simulate", "--sphere", "20", "--depth", "4", "--force", "5", "--compare",
+                 "--res", "coarse", "--levels", "1", "--out-dir", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "NOTE: gnn_arm answers outside the data" in out
+    assert "mean pressure of a contact" in out and "WARNING: gnn_arm pushes the skin" in out
+    assert "FEM (coarse)     failed: the FEM solve failed at 5 N" in out
+    assert "Traceback" not in out and (tmp_path / "simulate.png").is_file()

@@ -174,3 +174,37 @@ def test_measure_adds_a_column_and_keeps_the_rest(zoo_dir, tiny_dataset, capsys)
     zoo.verify("unet_tiny", folder)                  # the model files are untouched
     assert main(["zoo", "measure", "--zoo", str(folder)]) == 2
     assert "needs --evaluate-on" in capsys.readouterr().err
+
+
+def test_a_test_set_widens_the_envelope_only_where_the_promise_holds(tiny_dataset, tmp_path,
+                                                                     monkeypatch):
+    """A model trained on disks only, measured on a set with bands: the bands as intense as its
+    training scenes widen the contact area of its envelope when (and only when) it kept its
+    promise on them; zoo.read gives the widened envelope."""
+    import torch
+
+    from stmpl.dataset import Dataset
+    from stmpl.envelope import Envelope
+
+    ds = Dataset(tiny_dataset)
+    a = ds.arrays("train")
+    disks = np.array([k == "disk" for k in a["kind"]])
+    torch.manual_seed(0)
+    p = predictor.create("naive", ds.part)
+    p.envelope = Envelope.of(ds.part, a["thickness"][disks], a["force"][disks])
+    ckpt = p.save(tmp_path / "run" / "m.safetensors", {"dataset": {"name": "tiny"}})
+    band = ds.arrays("test")
+    band = next(i for i, k in enumerate(band["kind"]) if k == "band")
+    scenes, _ = scenes_of(ds, "test")
+    assert p.envelope.reasons(scenes[band])                     # a band is outside at first
+    for promise, kept in (({"rel_mee": 1e-9, "peak_err": 1e-9}, False),
+                          ({"rel_mee": 1e9, "peak_err": 1e9}, True)):
+        monkeypatch.setattr(zoo, "PROMISE", promise)
+        folder = tmp_path / f"zoo{kept}"
+        e = zoo.add(ckpt, "naive_tiny", path=folder, evaluate_on=[tiny_dataset])
+        box = e["envelope"]["tiny"]
+        assert box["kept"] is kept and box["info"]["scenes"] > 0
+        assert box["box"]["contact_area"][1] > p.envelope.boxes["training"]["contact_area"][1]
+        q = zoo.read("naive_tiny", path=folder)
+        assert ("tiny" in q.envelope.boxes) is kept
+        assert (q.envelope.reasons(scenes[band]) == []) is kept

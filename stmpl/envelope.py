@@ -1,0 +1,227 @@
+"""Where a predictor's answers are backed by data: the support of its training scenes (and of the
+test sets it was measured on), and the check of a new scene against it.
+
+A scene is described by what shapes its answer: the tissue thickness, and for every contact (a
+connected patch of loaded vertices) its total force, area and mean pressure, the highest
+per-vertex pressure, and the number of contacts. An :class:`Envelope` holds, per axis, the
+range those quantities took in the data, in one or more named boxes (``training``, then any
+test set a model was measured on and met its promise); a scene lies inside when it fits one box
+on every axis. Pressures and areas do not depend on the mesh resolution; per-vertex forces do,
+and are not an axis.
+
+>>> env = Envelope.of(part, thickness, force, name="training")   # (S, N) arrays
+>>> env.reasons(scene)   # [] inside, else one sentence per axis it leaves
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from stmpl.body.part import BodyPart
+
+FORMAT = "stmpl-envelope/1"
+
+AXES = {
+    # name: (kind, unit, scale for printing, what it is)
+    "thickness": ("range", "mm", 1e3, "tissue thickness"),
+    "thickness_variation": ("max", "%", 1e2, "thickness variation under a contact"),
+    "contacts": ("max", "", 1.0, "number of contacts"),
+    "contact_force": ("max", "N", 1.0, "force of a contact"),
+    "contact_area": ("range", "cm^2", 1e4, "area of a contact"),
+    "contact_pressure": ("max", "kPa", 1e-3, "mean pressure of a contact"),
+    "peak_pressure": ("max", "kPa", 1e-3, "highest pressure on a vertex"),
+}
+"""The axes: ``range`` axes are checked at both ends, ``max`` axes at the top only (a lighter or
+more even load than the data's is no harder to answer)."""
+
+LOAD_AXES = ("thickness", "contact_force", "contact_pressure", "peak_pressure")
+"""How hard the tissue is pushed: axes a test set widens an envelope along only with data of
+its own intensity (never from the training box's averages)."""
+SHAPE_AXES = ("contacts", "contact_area", "thickness_variation")
+"""How the load is laid out: the axes a test set on which a model kept its promise widens."""
+
+SLACK = 0.02
+"""Relative allowance on every bound (2 %): loads rebuilt by another route round differently."""
+VARIATION_ALLOWANCE = 0.05
+"""Thickness variation under a contact (relative to its mean) tolerated beyond the data's."""
+
+
+def contacts(part: BodyPart, force: np.ndarray) -> list[np.ndarray]:
+    """The contacts of a load: connected patches (over the mesh's edges) of the vertices with
+    ``force > 0``, each a ``(K,)`` array of vertex indices; ``force`` ``(N,)``."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    loaded = np.flatnonzero(np.asarray(force) > 0)
+    if len(loaded) == 0:
+        return []
+    where = np.full(part.n_vertices, -1)
+    where[loaded] = np.arange(len(loaded))
+    e = where[part.edges]
+    e = e[(e >= 0).all(1)]
+    k = len(loaded)
+    graph = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(k, k))
+    n, label = connected_components(graph, directed=False)
+    return [loaded[label == c] for c in range(n)]
+
+
+def features(part: BodyPart, thickness: np.ndarray, force: np.ndarray) -> dict:
+    """A scene's place on every axis of :data:`AXES` (SI units): scalars, and for the per-contact
+    axes a list with one value per contact. ``thickness``, ``force`` ``(N,)`` m and N."""
+    t = np.asarray(thickness, dtype=float)
+    f = np.asarray(force, dtype=float)
+    area = part.vertex_areas
+    out = {"thickness": [float(t.min()), float(t.max())], "thickness_variation": 0.0,
+           "contacts": 0, "contact_force": [], "contact_area": [], "contact_pressure": [],
+           "peak_pressure": float((f / area).max(initial=0.0))}
+    for c in contacts(part, f):
+        a = float(area[c].sum())
+        out["contact_force"].append(float(f[c].sum()))
+        out["contact_area"].append(a)
+        out["contact_pressure"].append(float(f[c].sum()) / a)
+        tc = t[c]
+        out["thickness_variation"] = max(out["thickness_variation"],
+                                         float((tc.max() - tc.min()) / tc.mean()))
+    out["contacts"] = len(out["contact_force"])
+    return out
+
+
+def _values(feat: dict, axis: str) -> list[float]:
+    v = feat[axis]
+    return [float(x) for x in v] if isinstance(v, list) else [float(v)]
+
+
+@dataclass
+class Envelope:
+    """Named boxes over :data:`AXES`: ``{box: {axis: [lo, hi]}}`` in SI units, with the number
+    of scenes each box was made from and where they came from."""
+
+    boxes: dict = field(default_factory=dict)
+    info: dict = field(default_factory=dict)     # {box: {"scenes": int, "source": str, ...}}
+
+    @classmethod
+    def of(cls, part: BodyPart, thickness, force, name: str = "training", source: str = "",
+           **notes) -> "Envelope":
+        """The envelope of ``S`` scenes on ``part``: ``thickness``, ``force`` ``(S, N)`` (m, N)."""
+        env = cls()
+        env.add(name, part, thickness, force, source=source, **notes)
+        return env
+
+    def add(self, name: str, part: BodyPart, thickness, force, source: str = "",
+            **notes) -> None:
+        """Add (or replace) box ``name``: the support of ``S`` scenes, ``(S, N)`` arrays."""
+        t = np.asarray(thickness, dtype=float)
+        f = np.asarray(force, dtype=float)
+        if t.ndim != 2 or t.shape != f.shape or t.shape[1] != part.n_vertices:
+            raise ValueError(f"thickness and force must both be (S, {part.n_vertices}), got "
+                             f"{t.shape} and {f.shape}")
+        if len(t) == 0:
+            raise ValueError(f"an envelope box ({name!r}) needs at least one scene")
+        lo = {a: np.inf for a in AXES}
+        hi = {a: -np.inf for a in AXES}
+        for ts, fs in zip(t, f):
+            feat = features(part, ts, fs)
+            for a in AXES:
+                vals = _values(feat, a)
+                if vals:
+                    lo[a], hi[a] = min(lo[a], min(vals)), max(hi[a], max(vals))
+        self.boxes[name] = {a: [float(lo[a]), float(hi[a])] for a in AXES
+                            if np.isfinite(lo[a])}
+        self.info[name] = {"scenes": int(len(t)), "source": source, **notes}
+
+    def widen(self, name: str, part: BodyPart, thickness, force, base: str = "training",
+              axes=SHAPE_AXES, source: str = "", **notes) -> np.ndarray:
+        """Add box ``name``: box ``base`` widened along ``axes`` to cover those of ``S`` scenes
+        (``(S, N)`` arrays) that fit ``base`` on every other axis; returns the ``(S,)`` mask
+        of those scenes (measure a model on them before keeping the box: see
+        :func:`stmpl.zoo.measure`). Nothing is added when no scene qualifies."""
+        t = np.asarray(thickness, dtype=float)
+        f = np.asarray(force, dtype=float)
+        box = {a: list(b) for a, b in self.boxes[base].items()}
+        others = {a: b for a, b in box.items() if a not in axes}
+        mask = np.zeros(len(t), dtype=bool)
+        for k, (ts, fs) in enumerate(zip(t, f)):
+            feat = features(part, ts, fs)
+            if _outside(feat, others, base):
+                continue
+            mask[k] = True
+            for a in axes:
+                vals = _values(feat, a)
+                if vals and a in box:
+                    box[a] = [min(box[a][0], min(vals)), max(box[a][1], max(vals))]
+        if mask.any():
+            self.boxes[name] = box
+            self.info[name] = {"scenes": int(mask.sum()), "source": source, "base": base,
+                               "widened": list(axes), **notes}
+        return mask
+
+    def reasons(self, scene=None, *, part=None, thickness=None, force=None) -> list[str]:
+        """Why a scene lies outside: ``[]`` when it fits a box, else one sentence per axis it
+        leaves in the box it comes closest to fitting. Give a Scene or ``part, thickness,
+        force``."""
+        if scene is not None:
+            part, thickness, force = scene.part, scene.thickness, scene.force
+        if not self.boxes:
+            return []
+        feat = features(part, thickness, force)
+        best = None
+        for name, box in self.boxes.items():
+            why = _outside(feat, box, name)
+            if not why:
+                return []
+            if best is None or len(why) < len(best):
+                best = why
+        return best
+
+    def to_dict(self) -> dict:
+        return {"format": FORMAT, "boxes": self.boxes, "info": self.info}
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "Envelope":
+        """From :meth:`to_dict`'s output, checked; ``ValueError`` names what is wrong."""
+        if not isinstance(d, dict) or d.get("format") != FORMAT:
+            got = d.get("format") if isinstance(d, dict) else None
+            raise ValueError(f"not a stmpl envelope (format {got!r})")
+        boxes = d.get("boxes")
+        if not isinstance(boxes, dict) or not boxes:
+            raise ValueError("an envelope needs at least one box")
+        for name, box in boxes.items():
+            for a, b in box.items():
+                if a not in AXES:
+                    raise ValueError(f"envelope box {name!r} has an unknown axis {a!r}")
+                if (not isinstance(b, list) or len(b) != 2
+                        or not all(isinstance(x, (int, float)) and np.isfinite(x) for x in b)
+                        or b[0] > b[1]):
+                    raise ValueError(f"envelope box {name!r}, axis {a!r}: need [lo, hi] "
+                                     f"finite and rising, got {b!r}")
+        return cls(dict(boxes), dict(d.get("info") or {}))
+
+    def summary(self, box: str = "training") -> str:
+        """One line per axis of ``box`` in readable units."""
+        lines = []
+        for a, (lo, hi) in self.boxes[box].items():
+            kind, unit, k, what = AXES[a]
+            rng = f"{lo * k:.3g}-{hi * k:.3g}" if kind == "range" else f"up to {hi * k:.3g}"
+            lines.append(f"{what}: {rng} {unit}".rstrip())
+        return "\n".join(lines)
+
+
+def _outside(feat: dict, box: dict, name: str) -> list[str]:
+    why = []
+    for a, (kind, unit, k, what) in AXES.items():
+        if a not in box:
+            continue
+        vals = _values(feat, a)
+        if not vals:
+            continue
+        lo, hi = box[a]
+        top = hi * (1 + SLACK) + (VARIATION_ALLOWANCE if a == "thickness_variation" else 0.0)
+        if max(vals) > top:
+            why.append(f"{what} {max(vals) * k:.3g} {unit} > {hi * k:.3g} {unit} "
+                       f"(the most in {name})".replace("  ", " "))
+        elif kind == "range" and min(vals) < lo * (1 - SLACK):
+            why.append(f"{what} {min(vals) * k:.3g} {unit} < {lo * k:.3g} {unit} "
+                       f"(the least in {name})".replace("  ", " "))
+    return why
