@@ -19,6 +19,7 @@ DEFAULTS = {
     "thickness_mm": [5.0, 7.5, 10.0],
     "material": {"name": "neo_hookean", "E": 1000.0, "nu": 0.4},
     "resolution": "reference",
+    "fidelity": "full",
     "forces": [0.25, 0.5, 0.75, 1.0],
     "max_pressure": 2000.0,
     "placements": {},
@@ -37,6 +38,8 @@ PLACEMENT_KEYS = {
     "grasp": {"along", "around", "grips", "hand_heights", "depth"},
 }
 BACKENDS = ("serial", "processes", "dask")
+FIDELITIES = ("full", "auto")
+"""``full`` solves the whole part; ``auto`` the patch the load moves (:mod:`fem.local`)."""
 
 
 def read_config(source) -> dict:
@@ -105,9 +108,12 @@ def check(cfg: dict) -> None:
         except TypeError as e:
             raise ValueError(f"{key}: {e}") from e
     resolution(cfg["resolution"])
+    checked.one_of(cfg["fidelity"], "fidelity", FIDELITIES)
 
 
 def config_hash(cfg: dict) -> str:
     """Hash of everything that decides the samples (not how they are computed in parallel)."""
     key = {k: v for k, v in cfg.items() if k not in ("parallel", "name")}
+    if key.get("fidelity") == "full":        # the default: hashes from before it existed hold
+        del key["fidelity"]
     return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]

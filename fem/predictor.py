@@ -7,6 +7,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fem.config import FIDELITIES
+from fem.local import simulate_local
 from fem.mesh import ShellMesh
 from fem.simulate import resolution, simulate
 from fem.solver import Solution
@@ -39,6 +41,8 @@ class FEMPredictor(BasePredictor):
         res: mesh resolution name or :class:`fem.simulate.Resolution` (default the reference).
         levels: continuation levels from rest to each scene's force.
         material, options: passed to the solver.
+        fidelity: ``"full"`` solves the whole part; ``"auto"`` only the patch the load moves,
+            grown until the tissue at its cut stays still (:mod:`fem.local`).
 
     A failed solve raises :class:`FEMFailed` (never a displacement). ``Deformation.info`` holds
     the last level's diagnostics and ``levels``, one diagnostics dict per continuation level;
@@ -47,10 +51,14 @@ class FEMPredictor(BasePredictor):
 
     name = "fem"
 
-    def __init__(self, res="reference", levels: int = 1, material=None, options=None):
+    def __init__(self, res="reference", levels: int = 1, material=None, options=None,
+                 fidelity: str = "full"):
         self.res = resolution(res)
         if isinstance(levels, bool) or int(levels) != levels or levels < 1:
             raise ValueError(f"levels must be an integer >= 1, got {levels!r}")
+        if fidelity not in FIDELITIES:
+            raise ValueError(f"fidelity must be one of {list(FIDELITIES)}, got {fidelity!r}")
+        self.fidelity = fidelity
         self.levels, self.material, self.options = int(levels), material, options
         self.last_shell: Shell | None = None
         self._last: dict = {}
@@ -64,16 +72,23 @@ class FEMPredictor(BasePredictor):
                 self._last[id(s)] = {"fem": "no load"}
                 continue
             totals = total * np.arange(1, self.levels + 1) / self.levels
-            mesh, sols = simulate(s.part, s.thickness, s.force, totals, self.res, self.material,
-                                  self.options)
+            local = None
+            if self.fidelity == "auto":
+                mesh, sols, local = simulate_local(s.part, s.thickness, s.force, totals,
+                                                   self.res, self.material, self.options)
+            else:
+                mesh, sols = simulate(s.part, s.thickness, s.force, totals, self.res,
+                                      self.material, self.options)
             sol = sols[-1]
             if not sol.ok:
                 raise FEMFailed(f"the FEM solve failed at {sol.total_force:.3g} N: {sol.reason}")
             self.last_shell = Shell(mesh, sols)
             self._last[id(s)] = {**{k: v for k, v in sol.diagnostics().items() if k != "reason"},
                                  "levels": [x.diagnostics() for x in sols],
-                                 "mesh": {"nodes": mesh.n_nodes, "tets": int(len(mesh.tets))}}
-            out.append(sol.part_displacement(mesh))
+                                 "mesh": {"nodes": mesh.n_nodes, "tets": int(len(mesh.tets))},
+                                 "local": None if local is None else local.summary()}
+            u = sol.part_displacement(mesh)
+            out.append(u if local is None else local.patch.lift(u, s.part.n_vertices))
         return out
 
     def info(self, scene: Scene) -> dict:

@@ -24,6 +24,7 @@ def solve_shard(payload: dict) -> dict:
         for var in ("MKL_NUM_THREADS", "OMP_NUM_THREADS"):
             os.environ.setdefault(var, str(threads))
     from fem.material import material
+    from fem.local import simulate_local
     from fem.simulate import simulate
     from fem.solver import SolverOptions
     from stmpl.dataset import DOUBLES, FLOATS, INTS, STRINGS
@@ -49,9 +50,15 @@ def solve_shard(payload: dict) -> dict:
                              f"{f / load.area:.0f} Pa > {cfg['max_pressure']:.0f} Pa"})
         if len(levels) == 0:
             continue
+        lift = None
         try:
-            mesh, sols = simulate(part, thickness, load.force, levels, cfg["resolution"], mat,
-                                  opts)
+            if cfg.get("fidelity", "full") == "auto":
+                mesh, sols, local = simulate_local(part, thickness, load.force, levels,
+                                                   cfg["resolution"], mat, opts)
+                lift = local.patch.lift
+            else:
+                mesh, sols = simulate(part, thickness, load.force, levels, cfg["resolution"],
+                                      mat, opts)
         except ValueError as e:  # a shell that cannot be meshed (folds) is a failure too
             for f in levels:
                 failures.append({"task": task, "placement": pi, "thickness_mm": th_mm,
@@ -67,7 +74,10 @@ def solve_shard(payload: dict) -> dict:
             rec["thickness_level"].append(ti)
             rec["thickness"].append(thickness.astype(np.float32))
             rec["force"].append((load.force * f).astype(np.float32))
-            rec["displacement"].append(s.part_displacement(mesh).astype(np.float32))
+            u = s.part_displacement(mesh)
+            if lift is not None:
+                u = lift(u, part.n_vertices)
+            rec["displacement"].append(u.astype(np.float32))
             rec["total"].append(float(f))
             rec["split"].append(int(split))
             rec["kind"].append(placement["kind"])

@@ -201,3 +201,28 @@ def test_workers_leave_when_the_generator_is_killed(tmp_path):
     proc.wait()
     gone, alive = psutil.wait_procs(workers, timeout=10)
     assert not alive, [p.pid for p in alive]
+
+
+def test_fidelity_auto_solves_patches_within_a_percent_of_the_whole(tmp_path):
+    """The same plan solved whole and on patches (fem.local): the same samples, displacements
+    within 1 % of each sample's largest; the config hash of the default (full) is the one
+    configs had before the key existed."""
+    from fem.config import config_hash
+
+    body = {"model": "tube", "radius": 0.04, "length": 0.4, "n_around": 24, "n_along": 30}
+    over = dict(body=body, placements={"disk": {"centres": 3, "radii": [0.015]}},
+                thickness_mm=[7.5])
+    generate(_cfg(**over), tmp_path / "full", progress=False)
+    generate(_cfg(**over, fidelity="auto"), tmp_path / "auto", progress=False)
+    a, b = _samples(tmp_path / "full"), _samples(tmp_path / "auto")
+    assert len(a["total"]) == len(b["total"]) > 0
+    np.testing.assert_array_equal(a["total"], b["total"])
+    peak = np.linalg.norm(a["displacement"], axis=2).max(1)
+    err = np.linalg.norm(a["displacement"] - b["displacement"], axis=2).max(1)
+    assert np.all(err < 0.01 * peak)
+    assert Dataset(tmp_path / "auto").card["config"]["fidelity"] == "auto"
+    full = read_config(_cfg())
+    assert config_hash(full) == config_hash({k: v for k, v in full.items() if k != "fidelity"})
+    assert config_hash(read_config(_cfg(fidelity="auto"))) != config_hash(full)
+    with pytest.raises(ValueError, match="fidelity must be one of"):
+        read_config(_cfg(fidelity="local"))

@@ -1,0 +1,174 @@
+"""The local FEM: solve only the tissue a load moves.
+
+A press moves the tissue within a few thicknesses of the contact; the rest of the part stays put
+to well under a percent of the deepest displacement. The local solve cuts the part to the
+vertices within ``margin`` of a loaded vertex (whole faces; the patches holding a load), holds
+the cut through the whole thickness as the part's own rims are held, and solves that patch. The
+answer is checked at the cut: if the vertices one edge inside it moved more than ``tolerance``
+of the deepest displacement, the cut was too tight and the margin grows by ``grow`` and the
+solve runs again (up to the whole part). The ring is judged at the last force level that
+converged: a patch whose every level failed grows too (the tight cut may be what failed), while a
+failure above a still ring is the load's own and stands. Vertices outside the patch get zero
+displacement.
+
+The first margin grows with the load and the tissue (:func:`first_margin`): the contact's
+radius plus ``thicknesses`` times the largest thickness under it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from stmpl.body.part import BodyPart, boundary_loops
+
+TOLERANCE = 0.005
+"""How far the vertices next to the cut may move, relative to the deepest displacement."""
+GROW = 1.5
+"""Margin factor from one attempt to the next."""
+THICKNESSES = 6.0
+"""The first margin: the contact's radius plus this many times its largest thickness."""
+
+
+@dataclass(frozen=True, eq=False)
+class Patch:
+    """A part cut to a region: ``part`` (the patch as a :class:`BodyPart`, its cut among its
+    rims), ``vertices`` ``(n,)`` the patch's vertices in the whole part, ``margin`` (m) and
+    ``ring`` the patch vertices one edge inside the cut."""
+
+    part: BodyPart
+    vertices: np.ndarray
+    margin: float
+    ring: np.ndarray
+    whole: bool = False
+
+    def lift(self, u: np.ndarray, n: int) -> np.ndarray:
+        """``(n, 3)`` displacement of the whole part from the patch's ``(k, 3)`` (zero outside)."""
+        out = np.zeros((n, 3))
+        out[self.vertices] = u
+        return out
+
+
+def first_margin(part: BodyPart, thickness: np.ndarray, force: np.ndarray) -> float:
+    """The first cut's margin, m: the radius of the loaded region (half its largest extent,
+    capped at 5 cm) plus :data:`THICKNESSES` times the thickest tissue under it."""
+    loaded = np.flatnonzero(force > 0)
+    x = part.vertices[loaded]
+    extent = float(np.linalg.norm(x.max(0) - x.min(0)))
+    return min(0.5 * extent, 0.05) + THICKNESSES * float(np.max(thickness[loaded]))
+
+
+def patch(part: BodyPart, force: np.ndarray, margin: float) -> Patch:
+    """The patch of ``part`` within ``margin`` (m, straight-line) of a loaded vertex: the faces
+    whose three vertices are that near, the connected pieces that hold a load."""
+    from scipy.spatial import cKDTree
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    loaded = np.flatnonzero(force > 0)
+    if len(loaded) == 0:
+        raise ValueError("the load has no loaded vertex (force is zero everywhere)")
+    near = cKDTree(part.vertices[loaded]).query(part.vertices, distance_upper_bound=margin)[0] \
+        <= margin
+    fidx = np.flatnonzero(near[part.faces].all(1))
+    n = part.n_vertices
+    if len(fidx) == len(part.faces):
+        return Patch(part, np.arange(n), margin, np.zeros(0, np.int64), whole=True)
+    faces = part.faces[fidx]
+    # pieces joined through edges (not through single shared vertices)
+    fi = np.repeat(np.arange(len(faces)), 3)
+    g = coo_matrix((np.ones(len(fi)), (fi, faces.ravel())), shape=(len(faces), n)).tocsr()
+    adj = g @ g.T
+    adj.data = (adj.data >= 2).astype(float)
+    adj.eliminate_zeros()
+    _, label = connected_components(adj, directed=False)
+    holds = np.unique(label[np.isin(faces, loaded).any(1)])
+    fidx = fidx[np.isin(label, holds)]
+    verts = np.unique(part.faces[fidx])
+    if len(fidx) == len(part.faces):
+        return Patch(part, np.arange(n), margin, np.zeros(0, np.int64), whole=True)
+    sub = _sub_part(part, verts, fidx)
+    cut = np.concatenate(sub.rims) if sub.rims else np.zeros(0, np.int64)
+    if part.rims:                        # the part's own rims are held in the whole solve too
+        cut = cut[~np.isin(verts[cut], np.concatenate(part.rims))]
+    e = sub.edges
+    on = np.zeros(sub.n_vertices, bool)
+    on[cut] = True
+    ring = np.unique(np.concatenate([e[on[e[:, 0]] & ~on[e[:, 1]], 1],
+                                     e[on[e[:, 1]] & ~on[e[:, 0]], 0]]))
+    return Patch(sub, verts, margin, ring)
+
+
+def _sub_part(part: BodyPart, verts: np.ndarray, fidx: np.ndarray) -> BodyPart:
+    """The patch of ``part`` made of faces ``fidx`` on vertices ``verts`` (whole-part indices),
+    normals from the whole part, rims = every boundary loop of the patch."""
+    where = np.full(part.n_vertices, -1)
+    where[verts] = np.arange(len(verts))
+    fuv = part.face_uv[fidx]
+    corners = np.unique(fuv)
+    cwhere = np.full(len(part.uv), -1)
+    cwhere[corners] = np.arange(len(corners))
+    f = where[part.faces[fidx]]
+    return dataclasses.replace(
+        part, name=f"{part.name}[patch]", vertices=part.vertices[verts], faces=f,
+        normals=part.normals[verts], uv=part.uv[corners], face_uv=cwhere[fuv],
+        uv_vertex=where[part.uv_vertex[corners]], rims=boundary_loops(f), axis=None,
+        body_index=None if part.body_index is None else part.body_index[verts])
+
+
+@dataclass
+class LocalResult:
+    """What a local solve did: the patch solved last, each attempt's margin, size, time and the
+    share the ring next to the cut moved (relative to the deepest displacement)."""
+
+    patch: Patch
+    attempts: list = field(default_factory=list)
+
+    def summary(self) -> dict:
+        return {"margin_m": self.patch.margin, "vertices": int(len(self.patch.vertices)),
+                "whole": self.patch.whole, "attempts": self.attempts}
+
+
+def simulate_local(part: BodyPart, thickness, force, totals=None, res="reference",
+                   material=None, options=None, margin: float | None = None,
+                   tolerance: float = TOLERANCE, grow: float = GROW):
+    """:func:`fem.simulate.simulate` on the patch the load moves. Returns ``(mesh, solutions,
+    result)``: the patch's mesh and solutions (``Solution.part_displacement`` on the patch),
+    and a :class:`LocalResult`; :meth:`Patch.lift` gives the whole part's displacement."""
+    from fem.simulate import simulate
+
+    t = np.asarray(thickness, dtype=float)
+    f = np.asarray(force, dtype=float)
+    m = first_margin(part, t, f) if margin is None else float(margin)
+    result = None
+    while True:
+        p = patch(part, f, m)
+        t0 = time.perf_counter()
+        mesh, sols = simulate(p.part, t[p.vertices], f[p.vertices], totals, res, material,
+                              options)
+        moved = _ring_moved(p, mesh, sols)
+        att = {"margin_m": m, "vertices": int(len(p.vertices)), "whole": p.whole,
+               "seconds": time.perf_counter() - t0, "ring_moved": moved}
+        result = result or LocalResult(p)
+        result.patch = p
+        result.attempts.append(att)
+        if p.whole or moved <= tolerance:
+            return mesh, sols, result
+        m *= grow
+
+
+def _ring_moved(p: Patch, mesh, sols) -> float:
+    """How far the ring next to the cut moved at the last level that converged, relative to the
+    deepest displacement there: ``inf`` when no level converged (a patch too tight may be what
+    failed, so it grows; a failure with the ring still is the load's own) or the patch has no
+    ring (all of it on the cut); 0 for the whole part."""
+    if p.whole:
+        return 0.0
+    ok = [s for s in sols if s.ok]
+    if not ok or len(p.ring) == 0:
+        return float("inf")
+    u = np.linalg.norm(ok[-1].part_displacement(mesh), axis=1)
+    return float(u[p.ring].max() / max(u.max(), 1e-30))

@@ -1,0 +1,85 @@
+"""The local FEM: the patch a load moves, its cut, the growth rule, and its answer against the
+whole part's solve."""
+
+import numpy as np
+import pytest
+
+from fem import local
+from fem.simulate import simulate
+from stmpl import loads
+from stmpl.body.primitives import tube
+
+RES = {"subdivisions": 1, "layers": 2, "refine_radius": 0.03, "order": 1}
+
+
+@pytest.fixture(scope="module")
+def long_tube():
+    return tube(radius=0.04, length=0.4, n_around=24, n_along=30)
+
+
+def test_a_patch_is_the_loaded_neighbourhood_with_its_cut_held(long_tube):
+    part = long_tube
+    ld = loads.disk(part, uv=(0.5, 0.5), radius=0.02, total=0.2)
+    p = local.patch(part, ld.force, 0.05)
+    assert not p.whole and set(ld.vertices) <= set(p.vertices)
+    dist = np.linalg.norm(part.vertices[p.vertices][:, None]
+                          - part.vertices[ld.vertices][None], axis=2).min(1)
+    assert dist.max() <= 0.05 + 1e-12
+    assert len(p.part.rims) == 1 and len(p.ring) > 0            # a disk's patch: one cut
+    assert not np.isin(p.ring, np.concatenate(p.part.rims)).any()
+    np.testing.assert_array_equal(p.part.normals, part.normals[p.vertices])
+    u = np.ones((p.part.n_vertices, 3))
+    assert p.lift(u, part.n_vertices)[p.vertices].sum() == 3 * len(p.vertices)
+    assert local.patch(part, ld.force, 1.0).whole
+    with pytest.raises(ValueError, match="no loaded vertex"):
+        local.patch(part, np.zeros(part.n_vertices), 0.05)
+
+
+def test_a_patch_reaching_the_parts_own_rim_is_cut_only_where_it_was_cut(long_tube):
+    """A band near the end of the tube: the patch meets the tube's own (held) rim; the ring
+    that is checked lies along the new cut only."""
+    part = long_tube
+    ld = loads.band(part, at=0.05, width=0.02, total=0.2)
+    p = local.patch(part, ld.force, 0.04)
+    own = np.concatenate(part.rims)
+    assert np.isin(p.vertices, own).any()
+    near_own = np.isin(p.vertices[p.ring], own)
+    assert not near_own.any()
+
+
+def test_local_matches_the_whole_solve_and_grows_when_too_tight(long_tube):
+    part = long_tube
+    t = np.full(part.n_vertices, 0.0075)
+    ld = loads.disk(part, uv=(0.5, 0.5), radius=0.02, total=1.0)
+    mesh, sols = simulate(part, t, ld.force, [0.1, 0.2], RES)
+    whole = sols[-1].part_displacement(mesh)
+    peak = np.linalg.norm(whole, axis=1).max()
+    m2, s2, res = local.simulate_local(part, t, ld.force, [0.1, 0.2], RES)
+    assert all(s.ok for s in s2) and not res.patch.whole
+    u = res.patch.lift(s2[-1].part_displacement(m2), part.n_vertices)
+    assert np.linalg.norm(u - whole, axis=1).max() < 0.01 * peak
+    assert res.attempts[-1]["ring_moved"] <= local.TOLERANCE
+    assert res.patch.part.n_vertices < 0.6 * part.n_vertices
+    # a first cut far too tight is grown until the ring stays still
+    m3, s3, tight = local.simulate_local(part, t, ld.force, [0.2], RES, margin=0.012)
+    assert len(tight.attempts) > 1 and tight.attempts[0]["ring_moved"] > local.TOLERANCE
+    assert [a["margin_m"] for a in tight.attempts] == pytest.approx(
+        [0.012 * local.GROW ** k for k in range(len(tight.attempts))])
+    u3 = tight.patch.lift(s3[-1].part_displacement(m3), part.n_vertices)
+    assert np.linalg.norm(u3 - whole, axis=1).max() < 0.01 * peak
+
+
+def test_the_fem_predictor_takes_fidelity(long_tube):
+    from stmpl import predictor
+    from stmpl.scene import Scene
+
+    part = long_tube
+    scene = Scene.from_load(part, np.full(part.n_vertices, 0.0075),
+                            loads.disk(part, uv=(0.5, 0.5), radius=0.02, total=0.2))
+    full = predictor.create("fem", res=RES).predict(scene)
+    auto = predictor.create("fem", res=RES, fidelity="auto").predict(scene)
+    assert full.info["local"] is None and auto.info["local"]["vertices"] < part.n_vertices
+    peak = full.magnitude.max()
+    assert np.abs(auto.displacement - full.displacement).max() < 0.01 * peak
+    with pytest.raises(ValueError, match="fidelity must be one of"):
+        predictor.create("fem", fidelity="half")
