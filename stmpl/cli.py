@@ -65,6 +65,14 @@ def cmd_train(args) -> int:
     return 0
 
 
+def cmd_ablate(args) -> int:
+    from stmpl.ablate import run
+
+    res = run(args.config, progress=not args.quiet)
+    print(f"wrote {res['out'] / 'ablation.md'} and the tables (.md, .csv) beside it")
+    return 0
+
+
 def cmd_evaluate(args) -> int:
     from stmpl.dataset import Dataset
     from stmpl.evaluate import evaluate
@@ -333,6 +341,12 @@ def parser() -> argparse.ArgumentParser:
                     help="torch device for learned models (default cpu)")
     ev.add_argument("--out", help="write the table here (.md and .csv)")
     ev.set_defaults(func=cmd_evaluate)
+
+    ab = sub.add_parser("ablate", help="the paper's Tables 1-3 for every predictor: trains or "
+                        "takes the set-ups, evaluates, writes the report (cached, resumable)")
+    ab.add_argument("config", help="ablation config (YAML), e.g. configs/ablation/small.yaml")
+    ab.add_argument("--quiet", action="store_true", help="no progress bar")
+    ab.set_defaults(func=cmd_ablate)
 
     zo = sub.add_parser("zoo", help="the shipped models: list, verify, add, measure on more "
                         "datasets")

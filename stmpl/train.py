@@ -103,7 +103,8 @@ def _selection(ds, split, cfg):
     keep = np.arange(len(a["total"]))
     if cfg["thickness_mm"] is not None:
         levels = np.asarray(cfg["thickness_mm"], float) * 1e-3
-        keep = keep[np.isin(np.round(a["thickness"][:, 0], 6), np.round(levels, 6))]
+        level = np.round(a["thickness"][:, 0].astype(float), 6)   # float32 storage: widen first
+        keep = keep[np.isin(level, np.round(levels, 6))]
     if split == "train" and cfg["train_fraction"] < 1.0:  # a seeded share of the placements
         places = np.unique(a["placement"][keep])
         rng = np.random.default_rng(cfg["seed"])

@@ -151,3 +151,18 @@ def test_an_edited_dataset_is_refused_before_training(tiny_dataset, tmp_path):
         h["force"][0, :] = 0.0
     with pytest.raises(ValueError, match=f"{shard.name} does not match card.json"):
         train(_cfg(data, tmp_path / "run", epochs=1), progress=False)
+
+
+def test_a_thickness_subset_trains_and_evaluates_on_those_levels_only(tiny_dataset, tmp_path):
+    """The paper's "only 3 beta_2" set-up: thickness levels stored as float32 match the
+    config's millimetres (they once never did, and the subset was empty)."""
+    ds = Dataset(tiny_dataset)
+    a = ds.arrays("train")
+    at5 = int(np.sum(np.isclose(a["thickness"][:, 0], 0.005)))
+    assert 0 < at5 < len(a["total"])
+    p = predictor.read(train(_cfg(tiny_dataset, tmp_path / "r", epochs=2, thickness_mm=[5.0]),
+                             progress=False))
+    assert p.envelope.info["training"]["scenes"] == at5
+    assert p.envelope.boxes["training"]["thickness"] == pytest.approx([0.005, 0.005])
+    scenes, _ = scenes_of(ds, "test", thickness_mm=[10.0])
+    assert scenes and all(np.allclose(s.thickness, 0.010) for s in scenes)

@@ -1,0 +1,103 @@
+"""`stmpl ablate`: the config's checks, the tables, the cache (a rerun does nothing new), a
+missing dataset made from its config."""
+
+import json
+
+import pytest
+
+from stmpl import ablate
+from stmpl.cli import main
+
+
+@pytest.fixture
+def config(tiny_dataset, tmp_path, tiny_config):
+    bands = tiny_config(name="tiny_bands", placements={"band": {"at": [0.3, 0.6],
+                                                                "widths": [0.03]}},
+                        splits=[0.0, 0.0, 1.0])
+    (tmp_path / "bands.yaml").write_text(json.dumps(bands))
+    naive = {"model": "naive", "data": "unused", "epochs": 20, "batch": 16, "lr": 0.02}
+    return {
+        "name": "t",
+        "datasets": {"tiny": {"folder": str(tiny_dataset)},
+                     "bands": {"config": str(tmp_path / "bands.yaml"),
+                               "folder": str(tmp_path / "data" / "bands")}},
+        "in_distribution": "tiny", "out_of_distribution": ["bands"],
+        "seen_thickness_mm": [5.0],
+        "setups": [{"name": "Naive", "train": naive},
+                   {"name": "Naive: only 5 mm", "train": naive, "thickness_mm": [5.0]},
+                   {"name": "FEM", "predictor": "fem", "limit": 2}],
+        "out": str(tmp_path / "report"), "runs": str(tmp_path / "runs"),
+    }
+
+
+def test_tables_rows_and_the_cache(config, tmp_path, monkeypatch):
+    res = ablate.run(config, progress=False)
+    t = res["tables"]
+    assert list(t["table1"]) == ["Naive", "Naive: only 5 mm", "FEM"]
+    assert set(t["table2"]) == {"Naive / bands", "Naive: only 5 mm / bands", "FEM / bands"}
+    assert set(t["table3"]) == {f"Naive: only 5 mm / {w}, {s} thickness"
+                                for w in ("in-distribution", "bands") for s in ("seen", "unseen")}
+    naive = t["table1"]["Naive"]
+    assert 1.0 < naive["rel_mee"][0] < 100.0 and naive["samples"] > 0
+    fem = t["table1"]["FEM"]
+    assert fem["samples"] == 2 and fem["rel_mee"][0] < 50       # another mesh than the data's
+    assert fem["seconds_per_scene"][0] > 10 * naive["seconds_per_scene"][0]
+    seen = t["table3"]["Naive: only 5 mm / in-distribution, seen thickness"]["samples"]
+    unseen = t["table3"]["Naive: only 5 mm / in-distribution, unseen thickness"]["samples"]
+    assert seen + unseen == naive["samples"]
+    md = (tmp_path / "report" / "ablation.md").read_text()
+    assert "Table 1" in md and "*STMPL (paper)*" in md and "| Naive / bands |" in md
+    csv = (tmp_path / "report" / "table2.csv").read_text().splitlines()
+    assert csv[0].startswith("setup,samples,mae_x_mean") and len(csv) == 1 + 3 + 3
+
+    def boom(*a, **k):
+        raise AssertionError("a cached job ran again")
+
+    monkeypatch.setattr("stmpl.evaluate.evaluate_dataset", boom)
+    monkeypatch.setattr("stmpl.train.train", boom)
+    again = ablate.run(config, progress=False)
+    assert json.dumps(again["tables"], sort_keys=True) == json.dumps(t, sort_keys=True)
+
+
+def test_a_changed_setup_reruns_only_itself(config, monkeypatch):
+    ablate.run(config, progress=False)
+    calls = []
+    from stmpl import evaluate
+
+    real = evaluate.evaluate_dataset
+
+    def counted(p, ds, *a, **k):
+        if "batch" in k:                        # the runner's (training measures val/test too)
+            calls.append(ds.card["name"])
+        return real(p, ds, *a, **k)
+
+    monkeypatch.setattr("stmpl.evaluate.evaluate_dataset", counted)
+    config["setups"][0]["epochs"] = 5                  # only the first set-up changes
+    ablate.run(config, progress=False)
+    assert sorted(calls) == ["tiny", "tiny_bands"]
+
+
+@pytest.mark.parametrize("change,message", [
+    ({"in_distribution": "nope"}, "in_distribution must be one of"),
+    ({"out_of_distribution": ["nope"]}, "out_of_distribution must list"),
+    ({"setups": []}, "at least one set-up"),
+    ({"setups": [{"name": "x"}]}, "either train"),
+    ({"setups": [{"name": "x", "predictor": "fem"}, {"name": "x", "predictor": "fem"}]},
+     "used twice"),
+    ({"setups": [{"name": "x", "predictor": "fem", "colour": 1}]}, "takes keys"),
+    ({"datasets": {}}, "at least one dataset"),
+])
+def test_bad_configs_are_named(config, change, message):
+    with pytest.raises(ValueError, match=message):
+        ablate.read_config({**config, **change})
+
+
+def test_cli_ablate(config, tmp_path, capsys):
+    import yaml
+
+    path = tmp_path / "a.yaml"
+    path.write_text(yaml.safe_dump(config))
+    assert main(["ablate", str(path), "--quiet"]) == 0
+    assert "ablation.md" in capsys.readouterr().out
+    assert main(["ablate", str(tmp_path / "missing.yaml")]) == 2
+    assert "ablation config file not found" in capsys.readouterr().err
