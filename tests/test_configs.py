@@ -34,3 +34,22 @@ def test_bad_model_options_fail_on_load():
         read_config({"model": "gnn", "data": "x", "options": {"width": 3}})
     with pytest.raises(ValueError, match="loss must be one of"):
         read_config({"model": "gnn", "data": "x", "options": {"loss": "l1"}})
+
+
+@pytest.mark.parametrize("path", sorted((CONFIGS / "ablation").glob("*.yaml")),
+                         ids=lambda p: p.name)
+def test_ablation_configs_load(path):
+    """Every dataset an ablation names has a shipped config writing where the ablation reads,
+    and every set-up's training config loads."""
+    from fem.config import read_config as read_data
+    from stmpl.ablate import read_config
+    from stmpl.train import read_config as read_train
+
+    cfg = read_config(path)
+    root = CONFIGS.parent
+    for d in cfg["datasets"].values():
+        data = read_data(root / d["config"])
+        assert pathlib.Path(d["folder"]) == pathlib.Path("data") / data["name"]
+    for s in cfg["setups"]:
+        if "train" in s:
+            read_train(root / s["train"])
