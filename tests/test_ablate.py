@@ -47,6 +47,12 @@ def test_tables_rows_and_the_cache(config, tmp_path, monkeypatch):
     assert seen + unseen == naive["samples"]
     md = (tmp_path / "report" / "ablation.md").read_text()
     assert "Table 1" in md and "*STMPL (paper)*" in md and "| Naive / bands |" in md
+    assert (tmp_path / "report" / "speed_accuracy.png").stat().st_size > 20_000
+    assert (tmp_path / "report" / "speed_accuracy.svg").is_file()
+    pts = {(p["label"], p["batch"]): p for p in res["points"]}
+    assert ("Naive", 1) in pts and ("FEM", 1) in pts and ("FEM", 6) not in pts
+    assert pts[("FEM", 1)]["seconds"] > 100 * pts[("Naive", 1)]["seconds"]
+    assert pts[("Naive", 1)]["rel_mee"] == pytest.approx(t["table2"]["Naive / bands"]["rel_mee"][0])
     csv = (tmp_path / "report" / "table2.csv").read_text().splitlines()
     assert csv[0].startswith("setup,samples,mae_x_mean") and len(csv) == 1 + 3 + 3
 
