@@ -28,6 +28,7 @@ import numpy as np
 
 DEFAULTS = {
     "name": None,
+    "kind": "tables",          # or "stability": a sweep (stmpl/stability.py)
     "datasets": {},            # name -> {config: dataset config path, folder: where it lives}
     "in_distribution": None,   # the dataset whose test split is Table 1 (and trains set-ups)
     "out_of_distribution": [],  # datasets of Table 2 (test splits)
@@ -117,10 +118,27 @@ def read_config(source) -> dict:
         if s["name"] in names:
             raise ValueError(f"setup name {s['name']!r} is used twice")
         names.add(s["name"])
+    checked.one_of(cfg["kind"], "kind", ("tables", "stability"))
     checked.integer(cfg["batch"], "batch", 1)
     cfg["out"] = cfg["out"] or f"reports/ablation-{cfg['name']}"
     cfg["runs"] = cfg["runs"] or f"runs/ablation-{cfg['name']}"
     return cfg
+
+
+def _kind(source) -> str:
+    """The ``kind`` a config (path or mapping) declares (``tables`` unless it says)."""
+    import yaml
+
+    raw = source
+    if not isinstance(source, dict):
+        path = pathlib.Path(source)
+        if not path.is_file():
+            raise FileNotFoundError(f"ablation config file not found: {path}")
+        try:
+            raw = yaml.safe_load(path.read_text())
+        except yaml.YAMLError:
+            return "tables"                        # read_config names the YAML error
+    return raw.get("kind", "tables") if isinstance(raw, dict) else "tables"
 
 
 def _hash(obj) -> str:
@@ -174,10 +192,15 @@ def _training_config(setup: dict, cfg: dict, ds) -> dict:
 
 def run(config, progress: bool = True) -> dict:
     """Run (or complete) an ablation; writes the tables and ``ablation.md`` into the config's
-    ``out`` and returns ``{"tables": {...}, "out": folder}``."""
+    ``out`` and returns ``{"tables": {...}, "out": folder}``. A config of ``kind: stability``
+    runs the stability sweep instead (:func:`stmpl.stability.run`)."""
     from stmpl.files import atomic_write_text
     from stmpl.train import train
 
+    if _kind(config) == "stability":
+        from stmpl import stability
+
+        return stability.run(config, progress)
     cfg = read_config(config)
     out = pathlib.Path(cfg["out"])
     out.mkdir(parents=True, exist_ok=True)

@@ -69,7 +69,10 @@ def cmd_ablate(args) -> int:
     from stmpl.ablate import run
 
     res = run(args.config, progress=not args.quiet)
-    print(f"wrote {res['out'] / 'ablation.md'} and the tables (.md, .csv) beside it")
+    if "points" in res and "tables" not in res:
+        print(f"wrote {res['out'] / 'stability.md'}, one picture per axis and the envelope map")
+    else:
+        print(f"wrote {res['out'] / 'ablation.md'}, the tables (.md, .csv) and the chart")
     return 0
 
 

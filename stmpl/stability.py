@@ -1,0 +1,334 @@
+"""The stability sweep: where each method stops being right, and how.
+
+From a base scene (a disk on the arm), one axis at a time is pushed from easy to past where the
+FEM stops: the total force, the mean pressure (force over a fixed disk), the load's size at a
+fixed pressure (a fingertip to a wide patch), the thickness, the place (across the UV seam, up to
+the open rims), the number of simultaneous contacts and how much the thickness varies under
+the load. At every point the FEM solves the scene (its failures counted with the reason and the
+time it took to fail) and every predictor answers it: its relative MEE and peak error against
+the FEM, whether it flagged the scene as outside its envelope and whether its answer was
+physically possible. Results are cached per point; ``stmpl ablate configs/ablation/stability.yaml``
+runs it and draws one picture per axis and the envelope map.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import pathlib
+import time
+import warnings
+
+import numpy as np
+
+DEFAULTS = {
+    "name": None,
+    "kind": "stability",
+    "body": {"model": "anny"},
+    "part": "left_arm",
+    "predictors": [],
+    "fem": {"res": "reference", "levels": 4},
+    "base": {"radius": 0.02, "total": 0.3, "thickness_mm": 7.5, "uv": [0.5, 0.5]},
+    "axes": {},
+    "out": None,
+}
+AXES = {
+    "force": ("total force, N", "total"),
+    "pressure": ("mean pressure on a 2 cm disk, kPa", "pressure_kpa"),
+    "size": ("disk radius at the base pressure, mm", "radius_mm"),
+    "thickness": ("tissue thickness, mm", "thickness_mm"),
+    "seam": ("a disk across the UV seam, position along it (0-1)", "at"),
+    "rim": ("a disk at chart v (the open rims at 0 and 1)", "v"),
+    "contacts": ("simultaneous contacts (1.5 cm disks, the force shared)", "count"),
+    "variation": ("thickness variation under the load (ramp, mm per 10 cm)", "slope_mm"),
+}
+
+
+def read_config(source) -> dict:
+    from stmpl import config as checked
+
+    cfg = checked.read(source, DEFAULTS, "stability config")
+    if not cfg["predictors"]:
+        raise ValueError("predictors must list at least one predictor spec (zoo:NAME, ...)")
+    if not isinstance(cfg["axes"], dict) or not cfg["axes"]:
+        raise ValueError(f"axes must name at least one of {sorted(AXES)}")
+    for a, v in cfg["axes"].items():
+        if a not in AXES:
+            raise ValueError(f"unknown stability axis {a!r}; use {sorted(AXES)}")
+        if not isinstance(v, list) or not v or any(isinstance(x, bool) or not isinstance(
+                x, (int, float)) for x in v):
+            raise ValueError(f"axes.{a} must be a list of numbers, got {v!r}")
+    cfg["out"] = cfg["out"] or f"reports/{cfg['name']}"
+    return cfg
+
+
+def scene_at(part, base: dict, axis: str, value: float):
+    """The base scene with ``axis`` set to ``value``."""
+    from stmpl import loads, tissue
+    from stmpl.scene import Scene
+
+    r, total, t = base["radius"], base["total"], base["thickness_mm"] * 1e-3
+    uv = tuple(base["uv"])
+    thick = tissue.constant(part, t)
+    if axis == "force":
+        load = loads.disk(part, uv=uv, radius=r, total=value)
+    elif axis == "pressure":
+        area = loads.disk(part, uv=uv, radius=r, total=1.0).area
+        load = loads.disk(part, uv=uv, radius=r, total=value * 1e3 * area)
+    elif axis == "size":
+        p0 = total / loads.disk(part, uv=uv, radius=r, total=1.0).area
+        unit = loads.disk(part, uv=uv, radius=value * 1e-3, total=1.0)
+        load = loads.disk(part, uv=uv, radius=value * 1e-3, total=p0 * unit.area)
+    elif axis == "thickness":
+        load = loads.disk(part, uv=uv, radius=r, total=total)
+        thick = tissue.constant(part, value * 1e-3)
+    elif axis == "seam":
+        load = loads.seam_disk(part, at=value, radius=r, total=total)
+    elif axis == "rim":
+        load = loads.disk(part, uv=(uv[0], value), radius=r, total=total)
+    elif axis == "contacts":
+        n = int(value)
+        us = np.linspace(0.2, 0.8, n) if n > 1 else [uv[0]]
+        vs = [0.35, 0.65] * n
+        parts = [loads.disk(part, uv=(float(u), vs[k]), radius=0.015, total=total / n)
+                 for k, u in enumerate(us)]
+        load = parts[0] if n == 1 else loads.combine(part, *parts)
+    elif axis == "variation":
+        load = loads.disk(part, uv=uv, radius=r, total=total)
+        centre = part.axial[load.vertices].mean()
+        thick = tissue.check(part, np.clip(t + value * 1e-2 * (part.axial - centre),
+                                           0.0025, 0.0125))
+    else:
+        raise ValueError(f"unknown axis {axis!r}")
+    return Scene.from_load(part, thick, load, axis=axis, value=float(value))
+
+
+def _key(*parts) -> str:
+    return hashlib.sha256(json.dumps(parts, sort_keys=True, default=str).encode()).hexdigest()[:12]
+
+
+def run(config, progress: bool = True) -> dict:
+    """Run (or complete) a sweep; returns ``{"points": [...], "out": folder}``."""
+    from stmpl import predictor
+    from stmpl.body.spec import part_from_spec
+    from stmpl.files import atomic_write_text
+    from stmpl.metrics import sample_metrics
+    from stmpl.predictor import ImpossibleAnswer, OutsideEnvelope, PredictionFailed
+    from stmpl.spec import label, predictor_from_spec
+
+    cfg = read_config(config)
+    out = pathlib.Path(cfg["out"])
+    out.mkdir(parents=True, exist_ok=True)
+    cache_path = out / "points.json"
+    cache = json.loads(cache_path.read_text()) if cache_path.is_file() else {}
+    part = part_from_spec(cfg["body"], cfg["part"])
+    fem = predictor.create("fem", **cfg["fem"])
+    preds = {label(s): predictor_from_spec(s) for s in cfg["predictors"]}
+    todo = [(a, float(v)) for a, vals in cfg["axes"].items() for v in vals]
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(todo), unit="point", desc=f"sweep {cfg['name']}", dynamic_ncols=True)
+    points = []
+    for axis, value in todo:
+        key = _key(part.fingerprint, cfg["fem"], cfg["base"], axis, value, sorted(preds))
+        if key not in cache:
+            scene = scene_at(part, cfg["base"], axis, value)
+            rec = {"axis": axis, "value": value, "total": scene.total_force,
+                   "load": scene.load.to_dict() if scene.load is not None else None}
+            t0 = time.perf_counter()
+            try:
+                truth = fem.predict(scene)
+                rec["fem"] = {"ok": True, "seconds": time.perf_counter() - t0,
+                              "deepest_mm": 1e3 * float(truth.magnitude.max())}
+            except PredictionFailed as e:
+                truth = None
+                rec["fem"] = {"ok": False, "seconds": time.perf_counter() - t0,
+                              "reason": str(e)}
+            rec["predictors"] = {}
+            for name, p in preds.items():
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", OutsideEnvelope)
+                    warnings.simplefilter("ignore", ImpossibleAnswer)
+                    try:
+                        d = p.predict(scene)
+                    except (ValueError, PredictionFailed) as e:   # e.g. a thickness it lacks
+                        rec["predictors"][name] = {"refused": str(e)}
+                        continue
+                env = d.info.get("envelope")
+                r = {"inside": None if env is None else env["inside"],
+                     "outside": None if env is None else env["outside"],
+                     "physical": d.info["physical"], "seconds": d.info["seconds"],
+                     "deepest_mm": 1e3 * float(d.magnitude.max())}
+                if truth is not None:
+                    m = sample_metrics(truth.displacement, d.displacement)
+                    r.update(rel_mee=m["rel_mee"], peak_err=m["peak_err"], max_err=m["max_err"])
+                rec["predictors"][name] = r
+            cache[key] = rec
+            atomic_write_text(cache_path, json.dumps(cache, indent=1, sort_keys=True))
+        points.append(cache[key])
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
+    figures(cfg, points, out)
+    report(cfg, points, out)
+    return {"points": points, "out": out}
+
+
+def verdict(r: dict) -> str:
+    """A predictor's answer at a point: ``refused``, ``impossible``, ``no FEM``, ``<=1 %``,
+    ``<=5 %`` or ``>5 %`` (the worse of relative MEE and |peak error|)."""
+    if "refused" in r:
+        return "refused"
+    if not r["physical"]:
+        return "impossible"
+    if "rel_mee" not in r:
+        return "no FEM"
+    worst = max(r["rel_mee"], abs(r["peak_err"]))
+    return "<=1 %" if worst <= 1 else "<=5 %" if worst <= 5 else ">5 %"
+
+
+def figures(cfg, points: list, out: pathlib.Path) -> list:
+    """One picture per axis (relative MEE and |peak error| per predictor against the axis,
+    FEM failures marked with the seconds they took) and the envelope map."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from stmpl.chart import FAMILIES, family
+
+    files = []
+    names = sorted({n for p in points for n in p["predictors"]})
+    for axis in cfg["axes"]:
+        pts = [p for p in points if p["axis"] == axis]
+        x = np.array([p["value"] for p in pts])
+        fig, axes = plt.subplots(1, 2, figsize=(12, 4.4))
+        for ax, key, what in ((axes[0], "rel_mee", "relative MEE against the FEM, %"),
+                              (axes[1], "peak_err", "|peak error| against the FEM, %")):
+            for n in names:
+                y = np.array([abs(p["predictors"].get(n, {}).get(key, np.nan)) for p in pts])
+                inside = np.array([p["predictors"].get(n, {}).get("inside") is not False
+                                   for p in pts])
+                c = FAMILIES[family(n)]
+                ax.plot(x, y, "-", c=c, lw=1.2, label=n)
+                ax.scatter(x[inside], y[inside], c=c, s=28, zorder=3)
+                ax.scatter(x[~inside], y[~inside], facecolors="white", edgecolors=c, s=28,
+                           zorder=3)
+            for lim, ls in ((1, ":"), (5, "--")):
+                ax.axhline(lim, c="#888888", lw=0.8, ls=ls)
+            fails = [p for p in pts if not p["fem"]["ok"]]
+            for p in fails:
+                ax.axvline(p["value"], c="#cc0000", lw=0.8, alpha=0.5)
+            if fails and ax is axes[0]:
+                f0 = fails[0]
+                ax.annotate(f"FEM fails from here\n({f0['fem']['reason'].split(': ')[-1]}, "
+                            f"{f0['fem']['seconds']:.1f} s)", (f0["value"], 0.02),
+                            xycoords=("data", "axes fraction"), fontsize=7, color="#cc0000",
+                            xytext=(3, 0), textcoords="offset points")
+            ax.set_yscale("log")
+            ax.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+            if x.min() > 0 and x.max() / x.min() > 20:            # forces from 0.05 to 5 N
+                ax.set_xscale("log")
+                ax.xaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+            ax.set_xlabel(AXES[axis][0])
+            ax.set_ylabel(what + " (log)")
+            ax.grid(True, which="both", alpha=0.25)
+        axes[0].legend(fontsize=8, title="filled: inside its envelope; open: outside",
+                       title_fontsize=7)
+        fig.suptitle(f"Stability along {axis}: dotted 1 %, dashed 5 %; red lines: the FEM "
+                     "fails", fontsize=11)
+        fig.tight_layout()
+        f = out / f"stability_{axis}.png"
+        fig.savefig(f, dpi=120)
+        plt.close(fig)
+        files.append(f)
+    files.append(envelope_map(points, names, out / "envelope_map.png"))
+    return files
+
+
+COLOURS = {"<=1 %": "#2ca02c", "<=5 %": "#ffbf00", ">5 %": "#d62728", "impossible": "#5a0000",
+           "refused": "#bbbbbb", "no FEM": "#ffffff"}
+
+
+def envelope_map(points: list, names: list, path) -> pathlib.Path:
+    """Rows: the sweep's points (axis = value); columns: predictors; colour: within 1 %, within
+    5 %, worse, impossible, refused, or no FEM answer to judge by; a cross: outside the
+    predictor's envelope (it warned)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Patch
+
+    fig, ax = plt.subplots(figsize=(1.6 + 1.5 * len(names), 0.9 + 0.22 * len(points)))
+    for i, p in enumerate(points):
+        for j, n in enumerate(names):
+            r = p["predictors"].get(n, {"refused": ""})
+            v = verdict(r)
+            ax.add_patch(plt.Rectangle((j, i), 1, 1, fc=COLOURS[v], ec="white"))
+            if r.get("inside") is False:
+                ax.plot([j + 0.3, j + 0.7], [i + 0.3, i + 0.7], c="black", lw=1)
+                ax.plot([j + 0.3, j + 0.7], [i + 0.7, i + 0.3], c="black", lw=1)
+        if not p["fem"]["ok"]:
+            ax.text(len(names) + 0.1, i + 0.5, "FEM fails", va="center", fontsize=7,
+                    color="#cc0000")
+    ax.set_xlim(0, len(names) + 1)
+    ax.set_ylim(len(points), 0)
+    ax.set_xticks(np.arange(len(names)) + 0.5, names, fontsize=8)
+    ax.set_yticks(np.arange(len(points)) + 0.5,
+                  [f"{p['axis']} = {p['value']:g}" for p in points], fontsize=7)
+    ax.tick_params(length=0)
+    for s in ax.spines.values():
+        s.set_visible(False)
+    ax.legend(handles=[Patch(fc=c, ec="#999999", label=k) for k, c in COLOURS.items()],
+              loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=7,
+              title="worse of rel. MEE, |peak|\nx = outside its envelope", title_fontsize=7)
+    ax.set_title("Where each method can be trusted", fontsize=10)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+    return pathlib.Path(path)
+
+
+def report(cfg, points: list, out: pathlib.Path) -> pathlib.Path:
+    """``stability.md``: per axis, the FEM's outcome and each predictor's errors and flags."""
+    from stmpl.files import atomic_write_text
+
+    names = sorted({n for p in points for n in p["predictors"]})
+    lines = [f"# Stability sweep: {cfg['name']}\n",
+             f"Base: a disk of {cfg['base']['radius'] * 1e3:g} mm radius, "
+             f"{cfg['base']['total']:g} N, {cfg['base']['thickness_mm']:g} mm of tissue at "
+             f"chart {tuple(cfg['base']['uv'])}; FEM {cfg['fem']}. Cells: relative MEE / peak "
+             "error (%) against the FEM; `out` = outside the predictor's envelope (it warned), "
+             "`IMPOSSIBLE` = the skin through the fixed surface.\n",
+             "![envelope map](envelope_map.png)\n"]
+    for axis in cfg["axes"]:
+        lines.append(f"## {axis}: {AXES[axis][0]}\n\n![{axis}](stability_{axis}.png)\n")
+        lines.append("| value | F total N | FEM | " + " | ".join(names) + " |")
+        lines.append("|--:|--:|---|" + "---|" * len(names))
+        for p in (q for q in points if q["axis"] == axis):
+            f = p["fem"]
+            fem = (f"{f['deepest_mm']:.3f} mm, {f['seconds']:.1f} s" if f["ok"] else
+                   f"fails after {f['seconds']:.1f} s: {f['reason'].split(': ', 1)[-1]}")
+            cells = []
+            for n in names:
+                r = p["predictors"].get(n, {})
+                if "refused" in r:
+                    cells.append("refused")
+                    continue
+                c = (f"{r['rel_mee']:.2f} / {r['peak_err']:+.1f}" if "rel_mee" in r else
+                     f"{r['deepest_mm']:.2f} mm")
+                if r.get("inside") is False:
+                    c += " out"
+                if not r["physical"]:
+                    c += " IMPOSSIBLE"
+                cells.append(c)
+            lines.append(f"| {p['value']:g} | {p['total']:.3g} | {fem} | " + " | ".join(cells)
+                         + " |")
+        lines.append("")
+    path = out / "stability.md"
+    atomic_write_text(path, "\n".join(lines))
+    return path
