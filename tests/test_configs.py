@@ -45,6 +45,14 @@ def test_ablation_configs_load(path):
     from stmpl.ablate import read_config
     from stmpl.train import read_config as read_train
 
+    import yaml
+
+    if yaml.safe_load(path.read_text()).get("kind") == "stability":
+        from stmpl import stability
+
+        cfg = stability.read_config(path)
+        assert cfg["out"] == "reports/stability"
+        return
     cfg = read_config(path)
     root = CONFIGS.parent
     for d in cfg["datasets"].values():
