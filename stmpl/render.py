@@ -30,6 +30,26 @@ def refine(triangles: np.ndarray, values: np.ndarray, levels: int = 2):
     return t, v
 
 
+LIGHT = np.array([-0.35, 0.55, 0.76]) / np.linalg.norm([-0.35, 0.55, 0.76])
+"""Light direction in camera coordinates (right, up, towards the viewer): from the upper left,
+so the limb's roundness and the dent read as shape."""
+TILT = (np.radians(28.0), np.radians(18.0))
+"""Camera turn (about its up axis) and tilt (about its right axis), so a limb recedes in depth
+instead of lying flat across the picture."""
+DENT_MM = 4.0
+"""Pictures draw the displacement exaggerated so the deepest point sits this deep (at most 10x,
+never less than 1x); the factor is written on the picture."""
+
+
+def turned(basis: np.ndarray, yaw: float = TILT[0], pitch: float = TILT[1]) -> np.ndarray:
+    """The camera ``basis`` turned by ``yaw`` about its up axis, then ``pitch`` about its right
+    axis (radians)."""
+    cy, sy, cp, sp = np.cos(yaw), np.sin(yaw), np.cos(pitch), np.sin(pitch)
+    r = np.array([[cy, 0, -sy], [0, 1, 0], [sy, 0, cy]])
+    r = np.array([[1, 0, 0], [0, cp, -sp], [0, sp, cp]]) @ r
+    return r @ basis
+
+
 def draw_meshes(ax, basis: np.ndarray, meshes: list) -> None:
     """Draw ``meshes`` seen through ``basis`` (camera rows: right, up, towards the viewer):
     each a tuple ``(triangles (T, 3, 3), rgba (T, 4) or (4,), cull)``; triangles turned away are
@@ -43,7 +63,8 @@ def draw_meshes(ax, basis: np.ndarray, meshes: list) -> None:
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
         keep = n[:, 2] > 0 if cull else np.ones(len(tri), bool)
         c = np.broadcast_to(np.asarray(rgba, float), (len(tri), 4)).copy()
-        c[:, :3] *= (0.4 + 0.6 * np.abs(n[:, 2]))[:, None]
+        n = n * np.where(n[:, 2] < 0, -1.0, 1.0)[:, None]       # the side the viewer sees
+        c[:, :3] *= (0.3 + 0.7 * np.clip(n @ LIGHT, 0.0, 1.0))[:, None]
         polys.append(tri[keep, :, :2])
         colours.append(c[keep])
         depth.append(tri[keep, :, 2].mean(1))
@@ -82,16 +103,19 @@ def contact_figure(deformations: dict, truth=None, objects=(), path=None, dpi: i
         raise ValueError("no deformations to draw")
     part = rows[0][1].scene.part
     basis, centre, reach = contact_camera(rows[0][1])
+    basis = turned(basis)
     top = max(max(d.magnitude.max() for _, d in rows) * 1e3, 1e-6)
-    cmap = matplotlib.colormaps["inferno"]
+    scale = float(np.clip(DENT_MM / top, 1.0, 10.0))
+    cmap = matplotlib.colormaps["YlOrRd"]      # light where still: the shading shows shape
     fig = plt.figure(figsize=(max(4.4 * len(rows) + 1.0, 10.0), 5.2))
     grid = fig.add_gridspec(1, len(rows) + 1, width_ratios=[1] * len(rows) + [0.05],
                             left=0.01, right=0.94, bottom=0.03, top=0.76, wspace=0.05)
     axes = [fig.add_subplot(grid[0, k]) for k in range(len(rows))]
     cx, cy = (centre @ basis.T)[:2]
     for (name, d), ax in zip(rows, axes):
-        tri, val = refine(d.vertices[part.faces], d.magnitude[part.faces] * 1e3)
-        meshes = [(tri, cmap(val.mean(1) / top), False)]
+        drawn = part.vertices + scale * d.displacement
+        tri, val = refine(drawn[part.faces], d.magnitude[part.faces] * 1e3)
+        meshes = [(tri, cmap(val.mean(1) / top), True)]          # the far side hidden
         for m in objects:
             meshes.append((np.asarray(m.vertices)[np.asarray(m.faces)], (0.6, 0.8, 1.0, 0.3),
                            True))
@@ -111,7 +135,9 @@ def contact_figure(deformations: dict, truth=None, objects=(), path=None, dpi: i
         ax.set_title("\n".join(lines), fontsize=10)
     sm = matplotlib.cm.ScalarMappable(matplotlib.colors.Normalize(0, top), cmap)
     fig.colorbar(sm, cax=fig.add_subplot(grid[0, -1]), label="displacement |u| (mm)")
-    fig.suptitle(title or _title(rows[0][1].scene), y=0.97)
+    fig.suptitle((title or _title(rows[0][1].scene))
+                 + (f"\n(dents drawn {scale:.0f}x deeper than they are; colours true)"
+                    if scale > 1.05 else ""), y=0.985, fontsize=10)
     if path is not None:
         import pathlib
 
