@@ -134,7 +134,15 @@ def run(config, progress: bool = True) -> dict:
     for axis, value in todo:
         key = _key(part.fingerprint, cfg["fem"], cfg["base"], axis, value, sorted(preds))
         if key not in cache:
-            scene = scene_at(part, cfg["base"], axis, value)
+            try:
+                scene = scene_at(part, cfg["base"], axis, value)
+            except ValueError as e:            # e.g. a fingertip between this mesh's vertices
+                cache[key] = {"axis": axis, "value": value, "skipped": str(e)}
+                atomic_write_text(cache_path, json.dumps(cache, indent=1, sort_keys=True))
+                points.append(cache[key])
+                if bar is not None:
+                    bar.update(1)
+                continue
             rec = {"axis": axis, "value": value, "total": scene.total_force,
                    "load": scene.load.to_dict() if scene.load is not None else None}
             t0 = time.perf_counter()
@@ -172,7 +180,7 @@ def run(config, progress: bool = True) -> dict:
             bar.update(1)
     if bar is not None:
         bar.close()
-    figures(cfg, points, out)
+    figures(cfg, [p for p in points if "skipped" not in p], out)
     report(cfg, points, out)
     return {"points": points, "out": out}
 
@@ -204,14 +212,17 @@ def figures(cfg, points: list, out: pathlib.Path) -> list:
     names = sorted({n for p in points for n in p["predictors"]})
     for axis in cfg["axes"]:
         pts = [p for p in points if p["axis"] == axis]
+        if not pts:                          # every point of the axis was skipped
+            continue
         x = np.array([p["value"] for p in pts])
+        inside_of = {n: np.array([p["predictors"].get(n, {}).get("inside") is not False
+                                  for p in pts], dtype=bool) for n in names}
         fig, axes = plt.subplots(1, 2, figsize=(12, 4.4))
         for ax, key, what in ((axes[0], "rel_mee", "relative MEE against the FEM, %"),
                               (axes[1], "peak_err", "|peak error| against the FEM, %")):
             for n in names:
                 y = np.array([abs(p["predictors"].get(n, {}).get(key, np.nan)) for p in pts])
-                inside = np.array([p["predictors"].get(n, {}).get("inside") is not False
-                                   for p in pts])
+                inside = inside_of[n]
                 c = FAMILIES[family(n)]
                 ax.plot(x, y, "-", c=c, lw=1.2, label=n)
                 ax.scatter(x[inside], y[inside], c=c, s=28, zorder=3)
@@ -297,7 +308,7 @@ def report(cfg, points: list, out: pathlib.Path) -> pathlib.Path:
     """``stability.md``: per axis, the FEM's outcome and each predictor's errors and flags."""
     from stmpl.files import atomic_write_text
 
-    names = sorted({n for p in points for n in p["predictors"]})
+    names = sorted({n for p in points for n in p.get("predictors", {})})
     lines = [f"# Stability sweep: {cfg['name']}\n",
              f"Base: a disk of {cfg['base']['radius'] * 1e3:g} mm radius, "
              f"{cfg['base']['total']:g} N, {cfg['base']['thickness_mm']:g} mm of tissue at "
@@ -306,10 +317,16 @@ def report(cfg, points: list, out: pathlib.Path) -> pathlib.Path:
              "`IMPOSSIBLE` = the skin through the fixed surface.\n",
              "![envelope map](envelope_map.png)\n"]
     for axis in cfg["axes"]:
-        lines.append(f"## {axis}: {AXES[axis][0]}\n\n![{axis}](stability_{axis}.png)\n")
+        shown = any("skipped" not in q for q in points if q["axis"] == axis)
+        lines.append(f"## {axis}: {AXES[axis][0]}\n"
+                     + (f"\n![{axis}](stability_{axis}.png)\n" if shown else ""))
         lines.append("| value | F total N | FEM | " + " | ".join(names) + " |")
         lines.append("|--:|--:|---|" + "---|" * len(names))
         for p in (q for q in points if q["axis"] == axis):
+            if "skipped" in p:
+                lines.append(f"| {p['value']:g} | | not made on this mesh: "
+                             f"{p['skipped'].split(' (')[0]} |" + " |" * len(names))
+                continue
             f = p["fem"]
             fem = (f"{f['deepest_mm']:.3f} mm, {f['seconds']:.1f} s" if f["ok"] else
                    f"fails after {f['seconds']:.1f} s: {f['reason'].split(': ', 1)[-1]}")

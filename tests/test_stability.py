@@ -38,7 +38,8 @@ def test_the_sweep_flags_what_lies_outside(tiny_dataset, tmp_path):
     cfg = {"name": "s", "kind": "stability", "body": TUBE, "part": "tube",
            "predictors": [str(ckpt)],                # named by its file: ckpt.stem
            "fem": {"res": {"subdivisions": 1, "layers": 1, "order": 1}, "levels": 1},
-           "base": BASE, "axes": {"force": [0.05, 0.15, 3.0], "thickness": [3.0]},
+           "base": BASE, "axes": {"force": [0.05, 0.15, 3.0], "thickness": [3.0],
+                                         "size": [1.0]},       # 1 mm: between vertices
            "out": str(tmp_path / "report")}
     from stmpl.ablate import run
 
@@ -51,13 +52,14 @@ def test_the_sweep_flags_what_lies_outside(tiny_dataset, tmp_path):
     assert heavy["inside"] is False and any("force of a contact" in w for w in heavy["outside"])
     thin = pts[("thickness", 3.0)]["predictors"][ckpt.stem]
     assert thin["inside"] is False and "tissue thickness 3 mm < 5 mm" in thin["outside"][0]
-    for p in res["points"]:
+    for p in (q for q in res["points"] if "skipped" not in q):
         assert p["fem"]["ok"] or (p["fem"]["reason"] and p["fem"]["seconds"] < 120)
+    assert "touches no vertex" in pts[("size", 1.0)]["skipped"]
     out = tmp_path / "report"
     for f in ("stability_force.png", "stability_thickness.png", "envelope_map.png"):
         assert (out / f).stat().st_size > 10_000
     md = (out / "stability.md").read_text()
-    assert "## force" in md and " out" in md
+    assert "## force" in md and " out" in md and "not made on this mesh" in md
     assert stability.verdict({"physical": False}) == "impossible"
     assert stability.verdict({"physical": True, "rel_mee": 0.5, "peak_err": -7.0}) == ">5 %"
 
