@@ -73,12 +73,15 @@ class FEMPredictor(BasePredictor):
                 continue
             totals = total * np.arange(1, self.levels + 1) / self.levels
             local = None
-            if self.fidelity == "auto":
-                mesh, sols, local = simulate_local(s.part, s.thickness, s.force, totals,
-                                                   self.res, self.material, self.options)
-            else:
-                mesh, sols = simulate(s.part, s.thickness, s.force, totals, self.res,
-                                      self.material, self.options)
+            try:
+                if self.fidelity == "auto":
+                    mesh, sols, local = simulate_local(s.part, s.thickness, s.force, totals,
+                                                       self.res, self.material, self.options)
+                else:
+                    mesh, sols = simulate(s.part, s.thickness, s.force, totals, self.res,
+                                          self.material, self.options)
+            except ValueError as e:            # a scene it cannot mesh (a thickness that folds)
+                raise FEMFailed(f"the FEM cannot build the tissue for this scene: {e}") from e
             sol = sols[-1]
             if not sol.ok:
                 raise FEMFailed(f"the FEM solve failed at {sol.total_force:.3g} N: {sol.reason}")

@@ -30,3 +30,16 @@ def test_fem_predictor_raises_on_failure(ds):
     with pytest.raises(FEMFailed, match="FEM solve failed"):
         predictor.create("fem", res={"subdivisions": 0, "layers": 1, "order": 1},
                          options=None).predict(s)
+
+
+def test_a_scene_the_fem_cannot_mesh_is_a_failure_that_says_why(arm):
+    """12.5 mm of tissue folds the arm's inner surface where it curves tightest: the FEM
+    predictor fails (PredictionFailed, not a bare ValueError) and names the fold."""
+    from fem.predictor import FEMFailed
+    from stmpl import loads, predictor, tissue
+    from stmpl.scene import Scene
+
+    scene = Scene.from_load(arm, tissue.constant(arm, 0.0125),
+                            loads.disk(arm, uv=(0.5, 0.5), radius=0.02, total=0.1))
+    with pytest.raises(FEMFailed, match="cannot build the tissue.*folds the inner surface"):
+        predictor.create("fem", res="coarse").predict(scene)
