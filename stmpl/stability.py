@@ -7,7 +7,7 @@ the open rims), the number of simultaneous contacts and how much the thickness v
 the load. At every point the FEM solves the scene (its failures counted with the reason and the
 time it took to fail) and every predictor answers it: its relative MEE and peak error against
 the FEM, whether it flagged the scene as outside its envelope and whether its answer was
-physically possible. Results are cached per point; ``stmpl ablate configs/ablation/stability.yaml``
+physically possible. Results are cached per point (by the scene's content, the FEM set-up and the predictors); ``stmpl ablate configs/ablation/stability.yaml``
 runs it and draws one picture per axis and the envelope map.
 """
 
@@ -38,8 +38,8 @@ AXES = {
     "size": ("disk radius at the base pressure, mm", "radius_mm"),
     "thickness": ("tissue thickness, mm", "thickness_mm"),
     "seam": ("a disk across the UV seam, position along it (0-1)", "at"),
-    "rim": ("a disk at chart v (the open rims at 0 and 1)", "v"),
-    "contacts": ("simultaneous contacts (1.5 cm disks, the force shared)", "count"),
+    "rim": ("a disk along the limb, 0 = proximal rim, 1 = distal rim", "along"),
+    "contacts": ("simultaneous contacts (1.5 cm disks in a row, the force shared)", "count"),
     "variation": ("thickness variation under the load (ramp, mm per 10 cm)", "slope_mm"),
 }
 
@@ -84,23 +84,38 @@ def scene_at(part, base: dict, axis: str, value: float):
         thick = tissue.constant(part, value * 1e-3)
     elif axis == "seam":
         load = loads.seam_disk(part, at=value, radius=r, total=total)
-    elif axis == "rim":
-        load = loads.disk(part, uv=(uv[0], value), radius=r, total=total)
-    elif axis == "contacts":
+    elif axis == "rim":                        # the base's side of the limb, moved along it
+        load = loads.disk(part, at=_side_vertex(part, uv, value), radius=r, total=total)
+    elif axis == "contacts":                   # 1.5 cm disks in a row along the limb
         n = int(value)
-        us = np.linspace(0.2, 0.8, n) if n > 1 else [uv[0]]
-        vs = [0.35, 0.65] * n
-        parts = [loads.disk(part, uv=(float(u), vs[k]), radius=0.015, total=total / n)
-                 for k, u in enumerate(us)]
+        alongs = np.linspace(0.3, 0.7, n) if n > 1 else [None]
+        parts = [loads.disk(part, uv=uv, radius=0.015, total=total) if a is None else
+                 loads.disk(part, at=_side_vertex(part, uv, float(a)), radius=0.015,
+                            total=total / n) for a in alongs]
         load = parts[0] if n == 1 else loads.combine(part, *parts)
     elif axis == "variation":
         load = loads.disk(part, uv=uv, radius=r, total=total)
         centre = part.axial[load.vertices].mean()
         thick = tissue.check(part, np.clip(t + value * 1e-2 * (part.axial - centre),
-                                           0.0025, 0.0125))
+                                           0.0025, 0.010))   # 12.5 mm folds the arm's wrist
     else:
         raise ValueError(f"unknown axis {axis!r}")
     return Scene.from_load(part, thick, load, axis=axis, value=float(value))
+
+
+def _side_vertex(part, uv, along: float) -> int:
+    """The vertex at fraction ``along`` of the limb on the same side as chart point ``uv``."""
+    from stmpl import loads
+
+    p0 = loads.place(part, uv=uv).position
+    s = part.axial
+    k0 = int(np.argmin(np.linalg.norm(part.vertices - p0, axis=1)))
+    c0, d0, _ = part.limb_frame(float((s[k0] - s.min()) / (s.max() - s.min())))
+    radial = (p0 - c0) - ((p0 - c0) @ d0) * d0
+    c, _, s0 = part.limb_frame(along)
+    near = np.abs(s - s0) <= np.abs(s - s0).min() + 0.01
+    dist = np.linalg.norm(part.vertices - (c + radial), axis=1)
+    return int(np.flatnonzero(near)[np.argmin(dist[near])])
 
 
 def _key(*parts) -> str:
@@ -132,17 +147,16 @@ def run(config, progress: bool = True) -> dict:
         bar = tqdm(total=len(todo), unit="point", desc=f"sweep {cfg['name']}", dynamic_ncols=True)
     points = []
     for axis, value in todo:
-        key = _key(part.fingerprint, cfg["fem"], cfg["base"], axis, value, sorted(preds))
+        try:
+            scene = scene_at(part, cfg["base"], axis, value)
+        except ValueError as e:                # e.g. a fingertip between this mesh's vertices
+            points.append({"axis": axis, "value": value, "skipped": str(e)})
+            if bar is not None:
+                bar.update(1)
+            continue
+        key = _key(part.fingerprint, cfg["fem"], axis, value, sorted(preds),   # what decides
+                   hashlib.sha256(scene.force.tobytes() + scene.thickness.tobytes()).hexdigest())
         if key not in cache:
-            try:
-                scene = scene_at(part, cfg["base"], axis, value)
-            except ValueError as e:            # e.g. a fingertip between this mesh's vertices
-                cache[key] = {"axis": axis, "value": value, "skipped": str(e)}
-                atomic_write_text(cache_path, json.dumps(cache, indent=1, sort_keys=True))
-                points.append(cache[key])
-                if bar is not None:
-                    bar.update(1)
-                continue
             rec = {"axis": axis, "value": value, "total": scene.total_force,
                    "load": scene.load.to_dict() if scene.load is not None else None}
             t0 = time.perf_counter()
