@@ -32,14 +32,17 @@ AXES = {
     "contact_area": ("range", "cm^2", 1e4, "area of a contact"),
     "contact_pressure": ("max", "kPa", 1e-3, "mean pressure of a contact"),
     "peak_pressure": ("max", "kPa", 1e-3, "highest pressure on a vertex"),
+    "rim_distance": ("min", "mm", 1e3, "distance of a contact from the part's open rims"),
 }
 """The axes: ``range`` axes are checked at both ends, ``max`` axes at the top only (a lighter or
-more even load than the data's is no harder to answer)."""
+more even load than the data's is no harder to answer), ``min`` axes at the bottom only (a
+contact nearer the cut rims, where the tissue is held, than any in the data)."""
 
 LOAD_AXES = ("thickness", "contact_force", "contact_pressure", "peak_pressure")
 """How hard the tissue is pushed: axes a test set widens an envelope along only with data of
 its own intensity (never from the training box's averages)."""
 SHAPE_AXES = ("contacts", "contact_area", "thickness_variation")
+"""(``rim_distance`` is in neither: no test set widens it.)"""
 """How the load is laid out: the axes a test set on which a model kept its promise widens."""
 
 SLACK = 0.02
@@ -85,7 +88,20 @@ def features(part: BodyPart, thickness: np.ndarray, force: np.ndarray) -> dict:
         out["thickness_variation"] = max(out["thickness_variation"],
                                          float((tc.max() - tc.min()) / tc.mean()))
     out["contacts"] = len(out["contact_force"])
+    if part.rims:
+        out["rim_distance"] = _rim_distance(part, f)
     return out
+
+
+def _rim_distance(part: BodyPart, force: np.ndarray) -> list[float]:
+    """Per contact, the distance (m) from its nearest vertex to the nearest open-rim vertex."""
+    from scipy.spatial import cKDTree
+
+    tree = getattr(part, "_rim_tree", None)
+    if tree is None:
+        tree = cKDTree(part.vertices[np.concatenate(part.rims)])
+        object.__setattr__(part, "_rim_tree", tree)     # built once per part (frozen)
+    return [float(tree.query(part.vertices[c])[0].min()) for c in contacts(part, force)]
 
 
 def _values(feat: dict, axis: str) -> list[float]:
@@ -203,7 +219,8 @@ class Envelope:
         lines = []
         for a, (lo, hi) in self.boxes[box].items():
             kind, unit, k, what = AXES[a]
-            rng = f"{lo * k:.3g}-{hi * k:.3g}" if kind == "range" else f"up to {hi * k:.3g}"
+            rng = (f"{lo * k:.3g}-{hi * k:.3g}" if kind == "range" else
+                   f"from {lo * k:.3g}" if kind == "min" else f"up to {hi * k:.3g}")
             lines.append(f"{what}: {rng} {unit}".rstrip())
         return "\n".join(lines)
 
@@ -218,6 +235,11 @@ def _outside(feat: dict, box: dict, name: str) -> list[str]:
             continue
         lo, hi = box[a]
         top = hi * (1 + SLACK) + (VARIATION_ALLOWANCE if a == "thickness_variation" else 0.0)
+        if kind == "min":
+            if min(vals) < lo * (1 - SLACK):
+                why.append(f"{what} {min(vals) * k:.3g} {unit} < {lo * k:.3g} {unit} "
+                           f"(the least in {name})")
+            continue
         if max(vals) > top:
             why.append(f"{what} {max(vals) * k:.3g} {unit} > {hi * k:.3g} {unit} "
                        f"(the most in {name})".replace("  ", " "))

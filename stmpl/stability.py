@@ -40,7 +40,8 @@ AXES = {
     "seam": ("a disk across the UV seam, position along it (0-1)", "at"),
     "rim": ("a disk along the limb, 0 = proximal rim, 1 = distal rim", "along"),
     "contacts": ("simultaneous contacts (1.5 cm disks in a row, the force shared)", "count"),
-    "variation": ("thickness variation under the load (ramp, mm per 10 cm)", "slope_mm"),
+    "variation": ("thickness ramp through the load, mm per 10 cm (kept within 5-10 mm)",
+                  "slope_mm"),
 }
 
 
@@ -97,7 +98,7 @@ def scene_at(part, base: dict, axis: str, value: float):
         load = loads.disk(part, uv=uv, radius=r, total=total)
         centre = part.axial[load.vertices].mean()
         thick = tissue.check(part, np.clip(t + value * 1e-2 * (part.axial - centre),
-                                           0.0025, 0.010))   # 12.5 mm folds the arm's wrist
+                                           0.005, 0.010))   # the range the models know
     else:
         raise ValueError(f"unknown axis {axis!r}")
     return Scene.from_load(part, thick, load, axis=axis, value=float(value))
@@ -139,6 +140,8 @@ def run(config, progress: bool = True) -> dict:
     part = part_from_spec(cfg["body"], cfg["part"])
     fem = predictor.create("fem", **cfg["fem"])
     preds = {label(s): predictor_from_spec(s) for s in cfg["predictors"]}
+    envelopes = {n: None if p.envelope is None else p.envelope.to_dict()
+                 for n, p in sorted(preds.items())}
     todo = [(a, float(v)) for a, vals in cfg["axes"].items() for v in vals]
     bar = None
     if progress:
@@ -154,7 +157,7 @@ def run(config, progress: bool = True) -> dict:
             if bar is not None:
                 bar.update(1)
             continue
-        key = _key(part.fingerprint, cfg["fem"], axis, value, sorted(preds),   # what decides
+        key = _key(part.fingerprint, cfg["fem"], axis, value, envelopes,       # what decides
                    hashlib.sha256(scene.force.tobytes() + scene.thickness.tobytes()).hexdigest())
         if key not in cache:
             rec = {"axis": axis, "value": value, "total": scene.total_force,

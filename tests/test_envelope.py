@@ -146,3 +146,19 @@ def test_training_records_the_envelope_and_the_checkpoint_keeps_it(tiny_dataset,
     assert p.envelope.info["training"]["scenes"] == ds.card["samples_per_split"]["train"]
     r = evaluate_dataset(p, ds, "test")
     assert r["inside_envelope"][0] == pytest.approx(100.0)
+
+
+def test_a_contact_nearer_the_rims_than_any_in_training_is_outside(ds):
+    """The rim distance is checked at its low end only: a training box built from loads in the
+    middle of the tube refuses a load on its rim."""
+    part = ds.part
+    t = np.full(part.n_vertices, 0.006)
+    mid = loads.disk(part, uv=(0.5, 0.5), radius=0.02, total=0.1)
+    env = Envelope.of(part, t[None], mid.force[None])
+    assert env.boxes["training"]["rim_distance"][0] > 0.03
+    rim = np.zeros(part.n_vertices)
+    rim[part.rims[0][:3]] = 0.1 / 3
+    why = env.reasons(part=part, thickness=t, force=rim)
+    assert any(w.startswith("distance of a contact from the part's open rims 0 mm <")
+               for w in why), why
+    assert env.reasons(part=part, thickness=t, force=mid.force * 0.5) == []
