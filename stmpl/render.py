@@ -156,4 +156,5 @@ def _title(scene) -> str:
     load = scene.load
     text = load.source.summary() if load is not None and load.source is not None else (
         load.summary() if load is not None else f"{scene.total_force:g} N")
-    return f"{scene.part.name}, {1e3 * float(np.median(scene.thickness)):.1f} mm tissue\n{text}"
+    return (f"{scene.part.name} ({scene.part.n_vertices} vertices), "
+            f"{1e3 * float(np.median(scene.thickness)):.1f} mm tissue\n{text}")
