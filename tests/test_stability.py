@@ -61,7 +61,8 @@ def test_the_sweep_flags_what_lies_outside(tiny_dataset, tmp_path):
     md = (out / "stability.md").read_text()
     assert "## force" in md and " out" in md and "not made on this mesh" in md
     assert stability.verdict({"physical": False}) == "impossible"
-    assert stability.verdict({"physical": True, "rel_mee": 0.5, "peak_err": -7.0}) == ">5 %"
+    assert stability.verdict({"physical": True, "rel_mee": 0.5, "peak_err": -7.0}) == "<=1 %"
+    assert stability.peak_off({"physical": True, "rel_mee": 0.5, "peak_err": -7.0})
 
 
 def test_bad_sweeps_are_named():
