@@ -349,36 +349,28 @@ def _cell(v, scale: float, dec: int) -> str:
 
 
 def table(rows: dict, paper: dict | None = None, fmt: str = "markdown") -> str:
-    """Rows ``{label: summary}`` (and the paper's rows) as markdown or CSV."""
+    """Rows ``{label: summary}`` and the paper's rows (as reported, in italics) as markdown or
+    CSV."""
+    entries = [(name, r, False) for name, r in rows.items()]
+    entries += [(name, dict(zip(PAPER_KEYS, vals)), True) for name, vals in (paper or {}).items()]
     if fmt == "csv":
         head = ["setup", "samples"] + [f"{k}_{s}" for k, *_ in COLUMNS for s in ("mean", "std")]
         lines = [",".join(head)]
-        for name, r in rows.items():
+        for name, r, _ in entries:
             vals = [f'"{name}"', str(r.get("samples", ""))]
             for k, *_ in COLUMNS:
                 v = r.get(k, (np.nan, np.nan))
-                v = v if isinstance(v, (list, tuple)) else (v, np.nan)
-                vals += [f"{float(x):.6g}" for x in v]
+                vals += [f"{float(x):.6g}" for x in (v if isinstance(v, (list, tuple))
+                                                      else (v, np.nan))]
             lines.append(",".join(vals))
-        for name, vals in (paper or {}).items():
-            d = dict(zip(PAPER_KEYS, vals))
-            cells = [f'"{name}"', ""]
-            for k, *_ in COLUMNS:
-                v = d.get(k, (np.nan, np.nan))
-                v = v if isinstance(v, (list, tuple)) else (v, np.nan)
-                cells += [f"{float(x):.6g}" for x in v]
-            lines.append(",".join(cells))
         return "\n".join(lines) + "\n"
     head = "| set-up | n | " + " | ".join(h for _, h, *_ in COLUMNS) + " |"
     lines = [head, "|---|--:|" + "--:|" * len(COLUMNS)]
-    for name, r in rows.items():
-        lines.append(f"| {name} | {r.get('samples', '')} | "
-                     + " | ".join(_cell(r.get(k), sc, dec) for k, _, sc, dec in COLUMNS) + " |")
-    for name, vals in (paper or {}).items():
-        d = dict(zip(PAPER_KEYS, vals))
-        lines.append(f"| *{name}* | | "
-                     + " | ".join(_cell(d.get(k), sc, dec) if k in d else "" for k, _, sc, dec
-                                  in COLUMNS) + " |")
+    for name, r, reported in entries:
+        cells = [_cell(r.get(k), sc, dec) if k in r or not reported else ""
+                 for k, _, sc, dec in COLUMNS]
+        label = f"*{name}*" if reported else name
+        lines.append(f"| {label} | {r.get('samples', '')} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 

@@ -39,6 +39,13 @@ DOUBLES = ("total", "residual", "solve_time", "min_det_F", "max_compression")
 STRINGS = ("kind", "params")
 
 
+def at_levels(arrays: dict, thickness_mm) -> np.ndarray:
+    """``(S,)`` mask of the samples whose (uniform) thickness is one of ``thickness_mm``; the
+    float32 thickness is widened before it is compared (a float32 5 mm is not a float64 5 mm)."""
+    level = np.round(np.asarray(arrays["thickness"][:, 0], dtype=float), 6)
+    return np.isin(level, np.round(np.asarray(thickness_mm, dtype=float) * 1e-3, 6))
+
+
 def shard_path(folder, k: int) -> pathlib.Path:
     return pathlib.Path(folder) / f"shard-{k:05d}.h5"
 

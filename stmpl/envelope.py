@@ -79,7 +79,8 @@ def features(part: BodyPart, thickness: np.ndarray, force: np.ndarray) -> dict:
     out = {"thickness": [float(t.min()), float(t.max())], "thickness_variation": 0.0,
            "contacts": 0, "contact_force": [], "contact_area": [], "contact_pressure": [],
            "peak_pressure": float((f / area).max(initial=0.0))}
-    for c in contacts(part, f):
+    found = contacts(part, f)
+    for c in found:
         a = float(area[c].sum())
         out["contact_force"].append(float(f[c].sum()))
         out["contact_area"].append(a)
@@ -88,20 +89,9 @@ def features(part: BodyPart, thickness: np.ndarray, force: np.ndarray) -> dict:
         out["thickness_variation"] = max(out["thickness_variation"],
                                          float((tc.max() - tc.min()) / tc.mean()))
     out["contacts"] = len(out["contact_force"])
-    if part.rims:
-        out["rim_distance"] = _rim_distance(part, f)
+    if part.rims:                        # per contact: its vertex nearest an open rim
+        out["rim_distance"] = [float(part.rim_distance[c].min()) for c in found]
     return out
-
-
-def _rim_distance(part: BodyPart, force: np.ndarray) -> list[float]:
-    """Per contact, the distance (m) from its nearest vertex to the nearest open-rim vertex."""
-    from scipy.spatial import cKDTree
-
-    tree = getattr(part, "_rim_tree", None)
-    if tree is None:
-        tree = cKDTree(part.vertices[np.concatenate(part.rims)])
-        object.__setattr__(part, "_rim_tree", tree)     # built once per part (frozen)
-    return [float(tree.query(part.vertices[c])[0].min()) for c in contacts(part, force)]
 
 
 def _values(feat: dict, axis: str) -> list[float]:

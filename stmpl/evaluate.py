@@ -18,8 +18,9 @@ def scenes_of(ds, split: str, thickness_mm=None, limit: int | None = None):
     a = ds.arrays(split)
     keep = np.arange(len(a["total"]))
     if thickness_mm is not None:
-        lv = np.round(np.asarray(thickness_mm, float) * 1e-3, 6)
-        keep = keep[np.isin(np.round(a["thickness"][:, 0].astype(float), 6), lv)]
+        from stmpl.dataset import at_levels
+
+        keep = keep[at_levels(a, thickness_mm)]
     if limit is not None:
         keep = keep[:limit]
     scenes = [Scene(ds.part, a["thickness"][i].astype(float), a["force"][i].astype(float),

@@ -102,9 +102,9 @@ def _selection(ds, split, cfg):
     a = ds.arrays(split)
     keep = np.arange(len(a["total"]))
     if cfg["thickness_mm"] is not None:
-        levels = np.asarray(cfg["thickness_mm"], float) * 1e-3
-        level = np.round(a["thickness"][:, 0].astype(float), 6)   # float32 storage: widen first
-        keep = keep[np.isin(level, np.round(levels, 6))]
+        from stmpl.dataset import at_levels
+
+        keep = keep[at_levels(a, cfg["thickness_mm"])]
     if split == "train" and cfg["train_fraction"] < 1.0:  # a seeded share of the placements
         places = np.unique(a["placement"][keep])
         rng = np.random.default_rng(cfg["seed"])

@@ -100,6 +100,16 @@ class BodyPart:
         return a
 
     @cached_property
+    def rim_distance(self) -> np.ndarray:
+        """``(N,)`` straight-line distance (m) of each vertex from the nearest open-rim vertex
+        (``inf`` everywhere for a part without rims)."""
+        if not self.rims:
+            return np.full(self.n_vertices, np.inf)
+        from scipy.spatial import cKDTree
+
+        return cKDTree(self.vertices[np.concatenate(self.rims)]).query(self.vertices)[0]
+
+    @cached_property
     def seam_groups(self) -> tuple[np.ndarray, ...]:
         """The UV copies of each seam vertex: one ``(k,)`` array of ``uv`` indices per vertex with
         ``k >= 2`` copies, ordered by vertex index."""

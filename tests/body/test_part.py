@@ -103,3 +103,14 @@ def test_finer_anny_arm(arm):
     assert fine.source["subdivisions"] == 1 and fine.name == "left_arm"
     with pytest.raises(ValueError, match="subdivisions must be an integer 0..3"):
         part_from_spec({"model": "anny", "subdivisions": 9}, "left_arm")
+
+
+def test_rim_distance_is_zero_on_the_rims_and_half_the_length_midway():
+    from stmpl.body.primitives import tube
+
+    part = tube(radius=0.04, length=0.2, n_around=16, n_along=12)
+    d = part.rim_distance
+    assert np.all(d[np.concatenate(part.rims)] == 0)
+    z = part.vertices[:, 2]
+    mid = np.argmin(np.abs(z - z.mean()))
+    assert d[mid] == pytest.approx(0.1, abs=0.01)
