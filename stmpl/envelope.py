@@ -26,7 +26,8 @@ FORMAT = "stmpl-envelope/1"
 AXES = {
     # name: (kind, unit, scale for printing, what it is)
     "thickness": ("range", "mm", 1e3, "tissue thickness"),
-    "thickness_variation": ("max", "%", 1e2, "thickness variation under a contact"),
+    "thickness_variation": ("max", "%", 1e2,
+                            "thickness variation within two thicknesses of a contact"),
     "contacts": ("max", "", 1.0, "number of contacts"),
     "contact_force": ("max", "N", 1.0, "force of a contact"),
     "contact_area": ("range", "cm^2", 1e4, "area of a contact"),
@@ -47,8 +48,10 @@ SHAPE_AXES = ("contacts", "contact_area", "thickness_variation")
 
 SLACK = 0.02
 """Relative allowance on every bound (2 %): loads rebuilt by another route round differently."""
-VARIATION_ALLOWANCE = 0.05
-"""Thickness variation under a contact (relative to its mean) tolerated beyond the data's."""
+VARIATION_ALLOWANCE = 0.02
+"""Thickness variation near a contact (relative to its mean) tolerated beyond the data's: set by
+the stability sweep (reports/stability): the shipped GNN, trained on uniform layers, stays under
+1 % at 1.5 % variation and passes it at 3.8 %."""
 
 
 def contacts(part: BodyPart, force: np.ndarray) -> list[np.ndarray]:
@@ -85,13 +88,22 @@ def features(part: BodyPart, thickness: np.ndarray, force: np.ndarray) -> dict:
         out["contact_force"].append(float(f[c].sum()))
         out["contact_area"].append(a)
         out["contact_pressure"].append(float(f[c].sum()) / a)
-        tc = t[c]
+        tc = t[_around(part, c, 2.0 * float(t[c].max()))]
         out["thickness_variation"] = max(out["thickness_variation"],
                                          float((tc.max() - tc.min()) / tc.mean()))
     out["contacts"] = len(out["contact_force"])
     if part.rims:                        # per contact: its vertex nearest an open rim
         out["rim_distance"] = [float(part.rim_distance[c].min()) for c in found]
     return out
+
+
+def _around(part: BodyPart, vertices: np.ndarray, reach: float) -> np.ndarray:
+    """The vertices within ``reach`` (m, straight line) of any of ``vertices``: the tissue a
+    contact moves, whatever the mesh's resolution."""
+    from scipy.spatial import cKDTree
+
+    d = cKDTree(part.vertices[vertices]).query(part.vertices, distance_upper_bound=reach)[0]
+    return np.flatnonzero(d <= reach)
 
 
 def _values(feat: dict, axis: str) -> list[float]:

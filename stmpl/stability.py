@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import textwrap
 import pathlib
 import time
 import warnings
@@ -43,6 +44,10 @@ AXES = {
     "variation": ("thickness ramp through the load, mm per 10 cm (kept within 5-10 mm)",
                   "slope_mm"),
 }
+
+
+LOG_AXES = ("force", "pressure")
+"""Axes drawn on a log scale (they span two decades)."""
 
 
 def read_config(source) -> dict:
@@ -192,7 +197,13 @@ def run(config, progress: bool = True) -> dict:
                 rec["predictors"][name] = r
             cache[key] = rec
             atomic_write_text(cache_path, json.dumps(cache, indent=1, sort_keys=True))
-        points.append(cache[key])
+        rec = cache[key]
+        for name, p in preds.items():       # the flags follow the envelope as it is today
+            r = rec["predictors"].get(name, {})
+            if "refused" not in r and p.envelope is not None:
+                why = p.envelope.reasons(scene)
+                r["inside"], r["outside"] = not why, why
+        points.append(rec)
         if bar is not None:
             bar.update(1)
     if bar is not None:
@@ -257,15 +268,24 @@ def figures(cfg, points: list, out: pathlib.Path) -> list:
                 ax.axvline(p["value"], c="#cc0000", lw=0.8, alpha=0.5)
             if fails and ax is axes[0]:
                 f0 = fails[0]
-                ax.annotate(f"FEM fails from here\n({f0['fem']['reason'].split(': ')[-1]}, "
-                            f"{f0['fem']['seconds']:.1f} s)", (f0["value"], 0.02),
+                why = textwrap.shorten(f0["fem"]["reason"].split(": ", 1)[-1], 60,
+                                       placeholder="...")
+                ax.annotate("FEM fails from here after "
+                            f"{f0['fem']['seconds']:.1f} s:\n" + "\n".join(
+                                textwrap.wrap(why, 32)), (f0["value"], 0.02),
                             xycoords=("data", "axes fraction"), fontsize=7, color="#cc0000",
-                            xytext=(3, 0), textcoords="offset points")
+                            xytext=(-3, 0), textcoords="offset points", ha="right")
             ax.set_yscale("log")
             ax.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
-            if x.min() > 0 and x.max() / x.min() > 20:            # forces from 0.05 to 5 N
+            lo, hi = ax.get_ylim()           # a narrow range gets its minor ticks labelled
+            minor = (matplotlib.ticker.FormatStrFormatter("%g") if hi / lo < 30
+                     else matplotlib.ticker.NullFormatter())
+            ax.yaxis.set_minor_formatter(minor)
+            if axis in LOG_AXES:                                  # forces from 0.05 to 5 N
                 ax.set_xscale("log")
                 ax.xaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+            if axis == "contacts":
+                ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
             ax.set_xlabel(AXES[axis][0])
             ax.set_ylabel(what + " (log)")
             ax.grid(True, which="both", alpha=0.25)

@@ -40,10 +40,17 @@ def test_features_are_force_over_area(ds):
     for F, A, P in zip(f["contact_force"], f["contact_area"], f["contact_pressure"]):
         assert P == pytest.approx(F / A)
     assert f["peak_pressure"] == pytest.approx((both.force / part.vertex_areas).max())
-    t2 = t.copy()
-    t2[a.vertices[0]] = 0.009                                # one vertex thicker under a
-    mean = t2[a.vertices].mean()
-    assert features(part, t2, both.force)["thickness_variation"] == pytest.approx(0.003 / mean)
+    from stmpl.envelope import _around
+
+    t2 = np.full(part.n_vertices, 0.012)                   # reach 24 mm: past the next ring
+    near = _around(part, a.vertices, 2 * 0.012)             # the tissue a's contact moves
+    assert set(a.vertices) < set(near)
+    far = np.setdiff1d(np.arange(part.n_vertices), near)
+    t2[far] = 0.006                                          # thinner only beyond it: no matter
+    assert features(part, t2, a.force)["thickness_variation"] == 0
+    t2[near[~np.isin(near, a.vertices)][0]] = 0.009          # thinner beside the contact: counts
+    mean = t2[near].mean()
+    assert features(part, t2, a.force)["thickness_variation"] == pytest.approx(0.003 / mean)
 
 
 @pytest.fixture
