@@ -73,7 +73,9 @@ def patch(part: BodyPart, force: np.ndarray, margin: float) -> Patch:
         raise ValueError("the load has no loaded vertex (force is zero everywhere)")
     near = cKDTree(part.vertices[loaded]).query(part.vertices, distance_upper_bound=margin)[0] \
         <= margin
-    fidx = np.flatnonzero(near[part.faces].all(1))
+    on = np.zeros(part.n_vertices, bool)
+    on[loaded] = True                  # the faces around a loaded vertex, however long, belong
+    fidx = np.flatnonzero(near[part.faces].all(1) | on[part.faces].any(1))
     n = part.n_vertices
     if len(fidx) == len(part.faces):
         return Patch(part, np.arange(n), margin, np.zeros(0, np.int64), whole=True)

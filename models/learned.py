@@ -121,6 +121,10 @@ class LearnedPredictor(BasePredictor):
             return ((pred - tgt) ** 2).mean()
         return relative_loss(pred, tgt)
 
+    def restored(self) -> None:
+        """Called when a checkpoint has been loaded (``self.meta`` set): rebuild what the
+        checkpoint does not carry. Nothing by default."""
+
     # -- shared
     def check(self, scenes) -> None:
         from stmpl.body.part import difference
@@ -180,6 +184,7 @@ class LearnedPredictor(BasePredictor):
         except RuntimeError as e:
             raise ValueError(f"checkpoint {path} does not fit its model config: {e}") from e
         p.meta = {k: v for k, v in meta.items() if k not in ("config", "kind", "envelope")}
+        p.restored()
         if "envelope" in meta:
             from stmpl.envelope import Envelope
 

@@ -5,7 +5,8 @@ input (:data:`models.features.PRIOR_SCALE`) and learns only the correction to it
 
 from __future__ import annotations
 
-from models.linear.operator import fit_operator, install
+from models.linear.operator import (check_operator, fit_on_demand, fit_operator, install,
+                                    reattach)
 
 PRIORS = ("none", "linear")
 CORRECTION_SCALE = 0.05
@@ -15,7 +16,9 @@ the prediction far from the prior before it learned anything."""
 
 
 class LinearPrior:
-    """Mixin for a :class:`LearnedPredictor` with the option ``prior`` (``none`` or ``linear``):
+    """Mixin for a :class:`LearnedPredictor` with the option ``prior`` (``none`` or ``linear``)
+    and ``operator`` (how the prior's operator travels, ``stored`` or ``on_demand``, see
+    :data:`models.linear.operator.OPERATORS`):
     with ``linear`` its model holds a :class:`ComplianceOperator` as ``model.prior``,
     :meth:`fit` computes it from the dataset, :meth:`base` gives its answer and
     :meth:`corrected` adds the network's correction to it."""
@@ -25,6 +28,7 @@ class LinearPrior:
         out = super().options(config)
         if out["prior"] not in PRIORS:
             raise ValueError(f"prior must be one of {PRIORS}, got {out['prior']!r}")
+        check_operator(out.get("operator", "stored"))
         return out
 
     @property
@@ -33,8 +37,14 @@ class LinearPrior:
 
     def fit(self, dataset, progress: bool = True) -> None:
         """With ``prior: linear``, compute the linear FEM operator for ``dataset`` (cached)."""
-        if self.prior:
+        if self.prior and self.config.get("operator", "stored") == "on_demand":
+            fit_on_demand(self, self.model.prior, dataset, {}, progress)
+        elif self.prior:
             install(self, self.model.prior, fit_operator(self.part, dataset, {}, progress))
+
+    def restored(self) -> None:
+        if self.prior:
+            reattach(self, self.model.prior)
 
     def base(self, thickness, force):
         """The linear FEM's ``(B, N, 3)`` answer in the units of ``raw``, or None without the

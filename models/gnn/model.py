@@ -129,7 +129,8 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
     predicts only the correction to it; :meth:`fit` computes the operator from the dataset)."""
 
     name = "gnn"
-    defaults = {"latent": 128, "steps": 15, "per_newton": False, "loss": "mse", "prior": "none"}
+    defaults = {"latent": 128, "steps": 15, "per_newton": False, "loss": "mse", "prior": "none",
+                "operator": "stored"}
 
     def build_model(self) -> nn.Module:
         part = self.part

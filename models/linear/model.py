@@ -14,16 +14,20 @@ from __future__ import annotations
 from torch import nn
 
 from models.learned import LearnedPredictor
-from models.linear.operator import ComplianceOperator, fit_operator, install
+from models.linear.operator import (ComplianceOperator, check_operator, fit_on_demand,
+                                    fit_operator, install, reattach)
 
 
 class LinearPredictor(LearnedPredictor):
     """Precomputed linear FEM. Options: ``levels_mm`` (thickness levels, default the dataset's),
-    ``tol`` (sparsity: entries below this share of the largest are dropped). :meth:`fit` computes
-    the operator from a dataset; it has no trained parameters."""
+    ``tol`` (sparsity: entries below this share of the largest are dropped), ``operator``
+    (``stored``: every column computed at fit time and carried by the checkpoint;
+    ``on_demand``: the columns a scene loads, solved when first needed on the patch they move and
+    cached on disk). :meth:`fit` computes the operator from a dataset; it has no trained
+    parameters."""
 
     name = "linear"
-    defaults = {"levels_mm": None, "tol": 1e-3}
+    defaults = {"levels_mm": None, "tol": 1e-3, "operator": "stored"}
 
     @classmethod
     def options(cls, config: dict | None = None) -> dict:
@@ -34,6 +38,7 @@ class LinearPredictor(LearnedPredictor):
             raise ValueError(f"levels_mm must be a non-empty list of thicknesses in mm, got {lv!r}")
         if not (isinstance(out["tol"], (int, float)) and 0 <= out["tol"] < 1):
             raise ValueError(f"tol must be in [0, 1), got {out['tol']!r}")
+        check_operator(out["operator"])
         return out
 
     def build_model(self) -> nn.Module:
@@ -43,5 +48,12 @@ class LinearPredictor(LearnedPredictor):
         return self.model(thickness, force) / self.scale
 
     def fit(self, dataset, progress: bool = True) -> None:
-        """Compute the operator for ``dataset``'s part and FEM set-up."""
-        install(self, self.model, fit_operator(self.part, dataset, self.config, progress))
+        """Compute the operator for ``dataset``'s part and FEM set-up (on demand: the columns
+        the dataset's samples load)."""
+        if self.config["operator"] == "on_demand":
+            fit_on_demand(self, self.model, dataset, self.config, progress)
+        else:
+            install(self, self.model, fit_operator(self.part, dataset, self.config, progress))
+
+    def restored(self) -> None:
+        reattach(self, self.model)

@@ -58,13 +58,29 @@ class ComplianceOperator(nn.Module):
         self._csr_key = None
         super()._load_from_state_dict(state_dict, prefix, *args, **kwargs)
 
+    store = None
+    """A :class:`fem.compliance.ColumnStore` when the operator is computed on demand
+    (:meth:`attach`); then ``index`` and ``values`` stay empty and only ``levels`` is saved."""
+
+    def attach(self, store) -> None:
+        """Compute the operator on demand from ``store`` (its levels become this module's)."""
+        self.store = store
+        self.levels = torch.as_tensor(store.levels, dtype=torch.float32).to(self.levels.device)
+        self.index = torch.zeros(2, 0, dtype=torch.long, device=self.levels.device)
+        self.values = torch.zeros(len(store.levels), 0, 3, device=self.levels.device)
+        self._csr_key = None
+
+    @property
+    def on_demand(self) -> bool:
+        return self.store is not None
+
     @property
     def ready(self) -> bool:
-        return len(self.levels) > 0
+        return len(self.levels) > 0 and (self.on_demand or self.index.shape[1] > 0)
 
     def weights(self, thickness: torch.Tensor) -> torch.Tensor:
         """``(B, N, L)`` interpolation weights of each vertex's thickness over the levels."""
-        if not self.ready:
+        if len(self.levels) == 0:
             raise RuntimeError("the compliance operator is empty; fit the predictor first")
         lv = self.levels
         lo, hi = float(lv[0]), float(lv[-1])
@@ -114,6 +130,16 @@ class ComplianceOperator(nn.Module):
         B, N = force.shape
         fw = force[..., None] * self.weights(thickness)                 # (B, N, L)
         used = torch.nonzero(fw.abs().sum((0, 1))).flatten().tolist()   # levels that carry load
+        if self.on_demand:
+            if N != self.store.part.n_vertices:
+                raise ValueError(f"the operator covers {self.store.part.n_vertices} vertices, "
+                                 f"the input {N}")
+            u = torch.zeros(B, N, 3, device=force.device)
+            for lv in used:
+                cols = torch.nonzero(fw[..., lv].abs().sum(0)).flatten()
+                G = torch.from_numpy(self.store.columns(lv, cols.cpu().numpy())).to(force.device)
+                u = u + torch.einsum("nkc,bk->bnc", G, fw[:, cols, lv].float())
+            return u
         u = torch.zeros(3 * N, B, device=force.device, dtype=self.values.dtype)
         mats = self._matrices(N)
         for lv in used:
@@ -181,6 +207,85 @@ def fit_operator(part, dataset, config: dict, progress: bool = True) -> dict:
     levels = config.get("levels_mm") or cfg["thickness_mm"]
     return operator_arrays(part, cfg, sorted(float(x) * 1e-3 for x in levels),
                            float(config.get("tol", 1e-3)), progress)
+
+
+OPERATORS = ("stored", "on_demand")
+"""How a linear operator travels: ``stored`` in the checkpoint (sparse, every column computed at
+fit time), or ``on_demand``: the checkpoint keeps the FEM set-up and the levels, and the columns a
+scene loads are solved when first needed (local patches, cached on disk)."""
+
+
+def check_operator(value) -> str:
+    if value not in OPERATORS:
+        raise ValueError(f"operator must be one of {OPERATORS}, got {value!r}")
+    return value
+
+
+def _groups(dataset):
+    """The distinct ``(thickness level index, loaded vertices)`` of ``dataset``'s samples (all
+    splits): every force level of a placement loads the same vertices."""
+    a = dataset.arrays()
+    seen = {}
+    for i in range(len(a["force"])):
+        key = (int(a["placement"][i]), int(a["thickness_level"][i]))
+        if key not in seen:
+            seen[key] = i
+    return a, seen
+
+
+def fit_on_demand(predictor, op: ComplianceOperator, dataset, config: dict,
+                  progress: bool = True) -> None:
+    """Attach a :class:`~fem.compliance.ColumnStore` for ``dataset``'s part and FEM set-up at
+    the config's ``levels_mm`` (default the dataset's levels) to ``op`` and compute the columns
+    every sample of ``dataset`` loads (one patch per placement and level; cached on disk)."""
+    from fem.compliance import ColumnStore
+
+    cfg = dataset.card["config"]
+    levels = sorted(float(x) * 1e-3 for x in (config.get("levels_mm") or cfg["thickness_mm"]))
+    store = ColumnStore(predictor.part, cfg, levels)
+    op.attach(store)
+    a, groups = _groups(dataset)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        bar = tqdm(total=len(groups), unit="load", desc="linear FEM columns", dynamic_ncols=True)
+    t0 = time.perf_counter()
+    for i in groups.values():
+        t = torch.as_tensor(a["thickness"][i:i + 1], dtype=torch.float32)
+        w = op.weights(t)[0]                                              # (N, L)
+        loaded = np.asarray(a["force"][i]) > 0
+        for lv in range(len(levels)):
+            cols = np.flatnonzero(loaded & (w[:, lv].numpy() > 0))
+            if len(cols):
+                store.ensure(lv, cols, save=False)
+        if bar is not None:
+            bar.update(1)
+    if bar is not None:
+        bar.close()
+    store.save()
+    record_on_demand(predictor, store, time.perf_counter() - t0)
+
+
+def record_on_demand(predictor, store, seconds: float | None = None) -> None:
+    """The on-demand operator's summary in ``predictor.meta["operator"]``: mode, levels, the
+    FEM set-up it is solved with, the columns computed at fit time and their cost."""
+    predictor.meta["operator"] = {
+        "mode": "on_demand", "levels_mm": [round(x * 1e3, 6) for x in store.levels],
+        "setup": store.setup, "columns_at_fit": store.computed,
+        **({} if seconds is None else {"compute_seconds": round(float(seconds), 3)})}
+
+
+def reattach(predictor, op: ComplianceOperator) -> None:
+    """After loading a checkpoint whose operator is ``on_demand``: attach a column store for the
+    predictor's part and the recorded set-up (columns come from the disk cache or are solved)."""
+    from fem.compliance import ColumnStore
+
+    meta = predictor.meta.get("operator") or {}
+    if meta.get("mode") != "on_demand":
+        return
+    op.attach(ColumnStore(predictor.part, meta["setup"],
+                          [float(x) * 1e-3 for x in meta["levels_mm"]]))
 
 
 def install(predictor, op: ComplianceOperator, arrays: dict) -> None:

@@ -93,7 +93,8 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
 
     name = "uv_unet"
     defaults = {"size": 128, "width": 16, "depth": 5, "dropout": 0.5, "geometry": False,
-                "tv": 0.0, "per_newton": False, "loss": "mse", "prior": "none"}
+                "tv": 0.0, "per_newton": False, "loss": "mse", "prior": "none",
+                "operator": "stored"}
 
     def build_model(self) -> nn.Module:
         from stmpl.uv import UVMap

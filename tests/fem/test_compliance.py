@@ -72,3 +72,38 @@ def test_sparsify_keeps_what_counts(G):
     dense[:, index[0], index[1]] = values
     err = np.linalg.norm(dense - stack, axis=-1).max() / np.linalg.norm(stack, axis=-1).max()
     assert err <= 1e-2 and index.shape[1] < G.shape[0] ** 2
+
+
+def test_local_columns_match_the_whole_part():
+    """A column solved on the patch it moves equals the whole part's within the ring
+    tolerance's reach; rows outside the patch are zero, columns come back in the asked order."""
+    from fem.compliance import local_compliance
+
+    long = tube(radius=0.05, length=0.4, n_around=24, n_along=24)
+    mid = int(np.argmin(np.abs(long.vertices[:, 2] - 0.2)))
+    cols = [mid + 1, mid]
+    whole = compliance(long, 0.004, RES, NeoHookean(), columns=cols)
+    g, info = local_compliance(long, 0.004, cols, RES, NeoHookean(), tolerance=0.01)
+    assert g.shape == (long.n_vertices, 2, 3)
+    assert info["vertices"] < long.n_vertices / 2      # a patch, not the whole tube
+    for k in range(2):
+        err = np.linalg.norm(g[:, k] - whole[:, k], axis=1).max()
+        assert err <= 0.01 * np.linalg.norm(whole[:, k], axis=1).max()
+    with pytest.raises(ValueError, match="vertex indices"):
+        local_compliance(long, 0.004, [long.n_vertices], RES, NeoHookean())
+
+
+def test_column_store_computes_once_and_reads_its_cache(part, G, tmp_path, monkeypatch):
+    from fem.compliance import ColumnStore
+
+    monkeypatch.setenv("STMPL_CACHE_DIR", str(tmp_path))
+    setup = {"material": {"name": "neo_hookean", "E": 1000.0, "nu": 0.4}, "resolution": RES}
+    store = ColumnStore(part, setup, [0.008])
+    a = store.columns(0, [50, 60])
+    assert store.ensure(0, [60, 50]) == 0 and store.computed == 2    # nothing solved again
+    np.testing.assert_allclose(a[:, 0], G[:, 50], atol=0.01 * np.abs(G[:, 50]).max())
+    back = ColumnStore(part, setup, [0.008])                        # a new process: from disk
+    assert back.missing(0, [50, 60, 61]).tolist() == [61]
+    np.testing.assert_array_equal(back.columns(0, [50, 60]), a)
+    back.path(0).write_bytes(b"not an npz")                         # a broken file: recomputed
+    assert ColumnStore(part, setup, [0.008]).missing(0, [50]).tolist() == [50]

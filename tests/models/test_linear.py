@@ -94,3 +94,25 @@ def test_options_are_checked(ds):
         predictor.create("linear", ds.part, {"levels_mm": [-5]})
     with pytest.raises(ValueError, match="tol"):
         predictor.create("linear", ds.part, {"tol": 2})
+
+
+def test_on_demand_operator_agrees_with_the_stored_one(ds, lin, tmp_path, monkeypatch):
+    """``operator: on_demand`` solves only the columns the samples load, on patches, and gives
+    the stored operator's answers; its checkpoint carries no operator and rebuilds it."""
+    monkeypatch.setenv("STMPL_CACHE_DIR", str(tmp_path))
+    lazy = predictor.create("linear", ds.part, {"operator": "on_demand"})
+    lazy.fit(ds, progress=False)
+    meta = lazy.meta["operator"]
+    assert meta["mode"] == "on_demand" and 0 < meta["columns_at_fit"]
+    scenes, truth = scenes_of(ds, "test", limit=6)
+    for s, a, b in zip(scenes, lin.predict(scenes), lazy.predict(scenes)):
+        peak = np.linalg.norm(a.displacement, axis=1).max()
+        assert np.linalg.norm(a.displacement - b.displacement, axis=1).max() < 0.01 * peak
+    path = lazy.save(tmp_path / "lazy.safetensors")
+    assert path.stat().st_size < lin.save(tmp_path / "lin.safetensors").stat().st_size
+    back = predictor.read(path)
+    assert back.model.on_demand and back.model.store.computed == 0      # nothing solved yet
+    for a, b in zip(lazy.predict(scenes), back.predict(scenes)):          # from the disk cache
+        np.testing.assert_allclose(a.displacement, b.displacement, rtol=1e-6, atol=1e-12)
+    with pytest.raises(ValueError, match="operator must be one of"):
+        predictor.create("linear", ds.part, {"operator": "lazy"})

@@ -34,3 +34,23 @@ def test_linear_prior_starts_at_the_linear_fem(kind, ds, tmp_path, make):
                                    [:, ds.part.uv_vertex], rtol=1e-5, atol=1e-9)
     with pytest.raises(ValueError, match="prior must be one of"):
         predictor.create(kind, ds.part, {**TINY_MODELS[kind], "prior": "fem"})
+
+
+@pytest.mark.parametrize("kind", ["gnn", "uv_unet"])
+def test_on_demand_prior_travels_as_its_set_up(kind, ds, tmp_path, make, monkeypatch):
+    """``operator: on_demand``: the prior is the same linear FEM, solved for the columns the
+    scenes load; the checkpoint holds only its set-up and levels, and a loaded model rebuilds it
+    (from the disk cache) to the same answers."""
+    monkeypatch.setenv("STMPL_CACHE_DIR", str(tmp_path))
+    p = predictor.create(kind, ds.part, {**TINY_MODELS[kind], "prior": "linear",
+                                         "operator": "on_demand"})
+    p.fit(ds, progress=False)
+    lin = make("linear", ds)
+    scenes, _ = scenes_of(ds, "test", limit=3)
+    for a, b in zip(p.predict(scenes), lin.predict(scenes)):
+        peak = np.linalg.norm(b.displacement, axis=1).max()
+        assert np.linalg.norm(a.displacement - b.displacement, axis=1).max() < 0.01 * peak
+    q = predictor.read(p.save(tmp_path / "g.safetensors"))
+    assert q.model.prior.on_demand and q.model.prior.index.shape[1] == 0
+    for a, b in zip(p.predict(scenes), q.predict(scenes)):
+        np.testing.assert_allclose(a.displacement, b.displacement, rtol=1e-5, atol=1e-12)
