@@ -221,50 +221,70 @@ def check_operator(value) -> str:
     return value
 
 
-def _groups(dataset):
-    """The distinct ``(thickness level index, loaded vertices)`` of ``dataset``'s samples (all
-    splits): every force level of a placement loads the same vertices."""
-    a = dataset.arrays()
-    seen = {}
-    for i in range(len(a["force"])):
-        key = (int(a["placement"][i]), int(a["thickness_level"][i]))
-        if key not in seen:
-            seen[key] = i
-    return a, seen
+def _needed(op: ComplianceOperator, thickness: np.ndarray, force: np.ndarray) -> list[np.ndarray]:
+    """Per level, the vertices whose column the samples ``thickness``, ``force`` ``(S, N)``
+    need (loaded, with a non-zero interpolation weight on that level)."""
+    w = op.weights(torch.as_tensor(thickness, dtype=torch.float32)).numpy()     # (S, N, L)
+    need = (np.asarray(force)[..., None] > 0) & (w > 0)
+    return [np.flatnonzero(need[..., lv].any(0)) for lv in range(w.shape[-1])]
+
+
+def solve_needed(store, op: ComplianceOperator, thickness: np.ndarray, force: np.ndarray,
+                 progress: bool = True) -> None:
+    """Compute (and save) every column the samples ``thickness``, ``force`` ``(S, N)`` need:
+    one solve per level over all of them (the union of many loads is most of the part, where
+    one factorisation beats a patch per load)."""
+    need = _needed(op, thickness, force)
+    bar = None
+    if progress:
+        from tqdm import tqdm
+
+        total = sum(len(store.missing(lv, c)) for lv, c in enumerate(need))
+        bar = tqdm(total=total, unit="col", desc="linear FEM columns", dynamic_ncols=True)
+    for lv, cols in enumerate(need):
+        done = store.ensure(lv, cols, save=True)
+        if bar is not None:
+            bar.update(done)
+    if bar is not None:
+        bar.close()
 
 
 def fit_on_demand(predictor, op: ComplianceOperator, dataset, config: dict,
                   progress: bool = True) -> None:
     """Attach a :class:`~fem.compliance.ColumnStore` for ``dataset``'s part and FEM set-up at
     the config's ``levels_mm`` (default the dataset's levels) to ``op`` and compute the columns
-    every sample of ``dataset`` loads (one patch per placement and level; cached on disk)."""
+    the samples of ``dataset`` load (all splits; cached on disk, so a second model on the same
+    data, or :func:`precompute` run beforehand, finds them there)."""
     from fem.compliance import ColumnStore
 
     cfg = dataset.card["config"]
     levels = sorted(float(x) * 1e-3 for x in (config.get("levels_mm") or cfg["thickness_mm"]))
     store = ColumnStore(predictor.part, cfg, levels)
     op.attach(store)
-    a, groups = _groups(dataset)
-    bar = None
-    if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=len(groups), unit="load", desc="linear FEM columns", dynamic_ncols=True)
+    a = dataset.arrays()
     t0 = time.perf_counter()
-    for i in groups.values():
-        t = torch.as_tensor(a["thickness"][i:i + 1], dtype=torch.float32)
-        w = op.weights(t)[0]                                              # (N, L)
-        loaded = np.asarray(a["force"][i]) > 0
-        for lv in range(len(levels)):
-            cols = np.flatnonzero(loaded & (w[:, lv].numpy() > 0))
-            if len(cols):
-                store.ensure(lv, cols, save=False)
-        if bar is not None:
-            bar.update(1)
-    if bar is not None:
-        bar.close()
-    store.save()
+    solve_needed(store, op, a["thickness"], a["force"], progress)
     record_on_demand(predictor, store, time.perf_counter() - t0)
+
+
+def precompute(config_path, progress: bool = True) -> ColumnStore:
+    """The columns a dataset config's plan loads (every placement at every thickness level),
+    solved into the disk cache before (or while) the dataset is made, so that training on it
+    with ``operator: on_demand`` finds them there."""
+    from fem.compliance import ColumnStore
+    from fem.config import read_config
+    from fem.placements import make_load, plan
+
+    pl = plan(read_config(config_path))
+    cfg, part = pl.cfg, pl.part
+    levels = sorted(float(x) * 1e-3 for x in cfg["thickness_mm"])
+    store = ColumnStore(part, cfg, levels)
+    op = ComplianceOperator()
+    op.attach(store)
+    force = np.stack([np.asarray(make_load(part, p).force) for p in pl.placements])
+    for lv in levels:
+        solve_needed(store, op, np.full(force.shape, lv), force, progress)
+    return store
 
 
 def record_on_demand(predictor, store, seconds: float | None = None) -> None:
