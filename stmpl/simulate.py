@@ -48,9 +48,10 @@ def add_arguments(sp) -> None:
                       help="how deep the object reaches into the skin, mm (default 2)")
     what.add_argument("--force", type=float, default=0.4, help="total force, N (default 0.4)")
     sp.add_argument("--part", default="left_arm", help="body part (default left_arm)")
-    sp.add_argument("--subdivide", type=int, default=0, metavar="N",
-                    help="a finer skin: split every triangle into four N times (the shipped "
-                    "models know the plain arm; use --model fem on a finer one)")
+    sp.add_argument("--subdivide", type=int, default=None, metavar="N",
+                    help="the skin's resolution: every triangle of anny's part split into four "
+                    "N times (default: the first model's own, 1 for the shipped models; 1 for "
+                    "the FEM alone)")
     sp.add_argument("--thickness", type=float, default=7.5, help="tissue thickness, mm")
     sp.add_argument("--model", action="append", help=f"zoo:<name> or a checkpoint; repeat to "
                     f"compare (default {DEFAULT_MODEL})")
@@ -106,22 +107,35 @@ def run(args) -> int:
     from stmpl.spec import label, predictor_from_spec
 
     t0 = time.perf_counter()
-    part = part_from_spec({"model": "anny", "subdivisions": args.subdivide}, args.part)
+    specs = args.model or [DEFAULT_MODEL]
+    preds = [predictor_from_spec(spec, res=args.res, levels=args.levels) for spec in specs]
+    sub = args.subdivide
+    if sub is None:     # the surface the first model was trained on, else the FEM's default
+        sub = next((int(p.part.source.get("subdivisions", 0)) for p in preds
+                    if getattr(p, "part", None) is not None), 1)
+    part = part_from_spec({"model": "anny", "subdivisions": sub}, args.part)
     objs = pressings(args, part)
     touch = contact.contact(part, objs)
     scene = Scene.from_load(part, tissue.constant(part, args.thickness * 1e-3), touch.load())
     print(f"{touch.summary()}  [{time.perf_counter() - t0:.1f} s to set up]")
     out: dict = {}
-    for spec in args.model or [DEFAULT_MODEL]:
-        p = predictor_from_spec(spec, res=args.res, levels=args.levels)
+    for spec, p in zip(specs, preds):
+        first = None
         with warnings.catch_warnings():                       # printed as lines instead
             warnings.simplefilter("ignore", ImpossibleAnswer)
             warnings.simplefilter("ignore", OutsideEnvelope)
+            store = _column_store(p)
+            solved = len(store.log) if store is not None else 0
             if not spec.startswith("fem"):
-                p.predict(scene)                              # warm-up, not timed
+                t1 = time.perf_counter()
+                p.predict(scene)                              # warm-up, timed apart
+                first = time.perf_counter() - t1
+            solved = store is not None and len(store.log) > solved
             out[label(spec)] = d = p.predict(scene)
         print(f"{label(spec):<16} deepest {1e3 * d.magnitude.max():6.3f} mm  "
-              f"{duration(d.info['seconds']):>10}")
+              f"{duration(d.info['seconds']):>10}"
+              + (f"  (first call {duration(first)}: the linear FEM's columns for this contact "
+                 "were solved and cached)" if solved else ""))
         env = d.info.get("envelope")
         if env and not env["inside"]:
             print(f"  NOTE: {label(spec)} answers outside the data it was trained and checked "
@@ -153,6 +167,14 @@ def run(args) -> int:
     print(f"wrote {folder / 'pressed.glb'} (body and object), {folder / 'pressed.ply'}, "
           f"{folder / 'simulate.png'}")
     return 0
+
+
+def _column_store(p):
+    """The on-demand linear FEM column store of predictor ``p`` (its operator or its prior's),
+    or None."""
+    model = getattr(p, "model", None)
+    op = getattr(model, "prior", model)
+    return getattr(op, "store", None)
 
 
 def write_meshes(deformation, objects, base) -> None:
