@@ -161,7 +161,9 @@ class ColumnStore:
         from fem.solver import SolverOptions
 
         self.part = part
-        self.setup = {k: setup.get(k) for k in ("material", "resolution", "solver")}
+        self.setup = {"material": setup.get("material") or {},
+                      "resolution": setup.get("resolution") or "reference",
+                      "solver": setup.get("solver") or {}}
         self.levels = [float(x) for x in levels]
         self.material = material(**(self.setup["material"] or {}))
         self.options = SolverOptions(**(self.setup["solver"] or {}))
@@ -186,20 +188,27 @@ class ColumnStore:
     def _level(self, level: int) -> tuple[np.ndarray, np.ndarray]:
         if level not in self._G:
             n = self.part.n_vertices
-            G = np.zeros((n, n, 3), np.float32)
-            done = np.zeros(n, bool)
-            path = self.path(level)
-            if self.cache and path.is_file():
-                try:
-                    with np.load(path) as z:
-                        cols, vals = z["columns"], z["values"]
-                    if vals.shape == (n, len(cols), 3) and (cols.size == 0 or cols.max() < n):
-                        G[:, cols] = vals
-                        done[cols] = True
-                except (OSError, ValueError, KeyError):
-                    pass                                  # a broken cache file is recomputed
-            self._G[level], self._done[level] = G, done
+            self._G[level], self._done[level] = np.zeros((n, n, 3), np.float32), np.zeros(n, bool)
+            self._read(level)
         return self._G[level], self._done[level]
+
+    def _read(self, level: int) -> None:
+        """Take the columns the level's cache file holds that memory does not (another process
+        may have added some since)."""
+        G, done = self._G[level], self._done[level]
+        path = self.path(level)
+        if not (self.cache and path.is_file()):
+            return
+        n = self.part.n_vertices
+        try:
+            with np.load(path) as z:
+                cols, vals = z["columns"], z["values"]
+            if vals.shape == (n, len(cols), 3) and (cols.size == 0 or cols.max() < n):
+                new = ~done[cols]
+                G[:, cols[new]] = vals[:, new]
+                done[cols[new]] = True
+        except (OSError, ValueError, KeyError):
+            pass                                          # a broken cache file is recomputed
 
     @property
     def computed(self) -> int:
@@ -240,6 +249,7 @@ class ColumnStore:
             return
         for lv in ([level] if level is not None else list(self._G)):
             G, done = self._level(lv)
+            self._read(lv)                                # keep what other processes added
             cols = np.flatnonzero(done)
             atomic_savez(self.path(lv), {"columns": cols, "values": G[:, cols]})
 

@@ -105,5 +105,9 @@ def test_column_store_computes_once_and_reads_its_cache(part, G, tmp_path, monke
     back = ColumnStore(part, setup, [0.008])                        # a new process: from disk
     assert back.missing(0, [50, 60, 61]).tolist() == [61]
     np.testing.assert_array_equal(back.columns(0, [50, 60]), a)
+    one, two = ColumnStore(part, setup, [0.008]), ColumnStore(part, setup, [0.008])
+    one.ensure(0, [70])                                             # two processes at once:
+    two.ensure(0, [80])                                             # neither loses the other's
+    assert ColumnStore(part, setup, [0.008]).missing(0, [50, 60, 70, 80]).size == 0
     back.path(0).write_bytes(b"not an npz")                         # a broken file: recomputed
     assert ColumnStore(part, setup, [0.008]).missing(0, [50]).tolist() == [50]
