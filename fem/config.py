@@ -11,6 +11,7 @@ import numpy as np
 
 from stmpl import config as checked
 from stmpl.body.spec import check_spec
+from stmpl.predictor import FIDELITIES
 
 DEFAULTS = {
     "name": None,
@@ -38,8 +39,8 @@ PLACEMENT_KEYS = {
     "grasp": {"along", "around", "grips", "hand_heights", "depth"},
 }
 BACKENDS = ("serial", "processes", "dask")
-FIDELITIES = ("full", "auto")
-"""``full`` solves the whole part; ``auto`` the patch the load moves (:mod:`fem.local`)."""
+# FIDELITIES (stmpl.predictor): ``full`` solves the whole part; ``auto`` the patch the load
+# moves (:mod:`fem.local`)
 
 
 def read_config(source) -> dict:

@@ -110,6 +110,10 @@ def read(path, device: str = "cpu") -> "BasePredictor":
     return get(kind).from_checkpoint(path, device=device)
 
 
+FIDELITIES = ("full", "auto")
+"""How much of a part a predictor models for a scene: all of it, or what the scene needs."""
+
+
 class BasePredictor:
     """Shared plumbing: single or batch input, validation, timing in ``Deformation.info``.
 
@@ -122,6 +126,10 @@ class BasePredictor:
     FEM, which fails loudly instead)."""
     strict = False
     """Refuse scenes outside the envelope (``PredictionFailed``) instead of warning."""
+    fidelity = "full"
+    """``"full"`` models the whole part; ``"auto"`` only what the scene needs (the FEM: the patch
+    the load moves; the GNN: the subgraph around it), where the predictor can (others ignore
+    it). See :data:`FIDELITIES`."""
 
     def predict(self, scenes: Scene | Sequence[Scene],
                 strict: bool | None = None) -> Deformation | list[Deformation]:
@@ -129,6 +137,9 @@ class BasePredictor:
         ``info["envelope"]["inside"] = False`` and one :class:`OutsideEnvelope` warning per
         call; with ``strict`` (default: the predictor's ``strict``) they raise
         ``PredictionFailed`` before anything is predicted."""
+        if self.fidelity not in FIDELITIES:
+            raise ValueError(f"fidelity must be one of {list(FIDELITIES)}, got "
+                             f"{self.fidelity!r}")
         single = isinstance(scenes, Scene)
         batch = [scenes] if single else list(scenes)
         if not batch:

@@ -167,8 +167,67 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         extra = [] if base is None else [base]
         x = torch.cat([load, thickness[..., None], self.normals.expand(B, -1, -1), *extra], -1)
         x = x.reshape(B * N, x.shape[-1])
+        if self.fidelity == "auto" and not self.model.training:
+            return self._raw_local(x, thickness, force, base)
         E = self.edge_index.shape[1]
         offs = (torch.arange(B, device=x.device) * N).repeat_interleave(E)
         ei = self.edge_index.repeat(1, B) + offs
         ea = self.edge_attr.repeat(B, 1)
         return self.corrected(base, self.model(x, ea, ei).reshape(B, N, 3))
+
+    def region(self, thickness: np.ndarray, force: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``fidelity="auto"``: per scene ``(B, N)`` masks of the vertices whose answer the
+        network gives (the region the load moves: within :func:`fem.local.first_margin` of it,
+        as hops along the mesh's edges) and of the subgraph it runs on (that region and
+        ``steps`` hops more, every input its answer depends on). ``thickness``, ``force``
+        ``(B, N)`` numpy."""
+        from fem.local import first_margin
+
+        if getattr(self, "_adjacency", None) is None:
+            import scipy.sparse as sp
+
+            e = self.part.edges
+            n = self.part.n_vertices
+            a = sp.coo_matrix((np.ones(2 * len(e), bool), (np.r_[e[:, 0], e[:, 1]],
+                                                            np.r_[e[:, 1], e[:, 0]])), (n, n))
+            self._adjacency = a.tocsr().astype(np.float32)
+            self._edge = float(np.median(np.linalg.norm(np.diff(self.part.vertices[e], axis=1)[:, 0],
+                                                        axis=1)))
+        inner, sub = np.zeros(force.shape, bool), np.zeros(force.shape, bool)
+        steps = int(self.config["steps"])
+        for b in range(len(force)):
+            m = force[b] > 0
+            if not m.any():
+                continue
+            hops = int(np.ceil(first_margin(self.part, thickness[b], force[b]) / self._edge))
+            for k in range(hops + steps):
+                m = m | (self._adjacency @ m.astype(np.float32) > 0)
+                if k == hops - 1:
+                    inner[b] = m
+            sub[b] = m
+            if hops == 0:
+                inner[b] = force[b] > 0
+        return inner, sub
+
+    def _raw_local(self, x, thickness, force, base):
+        """:meth:`raw` on the subgraphs of :meth:`region`: the network's output inside each
+        scene's region, the prior (or zero) outside."""
+        B, N = thickness.shape
+        inner, sub = self.region(thickness.cpu().numpy(), force.cpu().numpy())
+        nodes = np.flatnonzero(sub.ravel())                       # global ids b * N + i
+        where = np.full(B * N, -1)
+        where[nodes] = np.arange(len(nodes))
+        ei = self.edge_index.cpu().numpy()
+        src = (ei[0][None] + N * np.arange(B)[:, None]).ravel()
+        dst = (ei[1][None] + N * np.arange(B)[:, None]).ravel()
+        keep = (where[src] >= 0) & (where[dst] >= 0)
+        dev = x.device
+        sub_ei = torch.as_tensor(np.stack([where[src[keep]], where[dst[keep]]]), device=dev)
+        E = ei.shape[1]
+        sub_ea = self.edge_attr[torch.as_tensor(np.flatnonzero(keep) % E, device=dev)]
+        idx = torch.as_tensor(nodes, device=dev)
+        y = self.model(x.index_select(0, idx), sub_ea, sub_ei)           # (nodes, 3)
+        out = torch.zeros(B * N, 3, device=dev, dtype=y.dtype)
+        on = torch.as_tensor(inner.ravel()[nodes], device=dev)
+        out[idx[on]] = y[on]
+        return self.corrected(base, out.reshape(B, N, 3))

@@ -1,6 +1,7 @@
 """The mesh GNN: its feature normalisers travel in the checkpoint."""
 
 import numpy as np
+import pytest
 
 from stmpl import predictor
 
@@ -17,3 +18,56 @@ def test_gnn_normalisers_travel_in_the_checkpoint(ds, tmp_path, make):
                                rtol=1e-6)
     edge_len = np.linalg.norm(np.diff(ds.part.vertices[ds.part.edges], axis=1)[:, 0], axis=1)
     np.testing.assert_allclose(q.model.edge_norm.scale.numpy(), edge_len.mean(), rtol=1e-5)
+
+
+def test_auto_fidelity_answers_on_the_subgraph_the_load_needs(ds, make):
+    """``fidelity="auto"``: the network runs on the region the load moves plus ``steps`` hops,
+    so inside the region it answers exactly as on the whole mesh, and outside it the answer is
+    the prior's (the linear FEM)."""
+    import torch
+
+    from stmpl.evaluate import scenes_of
+
+    p = make("gnn/prior", ds)
+    torch.manual_seed(1)
+    torch.nn.init.normal_(p.model.net.decoder[-1].weight, std=0.5)     # a correction that shows
+    scenes = [s for s in scenes_of(ds, "test")[0] if s.thickness[0] < 0.006][:4]
+    full = p.predict(scenes)
+    p.fidelity = "auto"
+    auto = p.predict(scenes)
+    lin = make("linear", ds).predict(scenes)
+    inner, sub = p.region(np.stack([s.thickness for s in scenes]),
+                          np.stack([s.force for s in scenes]))
+    assert (~inner).any() and (inner & ~(np.stack([s.force for s in scenes]) > 0)).any()
+    assert (sub >= inner).all()
+    for b, (f, a, l) in enumerate(zip(full, auto, lin)):
+        np.testing.assert_allclose(a.displacement[inner[b]], f.displacement[inner[b]],
+                                   rtol=1e-4, atol=1e-9)
+        np.testing.assert_allclose(a.displacement[~inner[b]], l.displacement[~inner[b]],
+                                   rtol=1e-4, atol=1e-9)
+        assert not np.allclose(f.displacement, l.displacement, atol=1e-7)   # it does correct
+    p.fidelity = "most"
+    with pytest.raises(ValueError, match="fidelity must be one of"):
+        p.predict(scenes[0])
+
+
+def test_auto_fidelity_cuts_the_graph_where_no_input_is_lost(arm):
+    """On the arm a disk's subgraph is a small part of the mesh, and the network (here without a
+    prior: zero outside the region) still answers exactly as on the whole mesh inside it."""
+    import torch
+
+    from stmpl import loads, tissue
+    from stmpl.scene import Scene
+
+    torch.manual_seed(0)
+    p = predictor.create("gnn", arm, {"latent": 8, "steps": 2})
+    torch.nn.init.normal_(p.model.net.decoder[-1].weight, std=0.5)
+    s = Scene.from_load(arm, tissue.constant(arm, 0.005),
+                        loads.disk(arm, uv=(0.3, 0.5), radius=0.02, total=0.2))
+    full = p.predict(s).displacement
+    p.fidelity = "auto"
+    auto = p.predict(s).displacement
+    inner, sub = p.region(s.thickness[None], s.force[None])
+    assert sub.sum() < arm.n_vertices / 2 and inner.sum() < sub.sum()
+    np.testing.assert_allclose(auto[inner[0]], full[inner[0]], rtol=1e-4, atol=1e-9)
+    assert np.all(auto[~inner[0]] == 0) and np.abs(full[~inner[0]]).max() > 0
