@@ -82,7 +82,8 @@ def cmd_evaluate(args) -> int:
     from stmpl.spec import predictor_from_spec
 
     ds = Dataset(args.data)
-    predictors = {spec: predictor_from_spec(spec, args.device) for spec in args.predictors}
+    predictors = {spec: predictor_from_spec(spec, args.device, fidelity=args.fidelity)
+                  for spec in args.predictors}
     print(evaluate(predictors, ds, args.split, args.out, args.limit), end="")
     if args.out:
         print(f"wrote {args.out} (.md, .csv)")
@@ -181,7 +182,7 @@ def cmd_predict(args) -> int:
     specs = args.model or [DEFAULT_MODEL]
     out = {}
     for spec in specs:
-        d = predictor_from_spec(spec, args.device).predict(scene)
+        d = predictor_from_spec(spec, args.device, fidelity=args.fidelity).predict(scene)
         name = label(spec)
         out[name] = d
         print(f"{name:<24} max |u| {1e3 * d.magnitude.max():6.3f} mm  "
@@ -324,6 +325,9 @@ def parser() -> argparse.ArgumentParser:
     pr.add_argument("--levels", type=int, default=3, help="FEM continuation levels (--compare)")
     pr.add_argument("--device", default="cpu", type=device,
                     help="torch device for learned models (default cpu)")
+    pr.add_argument("--fidelity", default="full", choices=["full", "auto"],
+                    help="full: model the whole part; auto: only what the scene needs (the GNN "
+                    "on the subgraph around the load, the FEM on the patch it moves)")
     pr.add_argument("--out", help="PNG picture to write")
     pr.add_argument("--save", help="deformation file to write (.npz)")
     pr.set_defaults(func=cmd_predict)
@@ -342,6 +346,9 @@ def parser() -> argparse.ArgumentParser:
     ev.add_argument("--limit", type=_positive, help="first N samples only")
     ev.add_argument("--device", default="cpu", type=device,
                     help="torch device for learned models (default cpu)")
+    ev.add_argument("--fidelity", default="full", choices=["full", "auto"],
+                    help="full: model the whole part; auto: only what the scene needs (the GNN "
+                    "on the subgraph around the load, the FEM on the patch it moves)")
     ev.add_argument("--out", help="write the table here (.md and .csv)")
     ev.set_defaults(func=cmd_evaluate)
 

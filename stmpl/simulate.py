@@ -56,6 +56,9 @@ def add_arguments(sp) -> None:
     sp.add_argument("--model", action="append", help=f"zoo:<name> or a checkpoint; repeat to "
                     f"compare (default {DEFAULT_MODEL})")
     sp.add_argument("--compare", action="store_true", help="also solve the FEM, report errors")
+    sp.add_argument("--fidelity", default="full", choices=["full", "auto"],
+                    help="full: model the whole part; auto: only what the scene needs (the GNN "
+                    "on the subgraph around the contact, the FEM on the patch it moves)")
     sp.add_argument("--res", default="reference", help="FEM resolution for --compare")
     sp.add_argument("--levels", type=int, default=3, help="FEM continuation levels")
     sp.add_argument("--out-dir", default="simulate_out", help="folder for the results")
@@ -108,7 +111,8 @@ def run(args) -> int:
 
     t0 = time.perf_counter()
     specs = args.model or [DEFAULT_MODEL]
-    preds = [predictor_from_spec(spec, res=args.res, levels=args.levels) for spec in specs]
+    preds = [predictor_from_spec(spec, res=args.res, levels=args.levels,
+                                 fidelity=args.fidelity) for spec in specs]
     sub = args.subdivide
     if sub is None:     # the surface the first model was trained on, else the FEM's default
         sub = next((int(p.part.source.get("subdivisions", 0)) for p in preds
@@ -146,7 +150,8 @@ def run(args) -> int:
     truth = None
     if args.compare:
         try:
-            truth = predictor.create("fem", res=args.res, levels=args.levels).predict(scene)
+            truth = predictor.create("fem", res=args.res, levels=args.levels,
+                                     fidelity=args.fidelity).predict(scene)
         except PredictionFailed as e:
             print(f"{'FEM (' + args.res + ')':<16} failed: {e}; no errors to show")
     if truth is not None:

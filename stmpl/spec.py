@@ -7,19 +7,27 @@ import pathlib
 
 
 def predictor_from_spec(spec: str, device: str = "cpu", res: str = "reference",
-                        levels: int = 1):
+                        levels: int = 1, fidelity: str = "full"):
     """The predictor ``spec`` names (see the module docstring); ``res`` and ``levels`` are the
-    FEM's resolution (unless the spec names one) and continuation levels."""
+    FEM's resolution (unless the spec names one) and continuation levels; ``fidelity``
+    (``full`` or ``auto``, :data:`stmpl.predictor.FIDELITIES`) how much of the part it models."""
     from stmpl import predictor, zoo
 
+    if fidelity not in predictor.FIDELITIES:
+        raise ValueError(f"fidelity must be one of {list(predictor.FIDELITIES)}, got "
+                         f"{fidelity!r}")
     if spec.startswith("zoo:"):
-        return zoo.read(spec[4:], device=device)
-    if spec == "fem" or spec.startswith("fem:"):
+        p = zoo.read(spec[4:], device=device)
+    elif spec == "fem" or spec.startswith("fem:"):
         return predictor.create("fem", res=spec.split(":", 1)[1] if ":" in spec else res,
-                                levels=levels)
-    path = pathlib.Path(spec)
-    if path.suffix == ".safetensors" or path.exists():
-        return predictor.read(path, device=device)
+                                levels=levels, fidelity=fidelity)
+    elif pathlib.Path(spec).suffix == ".safetensors" or pathlib.Path(spec).exists():
+        p = predictor.read(spec, device=device)
+    else:
+        p = None
+    if p is not None:
+        p.fidelity = fidelity
+        return p
     raise ValueError(f"unknown predictor {spec!r}: give fem, fem:<resolution>, zoo:<name> or a "
                      ".safetensors checkpoint")
 
