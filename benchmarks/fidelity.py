@@ -11,6 +11,12 @@ displacement, and the solve time ratio:
     python benchmarks/fidelity.py --live DATASET [--count 6]
         solves the first test placements of DATASET's plan both ways now, one after the other
         (run it alone on the machine: the ratio is only as good as the quiet around it).
+
+    python benchmarks/fidelity.py --models SPEC [SPEC ...] --data DATASET [DATASET ...]
+        the learned predictors (zoo:<name> or checkpoints) at fidelity full and auto on each
+        dataset's test split: time per scene at batch 1 and 64, relative MEE and peak error
+        against the FEM for both, and auto's largest difference from full relative to the
+        deepest displacement (run it alone).
 """
 
 from __future__ import annotations
@@ -96,16 +102,61 @@ def live(folder: str, count: int) -> None:
           "deepest")
 
 
+def models(specs, datasets, limit: int = 64, repeat: int = 5) -> None:
+    import warnings
+
+    from _timing import median_time
+    from stmpl.dataset import Dataset
+    from stmpl.evaluate import scenes_of
+    from stmpl.metrics import sample_metrics, summarise
+    from stmpl.spec import label, predictor_from_spec
+
+    warnings.simplefilter("ignore")                    # envelope notes: not what is measured
+    print("| model | data | fidelity | ms/scene batch 1 | ms/scene batch 64 | rel. MEE % | "
+          "peak err % (mean, max abs) | largest diff. from full, % of deepest |")
+    print("|---|---|---|--:|--:|--:|--:|--:|")
+    for folder in datasets:
+        ds = Dataset(folder)
+        scenes, truth = scenes_of(ds, "test", limit=limit)
+        for spec in specs:
+            p = predictor_from_spec(spec)
+            full = None
+            for fid in ("full", "auto"):
+                p.fidelity = fid
+                pred = [d.displacement for d in p.predict(scenes)]   # warm (columns cached)
+                t1 = median_time(lambda: p.predict(scenes[0]), repeat)
+                t64 = median_time(lambda: p.predict(scenes), max(1, repeat // 2)) / len(scenes)
+                rows = [sample_metrics(t, u) for t, u in zip(truth, pred)]
+                m = summarise(rows)
+                pk = np.array([r["peak_err"] for r in rows])
+                if full is None:
+                    full, diff = pred, ""
+                else:
+                    d = max(np.linalg.norm(a - b, axis=1).max() / np.linalg.norm(b, axis=1).max()
+                            for a, b in zip(pred, full))
+                    diff = f"{100 * d:.3f}"
+                print(f"| {label(spec)} | {ds.card['name']} | {fid} | {1e3 * t1:.2f} | "
+                      f"{1e3 * t64:.3f} | {m['rel_mee'][0]:.3f} | {pk.mean():+.2f}, "
+                      f"{np.abs(pk).max():.1f} | {diff} |", flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     g = ap.add_mutually_exclusive_group(required=True)
     g.add_argument("--datasets", nargs=2, metavar=("FULL", "AUTO"))
     g.add_argument("--live", metavar="DATASET")
+    g.add_argument("--models", nargs="+", metavar="SPEC")
+    ap.add_argument("--data", nargs="+", help="--models: datasets whose test split is used")
+    ap.add_argument("--limit", type=int, default=64, help="--models: scenes per dataset")
     ap.add_argument("--count", type=int, default=6)
     args = ap.parse_args()
     print(f"machine: {platform.processor() or platform.machine()}, "
           f"{__import__('os').cpu_count()} cores")
-    if args.datasets:
+    if args.models:
+        if not args.data:
+            raise SystemExit("--models needs --data")
+        models(args.models, args.data, args.limit)
+    elif args.datasets:
         compare_datasets(*args.datasets)
     else:
         live(args.live, args.count)
