@@ -178,6 +178,18 @@ class ColumnStore:
             h.update(np.ascontiguousarray(getattr(part, k)).tobytes())
         self.key = h.hexdigest()[:16]
 
+    def level(self, thickness: float) -> int:
+        """The index of the level at ``thickness`` (m), added if the store has none there (its
+        columns are solved when asked for, like any other's)."""
+        t = float(thickness)
+        if not (np.isfinite(t) and t > 0):
+            raise ValueError(f"a level must be a positive thickness, got {t!r} m")
+        for k, x in enumerate(self.levels):
+            if abs(x - t) <= 1e-9:
+                return k
+        self.levels.append(t)
+        return len(self.levels) - 1
+
     def path(self, level: int) -> pathlib.Path:
         """The disk cache file of level ``level`` (an index into ``levels``)."""
         from stmpl.body.model import default_cache_dir

@@ -42,7 +42,9 @@ class LinearPredictor(LearnedPredictor):
         return out
 
     def build_model(self) -> nn.Module:
-        return ComplianceOperator()
+        op = ComplianceOperator()
+        op.extend = self.config["operator"] == "on_demand"   # a new thickness: a new level
+        return op
 
     def raw(self, thickness, force):
         return self.model(thickness, force) / self.scale

@@ -78,6 +78,11 @@ class ComplianceOperator(nn.Module):
     def ready(self) -> bool:
         return len(self.levels) > 0 and (self.on_demand or self.index.shape[1] > 0)
 
+    extend = False
+    """On demand only: a thickness beyond the levels adds a level there (its columns solved
+    when asked for) instead of being refused. The linear model sets it; a prior keeps the
+    levels its network was trained with."""
+
     def weights(self, thickness: torch.Tensor) -> torch.Tensor:
         """``(B, N, L)`` interpolation weights of each vertex's thickness over the levels."""
         if len(self.levels) == 0:
@@ -86,6 +91,11 @@ class ComplianceOperator(nn.Module):
         lo, hi = float(lv[0]), float(lv[-1])
         tmin, tmax = float(thickness.min()), float(thickness.max())
         tol = 1e-6 * hi
+        if self.on_demand and self.extend and (tmin < lo - tol or tmax > hi + tol):
+            new = [t for t in (tmin, tmax) if t < lo - tol or t > hi + tol]
+            self.levels = torch.sort(torch.cat([lv, torch.tensor(new, dtype=lv.dtype,
+                                                                 device=lv.device)]))[0]
+            return self.weights(thickness)
         if tmin < lo - tol or tmax > hi + tol:
             raise ValueError(f"thickness {tmin * 1e3:.3g}..{tmax * 1e3:.3g} mm lies outside the "
                              f"operator's levels {lo * 1e3:g}..{hi * 1e3:g} mm (the linear FEM "
@@ -137,7 +147,8 @@ class ComplianceOperator(nn.Module):
             u = torch.zeros(B, N, 3, device=force.device)
             for lv in used:
                 cols = torch.nonzero(fw[..., lv].abs().sum(0)).flatten()
-                G = torch.from_numpy(self.store.columns(lv, cols.cpu().numpy())).to(force.device)
+                at = self.store.level(float(self.levels[lv]))
+                G = torch.from_numpy(self.store.columns(at, cols.cpu().numpy())).to(force.device)
                 u = u + torch.einsum("nkc,bk->bnc", G, fw[:, cols, lv].float())
             return u
         u = torch.zeros(3 * N, B, device=force.device, dtype=self.values.dtype)
@@ -239,10 +250,11 @@ def solve_needed(store, op: ComplianceOperator, thickness: np.ndarray, force: np
     if progress:
         from tqdm import tqdm
 
-        total = sum(len(store.missing(lv, c)) for lv, c in enumerate(need))
+        total = sum(len(store.missing(store.level(float(op.levels[lv])), c))
+                    for lv, c in enumerate(need))
         bar = tqdm(total=total, unit="col", desc="linear FEM columns", dynamic_ncols=True)
     for lv, cols in enumerate(need):
-        done = store.ensure(lv, cols, save=True)
+        done = store.ensure(store.level(float(op.levels[lv])), cols, save=True)
         if bar is not None:
             bar.update(done)
     if bar is not None:

@@ -116,3 +116,21 @@ def test_on_demand_operator_agrees_with_the_stored_one(ds, lin, tmp_path, monkey
         np.testing.assert_allclose(a.displacement, b.displacement, rtol=1e-6, atol=1e-12)
     with pytest.raises(ValueError, match="operator must be one of"):
         predictor.create("linear", ds.part, {"operator": "lazy"})
+
+
+def test_on_demand_takes_a_new_thickness_as_a_new_level(ds, tmp_path, monkeypatch):
+    """On demand, a thickness beyond the levels is solved there (a new level), not refused,
+    and agrees with an operator computed at that thickness from the start."""
+    monkeypatch.setenv("STMPL_CACHE_DIR", str(tmp_path))
+    lazy = predictor.create("linear", ds.part, {"operator": "on_demand"})
+    lazy.fit(ds, progress=False)
+    n = ds.part.n_vertices
+    s = Scene(ds.part, np.full(n, 0.012), np.where(np.arange(n) == 40, 0.1, 0.0))
+    u = lazy.predict(s).displacement
+    assert 0.012 in np.round(lazy.model.levels.numpy().astype(float), 6)
+    from fem.compliance import ColumnStore
+
+    G = ColumnStore(ds.part, ds.card["config"], [0.012]).columns(0, [40])[:, 0]
+    np.testing.assert_allclose(u, 0.1 * G, rtol=1e-5, atol=1e-12)
+    thicker = lazy.predict(Scene(ds.part, np.full(n, 0.011), s.force)).displacement
+    assert 0 < np.abs(thicker).max()                     # between 10 and 12 mm: interpolated
