@@ -245,23 +245,35 @@ def _validate(p, ds) -> dict | None:
             "peak_err": [float(peak.mean()), float(peak.std())], "kept": bool(kept)}
 
 
+def _column(key: str) -> str:
+    """The table column of a measured set: the same kind of set on another surface of the part
+    (``ood_bands`` on the plain arm, ``ood_bands_fine`` on the subdivided one) shares it."""
+    return key[:-5] if key.endswith("_fine") else key
+
+
 def table(path=None) -> str:
-    """A markdown table of the zoo: name, kind, size, training dataset, and the MEE (mm) and
-    relative MEE (%) on the test split of every dataset it was measured on."""
+    """A markdown table of the zoo: name, kind, size, training dataset, and on the test split of
+    every kind of dataset it was measured on the MEE (mm), the relative MEE (%) and the mean
+    error of the peak displacement (%); a set a model was not measured on is a dash."""
     models = manifest(path)["models"]
-    sets = sorted({k for e in models.values() for k in (e.get("metrics") or {})
+    cols = sorted({_column(k) for e in models.values() for k in (e.get("metrics") or {})
                    if k not in ("val",)}, key=lambda k: (k != "test", k))
     head = "| model | kind | parameters | MB | trained on | " + " | ".join(
-        f"{'in-distribution test' if k == 'test' else k}: MEE mm, rel. %" for k in sets) + " |"
-    rows = [head, "|---|---|--:|--:|---|" + "--:|" * len(sets)]
+        f"{'in-distribution test' if k == 'test' else k}: MEE mm / rel. % / peak %"
+        for k in cols) + " |"
+    rows = [head, "|---|---|--:|--:|---|" + "--:|" * len(cols)]
     for n, e in sorted(models.items()):
         ds = e.get("dataset") or {}
+        metrics = {_column(k): v for k, v in (e.get("metrics") or {}).items()}
         cells = []
-        for k in sets:
-            t = (e.get("metrics") or {}).get(k) or {}
-            mee = t.get("mee", [float("nan")])[0]
-            rel = t.get("rel_mee", [float("nan")])[0]
-            cells.append(f"{mee:.4f}, {rel:.2f}")
+        for k in cols:
+            t = metrics.get(k) or {}
+            if "mee" not in t:
+                cells.append("–")
+                continue
+            peak = t.get("peak_err", [float("nan")])[0]
+            cells.append(f"{t['mee'][0]:.4f} / {t['rel_mee'][0]:.2f} / "
+                         + ("–" if peak != peak else f"{peak:+.1f}"))
         rows.append(f"| {n} | {e['kind']} | {e.get('parameters') or 0:,} | "
                     f"{e['bytes'] / 1e6:.2f} | {ds.get('name')} ({ds.get('hash')}) | "
                     + " | ".join(cells) + " |")

@@ -34,7 +34,7 @@ def test_add_list_load_round_trip(zoo_dir):
     e = zoo.entry("unet_tiny", folder)
     assert e["kind"] == "uv_unet" and e["dataset"]["hash"] == ds.card["hash"]
     assert e["trained"]["command"] == "stmpl train x.yaml" and e["bytes"] < zoo.MAX_BYTES
-    assert "unet_tiny | uv_unet" in zoo.table(folder) and "| 0.5000, 10.00 |" in zoo.table(folder)
+    assert "unet_tiny | uv_unet" in zoo.table(folder) and "| 0.5000 / 10.00 / – |" in zoo.table(folder)
     tiny = e["metrics"]["tiny"]   # measured on add: the same numbers evaluate gives
     from stmpl.evaluate import evaluate_dataset
 
@@ -137,26 +137,34 @@ def test_cli_zoo(zoo_dir, capsys):
 
 def test_the_shipped_zoo_verifies_and_beats_naive_on_a_fem_solve(arm):
     """The repository's zoo: every file matches the manifest, every model rebuilds on the arm it
-    was trained on, and on a fresh FEM solve (a 2 cm disk, 0.2 N, 7.5 mm; not a dataset sample)
-    the learned models' errors are below Naive's and within 3x their recorded test errors."""
+    was trained on (the plain arm or a subdivided one), and on a fresh FEM solve on that arm (a
+    2 cm disk, 0.2 N, 7.5 mm; not a dataset sample) the learned models' errors are below Naive's
+    and within 3x their recorded test errors."""
     from stmpl import loads, tissue
     from stmpl.scene import Scene
 
     names = zoo.names()
     assert {"naive_arm", "uv_unet_arm", "gnn_arm"} <= set(names)
-    scene = Scene.from_load(arm, tissue.constant(arm, 0.0075),
-                            loads.disk(arm, uv=(0.42, 0.55), radius=0.02, total=0.2))
-    truth = predictor.create("fem").predict(scene).displacement
-    active = np.linalg.norm(truth, axis=1) > 1e-6
-    rel = {}
-    for name in names:
-        p = zoo.read(name)
-        assert p.part.n_vertices == arm.n_vertices
-        np.testing.assert_allclose(p.part.vertices, arm.vertices, atol=1e-6)
-        err = np.linalg.norm(p.predict(scene).displacement - truth, axis=1)[active]
-        rel[name] = 100 * err.mean() / np.linalg.norm(truth, axis=1).max()
-        assert rel[name] < 3 * zoo.entry(name)["metrics"]["test"]["rel_mee"][0], rel
-    assert rel["uv_unet_arm"] < rel["naive_arm"] and rel["gnn_arm"] < rel["naive_arm"], rel
+    models = {name: zoo.read(name) for name in names}
+    for sub in sorted({int(p.part.source.get("subdivisions", 0)) for p in models.values()}):
+        part = arm.subdivided(sub)
+        scene = Scene.from_load(part, tissue.constant(part, 0.0075),
+                                loads.disk(part, uv=(0.42, 0.55), radius=0.02, total=0.2))
+        fem = predictor.create("fem", fidelity="auto" if sub else "full")
+        truth = fem.predict(scene).displacement
+        active = np.linalg.norm(truth, axis=1) > 1e-6
+        rel = {}
+        for name, p in models.items():
+            if int(p.part.source.get("subdivisions", 0)) != sub:
+                continue
+            assert p.part.n_vertices == part.n_vertices
+            np.testing.assert_allclose(p.part.vertices, part.vertices, atol=1e-6)
+            err = np.linalg.norm(p.predict(scene).displacement - truth, axis=1)[active]
+            rel[name] = 100 * err.mean() / np.linalg.norm(truth, axis=1).max()
+            assert rel[name] < 3 * zoo.entry(name)["metrics"]["test"]["rel_mee"][0], rel
+        naive = [rel[n] for n in rel if models[n].name == "naive"]
+        learned = [rel[n] for n in rel if models[n].name in ("gnn", "uv_unet")]
+        assert naive and learned and max(learned) < min(naive), rel
 
 
 def test_measure_adds_a_column_and_keeps_the_rest(zoo_dir, tiny_dataset, capsys):
