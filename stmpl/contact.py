@@ -158,11 +158,12 @@ class Contact:
         return np.unique(np.concatenate(self.touched))
 
     def summary(self) -> str:
-        names = ", ".join(f"{o.name} {o.total:g} N on {len(t)}" for o, t in
+        names = "; ".join(f"{o.name} {o.total:g} N on {len(t)} vertices" for o, t in
                           zip(self.objects, self.touched))
-        return (f"contact ({names} vertices): {self.total:g} N, {self.area * 1e4:.2f} cm^2, "
-                f"mean pressure {self.pressure / 1e3:.2f} kPa, deepest "
-                f"{1e3 * self.penetration.max():.2f} mm")
+        total = f" ({self.total:g} N in all)" if len(self.objects) > 1 else ""
+        return (f"contact: {names}{total}; {self.area * 1e4:.2f} cm^2, mean pressure "
+                f"{self.pressure / 1e3:.2f} kPa, reaching {1e3 * self.penetration.max():.2f} mm "
+                "into the skin at rest")
 
     def load(self) -> Load:
         """The :class:`~stmpl.loads.Load` of this contact (kind ``contact``), for a scene."""
