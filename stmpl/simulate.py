@@ -5,7 +5,7 @@ PLY) and a picture, and prints each method's time.
 
 >>> stmpl simulate                                     # the default grasp, GNN
 >>> stmpl simulate --grip pinch --along 0.5 --compare  # a pinch, checked by the FEM
->>> stmpl simulate --letters ECCV --force 0.3 --model zoo:uv_unet_arm
+>>> stmpl simulate --letters ECCV --force 0.3 --model zoo:uv_unet_arm_fine
 >>> stmpl simulate --object tool.stl --at 0.45 0.5 --depth 3
 """
 
@@ -16,7 +16,7 @@ import time
 
 import numpy as np
 
-DEFAULT_MODEL = "zoo:gnn_arm"
+DEFAULT_MODEL = "zoo:gnn_arm_fine"
 
 
 def add_arguments(sp) -> None:
@@ -121,7 +121,8 @@ def run(args) -> int:
     objs = pressings(args, part)
     touch = contact.contact(part, objs)
     scene = Scene.from_load(part, tissue.constant(part, args.thickness * 1e-3), touch.load())
-    print(f"{touch.summary()}  [{time.perf_counter() - t0:.1f} s to set up]")
+    print(f"{part.name} ({part.n_vertices} vertices), {args.thickness:g} mm of tissue; "
+          f"{touch.summary()}  [{time.perf_counter() - t0:.1f} s to set up]")
     out: dict = {}
     for spec, p in zip(specs, preds):
         first = None

@@ -51,7 +51,11 @@ def test_ablation_configs_load(path):
         from stmpl import stability
 
         cfg = stability.read_config(path)
-        assert cfg["out"] == "reports/stability"
+        assert cfg["out"] == f"reports/{cfg['name']}"
+        for spec in cfg["predictors"]:                  # every model it sweeps is shipped
+            from stmpl import zoo
+
+            assert not spec.startswith("zoo:") or spec[4:] in zoo.names(), spec
         return
     cfg = read_config(path)
     root = CONFIGS.parent
