@@ -146,10 +146,16 @@ class ComplianceOperator(nn.Module):
                                  f"the input {N}")
             u = torch.zeros(B, N, 3, device=force.device)
             for lv in used:
-                cols = torch.nonzero(fw[..., lv].abs().sum(0)).flatten()
                 at = self.store.level(float(self.levels[lv]))
-                G = torch.from_numpy(self.store.columns(at, cols.cpu().numpy())).to(force.device)
-                u = u + torch.einsum("nkc,bk->bnc", G, fw[:, cols, lv].float())
+                cols = torch.nonzero(fw[..., lv].abs().sum(0)).flatten()
+                self.store.ensure(at, cols.cpu().numpy())           # one patch for the batch
+                for b in range(B):                                   # each scene its own columns
+                    cb = torch.nonzero(fw[b, :, lv]).flatten()
+                    if len(cb) == 0:
+                        continue
+                    G = torch.from_numpy(self.store.columns(at, cb.cpu().numpy()))
+                    u[b] = u[b] + torch.einsum("nkc,k->nc", G.to(force.device),
+                                               fw[b, cb, lv].float())
             return u
         u = torch.zeros(3 * N, B, device=force.device, dtype=self.values.dtype)
         mats = self._matrices(N)
