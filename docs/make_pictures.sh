@@ -10,10 +10,12 @@ stmpl scene --load letter --char A --force 0.3 --height 170 --width 18 --at 0.5 
     --out arm_letter_A.png
 # FEM: 0.4 N on a 2 cm disk, reference mesh, 4 continuation levels
 stmpl solve --load disk --force 0.4 --levels 4 --radius 20 --at 0.5 0.5 --out arm_fem_disk.png
-# The main job: the default grasp and the letters, each against the FEM
-stmpl simulate --compare --model zoo:gnn_arm --model zoo:uv_unet_arm --model zoo:linear_arm \
-    --model zoo:naive_arm --out-dir /tmp/stmpl_grasp && cp /tmp/stmpl_grasp/simulate.png simulate_grasp.png
-stmpl simulate --letters ECCV --force 0.3 --depth 3 --compare --out-dir /tmp/stmpl_eccv \
-    && cp /tmp/stmpl_eccv/simulate.png simulate_eccv.png
-stmpl simulate --grip pinch --along 0.5 --around 0.5 --subdivide 1 --model fem --res medium \
+# The main job on the shipped models' skin (the once-subdivided arm): the default grasp, the
+# letters and a pinch, each against the FEM (solved on the patch each contact moves)
+stmpl simulate --compare --fidelity auto --model zoo:gnn_arm_fine --model zoo:uv_unet_arm_fine \
+    --model zoo:linear_arm_fine --model zoo:naive_arm_fine --out-dir /tmp/stmpl_grasp \
+    && cp /tmp/stmpl_grasp/simulate.png simulate_grasp.png
+stmpl simulate --letters ECCV --force 0.3 --depth 3 --compare --fidelity auto \
+    --out-dir /tmp/stmpl_eccv && cp /tmp/stmpl_eccv/simulate.png simulate_eccv.png
+stmpl simulate --grip pinch --along 0.5 --around 0.5 --force 0.15 --compare --fidelity auto \
     --out-dir /tmp/stmpl_pinch && cp /tmp/stmpl_pinch/simulate.png simulate_pinch.png
