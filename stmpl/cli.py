@@ -130,12 +130,13 @@ def cmd_scene(args) -> int:
     return 0
 
 
-def _scene(args):
-    """The scene the command-line options describe (its load summary printed)."""
+def _scene(args, subdivisions: int = 0):
+    """The scene the command-line options describe (its load summary printed), on the part
+    subdivided ``subdivisions`` times."""
     from stmpl.scene import Scene
 
     body = _body(args)
-    part = body.part(args.part)
+    part = body.part(args.part).subdivided(subdivisions)
     load = _load(args, part)
     print(load.summary())
     return Scene.from_load(part, _thickness(args, body, part), load, body=body.name)
@@ -167,9 +168,9 @@ def cmd_solve(args) -> int:
     return 0
 
 
-DEFAULT_MODEL = "zoo:gnn_arm"
+DEFAULT_MODEL = "zoo:gnn_arm_fine"
 """The predictor ``stmpl predict`` uses unless told: the shipped mesh GNN of the Anny left arm
-(the most accurate of the zoo's models)."""
+(the most accurate of the zoo's models), on the once-subdivided arm it was trained on."""
 
 
 def cmd_predict(args) -> int:
@@ -178,11 +179,16 @@ def cmd_predict(args) -> int:
     from stmpl.spec import label, predictor_from_spec
     from stmpl.viz import prediction_figure
 
-    scene = _scene(args)
     specs = args.model or [DEFAULT_MODEL]
+    preds = [predictor_from_spec(spec, args.device, fidelity=args.fidelity) for spec in specs]
+    sub = args.subdivide
+    if sub is None:     # the surface the first model was trained on, else the FEM's plain arm
+        sub = next((int(p.part.source.get("subdivisions", 0)) for p in preds
+                    if getattr(p, "part", None) is not None), 0)
+    scene = _scene(args, sub)
     out = {}
-    for spec in specs:
-        d = predictor_from_spec(spec, args.device, fidelity=args.fidelity).predict(scene)
+    for spec, p in zip(specs, preds):
+        d = p.predict(scene)
         name = label(spec)
         out[name] = d
         print(f"{name:<24} max |u| {1e3 * d.magnitude.max():6.3f} mm  "
@@ -320,6 +326,9 @@ def parser() -> argparse.ArgumentParser:
     _scene_args(pr, force=0.3)
     pr.add_argument("--model", action="append", help=f"zoo:<name>, a .safetensors checkpoint "
                     f"or fem[:res]; repeat to compare (default {DEFAULT_MODEL})")
+    pr.add_argument("--subdivide", type=int, default=None, metavar="N",
+                    help="the skin's resolution: the part's triangles split into four N times "
+                    "(default: the first model's own, 1 for the shipped models)")
     pr.add_argument("--compare", action="store_true", help="also solve the FEM and report errors")
     pr.add_argument("--res", default="reference", help="FEM resolution for --compare")
     pr.add_argument("--levels", type=int, default=3, help="FEM continuation levels (--compare)")
