@@ -265,8 +265,9 @@ class ColumnStore:
             cols = np.flatnonzero(done)
             atomic_savez(self.path(lv), {"columns": cols, "values": G[:, cols]})
 
-    def columns(self, level: int, columns) -> np.ndarray:
+    def columns(self, level: int, columns, ensure: bool = True) -> np.ndarray:
         """``(N, k, 3)`` float32 columns at ``level`` for the vertices ``columns`` ``(k,)``,
-        computed first where missing."""
-        self.ensure(level, columns)
-        return self._G[level][:, np.asarray(columns, dtype=np.int64)]
+        computed first where missing (``ensure=False``: the caller has made sure)."""
+        if ensure:
+            self.ensure(level, columns)
+        return self._level(level)[0][:, np.asarray(columns, dtype=np.int64)]

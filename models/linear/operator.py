@@ -153,7 +153,8 @@ class ComplianceOperator(nn.Module):
                     cb = torch.nonzero(fw[b, :, lv]).flatten()
                     if len(cb) == 0:
                         continue
-                    G = torch.from_numpy(self.store.columns(at, cb.cpu().numpy()))
+                    G = torch.from_numpy(self.store.columns(at, cb.cpu().numpy(),
+                                                            ensure=False))
                     u[b] = u[b] + torch.einsum("nkc,k->nc", G.to(force.device),
                                                fw[b, cb, lv].float())
             return u
