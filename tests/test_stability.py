@@ -72,3 +72,44 @@ def test_bad_sweeps_are_named():
         stability.read_config({"predictors": ["fem"], "axes": {"force": [True]}})
     with pytest.raises(ValueError, match="at least one predictor"):
         stability.read_config({"axes": {"force": [1.0]}})
+
+
+@pytest.mark.parametrize("config", ["configs/ablation/stability_fine.yaml"])
+def test_the_shipped_envelopes_flag_every_sweep_point_where_a_model_breaks_its_promise(arm,
+                                                                                      config):
+    """The committed sweep of the shipped models, driven through today's envelopes: at every
+    point where the FEM failed, or where a learned model's answer broke the per-scene promise
+    (zoo.SCENE_PROMISE) or was physically impossible, that model flags the scene as outside (or
+    refuses it). The envelope is what the sweep set; this keeps it so."""
+    import json
+    import pathlib
+
+    from stmpl import zoo
+
+    cfg = stability.read_config(config)
+    points = json.loads((pathlib.Path(cfg["out"]) / "points.json").read_text()).values()
+    part = arm.subdivided(int(cfg["body"].get("subdivisions", 0)))
+    learned = {}
+    for spec in cfg["predictors"]:
+        p = zoo.read(spec[4:])
+        if p.name in ("gnn", "uv_unet"):
+            learned[spec[4:]] = p
+    assert learned
+    checked = broke = 0
+    for rec in points:
+        scene = stability.scene_at(part, cfg["base"], rec["axis"], rec["value"])
+        assert scene.total_force == pytest.approx(rec["total"], rel=1e-6)   # the same scene
+        for name, p in learned.items():
+            r = rec["predictors"][name]
+            if "refused" in r:
+                continue
+            bad = (not rec["fem"]["ok"] or not r["physical"]
+                   or r["rel_mee"] > zoo.SCENE_PROMISE["rel_mee"]
+                   or abs(r["peak_err"]) > zoo.SCENE_PROMISE["peak_err"])
+            why = p.envelope.reasons(scene)
+            checked += 1
+            if bad:
+                broke += 1
+                assert why, (f"{name} at {rec['axis']}={rec['value']}: broke its promise "
+                             f"({r.get('rel_mee')}, {r.get('peak_err')}) inside its envelope")
+    assert checked >= 80 and broke >= 20, (checked, broke)
