@@ -7,8 +7,9 @@ the open rims), the number of simultaneous contacts and how much the thickness v
 the load. At every point the FEM solves the scene (its failures counted with the reason and the
 time it took to fail) and every predictor answers it: its relative MEE and peak error against
 the FEM, whether it flagged the scene as outside its envelope and whether its answer was
-physically possible. Results are cached per point (by the scene's content, the FEM set-up and the predictors); ``stmpl ablate configs/ablation/stability.yaml``
-runs it and draws one picture per axis and the envelope map.
+physically possible. Results are cached per point (by the scene's content, the FEM set-up and the
+predictors' digests; the flags are not cached but follow each model's envelope as it is today):
+``stmpl ablate configs/ablation/stability.yaml`` runs it and draws one picture per axis and the envelope map.
 """
 
 from __future__ import annotations
@@ -145,8 +146,9 @@ def run(config, progress: bool = True) -> dict:
     part = part_from_spec(cfg["body"], cfg["part"])
     fem = predictor.create("fem", **cfg["fem"])
     preds = {label(s): predictor_from_spec(s) for s in cfg["predictors"]}
-    envelopes = {n: None if p.envelope is None else p.envelope.to_dict()
-                 for n, p in sorted(preds.items())}
+    from stmpl.ablate import _setup_key
+
+    models = {label(s): _setup_key(s) for s in sorted(cfg["predictors"])}  # their digests
     todo = [(a, float(v)) for a, vals in cfg["axes"].items() for v in vals]
     bar = None
     if progress:
@@ -162,7 +164,7 @@ def run(config, progress: bool = True) -> dict:
             if bar is not None:
                 bar.update(1)
             continue
-        key = _key(part.fingerprint, cfg["fem"], axis, value, envelopes,       # what decides
+        key = _key(part.fingerprint, cfg["fem"], axis, value, models,          # what decides
                    hashlib.sha256(scene.force.tobytes() + scene.thickness.tobytes()).hexdigest())
         if key not in cache:
             rec = {"axis": axis, "value": value, "total": scene.total_force,
