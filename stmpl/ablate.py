@@ -39,9 +39,10 @@ DEFAULTS = {
     "batch": 64,
 }
 SETUP_KEYS = {"name", "train", "predictor", "thickness_mm", "options", "epochs", "max_train",
-              "limit"}
+              "limit", "fidelity"}
 """``limit``: evaluate on at most this many samples of each test split (the FEM takes seconds
-per scene)."""
+per scene); ``fidelity``: ``full`` (the default) or ``auto`` (model no more of the part than the
+scene needs, :data:`stmpl.predictor.FIDELITIES`)."""
 
 PAPER = {
     # The paper's Tables 1-3 (MAE x, y, z, MEE in mm as mean, std; EE shares in %), as reported
@@ -115,6 +116,9 @@ def read_config(source) -> dict:
         if ("train" in s) == ("predictor" in s):
             raise ValueError(f"setup {s['name']!r}: give either train (a training config) or "
                              "predictor (fem:RES, zoo:NAME or a checkpoint)")
+        if s.get("fidelity", "full") not in ("full", "auto"):
+            raise ValueError(f"setup {s['name']!r}: fidelity must be full or auto, got "
+                             f"{s['fidelity']!r}")
         if s["name"] in names:
             raise ValueError(f"setup name {s['name']!r} is used twice")
         names.add(s["name"])
@@ -149,28 +153,82 @@ def _slug(name: str) -> str:
     return "".join(c if c.isalnum() else "_" for c in name).strip("_").lower()
 
 
-def _datasets(cfg, progress: bool) -> dict:
-    """Every dataset of the config, opened; missing ones made from their configs."""
+class _Later:
+    """A dataset that is not on this machine but whose card an earlier run recorded (from the
+    same dataset config): enough to look up cached results. It is made from its config the
+    first time something needs its samples."""
+
+    def __init__(self, name: str, d: dict, card: dict, progress: bool):
+        self.name, self.d, self.card, self.progress = name, d, card, progress
+        self.folder = pathlib.Path(d["folder"])
+        self._ds = None
+
+    def get(self):
+        if self._ds is None:
+            self._ds = _make(self.name, self.d, self.progress)
+            if self._ds.card["hash"] != self.card["hash"]:
+                raise ValueError(f"dataset {self.name} made again from {self.d['config']} has "
+                                 f"hash {self._ds.card['hash']}, not the {self.card['hash']} "
+                                 "recorded in the ablation's cache (the generator changed); "
+                                 "delete the cache entry 'datasets' to start over")
+        return self._ds
+
+
+def _make(name: str, d: dict, progress: bool):
     from importlib.metadata import entry_points
 
     from stmpl.dataset import Dataset
 
+    folder = pathlib.Path(d["folder"])
+    if not (folder / "card.json").is_file():
+        if not d.get("config"):
+            raise FileNotFoundError(f"dataset {name} not found at {folder} and no config "
+                                    "to make it")
+        makers = {ep.name: ep for ep in entry_points(group="stmpl.generators")}
+        if "fem" not in makers:
+            raise ValueError("no dataset generator is installed (entry point "
+                             "stmpl.generators: fem); pip install -e .")
+        if progress:
+            print(f"making dataset {name} from {d['config']} into {folder}")
+        makers["fem"].load()(d["config"], folder, progress=progress)
+    return Dataset(folder)
+
+
+def _config_digest(d: dict) -> str | None:
+    path = pathlib.Path(d.get("config") or "")
+    return hashlib.sha256(path.read_bytes()).hexdigest()[:16] if path.is_file() else None
+
+
+def _datasets(cfg, progress: bool, recorded: dict) -> dict:
+    """Every dataset of the config: opened where it is on disk; where it is not, and the cache
+    recorded its card for the same dataset config, a :class:`_Later` (made only if a job needs
+    it); otherwise made now from its config. ``recorded`` (``{name: {"config": digest, "card":
+    {...}}}``) gains every opened dataset's card."""
     out = {}
     for name, d in cfg["datasets"].items():
         folder = pathlib.Path(d["folder"])
-        if not (folder / "card.json").is_file():
-            if not d.get("config"):
-                raise FileNotFoundError(f"dataset {name} not found at {folder} and no config "
-                                        "to make it")
-            makers = {ep.name: ep for ep in entry_points(group="stmpl.generators")}
-            if "fem" not in makers:
-                raise ValueError("no dataset generator is installed (entry point "
-                                 "stmpl.generators: fem); pip install -e .")
-            if progress:
-                print(f"making dataset {name} from {d['config']} into {folder}")
-            makers["fem"].load()(d["config"], folder, progress=progress)
-        out[name] = Dataset(folder)
+        rec = recorded.get(name)
+        digest = _config_digest(d)
+        if (not (folder / "card.json").is_file() and rec and digest
+                and rec.get("config") == digest):
+            out[name] = _Later(name, d, rec["card"], progress)
+            continue
+        if (folder / "card.json").is_file():
+            from stmpl.dataset import Dataset
+
+            out[name] = Dataset(folder)
+        else:
+            out[name] = _make(name, d, progress)
+        recorded[name] = {"config": digest,
+                          "card": {"hash": out[name].card["hash"],
+                                   "config": {"thickness_mm":
+                                              out[name].card["config"]["thickness_mm"]}}}
     return out
+
+
+def _ready(ds):
+    """The dataset itself (made now if it was only recorded)."""
+    return ds.get() if isinstance(ds, _Later) else ds
 
 
 def _training_config(setup: dict, cfg: dict, ds) -> dict:
@@ -206,7 +264,9 @@ def run(config, progress: bool = True) -> dict:
     out.mkdir(parents=True, exist_ok=True)
     cache_path = out / "cache.json"
     cache = json.loads(cache_path.read_text()) if cache_path.is_file() else {}
-    sets = _datasets(cfg, progress)
+    recorded = cache.setdefault("datasets", {})
+    sets = _datasets(cfg, progress, recorded)
+    atomic_write_text(cache_path, json.dumps(cache, indent=1, sort_keys=True))
     ind = sets[cfg["in_distribution"]]
     seen = cfg["seen_thickness_mm"]
 
@@ -236,12 +296,14 @@ def run(config, progress: bool = True) -> dict:
             t = _training_config(s, cfg, ind)
             ckpt = pathlib.Path(t["out"]) / f"{t['name']}.safetensors"
             if not ckpt.is_file():
+                _ready(ind)
                 ckpt = train(t, progress=False)
             spec = str(ckpt)
         else:
             spec = s["predictor"]
-        predictors[s["name"]] = _open(spec)
-        keys[s["name"]] = _setup_key(spec)
+        fidelity = s.get("fidelity", "full")
+        predictors[s["name"]] = _open(spec, fidelity)
+        keys[s["name"]] = _setup_key(spec) + ("" if fidelity == "full" else f"@{fidelity}")
         if bar is not None:
             bar.update(1)
     tables: dict = {"table1": {}, "table2": {}, "table3": {}}
@@ -252,7 +314,7 @@ def run(config, progress: bool = True) -> dict:
             from stmpl.evaluate import evaluate_dataset
 
             t0 = time.perf_counter()
-            res = evaluate_dataset(predictors[s["name"]], ds, "test", thickness_mm=thick,
+            res = evaluate_dataset(predictors[s["name"]], _ready(ds), "test", thickness_mm=thick,
                                    batch=cfg["batch"], limit=s.get("limit"))
             cache[key] = {**res, "evaluated_seconds": time.perf_counter() - t0}
             atomic_write_text(cache_path, json.dumps(cache, indent=1, sort_keys=True))
@@ -263,7 +325,7 @@ def run(config, progress: bool = True) -> dict:
     for s in cfg["setups"]:
         key = _hash(["latency", keys[s["name"]], ind.card["hash"]])
         if key not in cache:
-            cache[key] = _latency(predictors[s["name"]], ind)
+            cache[key] = _latency(predictors[s["name"]], _ready(ind))
             atomic_write_text(cache_path, json.dumps(cache, indent=1, sort_keys=True))
         err = _pooled([tables["table2"].get(f"{s['name']} / {o}")
                        for o in cfg["out_of_distribution"]] or [tables["table1"][s["name"]]])
@@ -317,10 +379,10 @@ def _pooled(rows: list) -> dict:
     return out
 
 
-def _open(spec: str):
+def _open(spec: str, fidelity: str = "full"):
     from stmpl.spec import predictor_from_spec
 
-    return predictor_from_spec(spec)
+    return predictor_from_spec(spec, fidelity=fidelity)
 
 
 def _setup_key(spec: str) -> str:

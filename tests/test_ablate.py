@@ -83,6 +83,36 @@ def test_a_changed_setup_reruns_only_itself(config, monkeypatch):
     assert sorted(calls) == ["tiny", "tiny_bands"]
 
 
+def test_a_cached_run_needs_no_data_and_makes_it_again_only_for_new_jobs(config, tmp_path,
+                                                                         monkeypatch):
+    """Datasets take hours to make and a machine may lose them: a rerun whose jobs are all
+    cached reads the cards it recorded instead of making the data again; a new job makes the
+    missing dataset from its config, and it must come out the same."""
+    import shutil
+
+    first = ablate.run(config, progress=False)
+    shutil.rmtree(tmp_path / "data" / "bands")
+
+    def boom(*a, **k):
+        raise AssertionError("a dataset was made again for cached jobs")
+
+    monkeypatch.setattr("stmpl.ablate._make", boom)
+    again = ablate.run(config, progress=False)
+    assert json.dumps(again["tables"], sort_keys=True) == json.dumps(first["tables"],
+                                                                    sort_keys=True)
+    assert not (tmp_path / "data" / "bands").exists()
+    monkeypatch.undo()
+    naive = next((tmp_path / "runs").glob("naive-*/*.safetensors"))
+    config["setups"].append({"name": "Naive (auto)", "predictor": str(naive),
+                             "fidelity": "auto"})
+    third = ablate.run(config, progress=False)
+    assert (tmp_path / "data" / "bands" / "card.json").is_file()      # made for the new job
+    assert "Naive (auto) / bands" in third["tables"]["table2"]
+    cache = json.loads((tmp_path / "report" / "cache.json").read_text())
+    assert cache["datasets"]["bands"]["card"]["hash"] == json.loads(
+        (tmp_path / "data" / "bands" / "card.json").read_text())["hash"]
+
+
 @pytest.mark.parametrize("change,message", [
     ({"in_distribution": "nope"}, "in_distribution must be one of"),
     ({"out_of_distribution": ["nope"]}, "out_of_distribution must list"),
@@ -91,6 +121,7 @@ def test_a_changed_setup_reruns_only_itself(config, monkeypatch):
     ({"setups": [{"name": "x", "predictor": "fem"}, {"name": "x", "predictor": "fem"}]},
      "used twice"),
     ({"setups": [{"name": "x", "predictor": "fem", "colour": 1}]}, "takes keys"),
+    ({"setups": [{"name": "x", "predictor": "fem", "fidelity": "half"}]}, "full or auto"),
     ({"datasets": {}}, "at least one dataset"),
 ])
 def test_bad_configs_are_named(config, change, message):
