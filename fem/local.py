@@ -134,6 +134,13 @@ class LocalResult:
                 "whole": self.patch.whole, "attempts": self.attempts}
 
 
+FAILED_ATTEMPTS = 2
+"""A solve in which no level converges is tried once more on a patch grown by ``GROW`` (the cut
+might have been what failed); when that fails too the failure is the load's own and is
+returned, instead of growing on to the whole part (which took minutes on the fine arm for a
+load that buckles)."""
+
+
 def simulate_local(part: BodyPart, thickness, force, totals=None, res="reference",
                    material=None, options=None, margin: float | None = None,
                    tolerance: float = TOLERANCE, grow: float = GROW):
@@ -146,6 +153,7 @@ def simulate_local(part: BodyPart, thickness, force, totals=None, res="reference
     f = np.asarray(force, dtype=float)
     m = first_margin(part, t, f) if margin is None else float(margin)
     result = None
+    failed = 0                        # attempts in a row in which no level converged
     while True:
         p = patch(part, f, m)
         t0 = time.perf_counter()
@@ -157,7 +165,8 @@ def simulate_local(part: BodyPart, thickness, force, totals=None, res="reference
         result = result or LocalResult(p)
         result.patch = p
         result.attempts.append(att)
-        if p.whole or moved <= tolerance:
+        failed = failed + 1 if not any(x.ok for x in sols) else 0
+        if p.whole or moved <= tolerance or failed >= FAILED_ATTEMPTS:
             return mesh, sols, result
         m *= grow
 

@@ -83,3 +83,18 @@ def test_the_fem_predictor_takes_fidelity(long_tube):
     assert np.abs(auto.displacement - full.displacement).max() < 0.01 * peak
     with pytest.raises(ValueError, match="fidelity must be one of"):
         predictor.create("fem", fidelity="half")
+
+
+def test_a_load_the_tissue_cannot_carry_fails_after_one_growth_not_the_whole_part(long_tube):
+    """When nothing converges the patch grows once (the cut might be to blame); a second failure
+    is the load's own and is returned as failed, not solved again on ever larger patches."""
+    part = long_tube
+    t = np.full(part.n_vertices, 0.0075)
+    ld = loads.disk(part, uv=(0.5, 0.5), radius=0.02, total=1.0)
+    from fem.solver import SolverOptions
+
+    opts = SolverOptions(max_iter=1, max_substeps=0)   # no solve can converge
+    mesh, sols, res = local.simulate_local(part, t, ld.force, [0.1, 0.2], RES, options=opts)
+    assert not any(s.ok for s in sols)
+    assert len(res.attempts) == local.FAILED_ATTEMPTS == 2 and not res.patch.whole
+    assert res.attempts[1]["margin_m"] == pytest.approx(local.GROW * res.attempts[0]["margin_m"])
