@@ -130,10 +130,13 @@ class LearnedPredictor(BasePredictor):
         from stmpl.body.part import difference
 
         for i, s in enumerate(scenes):
+            if s.part is self.part or s.part is getattr(self, "_checked_part", None):
+                continue                       # the same object as last time: same mesh
             why = difference(s.part, self.part)
             if why:
                 raise ValueError(f"scene {i} is on another body part than this {self.name} "
                                  f"predictor was trained on: {why}")
+            self._checked_part = s.part
 
     def predict_batch(self, scenes) -> list[np.ndarray]:
         import torch
@@ -142,7 +145,8 @@ class LearnedPredictor(BasePredictor):
                          device=self.device)
         f = torch.tensor(np.stack([s.force for s in scenes]), dtype=torch.float32,
                          device=self.device)
-        self.model.eval()
+        if self.model.training:
+            self.model.eval()
         with torch.no_grad():
             u = self.forward(t, f) * self.scale
         return list(u.double().cpu().numpy())

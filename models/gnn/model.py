@@ -42,6 +42,12 @@ def mlp(c_in: int, hidden: int, c_out: int, norm: bool = True) -> nn.Sequential:
     return nn.Sequential(*layers, nn.LayerNorm(c_out)) if norm else nn.Sequential(*layers)
 
 
+REGION_TOLERANCE = 0.01
+"""``fidelity="auto"`` with the linear prior: the network answers where the prior moves the
+tissue by more than this share of its deepest displacement (elsewhere the prior's answer
+stands; the network's correction there is smaller still)."""
+
+
 class GraphNetBlock(MessagePassing):
     """One processor step: ``e_ij <- e_ij + g_e([e_ij, h_i, h_j])``, then
     ``h_i <- h_i + g_v([h_i, sum_j e_ij])``. ``h``: ``(V, L)``, ``e``: ``(E, L)``,
@@ -175,12 +181,15 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         ea = self.edge_attr.repeat(B, 1)
         return self.corrected(base, self.model(x, ea, ei).reshape(B, N, 3))
 
-    def region(self, thickness: np.ndarray, force: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def region(self, thickness: np.ndarray, force: np.ndarray,
+               base: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``fidelity="auto"``: per scene ``(B, N)`` masks of the vertices whose answer the
-        network gives (the region the load moves: within :func:`fem.local.first_margin` of it,
-        as hops along the mesh's edges) and of the subgraph it runs on (that region and
-        ``steps`` hops more, every input its answer depends on). ``thickness``, ``force``
-        ``(B, N)`` numpy."""
+        network gives and of the subgraph it runs on (that region and ``steps`` hops more,
+        every input its answer depends on). The region is where the load moves the tissue: with
+        the linear prior ``base`` ``(B, N, 3)``, the loaded vertices and those the prior moves by
+        more than :data:`REGION_TOLERANCE` of its deepest displacement, one hop wider; without
+        it, within :func:`fem.local.first_margin` of the load, as hops along the mesh's edges.
+        ``thickness``, ``force`` ``(B, N)`` numpy."""
         from fem.local import first_margin
 
         if getattr(self, "_adjacency", None) is None:
@@ -199,7 +208,12 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
             m = force[b] > 0
             if not m.any():
                 continue
-            hops = int(np.ceil(first_margin(self.part, thickness[b], force[b]) / self._edge))
+            if base is not None:                  # where the linear FEM moves the tissue
+                mag = np.linalg.norm(base[b], axis=-1)
+                m = m | (mag > REGION_TOLERANCE * mag.max())
+                hops = 1
+            else:
+                hops = int(np.ceil(first_margin(self.part, thickness[b], force[b]) / self._edge))
             for k in range(hops + steps):
                 m = m | (self._adjacency @ m.astype(np.float32) > 0)
                 if k == hops - 1:
@@ -213,7 +227,8 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         """:meth:`raw` on the subgraphs of :meth:`region`: the network's output inside each
         scene's region, the prior (or zero) outside."""
         B, N = thickness.shape
-        inner, sub = self.region(thickness.cpu().numpy(), force.cpu().numpy())
+        inner, sub = self.region(thickness.cpu().numpy(), force.cpu().numpy(),
+                                 None if base is None else base.detach().cpu().numpy())
         nodes = np.flatnonzero(sub.ravel())                       # global ids b * N + i
         where = np.full(B * N, -1)
         where[nodes] = np.arange(len(nodes))

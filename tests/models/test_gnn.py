@@ -21,9 +21,9 @@ def test_gnn_normalisers_travel_in_the_checkpoint(ds, tmp_path, make):
 
 
 def test_auto_fidelity_answers_on_the_subgraph_the_load_needs(ds, make):
-    """``fidelity="auto"``: the network runs on the region the load moves plus ``steps`` hops,
-    so inside the region it answers exactly as on the whole mesh, and outside it the answer is
-    the prior's (the linear FEM)."""
+    """``fidelity="auto"``: the network runs on the region the load moves (where the prior moves
+    the tissue) plus ``steps`` hops, so inside the region it answers exactly as on the whole
+    mesh, and outside it the answer is the prior's (the linear FEM)."""
     import torch
 
     from stmpl.evaluate import scenes_of
@@ -36,8 +36,13 @@ def test_auto_fidelity_answers_on_the_subgraph_the_load_needs(ds, make):
     p.fidelity = "auto"
     auto = p.predict(scenes)
     lin = make("linear", ds).predict(scenes)
-    inner, sub = p.region(np.stack([s.thickness for s in scenes]),
-                          np.stack([s.force for s in scenes]))
+    t = np.stack([s.thickness for s in scenes])
+    f = np.stack([s.force for s in scenes])
+    with torch.no_grad():
+        base = p.base(torch.tensor(t, dtype=torch.float32), torch.tensor(f, dtype=torch.float32))
+    inner, sub = p.region(t, f, base.numpy())          # where the prior moves the tissue
+    wide, _ = p.region(t, f)                           # within the FEM's first margin
+    assert inner.sum() < wide.sum()
     assert (~inner).any() and (inner & ~(np.stack([s.force for s in scenes]) > 0)).any()
     assert (sub >= inner).all()
     for b, (f, a, l) in enumerate(zip(full, auto, lin)):
