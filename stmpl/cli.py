@@ -99,6 +99,10 @@ def cmd_zoo(args) -> int:
         for name in args.names or zoo.names(args.zoo):
             f = zoo.verify(name, args.zoo)
             print(f"{name}: {f.name} ok")
+    elif args.action == "limit":
+        if not args.sweep:
+            raise ValueError("zoo limit needs --sweep CONFIG (a stability sweep that has run)")
+        zoo.limit(args.names, args.sweep, path=args.zoo)
     elif args.action == "measure":
         if not args.evaluate_on:
             raise ValueError("zoo measure needs --evaluate-on DATA [DATA ...]")
@@ -369,7 +373,7 @@ def parser() -> argparse.ArgumentParser:
 
     zo = sub.add_parser("zoo", help="the shipped models: list, verify, add, measure on more "
                         "datasets")
-    zo.add_argument("action", choices=["list", "verify", "add", "measure"])
+    zo.add_argument("action", choices=["list", "verify", "add", "measure", "limit"])
     zo.add_argument("names", nargs="*", help="model names (verify, measure: default all; add: "
                     "one)")
     zo.add_argument("--zoo", help="zoo folder (default $STMPL_ZOO or the repository's zoo/)")
@@ -380,6 +384,9 @@ def parser() -> argparse.ArgumentParser:
     zo.add_argument("--evaluate-on", nargs="+", metavar="DATA",
                     help="add, measure: measure these datasets' test splits (e.g. "
                     "data/ood_grasps)")
+    zo.add_argument("--sweep", metavar="CONFIG",
+                    help="limit: the stability sweep whose points cap the models' envelopes "
+                    "where they break their promise (configs/ablation/stability.yaml)")
     zo.set_defaults(func=cmd_zoo)
 
     pa = sub.add_parser("parts", help="list the body model's parts and their sizes")

@@ -118,6 +118,18 @@ class Envelope:
 
     boxes: dict = field(default_factory=dict)
     info: dict = field(default_factory=dict)     # {box: {"scenes": int, "source": str, ...}}
+    limits: dict = field(default_factory=dict)
+    """Bounds over every box, set where a model was measured to break its promise inside its
+    data's support (the stability sweep): ``{axis: {"max": value, "source": str}}`` (SI)."""
+
+    def limit(self, axis: str, hi: float, source: str = "") -> None:
+        """Cap ``axis`` (a ``max`` or ``range`` axis of :data:`AXES`) at ``hi`` (SI) for every
+        box: a scene above it lies outside whatever box it fits."""
+        if axis not in AXES or AXES[axis][0] == "min":
+            raise ValueError(f"a limit needs a max or range axis of {sorted(AXES)}, got {axis!r}")
+        if not np.isfinite(hi) or hi <= 0:
+            raise ValueError(f"limit on {axis} must be finite and > 0, got {hi!r}")
+        self.limits[axis] = {"max": float(hi), "source": source}
 
     @classmethod
     def of(cls, part: BodyPart, thickness, force, name: str = "training", source: str = "",
@@ -184,6 +196,16 @@ class Envelope:
         if not self.boxes:
             return []
         feat = features(part, thickness, force)
+        capped = []
+        for a, lim in self.limits.items():
+            vals = _values(feat, a)
+            kind, unit, k, what = AXES[a]
+            if vals and max(vals) > lim["max"] * (1 + SLACK):
+                capped.append(f"{what} {max(vals) * k:.3g} {unit} > {lim['max'] * k:.3g} {unit} "
+                              f"(where it was measured to stop keeping its promise: "
+                              f"{lim.get('source') or 'a limit'})".replace("  ", " "))
+        if capped:
+            return capped
         best = None
         for name, box in self.boxes.items():
             why = _outside(feat, box, name)
@@ -194,7 +216,8 @@ class Envelope:
         return best
 
     def to_dict(self) -> dict:
-        return {"format": FORMAT, "boxes": self.boxes, "info": self.info}
+        return {"format": FORMAT, "boxes": self.boxes, "info": self.info,
+                **({"limits": self.limits} if self.limits else {})}
 
     @classmethod
     def from_dict(cls, d: dict) -> "Envelope":
@@ -214,11 +237,20 @@ class Envelope:
                         or b[0] > b[1]):
                     raise ValueError(f"envelope box {name!r}, axis {a!r}: need [lo, hi] "
                                      f"finite and rising, got {b!r}")
-        return cls(dict(boxes), dict(d.get("info") or {}))
+        env = cls(dict(boxes), dict(d.get("info") or {}))
+        for a, lim in (d.get("limits") or {}).items():
+            if not isinstance(lim, dict) or not isinstance(lim.get("max"), (int, float)):
+                raise ValueError(f"envelope limit {a!r}: need {{max: value}}, got {lim!r}")
+            env.limit(a, lim["max"], str(lim.get("source", "")))
+        return env
 
     def summary(self, box: str = "training") -> str:
-        """One line per axis of ``box`` in readable units."""
+        """One line per axis of ``box`` in readable units (and one per limit)."""
         lines = []
+        for a, lim in self.limits.items():
+            kind, unit, k, what = AXES[a]
+            lines.append(f"{what}: limited to {lim['max'] * k:.3g} {unit} "
+                         f"({lim.get('source') or 'a limit'})")
         for a, (lo, hi) in self.boxes[box].items():
             kind, unit, k, what = AXES[a]
             rng = (f"{lo * k:.3g}-{hi * k:.3g}" if kind == "range" else

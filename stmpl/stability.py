@@ -228,6 +228,60 @@ def verdict(r: dict) -> str:
     return "<=1 %" if r["rel_mee"] <= 1 else "<=5 %" if r["rel_mee"] <= 5 else ">5 %"
 
 
+def broke(rec: dict, name: str) -> bool:
+    """Whether predictor ``name`` broke its per-scene promise (:data:`stmpl.zoo.SCENE_PROMISE`)
+    at point ``rec``: an answer where the FEM failed, a physically impossible answer, or one off
+    by more than the promise. A refused scene was not answered and did not."""
+    from stmpl.zoo import SCENE_PROMISE
+
+    r = rec["predictors"].get(name, {})
+    if "refused" in r or not r:
+        return False
+    if not rec["fem"]["ok"] or not r["physical"]:
+        return True
+    return (r["rel_mee"] > SCENE_PROMISE["rel_mee"]
+            or abs(r["peak_err"]) > SCENE_PROMISE["peak_err"])
+
+
+def measured(cfg: dict, part) -> list[tuple[object, list[dict]]]:
+    """The sweep's points as ``(scene, records)``: every cached record of the scene (a cache
+    may hold more than one, from earlier versions of the code; judge them together)."""
+    points = json.loads((pathlib.Path(cfg["out"]) / "points.json").read_text()).values()
+    by = {}
+    for rec in points:
+        if "skipped" not in rec:
+            by.setdefault((rec["axis"], float(rec["value"])), []).append(rec)
+    return [(scene_at(part, cfg["base"], a, v), recs) for (a, v), recs in sorted(by.items())]
+
+
+def limit(cfg: dict, part, name: str, envelope, axis: str = "contact_pressure") -> dict | None:
+    """The cap on ``axis`` (SI) that keeps predictor ``name``'s envelope to its promise on the
+    sweep: the highest value among the points inside its envelope where it kept the promise,
+    below the lowest one where it broke it (in any record), and far enough below that one that
+    the envelope's slack does not reach it. ``None`` when it broke it nowhere
+    inside; ``ValueError`` when no cap on this axis separates them."""
+    from stmpl.envelope import _values, features
+
+    kept, broken = [], []
+    for scene, recs in measured(cfg, part):
+        if not any(name in r["predictors"] for r in recs) or envelope.reasons(scene):
+            continue
+        v = _values(features(part, scene.thickness, scene.force), axis)
+        if not v:
+            continue
+        (broken if any(broke(r, name) for r in recs) else kept).append(max(v))
+    if not broken:
+        return None
+    below = [v for v in kept if v < min(broken)]
+    if not below:
+        raise ValueError(f"{name}: it breaks its promise at the lightest {axis} the sweep "
+                         "measured inside its envelope; no cap on this axis keeps it")
+    from stmpl.envelope import SLACK
+
+    cap = min(max(below), 0.999 * min(broken) / (1 + SLACK))   # the slack must not reach it
+    return {"max": cap, "kept": len(kept), "broken": len(broken)}
+
+
 def peak_off(r: dict, limit: float = 5.0) -> bool:
     """Whether the predicted deepest displacement is off the FEM's by more than ``limit`` %."""
     return "peak_err" in r and abs(r["peak_err"]) > limit

@@ -121,12 +121,57 @@ def read(name: str, device: str = "cpu", path=None):
     from stmpl import predictor
 
     p = predictor.read(verify(name, path), device=device)
-    kept = {k: v for k, v in (entry(name, path).get("envelope") or {}).items() if v["kept"]}
-    if kept and p.envelope is not None:
+    e = entry(name, path)
+    kept = {k: v for k, v in (e.get("envelope") or {}).items() if v["kept"]}
+    if p.envelope is not None:
         for k, v in kept.items():
             p.envelope.boxes[k] = v["box"]
             p.envelope.info[k] = v["info"]
+        for axis, lim in (e.get("limits") or {}).items():
+            p.envelope.limit(axis, lim["max"], lim.get("source", ""))
     return p
+
+
+def limit(names: list[str] | None, config, axis: str = "contact_pressure", path=None,
+          progress=print) -> dict:
+    """Cap the envelopes of zoo models (default: the learned ones a stability sweep measured)
+    on ``axis`` where the sweep of ``config`` (its cached points; run it first) found them
+    breaking :data:`SCENE_PROMISE` inside their data's support
+    (:func:`stmpl.stability.limit`); the caps are kept in the manifest entries (``limits``) and
+    applied by :func:`read`. Returns ``{name: cap or None}``."""
+    from stmpl import stability
+    from stmpl.body.spec import part_from_spec
+    from stmpl.files import atomic_write_text
+
+    cfg = stability.read_config(config)
+    part = part_from_spec(cfg["body"], cfg["part"])
+    m = manifest(path)
+    swept = [s[4:] for s in cfg["predictors"] if s.startswith("zoo:")]
+    out = {}
+    for name in names or swept:
+        if name not in swept:
+            raise ValueError(f"{name} is not among the sweep's predictors {swept}")
+        e = m["models"][name]
+        if e.get("kind") not in ("gnn", "uv_unet"):
+            continue
+        e.pop("limits", None)
+        p = read(name, path=path)
+        p.envelope.limits = {}                      # its envelope without a cap
+        lim = stability.limit(cfg, part, name, p.envelope, axis)
+        out[name] = None if lim is None else lim["max"]
+        if lim is not None:
+            e["limits"] = {axis: {"max": lim["max"],
+                                  "source": f"the stability sweep {cfg['name']}: kept at "
+                                            f"{lim['kept']} points, broke at {lim['broken']}"}}
+        if progress:
+            from stmpl.envelope import AXES
+
+            kind, unit, k, what = AXES[axis]
+            progress(f"{name}: " + ("keeps its promise inside its envelope at every point" if
+                                    lim is None else f"{what} limited to {lim['max'] * k:.3g} "
+                                    f"{unit} (broke it at {lim['broken']} points inside)"))
+    atomic_write_text(root(path) / MANIFEST, json.dumps(m, indent=1, sort_keys=True))
+    return out
 
 
 def add(checkpoint, name: str, trained: dict | None = None, path=None,

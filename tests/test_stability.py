@@ -74,42 +74,54 @@ def test_bad_sweeps_are_named():
         stability.read_config({"axes": {"force": [1.0]}})
 
 
-@pytest.mark.parametrize("config", ["configs/ablation/stability_fine.yaml"])
+@pytest.mark.parametrize("config", ["configs/ablation/stability.yaml",
+                                    "configs/ablation/stability_fine.yaml"])
 def test_the_shipped_envelopes_flag_every_sweep_point_where_a_model_breaks_its_promise(arm,
                                                                                       config):
-    """The committed sweep of the shipped models, driven through today's envelopes: at every
-    point where the FEM failed, or where a learned model's answer broke the per-scene promise
-    (zoo.SCENE_PROMISE) or was physically impossible, that model flags the scene as outside (or
-    refuses it). The envelope is what the sweep set; this keeps it so."""
-    import json
-    import pathlib
-
+    """The committed sweeps of the shipped models, driven through today's envelopes (with the
+    caps `stmpl zoo limit` set from them): at every point where the FEM failed, or where a
+    learned model's answer broke the per-scene promise (zoo.SCENE_PROMISE) or was physically
+    impossible, in any record of that point, the model flags the scene as outside (or refuses
+    it)."""
     from stmpl import zoo
 
     cfg = stability.read_config(config)
-    points = json.loads((pathlib.Path(cfg["out"]) / "points.json").read_text()).values()
     part = arm.subdivided(int(cfg["body"].get("subdivisions", 0)))
-    learned = {}
-    for spec in cfg["predictors"]:
-        p = zoo.read(spec[4:])
-        if p.name in ("gnn", "uv_unet"):
-            learned[spec[4:]] = p
+    learned = {s[4:]: zoo.read(s[4:]) for s in cfg["predictors"]}
+    learned = {n: p for n, p in learned.items() if p.name in ("gnn", "uv_unet")}
     assert learned
-    checked = broke = 0
-    for rec in points:
-        scene = stability.scene_at(part, cfg["base"], rec["axis"], rec["value"])
-        assert scene.total_force == pytest.approx(rec["total"], rel=1e-6)   # the same scene
+    checked = broken = 0
+    for scene, recs in stability.measured(cfg, part):
+        assert scene.total_force == pytest.approx(recs[0]["total"], rel=1e-6)   # the same scene
         for name, p in learned.items():
-            r = rec["predictors"][name]
-            if "refused" in r:
+            if all("refused" in r["predictors"][name] for r in recs):
                 continue
-            bad = (not rec["fem"]["ok"] or not r["physical"]
-                   or r["rel_mee"] > zoo.SCENE_PROMISE["rel_mee"]
-                   or abs(r["peak_err"]) > zoo.SCENE_PROMISE["peak_err"])
-            why = p.envelope.reasons(scene)
             checked += 1
-            if bad:
-                broke += 1
-                assert why, (f"{name} at {rec['axis']}={rec['value']}: broke its promise "
-                             f"({r.get('rel_mee')}, {r.get('peak_err')}) inside its envelope")
-    assert checked >= 80 and broke >= 20, (checked, broke)
+            if any(stability.broke(r, name) for r in recs):
+                broken += 1
+                assert p.envelope.reasons(scene), (
+                    f"{name} at {recs[0]['axis']}={recs[0]['value']}: broke its promise inside "
+                    "its envelope")
+    assert checked >= 80 and broken >= 20, (checked, broken)
+
+
+def test_a_limit_caps_every_box_and_survives_a_round_trip(ds):
+    from stmpl.envelope import Envelope
+    from stmpl.evaluate import scenes_of
+
+    scenes, _ = scenes_of(ds, "train")
+    env = Envelope.of(ds.part, np.stack([s.thickness for s in scenes]),
+                      np.stack([s.force for s in scenes]))
+    inside = [s for s in scenes if not env.reasons(s)]
+    from stmpl.envelope import features
+
+    cp = sorted(max(features(ds.part, s.thickness, s.force)["contact_pressure"]) for s in inside)
+    env.limit("contact_pressure", cp[len(cp) // 2], "a test")
+    again = Envelope.from_dict(env.to_dict())
+    for e in (env, again):
+        out = [s for s in inside if e.reasons(s)]
+        assert 0 < len(out) < len(inside)
+        assert all("where it was measured to stop keeping its promise: a test" in e.reasons(s)[0]
+                   for s in out)
+    with pytest.raises(ValueError, match="max or range axis"):
+        env.limit("rim_distance", 0.01)
