@@ -57,19 +57,12 @@ the stability sweep (reports/stability): the shipped GNN, trained on uniform lay
 def contacts(part: BodyPart, force: np.ndarray) -> list[np.ndarray]:
     """The contacts of a load: connected patches (over the mesh's edges) of the vertices with
     ``force > 0``, each a ``(K,)`` array of vertex indices; ``force`` ``(N,)``."""
-    from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
 
     loaded = np.flatnonzero(np.asarray(force) > 0)
     if len(loaded) == 0:
         return []
-    where = np.full(part.n_vertices, -1)
-    where[loaded] = np.arange(len(loaded))
-    e = where[part.edges]
-    e = e[(e >= 0).all(1)]
-    k = len(loaded)
-    graph = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(k, k))
-    n, label = connected_components(graph, directed=False)
+    n, label = connected_components(part.adjacency[loaded][:, loaded], directed=False)
     return [loaded[label == c] for c in range(n)]
 
 
@@ -100,10 +93,8 @@ def features(part: BodyPart, thickness: np.ndarray, force: np.ndarray) -> dict:
 def _around(part: BodyPart, vertices: np.ndarray, reach: float) -> np.ndarray:
     """The vertices within ``reach`` (m, straight line) of any of ``vertices``: the tissue a
     contact moves, whatever the mesh's resolution."""
-    from scipy.spatial import cKDTree
-
-    d = cKDTree(part.vertices[vertices]).query(part.vertices, distance_upper_bound=reach)[0]
-    return np.flatnonzero(d <= reach)
+    near = part.tree.query_ball_point(part.vertices[vertices], reach)
+    return np.unique(np.concatenate([np.asarray(x, dtype=np.int64) for x in near]))
 
 
 def _values(feat: dict, axis: str) -> list[float]:

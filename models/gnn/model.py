@@ -193,13 +193,8 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         from fem.local import first_margin
 
         if getattr(self, "_adjacency", None) is None:
-            import scipy.sparse as sp
-
             e = self.part.edges
-            n = self.part.n_vertices
-            a = sp.coo_matrix((np.ones(2 * len(e), bool), (np.r_[e[:, 0], e[:, 1]],
-                                                            np.r_[e[:, 1], e[:, 0]])), (n, n))
-            self._adjacency = a.tocsr().astype(np.float32)
+            self._adjacency = self.part.adjacency.astype(np.float32)
             self._edge = float(np.median(np.linalg.norm(np.diff(self.part.vertices[e], axis=1)[:, 0],
                                                         axis=1)))
         inner, sub = np.zeros(force.shape, bool), np.zeros(force.shape, bool)

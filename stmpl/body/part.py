@@ -88,6 +88,22 @@ class BodyPart:
         return np.unique(np.sort(e, axis=1), axis=0)
 
     @cached_property
+    def adjacency(self) -> sp.csr_matrix:
+        """``(N, N)`` symmetric boolean vertex adjacency over :attr:`edges`."""
+        e, n = self.edges, self.n_vertices
+        a = sp.coo_matrix((np.ones(2 * len(e), bool), (np.r_[e[:, 0], e[:, 1]],
+                                                        np.r_[e[:, 1], e[:, 0]])), (n, n))
+        return a.tocsr()
+
+    @cached_property
+    def tree(self):
+        """A k-d tree of the rest positions (``scipy.spatial.cKDTree``), for neighbourhoods in
+        metres."""
+        from scipy.spatial import cKDTree
+
+        return cKDTree(self.vertices)
+
+    @cached_property
     def face_areas(self) -> np.ndarray:
         """``(M,)`` triangle areas, m^2."""
         return triangle_areas(self.vertices, self.faces)
