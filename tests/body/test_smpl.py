@@ -123,3 +123,57 @@ def test_missing_files_and_uvs(smpl_files, tmp_path):
         SMPLBody(model, uv, betas=np.zeros(11))
     with pytest.raises(ValueError, match="no whole face"):
         SMPLBody(model, uv, cache_dir=tmp_path).part("right_arm")
+
+
+def test_an_smpl_format_body_goes_through_the_whole_pipeline(smpl_files, tmp_path):
+    """A user's SMPL-format files take the same path as anny: a dataset made by the FEM on its
+    left arm, a GNN (on the linear FEM prior) trained on it, a checkpoint that predicts a fresh
+    scene on that body closer to the FEM than Naive does, and that refuses a body of another
+    topology with an error that says so."""
+    import warnings
+
+    from fem.generate import generate
+    from stmpl import loads, predictor, tissue
+    from stmpl.body.spec import part_from_spec
+    from stmpl.dataset import Dataset
+    from stmpl.scene import Scene
+    from stmpl.train import train
+
+    model, uv, _, _ = smpl_files
+    body = {"model": "smpl", "path": str(model), "uv_path": str(uv)}
+    data = tmp_path / "smpl_data"
+    generate({"name": "smpl_tiny", "body": body, "part": "left_arm", "thickness_mm": [5.0, 10.0],
+              "resolution": {"subdivisions": 1, "layers": 1, "refine_radius": 0.03, "order": 1},
+              "forces": [0.05, 0.1, 0.2], "placements": {"disk": {"centres": 8,
+                                                                   "radii": [0.03]}},
+              "shard_tasks": 4, "parallel": {"backend": "serial", "workers": 1}},
+             data, progress=False)
+    ds = Dataset(data)
+    assert ds.card["config"]["body"]["model"] == "smpl" and len(ds.arrays("train")["force"]) > 0
+    runs = {}
+    for kind, options, epochs in (("gnn", {"latent": 16, "steps": 2, "per_newton": True,
+                                           "prior": "linear", "loss": "relative"}, 30),
+                                  ("naive", {}, 30)):
+        runs[kind] = predictor.read(train({"name": f"smpl_{kind}", "model": kind,
+                                           "options": options, "data": str(data),
+                                           "epochs": epochs, "batch": 8, "lr": 1e-3,
+                                           "out": str(tmp_path / "runs" / kind)},
+                                          progress=False))
+    part = part_from_spec(body, "left_arm")
+    scene = Scene.from_load(part, tissue.constant(part, 0.0075),
+                            loads.disk(part, uv=(0.4, 0.5), radius=0.03, total=0.15))
+    truth = predictor.create("fem", res=ds.card["config"]["resolution"]).predict(scene)
+    peak = truth.magnitude.max()
+    err = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")               # 7.5 mm lies between the levels
+        for kind, p in runs.items():
+            d = p.predict(scene)
+            err[kind] = float(np.linalg.norm(d.displacement - truth.displacement, axis=1).mean()
+                              / peak)
+    assert err["gnn"] < 0.5 * err["naive"] and err["gnn"] < 0.05, err
+    other = tube(radius=0.04, length=0.5, n_around=10, n_along=9)
+    with pytest.raises(ValueError, match="another body part"):
+        runs["gnn"].predict(Scene.from_load(other, tissue.constant(other, 0.0075),
+                                            loads.disk(other, uv=(0.5, 0.5), radius=0.03,
+                                                       total=0.1)))
