@@ -432,7 +432,8 @@ def table(rows: dict, paper: dict | None = None, fmt: str = "markdown") -> str:
         cells = [_cell(r.get(k), sc, dec) if k in r or not reported else ""
                  for k, _, sc, dec in COLUMNS]
         label = f"*{name}*" if reported else name
-        lines.append(f"| {label} | {r.get('samples', '')} | " + " | ".join(cells) + " |")
+        n = f"{r.get('samples', '')}" + (f" ({r['failed']} failed)" if r.get("failed") else "")
+        lines.append(f"| {label} | {n} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
 

@@ -44,19 +44,27 @@ def evaluate_dataset(predictor, ds, split: str = "test", thickness_mm=None,
     import torch
 
     from stmpl.metrics import sample_metrics, seam_gap, summarise
-    from stmpl.predictor import OutsideEnvelope
+    from stmpl.predictor import OutsideEnvelope, PredictionFailed
 
     scenes, truth = scenes_of(ds, split, thickness_mm, limit)
     if not scenes:
         raise ValueError(f"split {split!r} of {ds.folder} has no samples")
     part = ds.part
     seam = part.seam_vertices
-    rows, seconds = [], []
+    rows, seconds, failed = [], [], []
+    if getattr(predictor, "name", "") == "fem":
+        batch = 1                          # seconds per scene, and a solve may fail alone
     for i in range(0, len(scenes), batch):
         chunk = scenes[i:i + batch]
         with warnings.catch_warnings():    # measured, not warned: see inside_envelope
             warnings.simplefilter("ignore", OutsideEnvelope)
-            out = predictor.predict(chunk)
+            try:
+                out = predictor.predict(chunk)
+            except PredictionFailed as e:  # counted and left out of the measures, with why
+                if len(chunk) > 1:
+                    raise
+                failed.append(str(e))
+                continue
         if hasattr(predictor, "corner_displacement"):
             t, f = (torch.tensor(np.stack([getattr(s, k) for s in chunk]), dtype=torch.float32,
                                  device=predictor.device) for k in ("thickness", "force"))
@@ -68,8 +76,14 @@ def evaluate_dataset(predictor, ds, split: str = "test", thickness_mm=None,
             rows.append({**sample_metrics(u, d.displacement, seam), "seam_gap": seam_gap(part, c),
                          "inside_envelope": np.nan if env is None else 100.0 * env["inside"]})
             seconds.append(d.info.get("seconds", np.nan))
+    if not rows:
+        raise PredictionFailed(f"{getattr(predictor, 'name', 'the predictor')} failed on all "
+                               f"{len(scenes)} scenes of {ds.folder} ({split}): {failed[0]}")
     s = summarise(rows)
     s["seconds_per_scene"] = (float(np.nanmean(seconds)), float(np.nanstd(seconds)))
+    if failed:
+        s["failed"] = len(failed)
+        s["failed_first"] = failed[0]
     return {k: (list(v) if isinstance(v, tuple) else v) for k, v in s.items()}
 
 

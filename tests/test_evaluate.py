@@ -35,3 +35,32 @@ def test_limits_and_tables(ds, make, tmp_path):
     assert "| naive | 3 |" in md
     assert (tmp_path / "t.md").read_text().startswith(f"Dataset {ds.folder}")
     assert (tmp_path / "t.csv").read_text().splitlines()[1].startswith("naive,3,")
+
+
+def test_a_scene_the_fem_fails_on_is_counted_and_left_out(ds, make):
+    """The FEM answers scene by scene; one that fails is counted with its reason, not averaged
+    in and not the end of the evaluation; failing on every scene is an error."""
+    from stmpl.evaluate import evaluate_dataset
+    from stmpl.predictor import PredictionFailed
+
+    fem = make("fem", ds)
+    solve = fem.predict_batch
+    seen = []
+
+    def flaky(scenes):
+        seen.append(len(scenes))
+        if len(seen) == 2:
+            raise PredictionFailed("the FEM solve failed at 0.2 N: indefinite tangent")
+        return solve(scenes)
+
+    fem.predict_batch = flaky
+    res = evaluate_dataset(fem, ds, "test", limit=3)
+    assert seen == [1, 1, 1] and res["samples"] == 2 and res["failed"] == 1
+    assert "indefinite tangent" in res["failed_first"]
+
+    def broken(scenes):
+        raise PredictionFailed("the FEM cannot build the tissue")
+
+    fem.predict_batch = broken
+    with pytest.raises(PredictionFailed, match="failed on all 2 scenes"):
+        evaluate_dataset(fem, ds, "test", limit=2)
