@@ -290,8 +290,13 @@ def run(config, progress: bool = True) -> dict:
 
         bar = tqdm(total=2 * len(cfg["setups"]) + len(jobs), unit="job", desc=f"ablate {cfg['name']}",
                    dynamic_ncols=True)
-    predictors, keys = {}, {}
-    for s in cfg["setups"]:
+    tables: dict = {"table1": {}, "table2": {}, "table3": {}}
+    points = []
+
+    def save():
+        atomic_write_text(cache_path, json.dumps(cache, indent=1, sort_keys=True))
+
+    for s in cfg["setups"]:           # one set-up at a time: trained, measured, its report out
         if "train" in s:
             t = _training_config(s, cfg, ind)
             ckpt = pathlib.Path(t["out"]) / f"{t['name']}.safetensors"
@@ -302,37 +307,35 @@ def run(config, progress: bool = True) -> dict:
         else:
             spec = s["predictor"]
         fidelity = s.get("fidelity", "full")
-        predictors[s["name"]] = _open(spec, fidelity)
-        keys[s["name"]] = _setup_key(spec) + ("" if fidelity == "full" else f"@{fidelity}")
+        p = _open(spec, fidelity)
+        setup_key = _setup_key(spec) + ("" if fidelity == "full" else f"@{fidelity}")
         if bar is not None:
             bar.update(1)
-    tables: dict = {"table1": {}, "table2": {}, "table3": {}}
-    for s, d, thick, table, row in jobs:
-        ds = sets[d]
-        key = _hash([keys[s["name"]], ds.card["hash"], thick, cfg["batch"], s.get("limit")])
-        if key not in cache:
-            from stmpl.evaluate import evaluate_dataset
+        for _, d, thick, table, row in [j for j in jobs if j[0] is s]:
+            ds = sets[d]
+            key = _hash([setup_key, ds.card["hash"], thick, cfg["batch"], s.get("limit")])
+            if key not in cache:
+                from stmpl.evaluate import evaluate_dataset
 
-            t0 = time.perf_counter()
-            res = evaluate_dataset(predictors[s["name"]], _ready(ds), "test", thickness_mm=thick,
-                                   batch=cfg["batch"], limit=s.get("limit"))
-            cache[key] = {**res, "evaluated_seconds": time.perf_counter() - t0}
-            atomic_write_text(cache_path, json.dumps(cache, indent=1, sort_keys=True))
-        tables[table][row] = cache[key]
-        if bar is not None:
-            bar.update(1)
-    points = []
-    for s in cfg["setups"]:
-        key = _hash(["latency", keys[s["name"]], ind.card["hash"]])
+                t0 = time.perf_counter()
+                res = evaluate_dataset(p, _ready(ds), "test", thickness_mm=thick,
+                                       batch=cfg["batch"], limit=s.get("limit"))
+                cache[key] = {**res, "evaluated_seconds": time.perf_counter() - t0}
+                save()
+            tables[table][row] = cache[key]
+            if bar is not None:
+                bar.update(1)
+        key = _hash(["latency", setup_key, ind.card["hash"]])
         if key not in cache:
-            cache[key] = _latency(predictors[s["name"]], _ready(ind))
-            atomic_write_text(cache_path, json.dumps(cache, indent=1, sort_keys=True))
+            cache[key] = _latency(p, _ready(ind))
+            save()
         err = _pooled([tables["table2"].get(f"{s['name']} / {o}")
                        for o in cfg["out_of_distribution"]] or [tables["table1"][s["name"]]])
         for batch, sec in cache[key].items():
             points.append({"label": s["name"], "batch": int(batch), "seconds": sec, **err})
         if bar is not None:
             bar.update(1)
+        _write(cfg, tables, out, points)             # the report so far
     if bar is not None:
         bar.close()
     _write(cfg, tables, out, points)
