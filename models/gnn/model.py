@@ -56,7 +56,9 @@ class GraphNetBlock(MessagePassing):
     ``g_e``'s first layer is applied as ``A e_ij + B h_i + C h_j``: the same map as on the
     concatenation, but ``B h`` and ``C h`` are computed once per node and gathered, which saves
     two thirds of the edge work (there are about six times more edges than nodes). Gathers use
-    ``index_select``, six times faster than advanced indexing on the CPU at these sizes."""
+    ``index_select``, six times faster than advanced indexing on the CPU at these sizes, and the
+    sum over incoming edges is one ``index_add_`` (the same sum as ``propagate`` with
+    ``aggr="add"``, without its per-call overhead: 10 % of a batch-1 prediction)."""
 
     def __init__(self, latent: int):
         super().__init__(aggr="add")
@@ -71,11 +73,8 @@ class GraphNetBlock(MessagePassing):
         hi, hj = h @ W[:, L:2 * L].T, h @ W[:, 2 * L:].T              # per node, then gathered
         nodes = torch.index_select(hi, 0, i) + torch.index_select(hj, 0, j) + b
         e = e + self.edge_out(torch.addmm(nodes, e, W[:, :L].T))
-        agg = self.propagate(edge_index, e=e, size=(h.shape[0], h.shape[0]))
+        agg = torch.zeros_like(h).index_add_(0, i, e)                 # sum_j e_ij at node i
         return h + self.node_mlp(torch.cat([h, agg], dim=-1)), e
-
-    def message(self, e: torch.Tensor) -> torch.Tensor:
-        return e
 
 
 class Normaliser(nn.Module):
