@@ -57,13 +57,23 @@ the stability sweep (reports/stability): the shipped GNN, trained on uniform lay
 def contacts(part: BodyPart, force: np.ndarray) -> list[np.ndarray]:
     """The contacts of a load: connected patches (over the mesh's edges) of the vertices with
     ``force > 0``, each a ``(K,)`` array of vertex indices; ``force`` ``(N,)``."""
-    from scipy.sparse.csgraph import connected_components
-
-    loaded = np.flatnonzero(np.asarray(force) > 0)
+    on = np.asarray(force) > 0
+    loaded = np.flatnonzero(on)
     if len(loaded) == 0:
         return []
-    n, label = connected_components(part.adjacency[loaded][:, loaded], directed=False)
-    return [loaded[label == c] for c in range(n)]
+    e = part.edges
+    e = e[on[e[:, 0]] & on[e[:, 1]]]                  # edges inside the load
+    label = np.arange(part.n_vertices)
+    while True:                                       # each vertex takes its patch's least index
+        new = label.copy()
+        np.minimum.at(new, e[:, 0], label[e[:, 1]])
+        np.minimum.at(new, e[:, 1], label[e[:, 0]])
+        new = new[new]                                # jump along the chain
+        if np.array_equal(new, label):
+            break
+        label = new
+    label = label[loaded]
+    return [loaded[label == c] for c in np.unique(label)]
 
 
 def features(part: BodyPart, thickness: np.ndarray, force: np.ndarray) -> dict:

@@ -27,6 +27,16 @@ def test_contacts_are_the_connected_loaded_patches(ds):
     two = contacts(part, both.force)
     assert len(two) == 2
     assert sorted(map(len, two)) == sorted([a.count, b.count])
+    from scipy.sparse.csgraph import connected_components
+
+    rng = np.random.default_rng(0)                    # any pattern: scipy's components
+    for share in (0.05, 0.3, 0.6, 0.95):
+        f = (rng.random(part.n_vertices) < share).astype(float)
+        on = np.flatnonzero(f)
+        n, label = connected_components(part.adjacency[on][:, on], directed=False)
+        want = [on[label == c] for c in range(n)]
+        got = contacts(part, f)
+        assert len(got) == n > 0 and all(np.array_equal(x, y) for x, y in zip(got, want))
 
 
 def test_features_are_force_over_area(ds):
