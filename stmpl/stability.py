@@ -254,32 +254,44 @@ def measured(cfg: dict, part) -> list[tuple[object, list[dict]]]:
     return [(scene_at(part, cfg["base"], a, v), recs) for (a, v), recs in sorted(by.items())]
 
 
-def limit(cfg: dict, part, name: str, envelope, axis: str = "contact_pressure") -> dict | None:
-    """The cap on ``axis`` (SI) that keeps predictor ``name``'s envelope to its promise on the
-    sweep: the highest value among the points inside its envelope where it kept the promise,
-    below the lowest one where it broke it (in any record), and far enough below that one that
-    the envelope's slack does not reach it. ``None`` when it broke it nowhere
-    inside; ``ValueError`` when no cap on this axis separates them."""
-    from stmpl.envelope import _values, features
+LIMIT_AXES = ("contact_pressure", "peak_pressure", "contact_force", "contacts")
+"""The axes a sweep may cap an envelope on (how hard, and how many places, the load presses)."""
 
-    kept, broken = [], []
+
+def limit(cfg: dict, part, name: str, envelope, axes=LIMIT_AXES) -> dict | None:
+    """The cap that keeps predictor ``name``'s envelope to its promise on the sweep: on each of
+    ``axes``, the highest value among the points inside its envelope where it kept the promise,
+    below the lowest one where it broke it (in any record), and far enough below that one that
+    the envelope's slack does not reach it; of those, the cap that leaves the most kept points
+    inside. Returns ``{"axis", "max" (SI), "kept", "broken", "lost"}`` (``lost``: kept points
+    the cap puts outside), ``None`` when it broke its promise nowhere inside; ``ValueError``
+    when no single cap separates them."""
+    from stmpl.envelope import SLACK, _values, features
+
+    rows = []                               # (feature values, broke?) of the points inside
     for scene, recs in measured(cfg, part):
         if not any(name in r["predictors"] for r in recs) or envelope.reasons(scene):
             continue
-        v = _values(features(part, scene.thickness, scene.force), axis)
-        if not v:
-            continue
-        (broken if any(broke(r, name) for r in recs) else kept).append(max(v))
-    if not broken:
+        rows.append((features(part, scene.thickness, scene.force),
+                     any(broke(r, name) for r in recs)))
+    if not any(b for _, b in rows):
         return None
-    below = [v for v in kept if v < min(broken)]
-    if not below:
-        raise ValueError(f"{name}: it breaks its promise at the lightest {axis} the sweep "
-                         "measured inside its envelope; no cap on this axis keeps it")
-    from stmpl.envelope import SLACK
-
-    cap = min(max(below), 0.999 * min(broken) / (1 + SLACK))   # the slack must not reach it
-    return {"max": cap, "kept": len(kept), "broken": len(broken)}
+    best = None
+    for axis in axes:
+        kept = [max(_values(f, axis)) for f, b in rows if not b and _values(f, axis)]
+        broken = [max(_values(f, axis)) for f, b in rows if b and _values(f, axis)]
+        below = [v for v in kept if v < min(broken)]
+        if not below:
+            continue
+        cap = min(max(below), 0.999 * min(broken) / (1 + SLACK))
+        lost = sum(v > cap * (1 + SLACK) for v in kept)
+        if best is None or lost < best["lost"]:
+            best = {"axis": axis, "max": cap, "kept": len(kept), "broken": len(broken),
+                    "lost": int(lost)}
+    if best is None:
+        raise ValueError(f"{name}: it breaks its promise at the lightest load the sweep measured "
+                         f"inside its envelope on every axis of {list(axes)}; no cap keeps it")
+    return best
 
 
 def peak_off(r: dict, limit: float = 5.0) -> bool:

@@ -132,15 +132,15 @@ def read(name: str, device: str = "cpu", path=None):
     return p
 
 
-def limit(names: list[str] | None, config, axis: str = "contact_pressure", path=None,
-          progress=print) -> dict:
+def limit(names: list[str] | None, config, path=None, progress=print) -> dict:
     """Cap the envelopes of zoo models (default: the learned ones a stability sweep measured)
-    on ``axis`` where the sweep of ``config`` (its cached points; run it first) found them
-    breaking :data:`SCENE_PROMISE` inside their data's support
-    (:func:`stmpl.stability.limit`); the caps are kept in the manifest entries (``limits``) and
-    applied by :func:`read`. Returns ``{name: cap or None}``."""
+    where the sweep of ``config`` (its cached points; run it first) found them breaking
+    :data:`SCENE_PROMISE` inside their data's support (:func:`stmpl.stability.limit`: one cap, on
+    the axis that keeps the most of the points where they held); the caps are kept in the
+    manifest entries (``limits``) and applied by :func:`read`. Returns ``{name: cap or None}``."""
     from stmpl import stability
     from stmpl.body.spec import part_from_spec
+    from stmpl.envelope import AXES
     from stmpl.files import atomic_write_text
 
     cfg = stability.read_config(config)
@@ -157,19 +157,21 @@ def limit(names: list[str] | None, config, axis: str = "contact_pressure", path=
         e.pop("limits", None)
         p = read(name, path=path)
         p.envelope.limits = {}                      # its envelope without a cap
-        lim = stability.limit(cfg, part, name, p.envelope, axis)
-        out[name] = None if lim is None else lim["max"]
+        lim = stability.limit(cfg, part, name, p.envelope)
+        out[name] = lim
         if lim is not None:
-            e["limits"] = {axis: {"max": lim["max"],
-                                  "source": f"the stability sweep {cfg['name']}: kept at "
-                                            f"{lim['kept']} points, broke at {lim['broken']}"}}
+            e["limits"] = {lim["axis"]: {
+                "max": lim["max"],
+                "source": f"the stability sweep {cfg['name']}: kept at {lim['kept']} points, "
+                          f"broke at {lim['broken']}"}}
         if progress:
-            from stmpl.envelope import AXES
-
-            kind, unit, k, what = AXES[axis]
-            progress(f"{name}: " + ("keeps its promise inside its envelope at every point" if
-                                    lim is None else f"{what} limited to {lim['max'] * k:.3g} "
-                                    f"{unit} (broke it at {lim['broken']} points inside)"))
+            if lim is None:
+                progress(f"{name}: keeps its promise inside its envelope at every point")
+            else:
+                kind, unit, k, what = AXES[lim["axis"]]
+                progress(f"{name}: {what} limited to {lim['max'] * k:.3g} {unit} (broke its "
+                         f"promise at {lim['broken']} points inside; {lim['lost']} of the "
+                         f"{lim['kept']} where it held now lie outside)")
     atomic_write_text(root(path) / MANIFEST, json.dumps(m, indent=1, sort_keys=True))
     return out
 
