@@ -135,10 +135,10 @@ def read(name: str, device: str = "cpu", path=None):
 def limit(names: list[str] | None, config, path=None, progress=print) -> dict:
     """Cap the envelopes of zoo models (default: the learned ones a stability sweep measured)
     where the sweep of ``config`` (its cached points; run it first) found them breaking
-    :data:`SCENE_PROMISE` inside their data's support (:func:`stmpl.stability.limit`: one cap, on
+    :data:`SCENE_PROMISE` inside their data's support (:func:`stmpl.limits.limit`: one cap, on
     the axis that keeps the most of the points where they held); the caps are kept in the
     manifest entries (``limits``) and applied by :func:`read`. Returns ``{name: cap or None}``."""
-    from stmpl import stability
+    from stmpl import limits, stability
     from stmpl.body.spec import part_from_spec
     from stmpl.envelope import AXES
     from stmpl.files import atomic_write_text
@@ -157,7 +157,7 @@ def limit(names: list[str] | None, config, path=None, progress=print) -> dict:
         e.pop("limits", None)
         p = read(name, path=path)
         p.envelope.limits = {}                      # its envelope without a cap
-        lim = stability.limit(cfg, part, name, p.envelope)
+        lim = limits.limit(cfg, part, name, p.envelope)
         out[name] = lim
         if lim is not None:
             e["limits"] = {lim["axis"]: {

@@ -83,7 +83,7 @@ def test_the_shipped_envelopes_flag_every_sweep_point_where_a_model_breaks_its_p
     learned model's answer broke the per-scene promise (zoo.SCENE_PROMISE) or was physically
     impossible, in any record of that point, the model flags the scene as outside (or refuses
     it)."""
-    from stmpl import zoo
+    from stmpl import limits, zoo
 
     cfg = stability.read_config(config)
     part = arm.subdivided(int(cfg["body"].get("subdivisions", 0)))
@@ -91,13 +91,13 @@ def test_the_shipped_envelopes_flag_every_sweep_point_where_a_model_breaks_its_p
     learned = {n: p for n, p in learned.items() if p.name in ("gnn", "uv_unet")}
     assert learned
     checked = broken = 0
-    for scene, recs in stability.measured(cfg, part):
+    for scene, recs in limits.measured(cfg, part):
         assert scene.total_force == pytest.approx(recs[0]["total"], rel=1e-6)   # the same scene
         for name, p in learned.items():
             if all("refused" in r["predictors"][name] for r in recs):
                 continue
             checked += 1
-            if any(stability.broke(r, name) for r in recs):
+            if any(limits.broke(r, name) for r in recs):
                 broken += 1
                 assert p.envelope.reasons(scene), (
                     f"{name} at {recs[0]['axis']}={recs[0]['value']}: broke its promise inside "
