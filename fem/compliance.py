@@ -149,7 +149,7 @@ STORE_VERSION = 1
 class ColumnStore:
     """The compliance operator of one body part and FEM set-up at thickness ``levels`` (m),
     column by column as scenes ask for them (:func:`local_compliance`), kept in memory (one
-    dense ``(N, N, 3)`` float32 array per level used) and, with ``cache``, on disk in stmpl's
+    dense ``(N, N, 3)`` float32 array per level used, each column contiguous) and, with ``cache``, on disk in stmpl's
     cache directory (``compliance/``), so a later process starts warm.
 
     ``setup``: a dataset config's ``material``, ``resolution`` and ``solver`` entries.
@@ -170,6 +170,7 @@ class ColumnStore:
         self.res = self.setup["resolution"] or "reference"
         self.cache, self.progress = cache, progress
         self._G: dict[int, np.ndarray] = {}
+        self._by_column: dict[int, np.ndarray] = {}
         self._done: dict[int, np.ndarray] = {}
         self.log: list[dict] = []
         h = hashlib.sha256(json.dumps([STORE_VERSION, self.setup, COLUMN_TOLERANCE],
@@ -200,7 +201,9 @@ class ColumnStore:
     def _level(self, level: int) -> tuple[np.ndarray, np.ndarray]:
         if level not in self._G:
             n = self.part.n_vertices
-            self._G[level], self._done[level] = np.zeros((n, n, 3), np.float32), np.zeros(n, bool)
+            self._by_column[level] = np.zeros((n, n, 3), np.float32)  # [column, vertex, xyz]
+            self._G[level] = self._by_column[level].transpose(1, 0, 2)  # the same memory
+            self._done[level] = np.zeros(n, bool)
             self._read(level)
         return self._G[level], self._done[level]
 
@@ -270,4 +273,5 @@ class ColumnStore:
         computed first where missing (``ensure=False``: the caller has made sure)."""
         if ensure:
             self.ensure(level, columns)
-        return self._level(level)[0][:, np.asarray(columns, dtype=np.int64)]
+        self._level(level)                  # each column contiguous: the gather is k copies
+        return self._by_column[level][np.asarray(columns, dtype=np.int64)].transpose(1, 0, 2)
