@@ -50,6 +50,7 @@ def speed_accuracy(points: list[dict], path, title: str = "") -> list[pathlib.Pa
         raise ValueError("no points to chart")
     fig, axes = plt.subplots(1, 2, figsize=(13, 5.4))
     x = np.array([p["seconds"] * 1e3 for p in points])
+    names = []                                  # (axes, points to name) once laid out
     for ax, key, what in ((axes[0], "rel_mee", "out-of-distribution relative MEE, %"),
                           (axes[1], "peak_err", "out-of-distribution |peak error|, %")):
         y = np.array([abs(p[key]) for p in points])
@@ -67,11 +68,10 @@ def speed_accuracy(points: list[dict], path, title: str = "") -> list[pathlib.Pa
         if len(front) > 1:
             ax.step(x[front], y[front], where="post", c="#999999", lw=1.2, ls="--", zorder=2,
                     label="Pareto front")
-        for i in idx:
-            b = points[i].get("batch", 1)
-            ax.annotate(points[i]["label"] + ("" if b == 1 else f" (batch {b})"),
-                        (x[i], y[i]), xytext=(4, 3), textcoords="offset points", fontsize=7,
-                        color="#333333")
+        for label in {points[i]["label"] for i in idx}:     # a set-up's batch sizes, joined
+            mine = sorted((x[i], y[i]) for i in idx if points[i]["label"] == label)
+            if len(mine) > 1:
+                ax.plot(*zip(*mine), c=FAMILIES[family(label)], lw=0.8, alpha=0.5, zorder=2)
         if key == "rel_mee":
             ax.scatter([PAPER_POINT["seconds"] * 1e3], [PAPER_POINT["rel_mee"]], marker="*",
                        s=160, facecolors="none", edgecolors="black", zorder=4,
@@ -81,15 +81,21 @@ def speed_accuracy(points: list[dict], path, title: str = "") -> list[pathlib.Pa
         ax.set_xlabel("time per scene, ms (log; this CPU unless marked)")
         ax.set_ylabel(what + " (log)")
         ax.grid(True, which="both", alpha=0.25)
-        ax.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
-        ax.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-        ax.xaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+        fmt = matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}")
+        for axis in (ax.xaxis, ax.yaxis):                   # 1-2-5 ticks, labelled
+            axis.set_major_locator(matplotlib.ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
+            axis.set_major_formatter(fmt)
+            axis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+        names.append((ax, [(x[i], y[i], points[i]["label"]) for i in idx
+                           if points[i].get("batch", 1) == 1]))
     handles, labels = axes[0].get_legend_handles_labels()
     seen = dict(zip(labels, handles))
     fig.legend(seen.values(), seen.keys(), loc="lower center", ncol=4, fontsize=8,
                frameon=False)
     fig.suptitle(title or "Speed against accuracy: lower left is better", fontsize=12)
     fig.tight_layout(rect=(0, 0.12, 1, 0.95))
+    for ax, items in names:
+        _labels(ax, items)
     path = pathlib.Path(path)
     base = path.with_suffix("")
     base.parent.mkdir(parents=True, exist_ok=True)
@@ -98,3 +104,30 @@ def speed_accuracy(points: list[dict], path, title: str = "") -> list[pathlib.Pa
     fig.savefig(out[1])
     plt.close(fig)
     return out
+
+
+def _labels(ax, items: list) -> None:
+    """Name each point (``(x, y, text)``) beside it, trying a few places around it so that no
+    two names overlap and none leaves the axes (the first such place; the first tried if none
+    is)."""
+    fig = ax.figure
+    fig.canvas.draw()
+    renderer = fig.canvas.get_renderer()
+    placed = []
+    frame = ax.get_window_extent(renderer)
+    offsets = [(5, 4), (5, -11), (-5, 4), (-5, -11), (5, 14), (5, -21), (-5, 14), (-5, -21)]
+    for x, y, text in sorted(items, key=lambda t: (t[0], t[1])):
+        for dx, dy in offsets:
+            t = ax.annotate(text, (x, y), xytext=(dx, dy), textcoords="offset points",
+                            fontsize=7, color="#333333", ha="left" if dx > 0 else "right")
+            box = t.get_window_extent(renderer)
+            inside = (frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0
+                      and box.y1 <= frame.y1)
+            if inside and not any(box.overlaps(b) for b in placed):
+                break
+            t.remove()
+        else:
+            t = ax.annotate(text, (x, y), xytext=offsets[0], textcoords="offset points",
+                            fontsize=7, color="#333333")
+            box = t.get_window_extent(renderer)
+        placed.append(box)
