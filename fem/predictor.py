@@ -50,6 +50,7 @@ class FEMPredictor(BasePredictor):
     """
 
     name = "fem"
+    batched = False
 
     def __init__(self, res="reference", levels: int = 1, material=None, options=None,
                  fidelity: str = "full"):

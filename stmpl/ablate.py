@@ -26,6 +26,7 @@ import time
 
 import numpy as np
 
+from stmpl.spec import key as spec_key
 from stmpl.tables import PAPER, TITLES, table
 
 DEFAULTS = {
@@ -266,7 +267,7 @@ def run(config, progress: bool = True) -> dict:
             spec = s["predictor"]
         fidelity = s.get("fidelity", "full")
         p = _open(spec, fidelity)
-        setup_key = _setup_key(spec) + ("" if fidelity == "full" else f"@{fidelity}")
+        setup_key = spec_key(spec) + ("" if fidelity == "full" else f"@{fidelity}")
         if bar is not None:
             bar.update(1)
         for _, d, thick, tab, row in [j for j in jobs if j[0] is s]:
@@ -296,7 +297,6 @@ def run(config, progress: bool = True) -> dict:
         _write(cfg, tables, out, points)             # the report so far
     if bar is not None:
         bar.close()
-    _write(cfg, tables, out, points)
     return {"tables": tables, "out": out, "points": points}
 
 
@@ -314,7 +314,7 @@ def _latency(p, ds, repeats: int = 5) -> dict:
         warnings.simplefilter("ignore", OutsideEnvelope)
         warnings.simplefilter("ignore", ImpossibleAnswer)
         p.predict(scenes[0])                                    # warm-up
-        if getattr(p, "name", "") == "fem":                     # one scene at a time, seconds
+        if not getattr(p, "batched", True):                     # the FEM: seconds a scene
             return {"1": float(np.median([_timed(p, [s]) for s in scenes[:2]]))}
         one = float(np.median([_timed(p, [s]) for s in scenes[:repeats * 4]]))
         many = float(np.median([_timed(p, scenes) / len(scenes) for _ in range(repeats)]))
@@ -345,27 +345,13 @@ def _open(spec: str, fidelity: str = "full"):
     return predictor_from_spec(spec, fidelity=fidelity)
 
 
-def _setup_key(spec: str) -> str:
-    """What decides a set-up's answers: a checkpoint's digest, or the spec itself."""
-    from stmpl.checkpoint import read_sidecar
-
-    p = pathlib.Path(spec)
-    if p.suffix == ".safetensors" and p.is_file():
-        return read_sidecar(p)["digest"]
-    if spec.startswith("zoo:"):
-        from stmpl import zoo
-
-        return zoo.entry(spec[4:])["digest"]
-    return spec
-
-
 def _write(cfg, tables, out: pathlib.Path, points: list) -> None:
     import platform
 
     from stmpl.files import atomic_write_text
 
     parts = [f"# Ablation: {cfg['name']}\n",
-             f"Datasets: " + ", ".join(f"{n} ({d['folder']})" for n, d in cfg["datasets"].items())
+             "Datasets: " + ", ".join(f"{n} ({d['folder']})" for n, d in cfg["datasets"].items())
              + f". Machine: {platform.processor() or platform.machine()}, "
              f"{__import__('os').cpu_count()} cores. Errors in mm on the vertices that move more "
              "than 0.001 mm, mean ± std over samples; rel. MEE against each sample's largest "

@@ -197,14 +197,10 @@ class Envelope:
         if not self.boxes:
             return []
         feat = features(part, thickness, force)
-        capped = []
-        for a, lim in self.limits.items():
-            vals = _values(feat, a)
-            kind, unit, k, what = AXES[a]
-            if vals and max(vals) > lim["max"] * (1 + SLACK):
-                capped.append(f"{what} {max(vals) * k:.3g} {unit} > {lim['max'] * k:.3g} {unit} "
-                              f"(where it was measured to stop keeping its promise: "
-                              f"{lim.get('source') or 'a limit'})".replace("  ", " "))
+        capped = [why for a, lim in self.limits.items()
+                  for why in _outside(feat, {a: [0.0, lim["max"]]}, "", most=(
+                      "where it was measured to stop keeping its promise: "
+                      + (lim.get("source") or "a limit")))]
         if capped:
             return capped
         best = None
@@ -260,7 +256,9 @@ class Envelope:
         return "\n".join(lines)
 
 
-def _outside(feat: dict, box: dict, name: str) -> list[str]:
+def _outside(feat: dict, box: dict, name: str, most: str | None = None) -> list[str]:
+    """Why ``feat`` leaves ``box`` (one sentence per axis; ``[]`` inside): each bound named as
+    "the most (least) in ``name``", or an upper bound as ``most`` when given."""
     why = []
     for a, (kind, unit, k, what) in AXES.items():
         if a not in box:
@@ -277,7 +275,7 @@ def _outside(feat: dict, box: dict, name: str) -> list[str]:
             continue
         if max(vals) > top:
             why.append(f"{what} {max(vals) * k:.3g} {unit} > {hi * k:.3g} {unit} "
-                       f"(the most in {name})".replace("  ", " "))
+                       f"({most or f'the most in {name}'})".replace("  ", " "))
         elif kind == "range" and min(vals) < lo * (1 - SLACK):
             why.append(f"{what} {min(vals) * k:.3g} {unit} < {lo * k:.3g} {unit} "
                        f"(the least in {name})".replace("  ", " "))

@@ -38,7 +38,11 @@ def evaluate_dataset(predictor, ds, split: str = "test", thickness_mm=None,
     Seam measures: ``seam_mee`` (MEE on the UV seam's vertices) for every predictor, and
     ``seam_gap`` (how far a seam vertex's UV copies disagree, before they are averaged) for
     predictors that predict per UV corner (``corner_displacement``); a per-vertex predictor
-    (GNN, Naive, FEM) gets 0: one value per vertex has no gap by construction."""
+    (GNN, Naive, FEM) gets 0: one value per vertex has no gap by construction.
+
+    A predictor that is not ``batched`` (the FEM) answers one scene at a time; a scene it fails
+    on is left out of the measures and counted (``failed``, the first reason in
+    ``failed_first``)."""
     import warnings
 
     import torch
@@ -52,8 +56,8 @@ def evaluate_dataset(predictor, ds, split: str = "test", thickness_mm=None,
     part = ds.part
     seam = part.seam_vertices
     rows, seconds, failed = [], [], []
-    if getattr(predictor, "name", "") == "fem":
-        batch = 1                          # seconds per scene, and a solve may fail alone
+    if not getattr(predictor, "batched", True):
+        batch = 1                          # the FEM: seconds a scene, and a solve may fail alone
     for i in range(0, len(scenes), batch):
         chunk = scenes[i:i + batch]
         with warnings.catch_warnings():    # measured, not warned: see inside_envelope

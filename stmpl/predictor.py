@@ -126,6 +126,10 @@ class BasePredictor:
     FEM, which fails loudly instead)."""
     strict = False
     """Refuse scenes outside the envelope (``PredictionFailed``) instead of warning."""
+    batched = True
+    """Whether a batch of scenes costs less per scene than one at a time. ``False`` for the FEM,
+    which solves them one after the other in seconds each and may fail on one alone: callers
+    that measure (evaluation, latency) then give it one scene at a time."""
     fidelity = "full"
     """``"full"`` models the whole part; ``"auto"`` only what the scene needs (the FEM: the patch
     the load moves; the GNN: the subgraph around it), where the predictor can (others ignore

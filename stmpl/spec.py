@@ -32,6 +32,20 @@ def predictor_from_spec(spec: str, device: str = "cpu", res: str = "reference",
                      ".safetensors checkpoint")
 
 
+def key(spec: str) -> str:
+    """What decides a spec's answers, for caches: a checkpoint's digest (a file's sidecar, or the
+    zoo manifest's entry), or the spec itself (``fem:<res>``)."""
+    from stmpl import zoo
+    from stmpl.checkpoint import read_sidecar
+
+    p = pathlib.Path(spec)
+    if p.suffix == ".safetensors" and p.is_file():
+        return read_sidecar(p)["digest"]
+    if spec.startswith("zoo:"):
+        return zoo.entry(spec[4:])["digest"]
+    return spec
+
+
 def label(spec: str) -> str:
     """A short name for a spec in tables and pictures: the zoo name, the checkpoint's stem or
     the spec itself."""

@@ -136,7 +136,7 @@ def run(config, progress: bool = True) -> dict:
     from stmpl.files import atomic_write_text
     from stmpl.metrics import sample_metrics
     from stmpl.predictor import ImpossibleAnswer, OutsideEnvelope, PredictionFailed
-    from stmpl.spec import label, predictor_from_spec
+    from stmpl.spec import key, label, predictor_from_spec
 
     cfg = read_config(config)
     out = pathlib.Path(cfg["out"])
@@ -146,9 +146,7 @@ def run(config, progress: bool = True) -> dict:
     part = part_from_spec(cfg["body"], cfg["part"])
     fem = predictor.create("fem", **cfg["fem"])
     preds = {label(s): predictor_from_spec(s) for s in cfg["predictors"]}
-    from stmpl.ablate import _setup_key
-
-    models = {label(s): _setup_key(s) for s in sorted(cfg["predictors"])}  # their digests
+    models = {label(s): key(s) for s in sorted(cfg["predictors"])}  # their digests
     todo = [(a, float(v)) for a, vals in cfg["axes"].items() for v in vals]
     bar = None
     if progress:
