@@ -34,6 +34,7 @@ PLACEMENT_KEYS = {
     "disk": {"centres", "radii"},
     "ellipse": {"centres", "semi_axes", "angles"},
     "seam_disk": {"at", "radii"},
+    "spots": {"centres", "counts", "radii", "spread"},
     "band": {"at", "widths"},
     "letter": {"chars", "uv", "heights", "strokes", "angles"},
     "grasp": {"along", "around", "grips", "hand_heights", "depth"},

@@ -36,7 +36,7 @@ def placements(cfg: dict, part: BodyPart) -> list[dict]:
     out = []
     for kind in sorted(cfg["placements"]):  # canonical order: a YAML round trip keeps task ids
         spec = cfg["placements"][kind]
-        if kind in ("disk", "ellipse"):
+        if kind in ("disk", "ellipse", "spots"):
             centres = [int(v) for v in farthest_points(part, int(spec.get("centres", 8)))]
         if kind == "disk":
             out += [{"kind": kind, "params": {"at": c, "radius": float(r)}}
@@ -49,6 +49,11 @@ def placements(cfg: dict, part: BodyPart) -> list[dict]:
         elif kind == "seam_disk":
             out += [{"kind": kind, "params": {"at": float(a), "radius": float(r)}}
                     for a in spec.get("at", [0.5]) for r in spec.get("radii", [0.02])]
+        elif kind == "spots":
+            out += [{"kind": kind, "params": {"at": c, "count": int(k), "radius": float(r),
+                                              "spread": float(spec.get("spread", 0.04))}}
+                    for c in centres for k in spec.get("counts", [3])
+                    for r in spec.get("radii", [0.008])]
         elif kind == "band":
             out += [{"kind": kind, "params": {"at": float(a), "width": float(w)}}
                     for a in spec.get("at", [0.5]) for w in spec.get("widths", [0.03])]

@@ -51,6 +51,9 @@ def _load(args, part):
                              angle=args.angle, total=total, **at)
     if args.load == "seam_disk":
         return loads.seam_disk(part, args.along, args.radius * mm, total)
+    if args.load == "spots":
+        return loads.spots(part, count=args.count, radius=args.radius * mm,
+                           spread=args.spread * mm, total=total, **at)
     if args.load == "band":
         return loads.band(part, args.along, args.width * mm, total)
     return loads.letter(part, args.char, at["uv"], args.height * mm, args.width * mm,
@@ -278,10 +281,14 @@ def _scene_args(sc, force: float) -> None:
     _body_args(sc)
     sc.add_argument("--part", default="left_arm", help="body part (default left_arm)")
     sc.add_argument("--load", default="disk",
-                    choices=["disk", "ellipse", "seam_disk", "band", "letter"])
+                    choices=["disk", "ellipse", "seam_disk", "spots", "band", "letter"])
     sc.add_argument("--force", type=float, default=force,
                     help=f"total force F_total, N (default {force:g})")
-    sc.add_argument("--radius", type=float, default=20.0, help="disk radius / ellipse a, mm")
+    sc.add_argument("--radius", type=float, default=20.0,
+                    help="disk or spot radius / ellipse a, mm")
+    sc.add_argument("--count", type=int, default=3, help="number of spots (default 3)")
+    sc.add_argument("--spread", type=float, default=40.0,
+                    help="spots lie within this distance of the centre, mm (default 40)")
     sc.add_argument("--width", type=float, default=30.0, help="band width / letter stroke, mm")
     sc.add_argument("--height", type=float, default=100.0, help="letter height, mm")
     sc.add_argument("--char", default="A", help="letter character")

@@ -254,3 +254,91 @@ class Dataset:
             raise ValueError(f"dataset {self.folder}: displacement has shape "
                              f"{out['displacement'].shape}, the part has {n} vertices")
         return out
+
+
+SETUP = ("body", "part", "material", "resolution", "solver")
+"""The keys of a dataset config that decide the FEM set-up: datasets trained on together must
+agree on them (their forces, thicknesses and placements may differ)."""
+
+
+class Datasets:
+    """Several datasets of one part and one FEM set-up read as one (training on the reference
+    set beside a set of other contacts): the same interface as :class:`Dataset`, its arrays
+    concatenated in the order given, placement and task numbers shifted so that they stay
+    distinct, and a card whose ``hash`` is of the members' hashes.
+
+    >>> ds = Datasets(["data/reference_fine", "data/contacts_fine"])
+    >>> ds.card["name"], ds.card["datasets"]       # 'reference_fine+contacts_fine', members
+    """
+
+    def __init__(self, folders):
+        if isinstance(folders, (str, pathlib.Path)) or len(folders) < 2:
+            raise ValueError(f"Datasets takes a list of two or more dataset folders, got "
+                             f"{folders!r}; open one with Dataset")
+        self.members = [Dataset(f) for f in folders]
+        first = self.members[0]
+        for ds in self.members[1:]:
+            if part_hash(ds.part) != part_hash(first.part):
+                raise ValueError(f"datasets {first.folder} and {ds.folder} live on different "
+                                 f"parts ({first.part.name}, {ds.part.name}); they cannot be "
+                                 "trained on together")
+            setup = {k: first.card["config"].get(k) for k in SETUP}
+            other = {k: ds.card["config"].get(k) for k in SETUP}
+            if setup != other:
+                diff = sorted(k for k in SETUP if setup[k] != other[k])
+                raise ValueError(f"datasets {first.folder} and {ds.folder} differ in their FEM "
+                                 f"set-up ({', '.join(diff)}); they cannot be trained on together")
+        self.part = first.part
+        self.folder = " + ".join(str(ds.folder) for ds in self.members)
+        cards = [ds.card for ds in self.members]
+        levels = sorted({float(t) for c in cards for t in c["config"]["thickness_mm"]})
+        self.card = {
+            "name": "+".join(c["name"] for c in cards),
+            "hash": hashlib.sha256(" ".join(c["hash"] for c in cards).encode()).hexdigest()[:16],
+            "samples": sum(int(c["samples"]) for c in cards),
+            "samples_per_split": {s: sum(int(c["samples_per_split"][s]) for c in cards)
+                                  for s in SPLITS},
+            "config": {**cards[0]["config"], "thickness_mm": levels},
+            "datasets": [{"folder": str(ds.folder), "name": ds.card["name"],
+                          "hash": ds.card["hash"]} for ds in self.members]}
+        self._all: dict | None = None
+
+    def __len__(self) -> int:
+        return int(self.card["samples"])
+
+    def __repr__(self) -> str:
+        return f"Datasets({self.folder!r}, {len(self)} samples, {self.card['samples_per_split']})"
+
+    def verify(self) -> None:
+        for ds in self.members:
+            ds.verify()
+
+    def arrays(self, split: str | None = None) -> dict[str, np.ndarray]:
+        """As :meth:`Dataset.arrays`, over every member in turn."""
+        if split is not None and split not in SPLITS:
+            raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+        if self._all is None:
+            parts, shift = [], {"placement": 0, "task": 0}
+            for ds in self.members:
+                a = dict(ds.arrays())
+                for k in shift:
+                    a[k] = a[k] + shift[k]
+                    shift[k] = int(a[k].max()) + 1 if len(a[k]) else shift[k]
+                parts.append(a)
+            self._all = {k: (np.concatenate([a[k] for a in parts]) if k in ARRAYS
+                             else [x for a in parts for x in a[k]]) for k in parts[0]}
+        a = self._all
+        if split is None:
+            return a
+        keep = np.flatnonzero(a["split"] == SPLITS.index(split))
+        return {k: (v[keep] if isinstance(v, np.ndarray) else [v[i] for i in keep])
+                for k, v in a.items()}
+
+
+def open_data(data) -> Dataset | Datasets:
+    """A :class:`Dataset` from one folder, :class:`Datasets` from a list of two or more."""
+    if isinstance(data, (list, tuple)):
+        if not data:
+            raise ValueError("no dataset folder given (an empty list)")
+        return Datasets(data) if len(data) > 1 else Dataset(data[0])
+    return Dataset(data)

@@ -2,8 +2,9 @@
 ``F_i = F_total / |V|`` along the inward vertex normal.
 
 Primitives: :func:`disk`, :func:`ellipse`, :func:`seam_disk` (measured on the surface, so they
-cross the UV seam unbroken), :func:`band` (a ring around a limb), :func:`letter` (a block-letter
-contour laid on the UV chart). Each returns a :class:`Load` that reports its vertex count,
+cross the UV seam unbroken), :func:`spots` (several small disks at once: fingertips, studs),
+:func:`band` (a ring around a limb), :func:`letter` (a block-letter contour laid on the UV
+chart). Each returns a :class:`Load` that reports its vertex count,
 contact area and mean pressure. Several loads add up with :func:`combine`.
 
 A load's place is a :class:`~stmpl.surface.SurfacePoint`, or anything :func:`place` turns into
@@ -131,6 +132,36 @@ def ellipse(part: BodyPart, at=None, semi_axes=(0.03, 0.015), angle: float = 0.0
                           "angle": float(angle)}, whole=False)
 
 
+def spots(part: BodyPart, at=None, count: int = 3, radius: float = 0.008,
+          spread: float = 0.04, total: float = 1.0, *, uv=None) -> Load:
+    """``count`` small disks of ``radius`` (m, geodesic) pressed at once, as fingertips or the
+    studs of a tool do: the first centred at a surface place, the others on the vertices within
+    geodesic ``spread`` (m) of it, spread evenly (each the farthest from the centres before it).
+    ``F_total`` is split equally over every vertex they touch, as for a grasp."""
+    if isinstance(count, bool) or not isinstance(count, (int, np.integer)) or count < 1:
+        raise ValueError(f"spots count must be an integer >= 1, got {count!r}")
+    _check_length("radius", radius)
+    _check_length("spread", spread)
+    src = place(part, at, uv=uv)
+    local = max(0.05, 1.25 * (spread + radius))
+    d = surface.geodesic_distance(part, src, local=local)
+    near = np.flatnonzero(d <= spread)
+    if count > 1 and near.size < count:
+        raise ValueError(f"spots: only {near.size} vertices lie within spread {spread} m of the "
+                         f"centre, fewer than count={count}; widen the spread")
+    hit, centres, gap = [np.flatnonzero(d <= radius)], [src.position], d[near]
+    for _ in range(count - 1):
+        v = int(near[int(np.argmax(gap))])
+        dv = surface.geodesic_distance(part, surface.vertex_point(part, v), local=local)
+        hit.append(np.flatnonzero(dv <= radius))
+        centres.append(part.vertices[v])
+        gap = np.minimum(gap, dv[near])
+    return from_vertices(part, np.concatenate(hit), total, "spots",
+                         {"centre": src.position.tolist(), "count": int(count),
+                          "radius": float(radius), "spread": float(spread),
+                          "centres": [np.asarray(c).tolist() for c in centres]}, whole=False)
+
+
 def seam_vertices_ordered(part: BodyPart) -> np.ndarray:
     """Seam vertices ordered along the seam (by limb axis, else by principal direction)."""
     sv = part.seam_vertices
@@ -205,8 +236,8 @@ def combine(part: BodyPart, *loads: Load) -> Load:
                 parts=tuple(loads), part_id=part.fingerprint)
 
 
-PRIMITIVES = {"disk": disk, "ellipse": ellipse, "seam_disk": seam_disk, "band": band,
-              "letter": letter}
+PRIMITIVES = {"disk": disk, "ellipse": ellipse, "seam_disk": seam_disk, "spots": spots,
+              "band": band, "letter": letter}
 """Load primitives by name (configs and the command line resolve through this)."""
 
 

@@ -125,6 +125,37 @@ def _side_vertex(part, uv, along: float) -> int:
     return int(np.flatnonzero(near)[np.argmin(dist[near])])
 
 
+def _fem_answer(fem, scene, key: str):
+    """The FEM's displacement ``(N, 3)`` m of ``scene`` (``None`` if the solve failed) and its
+    record (ok, seconds, deepest_mm or reason). Kept in stmpl's cache directory (``sweep/``) by
+    ``key`` (the part, the FEM set-up and the scene's content), so that a sweep re-run for new
+    models measures the models and does not solve the FEM again."""
+    from stmpl.body.model import default_cache_dir
+    from stmpl.files import atomic_savez
+    from stmpl.predictor import PredictionFailed
+
+    path = default_cache_dir() / "sweep" / f"{key}.npz"
+    if path.is_file():
+        try:
+            with np.load(path) as z:
+                rec = json.loads(str(z["record"]))
+                return (z["displacement"] if rec["ok"] else None), rec
+        except (OSError, ValueError, KeyError):
+            pass                                   # a broken cache file: solve again
+    t0 = time.perf_counter()
+    try:
+        d = fem.predict(scene)
+        u = d.displacement
+        rec = {"ok": True, "seconds": time.perf_counter() - t0,
+               "deepest_mm": 1e3 * float(d.magnitude.max())}
+    except PredictionFailed as e:
+        u = None
+        rec = {"ok": False, "seconds": time.perf_counter() - t0, "reason": str(e)}
+    atomic_savez(path, {"record": np.array(json.dumps(rec)),
+                        "displacement": u if u is not None else np.zeros((0, 3))})
+    return u, rec
+
+
 def _key(*parts) -> str:
     return hashlib.sha256(json.dumps(parts, sort_keys=True, default=str).encode()).hexdigest()[:12]
 
@@ -162,20 +193,13 @@ def run(config, progress: bool = True) -> dict:
             if bar is not None:
                 bar.update(1)
             continue
-        key = _key(part.fingerprint, cfg["fem"], axis, value, models,          # what decides
-                   hashlib.sha256(scene.force.tobytes() + scene.thickness.tobytes()).hexdigest())
+        content = hashlib.sha256(scene.force.tobytes() + scene.thickness.tobytes()).hexdigest()
+        key = _key(part.fingerprint, cfg["fem"], axis, value, models, content)  # what decides
         if key not in cache:
             rec = {"axis": axis, "value": value, "total": scene.total_force,
                    "load": scene.load.to_dict() if scene.load is not None else None}
-            t0 = time.perf_counter()
-            try:
-                truth = fem.predict(scene)
-                rec["fem"] = {"ok": True, "seconds": time.perf_counter() - t0,
-                              "deepest_mm": 1e3 * float(truth.magnitude.max())}
-            except PredictionFailed as e:
-                truth = None
-                rec["fem"] = {"ok": False, "seconds": time.perf_counter() - t0,
-                              "reason": str(e)}
+            truth, rec["fem"] = _fem_answer(fem, scene, _key(part.fingerprint, cfg["fem"],
+                                                             content))
             rec["predictors"] = {}
             for name, p in preds.items():
                 with warnings.catch_warnings():
@@ -192,7 +216,7 @@ def run(config, progress: bool = True) -> dict:
                      "physical": d.info["physical"], "seconds": d.info["seconds"],
                      "deepest_mm": 1e3 * float(d.magnitude.max())}
                 if truth is not None:
-                    m = sample_metrics(truth.displacement, d.displacement)
+                    m = sample_metrics(truth, d.displacement)
                     r.update(rel_mee=m["rel_mee"], peak_err=m["peak_err"], max_err=m["max_err"])
                 rec["predictors"][name] = r
             cache[key] = rec

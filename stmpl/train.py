@@ -1,6 +1,7 @@
 """One training loop for every learned predictor (``stmpl train CONFIG``).
 
-A config (YAML, checked on load) names the model kind and its options, the dataset folder, an
+A config (YAML, checked on load) names the model kind and its options, the dataset folder (or a
+list of folders of one part and FEM set-up, read as one: :class:`~stmpl.dataset.Datasets`), an
 optional thickness filter (the paper's "seen levels" ablation), an optional share of the training
 placements (``train_fraction``, for learning curves), and the optimiser settings. The loop: Adam
 (constant or cosine learning rate), shuffled mini-batches (seeded), validation loss every epoch,
@@ -67,8 +68,13 @@ def read_config(source) -> dict:
     if not isinstance(cfg["options"], dict):
         raise ValueError(f"options must be a mapping of model options, got {cfg['options']!r}")
     predictor.get(cfg["model"]).options(cfg["options"])  # checked; kept as written
-    if not cfg["data"] or not isinstance(cfg["data"], str):
-        raise ValueError(f"data: the dataset folder to train on is missing, got {cfg['data']!r}")
+    data = cfg["data"]
+    if not data or not (isinstance(data, str) or isinstance(data, list) and all(
+            isinstance(d, str) and d for d in data)):
+        raise ValueError(f"data: the dataset folder (or list of folders) to train on is missing, "
+                         f"got {data!r}")
+    if isinstance(data, list) and len(set(data)) < len(data):
+        raise ValueError(f"data: a dataset folder is listed twice in {data}")
     for k in ("epochs", "batch", "patience"):
         checked.integer(cfg[k], k, 1)
     checked.integer(cfg["seed"], "seed", 0)
@@ -133,13 +139,13 @@ def train(config, resume: bool = True, progress: bool = True):
     import torch
 
     from stmpl import predictor
-    from stmpl.dataset import Dataset
+    from stmpl.dataset import open_data
     from stmpl.files import atomic_path
 
     cfg = read_config(config)
     out = pathlib.Path(cfg["out"])
     out.mkdir(parents=True, exist_ok=True)
-    ds = Dataset(cfg["data"])
+    ds = open_data(cfg["data"])
     if cfg["device"].startswith("cuda") and not torch.cuda.is_available():
         raise ValueError(f"device {cfg['device']} was asked for but CUDA is not available here")
     device = torch.device(cfg["device"])
@@ -237,8 +243,10 @@ def _write_checkpoint(p, cfg, ds, out, history, best, extra) -> pathlib.Path:
 
     metrics = {s: evaluate_dataset(p, ds, s, thickness_mm=None)
                for s in ("val", "test") if ds.card["samples_per_split"][s]}
-    meta = {"dataset": {"folder": str(cfg["data"]), "hash": ds.card["hash"],
-                        "name": ds.card["name"], "samples": ds.card["samples_per_split"]},
+    folder = cfg["data"] if isinstance(cfg["data"], list) else str(cfg["data"])
+    meta = {"dataset": {"folder": folder, "hash": ds.card["hash"],
+                        "name": ds.card["name"], "samples": ds.card["samples_per_split"],
+                        **({"datasets": ds.card["datasets"]} if "datasets" in ds.card else {})},
             "training": {"config": cfg, "epochs": len(history),
                          "best_val": best if np.isfinite(best) else None,
                          "seconds": history[-1].get("seconds", 0.0) if history else 0.0,

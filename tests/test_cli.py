@@ -16,6 +16,19 @@ def test_scene_command_writes_picture_scene_and_mesh(tmp_path, capsys, arm):
     assert "disk: 5 N on" in capsys.readouterr().out
 
 
+def test_scene_of_spots(tmp_path, capsys, arm):
+    """``--load spots``: several fingertip-sized disks sharing the force."""
+    s = tmp_path / "s.npz"
+    assert main(["scene", "--load", "spots", "--count", "4", "--radius", "8", "--force", "0.4",
+                 "--out", str(tmp_path / "s.png"), "--save", str(s)]) == 0
+    sc = Scene.read(s)
+    from stmpl import loads
+
+    ld = loads.spots(arm, uv=(0.5, 0.5), count=4, radius=0.008, spread=0.04, total=0.4)
+    assert sc.force.sum() == pytest.approx(0.4) and np.count_nonzero(sc.force) == ld.count
+    assert "spots: 0.4 N on" in capsys.readouterr().out
+
+
 def test_scene_command_reports_bad_input(capsys, arm):
     assert main(["scene", "--force", "-1"]) == 2
     assert "total force must be finite and > 0" in capsys.readouterr().err

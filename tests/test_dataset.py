@@ -75,3 +75,38 @@ def test_splits_select_by_the_split_column(ds):
         n = ds.card["samples_per_split"][name]
         assert len(part["total"]) == int((a["split"] == i).sum()) == n
         np.testing.assert_array_equal(part["split"], i)
+
+
+def test_datasets_of_one_part_read_as_one(tmp_path, tiny_config, tiny_dataset):
+    """Two sets of one part and FEM set-up: their samples one after the other, placements and
+    tasks kept distinct, a hash of both; another part or material is refused by name."""
+    from stmpl.dataset import Datasets, open_data
+
+    generate(tiny_config(name="few", thickness_mm=[7.5], forces=[0.05, 0.1],
+                         placements={"disk": {"centres": 3, "radii": [0.015]}}),
+             tmp_path / "few", progress=False)
+    a, b = Dataset(tiny_dataset), Dataset(tmp_path / "few")
+    both = open_data([str(tiny_dataset), str(tmp_path / "few")])
+    assert isinstance(both, Datasets) and len(both) == len(a) + len(b)
+    assert both.card["name"] == "tiny+few" and both.card["hash"] not in (a.card["hash"],
+                                                                         b.card["hash"])
+    assert both.card["config"]["thickness_mm"] == [5.0, 7.5, 10.0]
+    x, y, xy = a.arrays("train"), b.arrays("train"), both.arrays("train")
+    np.testing.assert_array_equal(xy["displacement"], np.concatenate([x["displacement"],
+                                                                      y["displacement"]]))
+    assert xy["params"] == x["params"] + y["params"]
+    n = int(a.arrays()["placement"].max()) + 1
+    np.testing.assert_array_equal(xy["placement"], np.concatenate([x["placement"],
+                                                                   y["placement"] + n]))
+    assert sum(both.card["samples_per_split"].values()) == len(both)
+    generate(tiny_config(name="soft", thickness_mm=[7.5], forces=[0.05],
+                         material={"name": "neo_hookean", "E": 500.0, "nu": 0.4}),
+             tmp_path / "soft", progress=False)
+    with pytest.raises(ValueError, match=r"differ in their FEM set-up \(material\)"):
+        Datasets([tiny_dataset, tmp_path / "soft"])
+    generate(tiny_config(name="thin", body={**tiny_config()["body"], "radius": 0.03},
+                         thickness_mm=[7.5], forces=[0.05]), tmp_path / "thin", progress=False)
+    with pytest.raises(ValueError, match="live on different parts"):
+        Datasets([tiny_dataset, tmp_path / "thin"])
+    with pytest.raises(ValueError, match="empty list"):
+        open_data([])

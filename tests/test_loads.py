@@ -113,3 +113,26 @@ def test_a_load_stays_on_its_part(plate):
     with pytest.raises(ValueError, match="load 0 .* another part"):
         loads.combine(other, ld)
     assert Scene.from_load(plate, np.full(plate.n_vertices, 0.005), ld).total_force == 1.0
+
+
+def test_spots_are_small_disks_spread_around_a_centre(plate):
+    """Each spot is the disk of its centre; the centres lie within the spread, evenly apart;
+    the total is split equally over every touched vertex."""
+    r, spread, h = 0.005, 0.03, 0.0025
+    ld = loads.spots(plate, [0.0, 0.0, 0.0], count=3, radius=r, spread=spread, total=3.0)
+    c = np.array(ld.params["centres"])
+    assert c.shape == (3, 3) and np.allclose(c[0], 0.0)
+    dist = np.linalg.norm(c[:, None] - c[None], axis=-1)[np.triu_indices(3, 1)]
+    assert dist.min() >= spread - h and np.linalg.norm(c, axis=1).max() <= spread + 1e-9
+    union = np.unique(np.concatenate([loads.disk(plate, x, r).vertices for x in c]))
+    np.testing.assert_array_equal(np.sort(ld.vertices), union)
+    np.testing.assert_allclose(ld.force[ld.vertices], 3.0 / ld.count)
+    assert ld.area == pytest.approx(3 * np.pi * r**2, rel=0.15)
+    one = loads.spots(plate, [0.0, 0.0, 0.0], count=1, radius=r, total=1.0)
+    np.testing.assert_array_equal(one.vertices, loads.disk(plate, [0, 0, 0], r).vertices)
+    for bad, msg in (({"count": 0}, "count must be an integer >= 1"),
+                     ({"count": 2.5}, "count must be an integer"),
+                     ({"spread": 0.0}, "spread must be finite and > 0"),
+                     ({"count": 6, "spread": 0.003}, "widen the spread")):
+        with pytest.raises(ValueError, match=msg):
+            loads.spots(plate, [0.0, 0.0, 0.0], **{"radius": r, **bad})

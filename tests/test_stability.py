@@ -30,7 +30,7 @@ def test_scenes_along_each_axis_change_only_that_axis():
     assert np.ptp(v.thickness) == pytest.approx(0.005) and v.thickness.min() >= 0.005
 
 
-def test_the_sweep_flags_what_lies_outside(tiny_dataset, tmp_path):
+def test_the_sweep_flags_what_lies_outside(tiny_dataset, tmp_path, monkeypatch):
     from stmpl.train import train
 
     ckpt = train({"model": "naive", "data": str(tiny_dataset), "out": str(tmp_path / "n"),
@@ -63,6 +63,20 @@ def test_the_sweep_flags_what_lies_outside(tiny_dataset, tmp_path):
     assert stability.verdict({"physical": False}) == "impossible"
     assert stability.verdict({"physical": True, "rel_mee": 0.5, "peak_err": -7.0}) == "<=1 %"
     assert stability.peak_off({"physical": True, "rel_mee": 0.5, "peak_err": -7.0})
+    # another model: measured afresh, the FEM's answers come from the cache, not a new solve
+    other = train({"model": "naive", "data": str(tiny_dataset), "out": str(tmp_path / "m"),
+                   "epochs": 2, "batch": 16, "lr": 0.02}, progress=False)
+    from stmpl import predictor
+
+    fem_class = type(predictor.create("fem", res=cfg["fem"]["res"]))
+    calls, solve = [], fem_class.predict
+    monkeypatch.setattr(fem_class, "predict", lambda self, *a, **k: calls.append(1)
+                        or solve(self, *a, **k))
+    again = run({**cfg, "predictors": [str(other)]}, progress=False)
+    assert not calls and len(again["points"]) == len(res["points"])
+    np.testing.assert_allclose(
+        [p["fem"].get("deepest_mm", 0) for p in again["points"] if "skipped" not in p],
+        [p["fem"].get("deepest_mm", 0) for p in res["points"] if "skipped" not in p])
 
 
 def test_bad_sweeps_are_named():

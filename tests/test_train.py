@@ -166,3 +166,22 @@ def test_a_thickness_subset_trains_and_evaluates_on_those_levels_only(tiny_datas
     assert p.envelope.boxes["training"]["thickness"] == pytest.approx([0.005, 0.005])
     scenes, _ = scenes_of(ds, "test", thickness_mm=[10.0])
     assert scenes and all(np.allclose(s.thickness, 0.010) for s in scenes)
+
+
+def test_a_model_trains_on_two_datasets_at_once(tiny_dataset, tmp_path, tiny_config):
+    """``data`` may list folders: the envelope and the checkpoint's dataset card cover both."""
+    from fem.generate import generate
+
+    generate(tiny_config(name="few", thickness_mm=[7.5], forces=[0.05, 0.1, 0.3]),
+             tmp_path / "few", progress=False)
+    data = [str(tiny_dataset), str(tmp_path / "few")]
+    path = train({**_cfg(None, tmp_path / "run", epochs=3), "data": data}, progress=False)
+    meta = checkpoint.read_sidecar(path)
+    assert meta["dataset"]["folder"] == data and meta["dataset"]["name"] == "tiny+few"
+    assert [d["name"] for d in meta["dataset"]["datasets"]] == ["tiny", "few"]
+    p = predictor.read(path)
+    assert p.envelope.boxes["training"]["contact_force"][1] == pytest.approx(0.3, rel=1e-3)
+    with pytest.raises(ValueError, match="listed twice"):
+        read_config({**_cfg(None, tmp_path / "x"), "data": [data[0], data[0]]})
+    with pytest.raises(ValueError, match="list of folders"):
+        read_config({**_cfg(None, tmp_path / "x"), "data": [data[0], 3]})

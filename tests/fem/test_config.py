@@ -63,6 +63,21 @@ def test_nothing_to_solve_is_refused_before_anything_is_written(tmp_path):
     assert not (tmp_path / "d").exists()
 
 
+def test_spot_placements():
+    """Spots: centres x counts x radii placements, each loading the spots it asks for; a key
+    spots do not take, or a count too large for the spread, is named before solving."""
+    pl = plan(read_config(_cfg(placements={"spots": {"centres": 3, "counts": [1, 3],
+                                                     "radii": [0.01], "spread": 0.05}})))
+    assert [(p["kind"], p["params"]["count"]) for p in pl.placements] == [
+        ("spots", 1), ("spots", 3)] * 3
+    assert all(p["vertices"] >= p["params"]["count"] for p in pl.placements)
+    with pytest.raises(ValueError, match=r"placements.spots takes keys \['centres', 'counts'"):
+        read_config(_cfg(placements={"spots": {"centres": 3, "angles": [0]}}))
+    with pytest.raises(ValueError, match="impossible load placement spots.*widen the spread"):
+        plan(read_config(_cfg(placements={"spots": {"centres": 1, "counts": [40],
+                                                    "spread": 0.01}})))
+
+
 def test_grasp_placements(arm):
     """Grasp placements: anny's hand around the arm, each load the vertices it touches (found
     once, before solving); a grasp that touches nothing is left out and counted."""
