@@ -8,7 +8,9 @@ the load. At every point the FEM solves the scene (its failures counted with the
 time it took to fail) and every predictor answers it: its relative MEE and peak error against
 the FEM, whether it flagged the scene as outside its envelope and whether its answer was
 physically possible. Results are cached per point (by the scene's content, the FEM set-up and the
-predictors' digests; the flags are not cached but follow each model's envelope as it is today):
+predictors' digests; the flags are not cached but follow each model's envelope as it is today);
+a run keeps only its own points (a model retrained leaves no stale records behind), and the FEM's
+answers are cached apart, so new models are measured without solving the FEM again:
 ``stmpl ablate configs/ablation/stability.yaml`` runs it and draws one picture per axis and the envelope map.
 """
 
@@ -184,7 +186,7 @@ def run(config, progress: bool = True) -> dict:
         from tqdm import tqdm
 
         bar = tqdm(total=len(todo), unit="point", desc=f"sweep {cfg['name']}", dynamic_ncols=True)
-    points = []
+    points, used = [], set()
     for axis, value in todo:
         try:
             scene = scene_at(part, cfg["base"], axis, value)
@@ -222,6 +224,7 @@ def run(config, progress: bool = True) -> dict:
             cache[key] = rec
             atomic_write_text(cache_path, json.dumps(cache, indent=1, sort_keys=True))
         rec = cache[key]
+        used.add(key)
         for name, p in preds.items():       # the flags follow the envelope as it is today
             r = rec["predictors"].get(name, {})
             if "refused" not in r and p.envelope is not None:
@@ -232,6 +235,9 @@ def run(config, progress: bool = True) -> dict:
             bar.update(1)
     if bar is not None:
         bar.close()
+    if set(cache) - used:        # records of other models or points: not this sweep's any more
+        cache = {k: cache[k] for k in sorted(used)}
+        atomic_write_text(cache_path, json.dumps(cache, indent=1, sort_keys=True))
     figures(cfg, [p for p in points if "skipped" not in p], out)
     report(cfg, points, out)
     return {"points": points, "out": out}

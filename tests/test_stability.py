@@ -74,6 +74,10 @@ def test_the_sweep_flags_what_lies_outside(tiny_dataset, tmp_path, monkeypatch):
                         or solve(self, *a, **k))
     again = run({**cfg, "predictors": [str(other)]}, progress=False)
     assert not calls and len(again["points"]) == len(res["points"])
+    import json
+
+    kept = json.loads((tmp_path / "report" / "points.json").read_text())   # no stale records
+    assert {n for r in kept.values() for n in r.get("predictors", {})} == {other.stem}
     np.testing.assert_allclose(
         [p["fem"].get("deepest_mm", 0) for p in again["points"] if "skipped" not in p],
         [p["fem"].get("deepest_mm", 0) for p in res["points"] if "skipped" not in p])
