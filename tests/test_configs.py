@@ -22,9 +22,10 @@ def test_training_configs_load(path):
     from stmpl.train import read_config
 
     cfg = read_config(path)  # checks the model options too (unknown keys, loss, scale)
-    data = pathlib.Path(cfg["data"])
-    assert data.parent == pathlib.Path("data")
-    assert (CONFIGS / "data" / f"{data.name}.yaml").is_file()
+    for d in cfg["data"] if isinstance(cfg["data"], list) else [cfg["data"]]:
+        data = pathlib.Path(d)          # each set a config of ours makes
+        assert data.parent == pathlib.Path("data")
+        assert (CONFIGS / "data" / f"{data.name}.yaml").is_file()
 
 
 def test_bad_model_options_fail_on_load():
