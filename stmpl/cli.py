@@ -284,11 +284,9 @@ def _scene_args(sc, force: float) -> None:
                     choices=["disk", "ellipse", "seam_disk", "spots", "band", "letter"])
     sc.add_argument("--force", type=float, default=force,
                     help=f"total force F_total, N (default {force:g})")
-    sc.add_argument("--radius", type=float, default=20.0,
-                    help="disk or spot radius / ellipse a, mm")
+    sc.add_argument("--radius", type=float, default=20.0, help="disk, spot radius / ellipse a, mm")
     sc.add_argument("--count", type=int, default=3, help="number of spots (default 3)")
-    sc.add_argument("--spread", type=float, default=40.0,
-                    help="spots lie within this distance of the centre, mm (default 40)")
+    sc.add_argument("--spread", type=float, default=40.0, help="spots' spread, mm (default 40)")
     sc.add_argument("--width", type=float, default=30.0, help="band width / letter stroke, mm")
     sc.add_argument("--height", type=float, default=100.0, help="letter height, mm")
     sc.add_argument("--char", default="A", help="letter character")
