@@ -42,10 +42,12 @@ DEFAULTS = {
     "batch": 64,
 }
 SETUP_KEYS = {"name", "train", "predictor", "thickness_mm", "options", "epochs", "max_train",
-              "limit", "fidelity"}
+              "limit", "fidelity", "chart"}
 """``limit``: evaluate on at most this many samples of each test split (the FEM takes seconds
 per scene); ``fidelity``: ``full`` (the default) or ``auto`` (model no more of the part than the
-scene needs, :data:`stmpl.predictor.FIDELITIES`)."""
+scene needs, :data:`stmpl.predictor.FIDELITIES`); ``chart: false`` keeps a set-up that differs
+only in its training data (not in its speed) off the speed-vs-accuracy chart (it stays in the
+tables and in the chart's table)."""
 
 def read_config(source) -> dict:
     """A checked, complete ablation config; ``ValueError`` names what is wrong."""
@@ -78,6 +80,9 @@ def read_config(source) -> dict:
         if s.get("fidelity", "full") not in ("full", "auto"):
             raise ValueError(f"setup {s['name']!r}: fidelity must be full or auto, got "
                              f"{s['fidelity']!r}")
+        if not isinstance(s.get("chart", True), bool):
+            raise ValueError(f"setup {s['name']!r}: chart must be true or false, got "
+                             f"{s['chart']!r}")
         if s["name"] in names:
             raise ValueError(f"setup name {s['name']!r} is used twice")
         names.add(s["name"])
@@ -291,7 +296,8 @@ def run(config, progress: bool = True) -> dict:
         err = _pooled([tables["table2"].get(f"{s['name']} / {o}")
                        for o in cfg["out_of_distribution"]] or [tables["table1"][s["name"]]])
         for batch, sec in cache[key].items():
-            points.append({"label": s["name"], "batch": int(batch), "seconds": sec, **err})
+            points.append({"label": s["name"], "batch": int(batch), "seconds": sec,
+                           "chart": bool(s.get("chart", True)), **err})
         if bar is not None:
             bar.update(1)
         _write(cfg, tables, out, points)             # the report so far
@@ -367,7 +373,7 @@ def _write(cfg, tables, out: pathlib.Path, points: list) -> None:
     if points:
         from stmpl.chart import speed_accuracy
 
-        speed_accuracy(points, out / "speed_accuracy",
+        speed_accuracy([p for p in points if p.get("chart", True)], out / "speed_accuracy",
                        f"Speed against accuracy ({cfg['name']}): lower left is better")
         lines = ["| set-up | batch | ms/scene | OOD rel. MEE % | OOD peak err % |",
                  "|---|--:|--:|--:|--:|"]

@@ -65,6 +65,19 @@ def test_tables_rows_and_the_cache(config, tmp_path, monkeypatch):
     assert json.dumps(again["tables"], sort_keys=True) == json.dumps(t, sort_keys=True)
 
 
+def test_a_setup_off_the_chart_stays_in_the_tables(config, monkeypatch):
+    """``chart: false``: measured and tabled (its latency too), but not drawn on the chart."""
+    drawn = []
+    monkeypatch.setattr("stmpl.chart.speed_accuracy",
+                        lambda pts, *a, **k: drawn.append({p["label"] for p in pts}))
+    config["setups"][1]["chart"] = False
+    config["setups"] = config["setups"][:2]
+    res = ablate.run(config, progress=False)
+    assert "Naive: only 5 mm" in res["tables"]["table1"]
+    assert {p["label"] for p in res["points"]} == {"Naive", "Naive: only 5 mm"}
+    assert drawn and drawn[-1] == {"Naive"}
+
+
 def test_a_changed_setup_reruns_only_itself(config, monkeypatch):
     ablate.run(config, progress=False)
     calls = []
@@ -122,6 +135,7 @@ def test_a_cached_run_needs_no_data_and_makes_it_again_only_for_new_jobs(config,
      "used twice"),
     ({"setups": [{"name": "x", "predictor": "fem", "colour": 1}]}, "takes keys"),
     ({"setups": [{"name": "x", "predictor": "fem", "fidelity": "half"}]}, "full or auto"),
+    ({"setups": [{"name": "x", "predictor": "fem", "chart": "no"}]}, "chart must be true or"),
     ({"datasets": {}}, "at least one dataset"),
 ])
 def test_bad_configs_are_named(config, change, message):
