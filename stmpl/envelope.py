@@ -189,8 +189,9 @@ class Envelope:
         return mask
 
     def reasons(self, scene=None, *, part=None, thickness=None, force=None) -> list[str]:
-        """Why a scene lies outside: ``[]`` when it fits a box, else one sentence per axis it
-        leaves in the box it comes closest to fitting. Give a Scene or ``part, thickness,
+        """Why a scene lies outside: ``[]`` when it fits a box and keeps every limit, else one
+        sentence per limit it passes and per axis it leaves in the box it comes closest to
+        fitting. Give a Scene or ``part, thickness,
         force``."""
         if scene is not None:
             part, thickness, force = scene.part, scene.thickness, scene.force
@@ -201,16 +202,15 @@ class Envelope:
                   for why in _outside(feat, {a: [0.0, lim["max"]]}, "", most=(
                       "where it was measured to stop keeping its promise: "
                       + (lim.get("source") or "a limit")))]
-        if capped:
-            return capped
         best = None
         for name, box in self.boxes.items():
             why = _outside(feat, box, name)
             if not why:
-                return []
+                best = []
+                break
             if best is None or len(why) < len(best):
                 best = why
-        return best
+        return capped + best         # a cap first, then the data's own bounds the scene leaves
 
     def to_dict(self) -> dict:
         return {"format": FORMAT, "boxes": self.boxes, "info": self.info,
