@@ -215,16 +215,10 @@ class Dataset:
     def arrays(self, split: str | None = None) -> dict[str, np.ndarray]:
         """All samples (or one split's) as stacked arrays; also ``kind`` and ``params`` lists.
         The shards are checked against the card on the first call."""
-        if split is not None and split not in SPLITS:
-            raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+        _check_split(split)
         if "all" not in self._cache:
             self._cache["all"] = self._read_all()
-        a = self._cache["all"]
-        if split is None:
-            return a
-        keep = np.flatnonzero(a["split"] == SPLITS.index(split))
-        return {k: (v[keep] if isinstance(v, np.ndarray) else [v[i] for i in keep])
-                for k, v in a.items()}
+        return _of_split(self._cache["all"], split)
 
     def _read_all(self) -> dict:
         v1 = self.card["format"] == "stmpl-dataset/1"
@@ -315,8 +309,7 @@ class Datasets:
 
     def arrays(self, split: str | None = None) -> dict[str, np.ndarray]:
         """As :meth:`Dataset.arrays`, over every member in turn."""
-        if split is not None and split not in SPLITS:
-            raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+        _check_split(split)
         if self._all is None:
             parts, shift = [], {"placement": 0, "task": 0}
             for ds in self.members:
@@ -327,12 +320,21 @@ class Datasets:
                 parts.append(a)
             self._all = {k: (np.concatenate([a[k] for a in parts]) if k in ARRAYS
                              else [x for a in parts for x in a[k]]) for k in parts[0]}
-        a = self._all
-        if split is None:
-            return a
-        keep = np.flatnonzero(a["split"] == SPLITS.index(split))
-        return {k: (v[keep] if isinstance(v, np.ndarray) else [v[i] for i in keep])
-                for k, v in a.items()}
+        return _of_split(self._all, split)
+
+
+def _check_split(split: str | None) -> None:
+    if split is not None and split not in SPLITS:
+        raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+
+
+def _of_split(a: dict, split: str | None) -> dict:
+    """The samples of ``a`` (all samples' arrays and lists) in ``split`` (all for ``None``)."""
+    if split is None:
+        return a
+    keep = np.flatnonzero(a["split"] == SPLITS.index(split))
+    return {k: (v[keep] if isinstance(v, np.ndarray) else [v[i] for i in keep])
+            for k, v in a.items()}
 
 
 def open_data(data) -> Dataset | Datasets:

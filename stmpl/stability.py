@@ -235,9 +235,9 @@ def run(config, progress: bool = True) -> dict:
             bar.update(1)
     if bar is not None:
         bar.close()
-    if set(cache) - used:        # records of other models or points: not this sweep's any more
-        cache = {k: cache[k] for k in sorted(used)}
-        atomic_write_text(cache_path, json.dumps(cache, indent=1, sort_keys=True))
+    # this sweep's points only (a retrained model's records go), their flags as of today
+    atomic_write_text(cache_path, json.dumps({k: cache[k] for k in sorted(used)}, indent=1,
+                                             sort_keys=True))
     figures(cfg, [p for p in points if "skipped" not in p], out)
     report(cfg, points, out)
     return {"points": points, "out": out}
