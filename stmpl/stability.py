@@ -305,12 +305,10 @@ def figures(cfg, points: list, out: pathlib.Path) -> list:
                                 textwrap.wrap(why, 32)), (f0["value"], 0.02),
                             xycoords=("data", "axes fraction"), fontsize=7, color="#cc0000",
                             xytext=(-3, 0), textcoords="offset points", ha="right")
-            ax.set_yscale("log")
+            ax.set_yscale("log")                 # 1-2-5 ticks, labelled, as on the chart
+            ax.yaxis.set_major_locator(matplotlib.ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
             ax.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
-            lo, hi = ax.get_ylim()           # a narrow range gets its minor ticks labelled
-            minor = (matplotlib.ticker.FormatStrFormatter("%g") if hi / lo < 30
-                     else matplotlib.ticker.NullFormatter())
-            ax.yaxis.set_minor_formatter(minor)
+            ax.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
             if axis in LOG_AXES:                                  # forces from 0.05 to 5 N
                 ax.set_xscale("log")
                 ax.xaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
@@ -319,11 +317,13 @@ def figures(cfg, points: list, out: pathlib.Path) -> list:
             ax.set_xlabel(AXES[axis][0])
             ax.set_ylabel(what + " (log)")
             ax.grid(True, which="both", alpha=0.25)
-        axes[0].legend(fontsize=8, title="filled: inside its envelope; open: outside",
-                       title_fontsize=7)
+        handles, labels = axes[0].get_legend_handles_labels()   # below the panels: no line hidden
+        fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8,
+                   frameon=False, title="filled: inside its envelope; open: outside",
+                   title_fontsize=7)
         fig.suptitle(f"Stability along {axis}: dotted 1 %, dashed 5 %; red lines: the FEM "
                      "fails", fontsize=11)
-        fig.tight_layout()
+        fig.tight_layout(rect=(0, 0.1, 1, 1))
         f = out / f"stability_{axis}.png"
         fig.savefig(f, dpi=120)
         plt.close(fig)
