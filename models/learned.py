@@ -17,7 +17,7 @@ tanh output squeezed into 1/10 of its range learns the far field poorly. Every l
 takes it as the option ``disp_scale_mm``; the checkpoint keeps it."""
 
 
-LOSSES = ("mse", "relative")
+LOSSES = ("mse", "relative", "pooled")
 LOSS_EPS = 1e-6
 """Regularises the ``relative`` loss's norms (units of :meth:`LearnedPredictor.raw`, so about
 1e-6 of the full scale, well under any error that counts)."""
@@ -31,6 +31,20 @@ def relative_loss(pred, target):
     norm = torch.sqrt(((pred - target) ** 2).sum(-1) + LOSS_EPS ** 2)      # (B, N)
     peak = target.norm(dim=-1).amax(-1)                                    # (B,)
     return (norm.mean(-1) / (peak + LOSS_EPS)).mean()
+
+
+def pooled_loss(pred, target, weight=None):
+    """The batch's summed mean Euclidean error over its summed peak displacement for ``(B, N, 3)``
+    tensors, each sample weighted by ``weight`` ``(B,)`` (per-newton tensors: the total force, so
+    the sums are of absolute displacements): ``sum_b w_b MEE_b / sum_b w_b max_i |target_bi|``.
+    Unlike :func:`relative_loss`, a heavy press weighs more than a light one, as it does in the
+    mean MEE over a test set (and in its ratio to Naive's)."""
+    import torch
+
+    norm = torch.sqrt(((pred - target) ** 2).sum(-1) + LOSS_EPS ** 2)      # (B, N)
+    peak = target.norm(dim=-1).amax(-1)                                    # (B,)
+    w = torch.ones_like(peak) if weight is None else weight
+    return (w * norm.mean(-1)).sum() / ((w * peak).sum() + LOSS_EPS)
 
 
 def torch_device(name):
@@ -115,11 +129,20 @@ class LearnedPredictor(BasePredictor):
         (default, the paper's L2), the mean squared error over the vertices of :meth:`raw`
         against the normalised target (with ``per_newton`` each sample's error counts per
         newton, so a light press weighs as much as a heavy one); ``relative``, each sample's
-        mean Euclidean error over its peak displacement (the relative MEE the targets use)."""
+        mean Euclidean error over its peak displacement (the relative MEE the targets use);
+        ``pooled``, the batch's mean Euclidean errors over its peaks, summed before the ratio
+        (:func:`pooled_loss`: heavier presses weigh more)."""
         pred, tgt = self.raw(thickness, force), self.normalised(target, force)
         if self.config.get("loss", "mse") == "mse":
             return ((pred - tgt) ** 2).mean()
-        return relative_loss(pred, tgt)
+        return self.euclidean_loss(pred, tgt, force)
+
+    def euclidean_loss(self, pred, tgt, force):
+        """The ``relative`` or ``pooled`` loss of ``(B, N, 3)`` outputs against targets in the
+        units of :meth:`raw` (``pooled`` weighs per-newton samples by their total force)."""
+        if self.config["loss"] == "relative":
+            return relative_loss(pred, tgt)
+        return pooled_loss(pred, tgt, total_force(force) if self.per_newton else None)
 
     def restored(self) -> None:
         """Called when a checkpoint has been loaded (``self.meta`` set): rebuild what the

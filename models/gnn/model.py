@@ -128,10 +128,10 @@ class MeshGraphNet(nn.Module):
 class GNNPredictor(LinearPrior, LearnedPredictor):
     """Mesh GNN predictor. Options: ``latent`` (width), ``steps`` (message passing),
     ``per_newton`` (node inputs: the pressure per newton of the total and the total; output:
-    the displacement per newton, ``disp_scale_mm`` then in mm/N), ``loss`` (``mse`` or
-    ``relative``, see :meth:`LearnedPredictor.loss`), ``prior`` (``none``, or ``linear``: the
-    precomputed linear FEM's displacement, :mod:`models.linear`, is a node input and the network
-    predicts only the correction to it; :meth:`fit` computes the operator from the dataset)."""
+    the displacement per newton, ``disp_scale_mm`` then in mm/N), ``loss`` (``mse``,
+    ``relative`` or ``pooled``, see :meth:`LearnedPredictor.loss`), ``prior`` (``none``, or
+    ``linear``: the precomputed linear FEM's displacement, :mod:`models.linear`, is a node input
+    and the network predicts only the correction to it; :meth:`fit` computes the operator from the dataset)."""
 
     name = "gnn"
     defaults = {"latent": 128, "steps": 15, "per_newton": False, "loss": "mse", "prior": "none",

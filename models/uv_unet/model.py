@@ -24,7 +24,7 @@ import torch
 from torch import nn
 
 from models.features import PRESSURE_SCALE, PRIOR_SCALE, load_channels, normalised_thickness
-from models.learned import LearnedPredictor, relative_loss
+from models.learned import LearnedPredictor
 from models.linear.operator import ComplianceOperator
 from models.prior import CORRECTION_SCALE, LinearPrior
 
@@ -85,8 +85,8 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
     """UV-UNet predictor. Options: ``size`` (UV image pixels, 64..512), ``width``, ``depth``,
     ``dropout``, ``geometry`` (add position and normal channels), ``tv`` (total-variation weight
     in the loss), ``per_newton`` (inputs: the pressure per newton of the total and the total;
-    output: the displacement per newton, ``disp_scale_mm`` then in mm/N), ``loss`` (``mse`` or
-    ``relative``, see :meth:`loss`), ``prior`` (``none``, or ``linear``: the precomputed linear
+    output: the displacement per newton, ``disp_scale_mm`` then in mm/N), ``loss`` (``mse``,
+    ``relative`` or ``pooled``, see :meth:`loss`), ``prior`` (``none``, or ``linear``: the precomputed linear
     FEM's displacement, :mod:`models.linear`, comes in as three more channels, the output images
     hold only the correction, added to the linear answer at the vertices, so the prior itself
     has no seam gap; :meth:`fit` computes the operator)."""
@@ -140,15 +140,15 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
 
     def loss(self, thickness, force, target):
         """Masked L2 over the chart's pixels (``loss: mse``, the paper's), or with ``loss:
-        relative`` the relative MEE at every UV corner (a seam vertex's copies each count), plus
-        the optional total variation."""
+        relative`` (``pooled``) the relative (pooled) MEE at every UV corner (a seam vertex's
+        copies each count), plus the optional total variation."""
         base = self.base(thickness, force)
         out = self.model(self.images(thickness, force, base))
         tgt = self.normalised(target, force)
-        if self.config["loss"] == "relative":
+        if self.config["loss"] != "mse":
             pred = self.corrected(None if base is None else base[:, self._corner_vertex],
                                   self.uvmap.sample_corners(out))
-            return relative_loss(pred, tgt[:, self._corner_vertex]) + self._tv(out)
+            return self.euclidean_loss(pred, tgt[:, self._corner_vertex], force) + self._tv(out)
         if base is not None:                                  # the correction's image
             tgt = (tgt - base) / CORRECTION_SCALE
         tgt = self.uvmap.rasterise(tgt)

@@ -13,7 +13,8 @@ TINY_MODELS = {"naive": {}, "linear": {}, "uv_unet": {"size": 64, "width": 4, "d
 
 def test_relative_loss_is_the_relative_mee(ds):
     """``loss: relative`` is each sample's mean Euclidean error over its peak: a prediction 10 %
-    too large everywhere scores 0.1 * mean |u| / max |u|; an unknown loss is refused."""
+    too large everywhere scores 0.1 * mean |u| / max |u|; ``pooled`` sums both over the batch
+    first; an unknown loss is refused."""
     import torch
 
     p = predictor.create("gnn", ds.part, {**TINY_MODELS["gnn"], "per_newton": True,
@@ -26,6 +27,20 @@ def test_relative_loss_is_the_relative_mee(ds):
     mag = np.linalg.norm(truth, axis=-1)
     expected = np.mean(0.1 * mag.mean(-1) / mag.max(-1))
     assert float(p.loss(t, f, u)) == pytest.approx(expected, rel=2e-3)
+    # pooled: the batch's errors over its peaks, summed first (a heavier press weighs more)
+    # (the second sample three times as deep and 30 % off, where relative sees only 10 and 30 %)
+    u[1] *= 3.0
+    mag[1] *= 3.0
+    over = torch.tensor([1.1, 1.3])[:, None, None]
+    p.raw = lambda thickness, force: p.normalised(over * u, force)
+    err = np.array([0.1, 0.3])[:, None] * mag
+    p.config["loss"] = "pooled"
+    pooled = err.mean(-1).sum() / mag.max(-1).sum()
+    assert float(p.loss(t, f, u)) == pytest.approx(pooled, rel=2e-3)
+    p.config["loss"] = "relative"
+    relative = np.mean(err.mean(-1) / mag.max(-1))
+    assert float(p.loss(t, f, u)) == pytest.approx(relative, rel=2e-3)
+    assert pooled > 1.1 * relative
     with pytest.raises(ValueError, match="loss must be one of"):
         predictor.create("gnn", ds.part, {**TINY_MODELS["gnn"], "loss": "l1"})
 
