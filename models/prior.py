@@ -5,10 +5,16 @@ input (:data:`models.features.PRIOR_SCALE`) and learns only the correction to it
 
 from __future__ import annotations
 
+import numpy as np
+
 from models.linear.operator import (check_operator, fit_on_demand, fit_operator, install,
                                     reattach)
 
 PRIORS = ("none", "linear")
+REGION_TOLERANCE = 0.01
+"""``fidelity="auto"``: a learned model on the linear prior answers where the prior moves the
+tissue by more than this share of its deepest displacement (and one ring of vertices wider); the
+prior alone answers elsewhere."""
 CORRECTION_SCALE = 0.05
 """On top of the prior the network's output is a correction in units of this share of ``raw``'s:
 corrections are a few per cent of the answer, and at full scale Adam's first steps would throw
@@ -58,3 +64,16 @@ class LinearPrior:
         """The prior ``base`` plus the network's output ``out`` read as a correction (the
         output alone without a prior); any ``(..., 3)`` shapes that broadcast."""
         return out if base is None else base + CORRECTION_SCALE * out
+
+
+def moved(part, force: np.ndarray, base: np.ndarray, rings: int = 1) -> np.ndarray:
+    """``fidelity="auto"``: per scene the ``(B, N)`` mask of the loaded vertices (``force``
+    ``(B, N)`` > 0) and of those the prior's answer ``base`` ``(B, N, 3)`` moves by more than
+    :data:`REGION_TOLERANCE` of its deepest, grown by ``rings`` rings of mesh neighbours."""
+    adjacency = part.adjacency.astype(np.float32)
+    mag = np.linalg.norm(base, axis=-1)
+    m = (force > 0) | (mag > REGION_TOLERANCE * mag.max(-1, keepdims=True))
+    m &= (force > 0).any(-1, keepdims=True)               # an unloaded scene moves nothing
+    for _ in range(rings):
+        m = m | (adjacency @ m.T.astype(np.float32) > 0).T
+    return m

@@ -39,6 +39,7 @@ class UVMap(torch.nn.Module):
         if pad < 2:
             raise ValueError(f"pad must be >= 2 pixels, got {pad}")
         self.size, self.pad, self.n_vertices = int(size), int(pad), part.n_vertices
+        self._uv = (np.asarray(part.uv), np.asarray(part.uv_vertex))
         pix, tri, bary, inside = _raster(part.uv, part.face_uv, self.size)
         pix, tri, bary = _dilate(pix, tri, bary, inside, self.size, pad,
                                  _pixel_xy(part.uv, self.size)[part.face_uv])
@@ -90,6 +91,30 @@ class UVMap(torch.nn.Module):
         flat = images.flatten(2)
         w = self.corner_weight.to(images.dtype)
         return (flat[:, :, self.corner_index] * w).sum(dim=-1).transpose(1, 2)
+
+    def window(self, vertices: np.ndarray, margin: int = 0,
+               align: int = 1) -> tuple[int, int, int, int]:
+        """The pixel rows and columns ``(y0, y1, x0, x1)`` (ends exclusive) that bilinear
+        sampling reads at every UV corner of the boolean ``(N,)`` ``vertices``, grown by
+        ``margin`` pixels on each side, the start and the size multiples of ``align`` (so a
+        network with strides up to ``align`` sees the same pixel grid as on the whole image),
+        clipped to the image. Raises ``ValueError`` if no vertex is given."""
+        vertices = np.asarray(vertices, bool)
+        if vertices.shape != (self.n_vertices,) or not vertices.any():
+            raise ValueError(f"window needs a non-empty ({self.n_vertices},) vertex mask")
+        if getattr(self, "_corner_tap_xy", None) is None:
+            uv, corner = self._uv
+            x, y = _pixel_xy(uv, self.size).T
+            x0 = np.clip(np.floor(x).astype(int), 0, self.size - 2)
+            y0 = np.clip(np.floor(y).astype(int), 0, self.size - 2)
+            self._corner_tap_xy = (x0, y0, corner)
+        x, y, corner = self._corner_tap_xy
+        c = vertices[corner]
+        lo = np.array([y[c].min(), x[c].min()]) - margin
+        hi = np.array([y[c].max(), x[c].max()]) + 2 + margin      # taps at x0 and x0 + 1
+        lo = np.maximum(lo // align * align, 0)
+        hi = np.minimum(-(-hi // align) * align, self.size)
+        return int(lo[0]), int(hi[0]), int(lo[1]), int(hi[1])
 
     @staticmethod
     def _batch(values: torch.Tensor, name: str, n: int) -> tuple[torch.Tensor, bool]:

@@ -88,3 +88,24 @@ def test_support_covers_every_pixel_sampling_reads(arm):
     assert bool(m.support[m.mask].all())
     read = m.sample_index[m.sample_weight > 0]
     assert bool(m.support.flatten()[read].all())
+
+
+def test_window_holds_every_pixel_a_vertex_set_samples(arm):
+    """``window``: the pixels bilinear sampling reads at a set of vertices, grown by a margin,
+    aligned and clipped: an image that is zero outside the window samples those vertices as
+    the whole image does; a margin or alignment only grows it; an empty set is refused."""
+    m = UVMap(arm, 128)
+    near = np.linalg.norm(arm.vertices - arm.vertices[0], axis=1) < 0.03
+    y0, y1, x0, x1 = m.window(near)
+    assert 0 < (y1 - y0) * (x1 - x0) < 0.25 * 128 ** 2           # a small part of the chart
+    field = _smooth_field(arm).float()
+    image = m.rasterise(field)
+    cut = torch.zeros_like(image)
+    cut[:, y0:y1, x0:x1] = image[:, y0:y1, x0:x1]
+    np.testing.assert_allclose(m.sample(cut)[near].numpy(), m.sample(image)[near].numpy())
+    assert not np.allclose(m.sample(cut).numpy(), m.sample(image).numpy())
+    a = m.window(near, margin=5, align=8)
+    assert a[0] <= y0 - 5 or a[0] == 0
+    assert a[3] >= min(x1 + 5, 128) and all(v % 8 == 0 for v in a)
+    with pytest.raises(ValueError, match="non-empty"):
+        m.window(np.zeros(arm.n_vertices, bool))

@@ -33,19 +33,13 @@ from models.features import (PRESSURE_SCALE, PRIOR_SCALE, THICKNESS_SCALE, THICK
                              load_channels)
 from models.learned import LearnedPredictor
 from models.linear.operator import ComplianceOperator
-from models.prior import LinearPrior
+from models.prior import LinearPrior, moved
 
 
 def mlp(c_in: int, hidden: int, c_out: int, norm: bool = True) -> nn.Sequential:
     """Two linear layers with a ReLU between, optionally a LayerNorm on the output."""
     layers = [nn.Linear(c_in, hidden), nn.ReLU(), nn.Linear(hidden, c_out)]
     return nn.Sequential(*layers, nn.LayerNorm(c_out)) if norm else nn.Sequential(*layers)
-
-
-REGION_TOLERANCE = 0.01
-"""``fidelity="auto"`` with the linear prior: the network answers where the prior moves the
-tissue by more than this share of its deepest displacement (elsewhere the prior's answer
-stands; the network's correction there is smaller still)."""
 
 
 class GraphNetBlock(MessagePassing):
@@ -185,8 +179,8 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         """``fidelity="auto"``: per scene ``(B, N)`` masks of the vertices whose answer the
         network gives and of the subgraph it runs on (that region and ``steps`` hops more,
         every input its answer depends on). The region is where the load moves the tissue: with
-        the linear prior ``base`` ``(B, N, 3)``, the loaded vertices and those the prior moves by
-        more than :data:`REGION_TOLERANCE` of its deepest displacement, one hop wider; without
+        the linear prior ``base`` ``(B, N, 3)``, :func:`models.prior.moved` (the loaded vertices
+        and those the prior moves by more than 1 % of its deepest, one ring wider); without
         it, within :func:`fem.local.first_margin` of the load, as hops along the mesh's edges.
         ``thickness``, ``force`` ``(B, N)`` numpy."""
         from fem.local import first_margin
@@ -196,18 +190,19 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
             self._adjacency = self.part.adjacency.astype(np.float32)
             self._edge = float(np.median(np.linalg.norm(np.diff(self.part.vertices[e], axis=1)[:, 0],
                                                         axis=1)))
-        inner, sub = np.zeros(force.shape, bool), np.zeros(force.shape, bool)
         steps = int(self.config["steps"])
+        if base is not None:                      # where the linear FEM moves the tissue
+            inner = moved(self.part, force, base, rings=1)
+            sub = inner.copy()
+            for _ in range(steps):
+                sub |= (self._adjacency @ sub.T.astype(np.float32) > 0).T
+            return inner, sub
+        inner, sub = np.zeros(force.shape, bool), np.zeros(force.shape, bool)
         for b in range(len(force)):
             m = force[b] > 0
             if not m.any():
                 continue
-            if base is not None:                  # where the linear FEM moves the tissue
-                mag = np.linalg.norm(base[b], axis=-1)
-                m = m | (mag > REGION_TOLERANCE * mag.max())
-                hops = 1
-            else:
-                hops = int(np.ceil(first_margin(self.part, thickness[b], force[b]) / self._edge))
+            hops = int(np.ceil(first_margin(self.part, thickness[b], force[b]) / self._edge))
             for k in range(hops + steps):
                 m = m | (self._adjacency @ m.astype(np.float32) > 0)
                 if k == hops - 1:

@@ -26,7 +26,7 @@ from torch import nn
 from models.features import PRESSURE_SCALE, PRIOR_SCALE, load_channels, normalised_thickness
 from models.learned import LearnedPredictor
 from models.linear.operator import ComplianceOperator
-from models.prior import CORRECTION_SCALE, LinearPrior
+from models.prior import CORRECTION_SCALE, LinearPrior, moved
 
 
 class UNet(nn.Module):
@@ -89,7 +89,8 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
     ``relative`` or ``pooled``, see :meth:`loss`), ``prior`` (``none``, or ``linear``: the precomputed linear
     FEM's displacement, :mod:`models.linear`, comes in as three more channels, the output images
     hold only the correction, added to the linear answer at the vertices, so the prior itself
-    has no seam gap; :meth:`fit` computes the operator)."""
+    has no seam gap; :meth:`fit` computes the operator). With the prior, ``fidelity="auto"``
+    runs the network on the window of the chart the load needs (:meth:`_sample_cropped`)."""
 
     name = "uv_unet"
     defaults = {"size": 128, "width": 16, "depth": 5, "dropout": 0.5, "geometry": False,
@@ -135,8 +136,31 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
 
     def raw(self, thickness, force):
         base = self.base(thickness, force)
-        return self.corrected(base, self.uvmap.sample(self.model(self.images(thickness, force,
-                                                                             base))))
+        images = self.images(thickness, force, base)
+        if self.fidelity == "auto" and base is not None and not self.model.training:
+            return self.corrected(base, self._sample_cropped(images, force, base))
+        return self.corrected(base, self.uvmap.sample(self.model(images)))
+
+    @property
+    def crop_margin(self) -> int:
+        """Pixels around a window that the network's receptive field reaches in from (4x4
+        stride-2 layers, down and up: within 3 * 2^depth pixels), so that inside it a crop's
+        output is the whole image's exactly."""
+        return 3 * 2 ** int(self.config["depth"])
+
+    def _sample_cropped(self, images, force, base):
+        """``fidelity="auto"`` on the prior: per scene the network runs on a window of the chart,
+        the pixels that sampling reads at :func:`models.prior.moved`'s vertices plus
+        :attr:`crop_margin`, aligned to the network's strides; those vertices get its correction
+        (the whole image's, exactly), every other vertex none (the prior's answer stands)."""
+        inner = moved(self.part, force.cpu().numpy(), base.detach().cpu().numpy())
+        out = images.new_zeros(images.shape[0], 3, *images.shape[-2:])
+        for b in np.flatnonzero(inner.any(-1)):
+            y0, y1, x0, x1 = self.uvmap.window(inner[b], self.crop_margin,
+                                               2 ** int(self.config["depth"]))
+            out[b, :, y0:y1, x0:x1] = self.model(images[b:b + 1, :, y0:y1, x0:x1])[0]
+        keep = torch.as_tensor(inner, dtype=out.dtype, device=out.device)[..., None]
+        return self.uvmap.sample(out) * keep
 
     def loss(self, thickness, force, target):
         """Masked L2 over the chart's pixels (``loss: mse``, the paper's), or with ``loss:

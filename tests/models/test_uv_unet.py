@@ -44,3 +44,38 @@ def test_unet_relative_loss_reads_the_corners(ds):
         image = p.uvmap.rasterise(p.normalised(factor * u, f))
         p.model = lambda x, image=image: image
         assert abs(float(p.loss(t, f, u)) - want) < tol
+
+
+def test_auto_fidelity_runs_on_the_window_the_load_needs(ds, make):
+    """``fidelity="auto"`` on the prior: the network runs on a window of the chart around where
+    the prior moves the tissue, wide enough for its receptive field, so there it answers as on
+    the whole image (to float rounding), and elsewhere the linear FEM's answer stands."""
+    import torch
+
+    from models.prior import moved
+    from stmpl import predictor
+
+    torch.manual_seed(0)
+    p = predictor.create("uv_unet", ds.part, {**TINY_MODELS["uv_unet"], "size": 128,
+                                              "per_newton": True, "prior": "linear"})
+    p.fit(ds, progress=False)
+    last = p.model.net.up[-1][-1]
+    torch.nn.init.normal_(last.weight, std=0.5)                      # a correction that shows
+    scenes = [s for s in scenes_of(ds, "test")[0] if s.thickness[0] < 0.006][:4]
+    full = p.predict(scenes)
+    p.fidelity = "auto"
+    auto = p.predict(scenes)
+    lin = predictor.create("linear", ds.part)
+    lin.fit(ds, progress=False)
+    lin = lin.predict(scenes)
+    f = np.stack([s.force for s in scenes])
+    inner = moved(ds.part, f, np.stack([d.displacement for d in lin]))
+    assert (~inner).any()
+    y0, y1, x0, x1 = p.uvmap.window(inner[0], p.crop_margin, 8)
+    assert (y1 - y0) * (x1 - x0) < 128 ** 2                          # a crop, not the chart
+    for b, (u, a, l) in enumerate(zip(full, auto, lin)):
+        np.testing.assert_allclose(a.displacement[inner[b]], u.displacement[inner[b]],
+                                   rtol=1e-4, atol=1e-9)
+        np.testing.assert_allclose(a.displacement[~inner[b]], l.displacement[~inner[b]],
+                                   rtol=1e-4, atol=1e-9)
+        assert not np.allclose(u.displacement, l.displacement, atol=1e-7)   # it does correct
