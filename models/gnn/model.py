@@ -125,7 +125,8 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
     the displacement per newton, ``disp_scale_mm`` then in mm/N), ``loss`` (``mse``,
     ``relative`` or ``pooled``, see :meth:`LearnedPredictor.loss`), ``prior`` (``none``, or
     ``linear``: the precomputed linear FEM's displacement, :mod:`models.linear`, is a node input
-    and the network predicts only the correction to it; :meth:`fit` computes the operator from the dataset)."""
+    and the network predicts only the correction to it; :meth:`fit` computes the operator from
+    the dataset)."""
 
     name = "gnn"
     defaults = {"latent": 128, "steps": 15, "per_newton": False, "loss": "mse", "prior": "none",
