@@ -86,10 +86,10 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
     ``dropout``, ``geometry`` (add position and normal channels), ``tv`` (total-variation weight
     in the loss), ``per_newton`` (inputs: the pressure per newton of the total and the total;
     output: the displacement per newton, ``disp_scale_mm`` then in mm/N), ``loss`` (``mse``,
-    ``relative`` or ``pooled``, see :meth:`loss`), ``prior`` (``none``, or ``linear``: the precomputed linear
-    FEM's displacement, :mod:`models.linear`, comes in as three more channels, the output images
-    hold only the correction, added to the linear answer at the vertices, so the prior itself
-    has no seam gap; :meth:`fit` computes the operator). With the prior, ``fidelity="auto"``
+    ``relative`` or ``pooled``, see :meth:`loss`), ``prior`` (``none``, or ``linear``: the
+    precomputed linear FEM's displacement, :mod:`models.linear`, comes in as three more
+    channels, the output images hold only the correction, added to the linear answer at the
+    vertices, so the prior itself has no seam gap; :meth:`fit` computes the operator). With the prior, ``fidelity="auto"``
     runs the network on the window of the chart the load needs (:meth:`_sample_cropped`)."""
 
     name = "uv_unet"
