@@ -5,6 +5,8 @@ input (:data:`models.features.PRIOR_SCALE`) and learns only the correction to it
 
 from __future__ import annotations
 
+import weakref
+
 import numpy as np
 
 from models.linear.operator import (check_operator, fit_on_demand, fit_operator, install,
@@ -66,11 +68,17 @@ class LinearPrior:
         return out if base is None else base + CORRECTION_SCALE * out
 
 
+_ADJACENCY: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
+"""Each part's adjacency as float32 (sparse products), kept while the part lives."""
+
+
 def moved(part, force: np.ndarray, base: np.ndarray, rings: int = 1) -> np.ndarray:
     """``fidelity="auto"``: per scene the ``(B, N)`` mask of the loaded vertices (``force``
     ``(B, N)`` > 0) and of those the prior's answer ``base`` ``(B, N, 3)`` moves by more than
     :data:`REGION_TOLERANCE` of its deepest, grown by ``rings`` rings of mesh neighbours."""
-    adjacency = part.adjacency.astype(np.float32)
+    adjacency = _ADJACENCY.get(part)
+    if adjacency is None:
+        adjacency = _ADJACENCY[part] = part.adjacency.astype(np.float32)
     mag = np.linalg.norm(base, axis=-1)
     m = (force > 0) | (mag > REGION_TOLERANCE * mag.max(-1, keepdims=True))
     m &= (force > 0).any(-1, keepdims=True)               # an unloaded scene moves nothing

@@ -97,8 +97,15 @@ class NormalisedGraphNet(nn.Module):
         if prior is not None:
             self.prior = prior
 
-    def forward(self, x, edge_attr, edge_index):
-        return self.net(self.node_norm(x), self.edge_norm(edge_attr), edge_index)
+    def forward(self, x, edge_attr, edge_index, edges=None):
+        """``edges``: the encoded ``edge_attr`` if known (:meth:`encode_edges`), else None."""
+        if edges is None:
+            edges = self.encode_edges(edge_attr)
+        return self.net(self.node_norm(x), edges, edge_index)
+
+    def encode_edges(self, edge_attr):
+        """``(E, edge_in)`` raw edge features -> ``(E, latent)`` encoded."""
+        return self.net.edge_encoder(self.edge_norm(edge_attr))
 
 
 class MeshGraphNet(nn.Module):
@@ -112,8 +119,9 @@ class MeshGraphNet(nn.Module):
         self.processor = nn.ModuleList(GraphNetBlock(latent) for _ in range(steps))
         self.decoder = mlp(latent, latent, out, norm=False)
 
-    def forward(self, x: torch.Tensor, edge_attr: torch.Tensor, edge_index: torch.Tensor):
-        h, e = self.node_encoder(x), self.edge_encoder(edge_attr)
+    def forward(self, x: torch.Tensor, e: torch.Tensor, edge_index: torch.Tensor):
+        """``x`` normalised node features, ``e`` encoded edges ``(E, latent)``."""
+        h = self.node_encoder(x)
         for block in self.processor:
             h, e = block(h, edge_index, e)
         return self.decoder(h)
@@ -172,8 +180,19 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         E = self.edge_index.shape[1]
         offs = (torch.arange(B, device=x.device) * N).repeat_interleave(E)
         ei = self.edge_index.repeat(1, B) + offs
-        ea = self.edge_attr.repeat(B, 1)
-        return self.corrected(base, self.model(x, ea, ei).reshape(B, N, 3))
+        return self.corrected(base, self.model(x, None, ei, self.edges().repeat(B, 1))
+                              .reshape(B, N, 3))
+
+    def edges(self) -> torch.Tensor:
+        """The part's encoded edge features ``(E, latent)``: a pure function of the mesh and the
+        edge encoder's weights, so at inference they are kept until the weights change."""
+        if self.model.training or torch.is_grad_enabled():
+            return self.model.encode_edges(self.edge_attr)
+        version = [t._version for t in (*self.model.parameters(), *self.model.buffers())]
+        cached = getattr(self, "_edges", None)
+        if cached is None or cached[0] != version:
+            self._edges = cached = (version, self.model.encode_edges(self.edge_attr))
+        return cached[1]
 
     def region(self, thickness: np.ndarray, force: np.ndarray,
                base: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
@@ -229,9 +248,10 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         dev = x.device
         sub_ei = torch.as_tensor(np.stack([where[src[keep]], where[dst[keep]]]), device=dev)
         E = ei.shape[1]
-        sub_ea = self.edge_attr[torch.as_tensor(np.flatnonzero(keep) % E, device=dev)]
+        sub_e = self.edges().index_select(0, torch.as_tensor(np.flatnonzero(keep) % E,
+                                                             device=dev))
         idx = torch.as_tensor(nodes, device=dev)
-        y = self.model(x.index_select(0, idx), sub_ea, sub_ei)           # (nodes, 3)
+        y = self.model(x.index_select(0, idx), None, sub_ei, sub_e)      # (nodes, 3)
         out = torch.zeros(B * N, 3, device=dev, dtype=y.dtype)
         on = torch.as_tensor(inner.ravel()[nodes], device=dev)
         out[idx[on]] = y[on]

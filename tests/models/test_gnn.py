@@ -81,3 +81,24 @@ def test_auto_fidelity_cuts_the_graph_where_no_input_is_lost(arm):
     assert sub.sum() < arm.n_vertices / 2 and inner.sum() < sub.sum()
     np.testing.assert_allclose(auto[inner[0]], full[inner[0]], rtol=1e-4, atol=1e-9)
     assert np.all(auto[~inner[0]] == 0) and np.abs(full[~inner[0]]).max() > 0
+
+
+def test_encoded_edges_are_kept_until_the_weights_change(ds, make):
+    """At inference the mesh's encoded edges are computed once; a change to the weights (an
+    optimiser step, a loaded checkpoint) makes them computed again, never stale."""
+    import torch
+
+    from stmpl.evaluate import scenes_of
+
+    p = make("gnn/prior", ds)
+    s = scenes_of(ds, "test", limit=1)[0][0]
+    first = p.predict(s).displacement
+    kept = p._edges[1]
+    assert p.predict(s).displacement == pytest.approx(first) and p._edges[1] is kept
+    with torch.no_grad():
+        p.model.net.edge_encoder[0].weight.mul_(2.0)
+        torch.nn.init.normal_(p.model.net.decoder[-1].weight, std=0.5)
+    with torch.no_grad():
+        fresh = p.model.encode_edges(p.edge_attr)
+    p.predict(s)
+    assert p._edges[1] is not kept and torch.equal(p._edges[1], fresh)
