@@ -91,9 +91,10 @@ def features(part: BodyPart, thickness: np.ndarray, force: np.ndarray) -> dict:
         out["contact_force"].append(float(f[c].sum()))
         out["contact_area"].append(a)
         out["contact_pressure"].append(float(f[c].sum()) / a)
-        tc = t[_around(part, c, 2.0 * float(t[c].max()))]
-        out["thickness_variation"] = max(out["thickness_variation"],
-                                         float((tc.max() - tc.min()) / tc.mean()))
+        if out["thickness"][0] < out["thickness"][1]:           # else uniform: none
+            tc = t[_around(part, c, 2.0 * float(t[c].max()))]
+            out["thickness_variation"] = max(out["thickness_variation"],
+                                             float((tc.max() - tc.min()) / tc.mean()))
     out["contacts"] = len(out["contact_force"])
     if part.rims:                        # per contact: its vertex nearest an open rim
         out["rim_distance"] = [float(part.rim_distance[c].min()) for c in found]
