@@ -50,6 +50,9 @@ class UVMap(torch.nn.Module):
         self.register_buffer("mask", torch.as_tensor(inside.reshape(self.size, self.size)))
         support = np.zeros(self.size * self.size, dtype=bool)
         support[pix] = True
+        slot = np.full(self.size * self.size, -1, dtype=np.int64)   # pixel -> its row of pix
+        slot[pix] = np.arange(len(pix))
+        self.register_buffer("slot", torch.as_tensor(slot.reshape(self.size, self.size)))
         self.register_buffer("support", torch.as_tensor(support.reshape(self.size, self.size)))
         idx, w = _sample_plan(part, self.size)
         self.register_buffer("sample_index", torch.as_tensor(idx, dtype=torch.long))
@@ -58,18 +61,29 @@ class UVMap(torch.nn.Module):
         self.register_buffer("corner_index", torch.as_tensor(taps, dtype=torch.long))
         self.register_buffer("corner_weight", torch.as_tensor(tw, dtype=torch.float32))
 
-    def rasterise(self, values: torch.Tensor) -> torch.Tensor:
-        """Vertex values ``(N, C)`` or ``(B, N, C)`` -> images ``(C, H, W)`` or ``(B, C, H, W)``.
+    def rasterise(self, values: torch.Tensor, window: tuple[int, int, int, int] | None = None
+                  ) -> torch.Tensor:
+        """Vertex values ``(N, C)`` or ``(B, N, C)`` -> images ``(C, H, W)`` or ``(B, C, H, W)``;
+        with ``window`` ``(y0, y1, x0, x1)`` (:meth:`window`) only those rows and columns,
+        ``(B, C, y1 - y0, x1 - x0)``, as cut from the whole image but computed alone.
 
         Pixels beyond the padded chart are 0; :attr:`mask` marks the chart itself and
         :attr:`support` the chart with its padding (every pixel that sampling can read)."""
         values, single = self._batch(values, "values", self.n_vertices)
         b, _, c = values.shape
-        w = self.bary.to(values.dtype)
-        px = (values[:, self.corner_vertex] * w[None, :, :, None]).sum(dim=2)  # (B, P, C)
-        out = values.new_zeros(b, self.size * self.size, c)
-        out = out.index_copy(1, self.pix, px)
-        out = out.transpose(1, 2).reshape(b, c, self.size, self.size)
+        pix, corner_vertex, w = self.pix, self.corner_vertex, self.bary.to(values.dtype)
+        h, wd = self.size, self.size
+        if window is not None:
+            y0, y1, x0, x1 = window
+            h, wd = y1 - y0, x1 - x0
+            slot = self.slot[y0:y1, x0:x1].reshape(-1)
+            pix = torch.nonzero(slot >= 0).flatten()                 # in the window's raster
+            sel = slot[pix]
+            corner_vertex, w = corner_vertex[sel], w[sel]
+        px = (values[:, corner_vertex] * w[None, :, :, None]).sum(dim=2)  # (B, P, C)
+        out = values.new_zeros(b, h * wd, c)
+        out = out.index_copy(1, pix, px)
+        out = out.transpose(1, 2).reshape(b, c, h, wd)
         return out[0] if single else out
 
     def sample(self, images: torch.Tensor) -> torch.Tensor:

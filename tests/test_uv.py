@@ -109,3 +109,14 @@ def test_window_holds_every_pixel_a_vertex_set_samples(arm):
     assert a[3] >= min(x1 + 5, 128) and all(v % 8 == 0 for v in a)
     with pytest.raises(ValueError, match="non-empty"):
         m.window(np.zeros(arm.n_vertices, bool))
+
+
+def test_a_window_rasterised_alone_is_the_cut_of_the_whole_image(arm):
+    m = UVMap(arm, 128)
+    field = _smooth_field(arm).float()
+    near = np.linalg.norm(arm.vertices - arm.vertices[0], axis=1) < 0.03
+    y0, y1, x0, x1 = win = m.window(near, margin=7, align=8)
+    whole = m.rasterise(field[None])
+    alone = m.rasterise(field[None], win)
+    assert alone.shape == (1, 3, y1 - y0, x1 - x0)
+    assert torch.equal(alone, whole[:, :, y0:y1, x0:x1])

@@ -122,9 +122,9 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
         nn.init.zeros_(last.bias)
         return WithPrior(net, ComplianceOperator())
 
-    def images(self, thickness, force, base=None) -> torch.Tensor:
-        """``(B, C, S, S)`` input images from ``(B, N)`` thickness (m) and force (N), and with
-        the prior its answer ``base`` (:meth:`base`, computed once by the caller)."""
+    def inputs(self, thickness, force, base=None) -> torch.Tensor:
+        """``(B, N, C)`` per-vertex input channels from ``(B, N)`` thickness (m) and force (N),
+        and with the prior its answer ``base`` (:meth:`base`, computed once by the caller)."""
         chans = [*load_channels(force, self._inv_area, self.per_newton),
                  normalised_thickness(thickness)]
         x = torch.stack(chans, -1)
@@ -132,14 +132,19 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
             x = torch.cat([x, self._geometry.expand(x.shape[0], -1, -1)], -1)
         if base is not None:
             x = torch.cat([x, base / PRIOR_SCALE], -1)
-        return self.uvmap.rasterise(x)
+        return x
+
+    def images(self, thickness, force, base=None) -> torch.Tensor:
+        """``(B, C, S, S)`` input images: :meth:`inputs` on the chart."""
+        return self.uvmap.rasterise(self.inputs(thickness, force, base))
 
     def raw(self, thickness, force):
         base = self.base(thickness, force)
-        images = self.images(thickness, force, base)
         if self.fidelity == "auto" and base is not None and not self.model.training:
-            return self.corrected(base, self._sample_cropped(images, force, base))
-        return self.corrected(base, self.uvmap.sample(self.model(images)))
+            return self.corrected(base, self._sample_cropped(self.inputs(thickness, force, base),
+                                                             force, base))
+        return self.corrected(base, self.uvmap.sample(self.model(self.images(thickness, force,
+                                                                             base))))
 
     @property
     def crop_margin(self) -> int:
@@ -148,17 +153,19 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
         output is the whole image's exactly."""
         return 3 * 2 ** int(self.config["depth"])
 
-    def _sample_cropped(self, images, force, base):
-        """``fidelity="auto"`` on the prior: per scene the network runs on a window of the chart,
-        the pixels that sampling reads at :func:`models.prior.moved`'s vertices plus
-        :attr:`crop_margin`, aligned to the network's strides; those vertices get its correction
-        (the whole image's, exactly), every other vertex none (the prior's answer stands)."""
+    def _sample_cropped(self, x, force, base):
+        """``fidelity="auto"`` on the prior, from the ``(B, N, C)`` :meth:`inputs` ``x``: per
+        scene the network runs on a window of the chart (rasterised alone), the pixels that
+        sampling reads at :func:`models.prior.moved`'s vertices plus :attr:`crop_margin`,
+        aligned to the network's strides; those vertices get its correction (the whole image's,
+        exactly), every other vertex none (the prior's answer stands)."""
         inner = moved(self.part, force.cpu().numpy(), base.detach().cpu().numpy())
-        out = images.new_zeros(images.shape[0], 3, *images.shape[-2:])
+        size = self.uvmap.size
+        out = x.new_zeros(x.shape[0], 3, size, size)
         for b in np.flatnonzero(inner.any(-1)):
-            y0, y1, x0, x1 = self.uvmap.window(inner[b], self.crop_margin,
-                                               2 ** int(self.config["depth"]))
-            out[b, :, y0:y1, x0:x1] = self.model(images[b:b + 1, :, y0:y1, x0:x1])[0]
+            y0, y1, x0, x1 = win = self.uvmap.window(inner[b], self.crop_margin,
+                                                     2 ** int(self.config["depth"]))
+            out[b, :, y0:y1, x0:x1] = self.model(self.uvmap.rasterise(x[b:b + 1], win))[0]
         keep = torch.as_tensor(inner, dtype=out.dtype, device=out.device)[..., None]
         return self.uvmap.sample(out) * keep
 
