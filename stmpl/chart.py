@@ -78,6 +78,8 @@ def speed_accuracy(points: list[dict], path, title: str = "") -> list[pathlib.Pa
                        label=PAPER_POINT["label"])
         ax.set_xscale("log")
         ax.set_yscale("log")
+        if ok.any():                     # room below the lowest points for their names
+            ax.set_ylim(y[ok].min() / 1.8, y[ok].max() * 1.4)
         ax.set_xlabel("time per scene, ms (log; this CPU unless marked)")
         ax.set_ylabel(what + " (log)")
         ax.grid(True, which="both", alpha=0.25)
@@ -87,15 +89,16 @@ def speed_accuracy(points: list[dict], path, title: str = "") -> list[pathlib.Pa
             axis.set_major_formatter(fmt)
             axis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         names.append((ax, [(x[i], y[i], points[i]["label"]) for i in idx
-                           if points[i].get("batch", 1) == 1]))
+                           if points[i].get("batch", 1) == 1],
+                      [(x[i], y[i]) for i in idx]))
     handles, labels = axes[0].get_legend_handles_labels()
     seen = dict(zip(labels, handles))
     fig.legend(seen.values(), seen.keys(), loc="lower center", ncol=4, fontsize=8,
                frameon=False)
     fig.suptitle(title or "Speed against accuracy: lower left is better", fontsize=12)
     fig.tight_layout(rect=(0, 0.12, 1, 0.95))
-    for ax, items in names:
-        _labels(ax, items)
+    for ax, items, markers in names:
+        _labels(ax, items, markers)
     path = pathlib.Path(path)
     base = path.with_suffix("")
     base.parent.mkdir(parents=True, exist_ok=True)
@@ -106,28 +109,72 @@ def speed_accuracy(points: list[dict], path, title: str = "") -> list[pathlib.Pa
     return out
 
 
-def _labels(ax, items: list) -> None:
-    """Name each point (``(x, y, text)``) beside it, trying a few places around it so that no
-    two names overlap and none leaves the axes (the first such place; the first tried if none
-    is)."""
+def _nearest(box, own, markers: list, ax) -> bool:
+    """Whether the name in display box ``box`` lies nearer its own point ``own`` (data) than
+    any other marker (so that a reader pairs them right)."""
+    def gap(p):
+        cx, cy = ax.transData.transform(p)
+        return np.hypot(max(box.x0 - cx, 0, cx - box.x1), max(box.y0 - cy, 0, cy - box.y1))
+
+    mine = gap(own)
+    return all(gap(m) > mine for m in markers if tuple(m) != tuple(own))
+
+
+def _labels(ax, items: list, markers: list | None = None) -> None:
+    """Name each point (``(x, y, text)``) beside it where the name overlaps no other name, no
+    marker and stays inside the axes; the names that find no such place line up in a column
+    to the right of their points, each joined to its point by a thin leader line, in the
+    points' vertical order (so the lines do not cross), right of every marker (``markers``,
+    ``(x, y)``: all the panel's points, unnamed ones too) at their height."""
+    from matplotlib.text import Text
+    from matplotlib.transforms import Bbox
+
     fig = ax.figure
     fig.canvas.draw()
     renderer = fig.canvas.get_renderer()
-    placed = []
     frame = ax.get_window_extent(renderer)
-    offsets = [(5, 4), (5, -11), (-5, 4), (-5, -11), (5, 14), (5, -21), (-5, 14), (-5, -21)]
+    scale = fig.dpi / 72.0                              # points -> display pixels
+    placed = []
+    markers = [(x, y) for x, y, _ in items] + list(markers or [])
+    for x, y in markers:                                # names keep off the markers
+        cx, cy = ax.transData.transform((x, y))
+        placed.append(Bbox.from_bounds(cx - 4 * scale, cy - 4 * scale, 8 * scale, 8 * scale))
+    style = {"fontsize": 7, "color": "#333333"}
+    crowded = []
     for x, y, text in sorted(items, key=lambda t: (t[0], t[1])):
-        for dx, dy in offsets:
+        for dx, dy in ((5, 4), (5, -11), (-5, 4), (-5, -11)):
             t = ax.annotate(text, (x, y), xytext=(dx, dy), textcoords="offset points",
-                            fontsize=7, color="#333333", ha="left" if dx > 0 else "right")
+                            ha="left" if dx > 0 else "right", **style)
             box = t.get_window_extent(renderer)
             inside = (frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0
                       and box.y1 <= frame.y1)
-            if inside and not any(box.overlaps(b) for b in placed):
+            if inside and not any(box.overlaps(b) for b in placed) and \
+                    _nearest(box, (x, y), markers, ax):
+                placed.append(box)
                 break
             t.remove()
         else:
-            t = ax.annotate(text, (x, y), xytext=offsets[0], textcoords="offset points",
-                            fontsize=7, color="#333333")
-            box = t.get_window_extent(renderer)
-        placed.append(box)
+            crowded.append((x, y, text))
+    if not crowded:
+        return
+    pix = [ax.transData.transform((x, y)) for x, y, _ in crowded]
+    step = 11 * scale
+    top, bottom = max(p[1] for p in pix) + step, min(p[1] for p in pix) - len(pix) * step
+    reach = max(p[0] for p in pix) + 100 * scale        # the crowd's own neighbourhood
+    beside = [m[0] for m in (ax.transData.transform(m) for m in markers)
+              if bottom <= m[1] <= top and m[0] <= reach]
+    column = max([p[0] for p in pix] + beside) + 14 * scale   # right of the markers there
+    order = np.argsort([-p[1] for p in pix])              # top to bottom
+    ys, last = {}, np.inf
+    for i in order:
+        ys[i] = min(pix[i][1], last - step)
+        last = ys[i]
+    low = min(ys.values()) - frame.y0 - 4 * scale         # lift the column into the axes
+    if low < 0:
+        ys = {i: v - low for i, v in ys.items()}
+    to_data = ax.transData.inverted()
+    for i, (x, y, text) in enumerate(crowded):
+        at = to_data.transform((column, ys[i]))
+        ax.annotate(text, (x, y), xytext=tuple(at), textcoords="data", ha="left",
+                    va="center", arrowprops={"arrowstyle": "-", "color": "#777777", "lw": 0.6,
+                                             "shrinkA": 2, "shrinkB": 4 * scale}, **style)
