@@ -88,6 +88,16 @@ def contact_camera(deformation) -> tuple[np.ndarray, np.ndarray, float]:
     return basis, centre, reach
 
 
+def _warning(d) -> str | None:
+    """The line a panel adds in red when its answer is impossible or outside its envelope."""
+    env = d.info.get("envelope")
+    if not d.info.get("physical", True):
+        return "physically impossible answer: do not use"
+    if env and not env["inside"]:
+        return "outside its envelope: " + env["outside"][0].split(" (")[0]
+    return None
+
+
 def contact_figure(deformations: dict, truth=None, objects=(), path=None, dpi: int = 110,
                    title: str | None = None):
     """A PNG of one pressed scene: a panel per method (``deformations``: name ->
@@ -108,8 +118,10 @@ def contact_figure(deformations: dict, truth=None, objects=(), path=None, dpi: i
     scale = float(np.clip(DENT_MM / top, 1.0, 10.0))
     cmap = matplotlib.colormaps["YlOrRd"]      # light where still: the shading shows shape
     fig = plt.figure(figsize=(max(4.4 * len(rows) + 1.0, 10.0), 5.2))
+    warned = any(_warning(d) for _, d in rows)            # a fourth title line: lower panels
     grid = fig.add_gridspec(1, len(rows) + 1, width_ratios=[1] * len(rows) + [0.05],
-                            left=0.01, right=0.94, bottom=0.03, top=0.76, wspace=0.05)
+                            left=0.01, right=0.94, bottom=0.03, top=0.72 if warned else 0.76,
+                            wspace=0.05)
     axes = [fig.add_subplot(grid[0, k]) for k in range(len(rows))]
     cx, cy = (centre @ basis.T)[:2]
     for (name, d), ax in zip(rows, axes):
@@ -132,7 +144,10 @@ def contact_figure(deformations: dict, truth=None, objects=(), path=None, dpi: i
             peak = truth.magnitude.max()
             lines.append(f"error {100 * err[active].mean() / peak:.2f} % of the deepest, "
                          f"peak {100 * (d.magnitude.max() - peak) / peak:+.1f} %")
-        ax.set_title("\n".join(lines), fontsize=10)
+        warn = _warning(d)
+        if warn:
+            lines.append(warn)
+        ax.set_title("\n".join(lines), fontsize=10, color="#a00000" if warn else "black")
     sm = matplotlib.cm.ScalarMappable(matplotlib.colors.Normalize(0, top), cmap)
     fig.colorbar(sm, cax=fig.add_subplot(grid[0, -1]), label="displacement |u| (mm)")
     fig.suptitle((title or _title(rows[0][1].scene))

@@ -27,5 +27,18 @@ def test_contact_figure(tmp_path, arm):
     fig = contact_figure({"linear": d}, None, [touch.objects[0].posed()], tmp_path / "c.png")
     assert (tmp_path / "c.png").stat().st_size > 30_000
     assert "bar 0.3 N" in fig._suptitle.get_text()
+    title = fig.axes[0].get_title()
+    assert "outside its envelope" not in title
+    # an answer outside the model's envelope says so in its panel, in red
+    d.info["envelope"] = {"inside": False, "outside": ["mean pressure of a contact 0.48 kPa > "
+                                                       "0.4 kPa (where it was measured)"]}
+    fig = contact_figure({"linear": d}, None, [touch.objects[0].posed()], tmp_path / "c.png")
+    ax = fig.axes[0]
+    assert ax.get_title().endswith("outside its envelope: mean pressure of a contact 0.48 kPa "
+                                   "> 0.4 kPa")
+    assert ax.title.get_color() == "#a00000"
+    d.info["physical"] = False
+    fig = contact_figure({"linear": d}, None, [], tmp_path / "c.png")
+    assert "physically impossible" in fig.axes[0].get_title()
     with pytest.raises(ValueError, match="no deformations"):
         contact_figure({})
