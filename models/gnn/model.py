@@ -188,7 +188,11 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         edge encoder's weights, so at inference they are kept until the weights change."""
         if self.model.training or torch.is_grad_enabled():
             return self.model.encode_edges(self.edge_attr)
-        version = [t._version for t in (*self.model.parameters(), *self.model.buffers())]
+        tensors = getattr(self, "_edge_tensors", (None, []))   # what the encoded edges depend on
+        if tensors[0] is not self.model:
+            self._edge_tensors = tensors = (self.model, [*self.model.net.edge_encoder.parameters(),
+                                                         *self.model.edge_norm.buffers()])
+        version = [id(self.model)] + [t._version for t in tensors[1]]
         cached = getattr(self, "_edges", None)
         if cached is None or cached[0] != version:
             self._edges = cached = (version, self.model.encode_edges(self.edge_attr))
