@@ -39,7 +39,7 @@ class UVMap(torch.nn.Module):
         if pad < 2:
             raise ValueError(f"pad must be >= 2 pixels, got {pad}")
         self.size, self.pad, self.n_vertices = int(size), int(pad), part.n_vertices
-        self._uv = (np.asarray(part.uv), np.asarray(part.uv_vertex))
+        self._corner_of = np.asarray(part.uv_vertex)              # UV corner -> its vertex
         pix, tri, bary, inside = _raster(part.uv, part.face_uv, self.size)
         pix, tri, bary = _dilate(pix, tri, bary, inside, self.size, pad,
                                  _pixel_xy(part.uv, self.size)[part.face_uv])
@@ -116,14 +116,9 @@ class UVMap(torch.nn.Module):
         vertices = np.asarray(vertices, bool)
         if vertices.shape != (self.n_vertices,) or not vertices.any():
             raise ValueError(f"window needs a non-empty ({self.n_vertices},) vertex mask")
-        if getattr(self, "_corner_tap_xy", None) is None:
-            uv, corner = self._uv
-            x, y = _pixel_xy(uv, self.size).T
-            x0 = np.clip(np.floor(x).astype(int), 0, self.size - 2)
-            y0 = np.clip(np.floor(y).astype(int), 0, self.size - 2)
-            self._corner_tap_xy = (x0, y0, corner)
-        x, y, corner = self._corner_tap_xy
-        c = vertices[corner]
+        first = self.corner_index[:, 0].cpu().numpy()          # each corner's top-left tap
+        y, x = first // self.size, first % self.size
+        c = vertices[self._corner_of]
         lo = np.array([y[c].min(), x[c].min()]) - margin
         hi = np.array([y[c].max(), x[c].max()]) + 2 + margin      # taps at x0 and x0 + 1
         lo = np.maximum(lo // align * align, 0)

@@ -89,8 +89,9 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
     ``relative`` or ``pooled``, see :meth:`loss`), ``prior`` (``none``, or ``linear``: the
     precomputed linear FEM's displacement, :mod:`models.linear`, comes in as three more
     channels, the output images hold only the correction, added to the linear answer at the
-    vertices, so the prior itself has no seam gap; :meth:`fit` computes the operator). With the prior, ``fidelity="auto"``
-    runs the network on the window of the chart the load needs (:meth:`_sample_cropped`)."""
+    vertices, so the prior itself has no seam gap; :meth:`fit` computes the operator). With the
+    prior, ``fidelity="auto"`` runs the network on the window of the chart the load needs
+    (:meth:`_sample_cropped`)."""
 
     name = "uv_unet"
     defaults = {"size": 128, "width": 16, "depth": 5, "dropout": 0.5, "geometry": False,
