@@ -86,17 +86,28 @@ class UVMap(torch.nn.Module):
         out = out.transpose(1, 2).reshape(b, c, h, wd)
         return out[0] if single else out
 
-    def sample(self, images: torch.Tensor) -> torch.Tensor:
+    def sample(self, images: torch.Tensor, window: tuple[int, int, int, int] | None = None,
+               vertices: torch.Tensor | None = None) -> torch.Tensor:
         """Images ``(C, H, W)`` or ``(B, C, H, W)`` -> vertex values ``(N, C)`` or ``(B, N, C)``,
-        bilinear at each UV corner, seam copies averaged."""
+        bilinear at each UV corner, seam copies averaged. With ``window`` the images are that
+        window of the chart (:meth:`rasterise`) and ``vertices`` ``(n,)`` the vertices sampled,
+        every pixel they read inside it (as :meth:`window` makes it): ``(B, n, C)``."""
         single = images.dim() == 3
         images = images[None] if single else images
-        if images.dim() != 4 or images.shape[-2:] != (self.size, self.size):
-            raise ValueError(f"images must be (B, C, {self.size}, {self.size}) or "
-                             f"(C, {self.size}, {self.size}), got {tuple(images.shape)}")
+        if window is None:
+            h, wd, idx, w = self.size, self.size, self.sample_index, self.sample_weight
+        else:
+            y0, y1, x0, x1 = window
+            h, wd = y1 - y0, x1 - x0
+            taps = self.sample_index[vertices]                      # in the whole image
+            idx = ((taps // self.size - y0).clamp(0, h - 1) * wd
+                   + (taps % self.size - x0).clamp(0, wd - 1))     # unused taps weigh 0
+            w = self.sample_weight[vertices]
+        if images.dim() != 4 or images.shape[-2:] != (h, wd):
+            raise ValueError(f"images must be (B, C, {h}, {wd}) or (C, {h}, {wd}), got "
+                             f"{tuple(images.shape)}")
         flat = images.flatten(2)  # (B, C, HW)
-        w = self.sample_weight.to(images.dtype)
-        out = (flat[:, :, self.sample_index] * w).sum(dim=-1).transpose(1, 2)  # (B, N, C)
+        out = (flat[:, :, idx] * w.to(images.dtype)).sum(dim=-1).transpose(1, 2)  # (B, N, C)
         return out[0] if single else out
 
     def sample_corners(self, images: torch.Tensor) -> torch.Tensor:

@@ -120,3 +120,16 @@ def test_a_window_rasterised_alone_is_the_cut_of_the_whole_image(arm):
     alone = m.rasterise(field[None], win)
     assert alone.shape == (1, 3, y1 - y0, x1 - x0)
     assert torch.equal(alone, whole[:, :, y0:y1, x0:x1])
+
+
+def test_sampling_a_window_reads_what_the_whole_image_gives(arm):
+    m = UVMap(arm, 128)
+    field = _smooth_field(arm).float()
+    near = np.linalg.norm(arm.vertices - arm.vertices[5], axis=1) < 0.03
+    win = m.window(near, margin=3, align=4)
+    v = torch.as_tensor(np.flatnonzero(near))
+    whole = m.sample(m.rasterise(field[None]))[0, v]
+    alone = m.sample(m.rasterise(field[None], win), win, v)[0]
+    np.testing.assert_allclose(alone.numpy(), whole.numpy(), rtol=1e-6, atol=1e-6)
+    with pytest.raises(ValueError, match="images must be"):
+        m.sample(m.rasterise(field[None]), win, v)

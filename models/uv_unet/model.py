@@ -161,14 +161,13 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
         aligned to the network's strides; those vertices get its correction (the whole image's,
         exactly), every other vertex none (the prior's answer stands)."""
         inner = moved(self.part, force.cpu().numpy(), base.detach().cpu().numpy())
-        size = self.uvmap.size
-        out = x.new_zeros(x.shape[0], 3, size, size)
+        m = self.uvmap
+        out = x.new_zeros(x.shape[0], x.shape[1], 3)
         for b in np.flatnonzero(inner.any(-1)):
-            y0, y1, x0, x1 = win = self.uvmap.window(inner[b], self.crop_margin,
-                                                     2 ** int(self.config["depth"]))
-            out[b, :, y0:y1, x0:x1] = self.model(self.uvmap.rasterise(x[b:b + 1], win))[0]
-        keep = torch.as_tensor(inner, dtype=out.dtype, device=out.device)[..., None]
-        return self.uvmap.sample(out) * keep
+            win = m.window(inner[b], self.crop_margin, 2 ** int(self.config["depth"]))
+            v = torch.as_tensor(np.flatnonzero(inner[b]), device=x.device)
+            out[b, v] = m.sample(self.model(m.rasterise(x[b:b + 1], win)), win, v)[0]
+        return out
 
     def loss(self, thickness, force, target):
         """Masked L2 over the chart's pixels (``loss: mse``, the paper's), or with ``loss:
