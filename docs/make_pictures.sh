@@ -6,7 +6,7 @@ cd "$(dirname "$0")"
 stmpl scene --load disk --force 0.3 --radius 25 --at 0.5 0.5 --out arm_disk.png
 stmpl scene --load seam_disk --force 0.3 --radius 30 --along 0.5 --out arm_seam_disk.png
 stmpl scene --load band --force 0.5 --width 30 --along 0.4 --out arm_band.png
-stmpl scene --load letter --char A --force 0.3 --height 170 --width 18 --at 0.5 0.5 \
+stmpl scene --load letter --char A --force 0.3 --char-height 170 --width 18 --at 0.5 0.5 \
     --out arm_letter_A.png
 # FEM: 0.4 N on a 2 cm disk, reference mesh, 4 continuation levels
 stmpl solve --load disk --force 0.4 --levels 4 --radius 20 --at 0.5 0.5 --out arm_fem_disk.png

@@ -19,7 +19,14 @@ def _body_spec(args) -> dict:
     if args.smpl:
         return {"model": "smpl", "path": args.smpl, "uv_path": args.smpl_uv,
                 "betas": [0.0, args.beta2] if args.beta2 is not None else None}
-    return {"model": "anny", "phenotype": {"weight": args.weight}}
+    return {"model": "anny", "phenotype": phenotype(args)}
+
+
+def phenotype(args) -> dict:
+    """The anny phenotype the options ``--weight``, ``--muscle``, ... give (unset ones 0.5)."""
+    from stmpl.body.anny_body import PHENOTYPES
+
+    return {k: getattr(args, k) for k in PHENOTYPES if getattr(args, k, None) is not None}
 
 
 def _body(args):
@@ -56,7 +63,7 @@ def _load(args, part):
                            spread=args.spread * mm, total=total, **at)
     if args.load == "band":
         return loads.band(part, args.along, args.width * mm, total)
-    return loads.letter(part, args.char, at["uv"], args.height * mm, args.width * mm,
+    return loads.letter(part, args.char, at["uv"], args.char_height * mm, args.width * mm,
                         args.angle, total)
 
 
@@ -269,9 +276,19 @@ def device(text: str) -> str:
     return text
 
 
-def _body_args(p) -> None:
+def phenotype_args(p) -> None:
+    """anny's phenotype options, each in [0, 1] (0.5 when not given)."""
     p.add_argument("--weight", type=float, default=0.5,
                    help="anny weight phenotype in [0, 1] (thin..heavy; default 0.5)")
+    for name, what in (("gender", "female..male"), ("age", "young..old"),
+                       ("muscle", "low..high"), ("height", "short..tall"),
+                       ("proportions", "anny's proportions")):
+        p.add_argument(f"--{name}", type=float, default=None,
+                       help=f"anny {name} phenotype in [0, 1] ({what}; default 0.5)")
+
+
+def _body_args(p) -> None:
+    phenotype_args(p)
     p.add_argument("--smpl", help="an SMPL-format model file (.npz/.pkl) instead of anny")
     p.add_argument("--smpl-uv", help="OBJ with the SMPL UV layout (vt/ft)")
     p.add_argument("--beta2", type=float, help="SMPL beta_2 in [-2, 2] (thickness heuristic)")
@@ -288,7 +305,7 @@ def _scene_args(sc, force: float) -> None:
     sc.add_argument("--count", type=int, default=3, help="number of spots (default 3)")
     sc.add_argument("--spread", type=float, default=40.0, help="spots' spread, mm (default 40)")
     sc.add_argument("--width", type=float, default=30.0, help="band width / letter stroke, mm")
-    sc.add_argument("--height", type=float, default=100.0, help="letter height, mm")
+    sc.add_argument("--char-height", type=float, default=100.0, help="letter height, mm")
     sc.add_argument("--char", default="A", help="letter character")
     sc.add_argument("--angle", type=float, default=0.0, help="ellipse/letter angle, rad")
     sc.add_argument("--along", type=float, default=0.5,

@@ -158,3 +158,21 @@ def test_a_permission_error_is_one_line(tmp_path, capsys, arm, monkeypatch):
     monkeypatch.setattr(stmpl.viz, "_save_figure", refuse)
     _fails(["scene", "--force", "0.3", "--out", str(target)], capsys,
            f"Permission denied: {target}")
+
+
+def test_any_anny_phenotype_makes_the_scene_and_a_learned_model_refuses_it(tmp_path, capsys, arm):
+    """``--muscle``, ``--height``, ...: the scene is on that body (its arm differs from the
+    default one), and a model trained on the default body refuses it in one line."""
+    s = tmp_path / "s.npz"
+    assert main(["scene", "--muscle", "0.9", "--height", "0.8", "--force", "0.2",
+                 "--out", str(tmp_path / "s.png"), "--save", str(s)]) == 0
+    part = Scene.read(s).part
+    assert part.source["options"]["phenotype"]["muscle"] == 0.9
+    assert part.n_vertices == arm.n_vertices
+    assert np.abs(part.vertices - arm.vertices).max() > 1e-3           # another arm
+    capsys.readouterr()
+    assert main(["predict", "--muscle", "0.9", "--model", "zoo:linear_arm",
+                 "--out", str(tmp_path / "p.png")]) == 2
+    assert "another body part" in capsys.readouterr().err
+    assert main(["scene", "--age", "1.5"]) == 2
+    assert "age must be in [0, 1]" in capsys.readouterr().err
