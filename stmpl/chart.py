@@ -172,9 +172,12 @@ def _labels(ax, items: list, markers: list | None = None) -> None:
     low = min(ys.values()) - frame.y0 - 4 * scale         # lift the column into the axes
     if low < 0:
         ys = {i: v - low for i, v in ys.items()}
+    side = "left"
+    if column + 110 * scale > frame.x1:                  # no room on the right: the left
+        column, side = min(p[0] for p in pix) - 14 * scale, "right"
     to_data = ax.transData.inverted()
     for i, (x, y, text) in enumerate(crowded):
         at = to_data.transform((column, ys[i]))
-        ax.annotate(text, (x, y), xytext=tuple(at), textcoords="data", ha="left",
+        ax.annotate(text, (x, y), xytext=tuple(at), textcoords="data", ha=side,
                     va="center", arrowprops={"arrowstyle": "-", "color": "#777777", "lw": 0.6,
                                              "shrinkA": 2, "shrinkB": 4 * scale}, **style)
