@@ -8,6 +8,9 @@ import sys
 import warnings
 from importlib.metadata import entry_points
 
+from stmpl.body.anny_body import phenotype_of, phenotype_options
+from stmpl.body.smpl_body import smpl_options
+
 log = logging.getLogger("stmpl")
 
 COMMANDS = "stmpl.commands"
@@ -19,14 +22,7 @@ def _body_spec(args) -> dict:
     if args.smpl:
         return {"model": "smpl", "path": args.smpl, "uv_path": args.smpl_uv,
                 "betas": [0.0, args.beta2] if args.beta2 is not None else None}
-    return {"model": "anny", "phenotype": phenotype(args)}
-
-
-def phenotype(args) -> dict:
-    """The anny phenotype the options ``--weight``, ``--muscle``, ... give (unset ones 0.5)."""
-    from stmpl.body.anny_body import PHENOTYPES
-
-    return {k: getattr(args, k) for k in PHENOTYPES if getattr(args, k, None) is not None}
+    return {"model": "anny", "phenotype": phenotype_of(args)}
 
 
 def _body(args):
@@ -276,22 +272,9 @@ def device(text: str) -> str:
     return text
 
 
-def phenotype_args(p) -> None:
-    """anny's phenotype options, each in [0, 1] (0.5 when not given)."""
-    p.add_argument("--weight", type=float, default=0.5,
-                   help="anny weight phenotype in [0, 1] (thin..heavy; default 0.5)")
-    for name, what in (("gender", "female..male"), ("age", "young..old"),
-                       ("muscle", "low..high"), ("height", "short..tall"),
-                       ("proportions", "anny's proportions")):
-        p.add_argument(f"--{name}", type=float, default=None,
-                       help=f"anny {name} phenotype in [0, 1] ({what}; default 0.5)")
-
-
 def _body_args(p) -> None:
-    phenotype_args(p)
-    p.add_argument("--smpl", help="an SMPL-format model file (.npz/.pkl) instead of anny")
-    p.add_argument("--smpl-uv", help="OBJ with the SMPL UV layout (vt/ft)")
-    p.add_argument("--beta2", type=float, help="SMPL beta_2 in [-2, 2] (thickness heuristic)")
+    phenotype_options(p)
+    smpl_options(p)
 
 
 def _scene_args(sc, force: float) -> None:

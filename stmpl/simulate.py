@@ -48,9 +48,9 @@ def add_arguments(sp) -> None:
                       help="how deep the object reaches into the skin, mm (default 2)")
     what.add_argument("--force", type=float, default=0.4, help="total force, N (default 0.4)")
     sp.add_argument("--part", default="left_arm", help="body part (default left_arm)")
-    from stmpl.cli import phenotype_args
+    from stmpl.body.anny_body import phenotype_options
 
-    phenotype_args(sp)
+    phenotype_options(sp)
     sp.add_argument("--subdivide", type=int, default=None, metavar="N",
                     help="the skin's resolution: every triangle of anny's part split into four "
                     "N times (default: the first model's own, 1 for the shipped models; 1 for "
@@ -110,7 +110,7 @@ def run(args) -> int:
     from stmpl.body.spec import part_from_spec
     from stmpl.render import contact_figure, duration
     from stmpl.scene import Scene
-    from stmpl.cli import phenotype
+    from stmpl.body.anny_body import phenotype_of
     from stmpl.spec import label, predictor_from_spec
 
     t0 = time.perf_counter()
@@ -122,7 +122,7 @@ def run(args) -> int:
         sub = next((int(p.part.source.get("subdivisions", 0)) for p in preds
                     if getattr(p, "part", None) is not None), 1)
     part = part_from_spec({"model": "anny", "subdivisions": sub,
-                           "phenotype": phenotype(args)}, args.part)
+                           "phenotype": phenotype_of(args)}, args.part)
     objs = pressings(args, part)
     touch = contact.contact(part, objs)
     scene = Scene.from_load(part, tissue.constant(part, args.thickness * 1e-3), touch.load())

@@ -200,3 +200,12 @@ def read_obj_uv(path, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     if ft.max() >= len(uv) or ft.min() < 0:
         raise ValueError(f"UV OBJ {path.name}: vt index out of range")
     return uv, ft[order]
+
+
+def smpl_options(parser) -> None:
+    """Add ``--smpl`` (a user's SMPL-format model file), ``--smpl-uv`` and ``--beta2`` to an
+    ``argparse`` parser."""
+    parser.add_argument("--smpl", help="an SMPL-format model file (.npz/.pkl) instead of anny")
+    parser.add_argument("--smpl-uv", help="OBJ with the SMPL UV layout (vt/ft)")
+    parser.add_argument("--beta2", type=float,
+                        help="SMPL beta_2 in [-2, 2] (thickness heuristic)")
