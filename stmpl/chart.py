@@ -167,7 +167,7 @@ def _labels(ax, items: list, markers: list | None = None) -> None:
     order = np.argsort([-p[1] for p in pix])              # top to bottom
     ys, last = {}, np.inf
     for i in order:
-        ys[i] = min(pix[i][1], last - step)
+        ys[i] = min(pix[i][1] + 6 * scale, last - step)   # a little above: the leader slants
         last = ys[i]
     low = min(ys.values()) - frame.y0 - 4 * scale         # lift the column into the axes
     if low < 0:
