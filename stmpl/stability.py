@@ -296,15 +296,6 @@ def figures(cfg, points: list, out: pathlib.Path) -> list:
             fails = [p for p in pts if not p["fem"]["ok"]]
             for p in fails:
                 ax.axvline(p["value"], c="#cc0000", lw=0.8, alpha=0.5)
-            if fails and ax is axes[0]:
-                f0 = fails[0]
-                why = textwrap.shorten(f0["fem"]["reason"].split(": ", 1)[-1], 60,
-                                       placeholder="...")
-                ax.annotate("FEM fails from here after "
-                            f"{f0['fem']['seconds']:.1f} s:\n" + "\n".join(
-                                textwrap.wrap(why, 32)), (f0["value"], 0.02),
-                            xycoords=("data", "axes fraction"), fontsize=7, color="#cc0000",
-                            xytext=(-3, 0), textcoords="offset points", ha="right")
             ax.set_yscale("log")                 # 1-2-5 ticks, labelled, as on the chart
             ax.yaxis.set_major_locator(matplotlib.ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
             ax.yaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
@@ -314,6 +305,8 @@ def figures(cfg, points: list, out: pathlib.Path) -> list:
                 ax.xaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
             if axis == "contacts":
                 ax.xaxis.set_major_locator(matplotlib.ticker.MaxNLocator(integer=True))
+            if fails and ax is axes[0]:
+                _fem_fails(ax, fails[0])
             ax.set_xlabel(AXES[axis][0])
             ax.set_ylabel(what + " (log)")
             ax.grid(True, which="both", alpha=0.25)
@@ -330,6 +323,23 @@ def figures(cfg, points: list, out: pathlib.Path) -> list:
         files.append(f)
     files.append(envelope_map(points, names, out / "envelope_map.png"))
     return files
+
+
+def _fem_fails(ax, f0: dict) -> None:
+    """Say where the FEM starts failing, why and how fast: in the failing region to the right of
+    the first failure when it has room (no method has an error there to hide), else above the
+    panel."""
+    why = textwrap.shorten(f0["fem"]["reason"].split(": ", 1)[-1], 60, placeholder="...")
+    text = f"FEM fails from here after {f0['fem']['seconds']:.1f} s:\n" + "\n".join(
+        textwrap.wrap(why, 32))
+    x = ax.transScale.transform((f0["value"], 1.0))[0]          # where on the axis, 0..1
+    lo, hi = (ax.transScale.transform((v, 1.0))[0] for v in ax.get_xlim())
+    if (hi - x) / (hi - lo) > 0.3:
+        ax.annotate(text, (f0["value"], 0.5), xycoords=("data", "axes fraction"), fontsize=7,
+                    color="#cc0000", xytext=(4, 0), textcoords="offset points", va="center")
+    else:
+        ax.set_title(f"FEM fails from {f0['value']:g} after {f0['fem']['seconds']:.1f} s: {why}",
+                     fontsize=7, color="#cc0000", loc="right")
 
 
 COLOURS = {"<=1 %": "#2ca02c", "<=5 %": "#ffbf00", ">5 %": "#d62728", "impossible": "#5a0000",
