@@ -26,6 +26,15 @@ def generate_command(args) -> int:
     if not card:
         print("stopped early (--max-shards); run again to finish")
         return 0
+    if "members" in card:                                # one dataset per body
+        for m in card["members"]:
+            sp = m["samples_per_split"]
+            print(f"{m['folder']}: {m['samples']} samples (train {sp['train']}, val "
+                  f"{sp['val']}, test {sp['test']}), {m['failures']} solves failed; "
+                  f"{m['thickness_mm'][0]:g} mm, {m['phenotype']}")
+        print(f"{card['samples']} samples on {len(card['members'])} bodies; content hash "
+              f"{card['hash']}")
+        return 0
     sp = card["samples_per_split"]
     median = card["timing"]["solve_seconds_median_per_sample"]
     print(f"{card['samples']} samples (train {sp['train']}, val {sp['val']}, test "

@@ -29,7 +29,16 @@ DEFAULTS = {
     "shard_tasks": 4,
     "solver": {},
     "parallel": {"backend": "processes", "workers": 2, "scheduler": None},
+    "linear": False,
+    "bodies": None,
 }
+OPTIONAL = {"fidelity": "full", "linear": False, "bodies": None}
+"""Keys whose default leaves a config's hash as it was before the key existed."""
+BODY_KEYS = {"phenotypes", "sample", "thickness"}
+"""``bodies``: ``phenotypes`` (a list of anny phenotypes), ``sample`` (``{count, seed, age}``:
+that many drawn from anny's shape distribution, adults of ``age`` [lo, hi] years), ``thickness``
+(``from_weight``, the paper's heuristic per body, or ``levels``: ``thickness_mm`` on every
+body); see :mod:`fem.bodies`."""
 PLACEMENT_KEYS = {
     "disk": {"centres", "radii"},
     "ellipse": {"centres", "semi_axes", "angles"},
@@ -111,11 +120,18 @@ def check(cfg: dict) -> None:
             raise ValueError(f"{key}: {e}") from e
     resolution(cfg["resolution"])
     checked.one_of(cfg["fidelity"], "fidelity", FIDELITIES)
+    if not isinstance(cfg["linear"], bool):
+        raise ValueError(f"linear must be true or false, got {cfg['linear']!r}")
+    if cfg["bodies"] is not None:
+        from fem.bodies import check_bodies
+
+        check_bodies(cfg)
 
 
 def config_hash(cfg: dict) -> str:
     """Hash of everything that decides the samples (not how they are computed in parallel)."""
     key = {k: v for k, v in cfg.items() if k not in ("parallel", "name")}
-    if key.get("fidelity") == "full":        # the default: hashes from before it existed hold
-        del key["fidelity"]
+    for k, default in OPTIONAL.items():     # defaults: hashes from before the key existed hold
+        if k in key and key[k] == default:
+            del key[k]
     return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]

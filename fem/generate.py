@@ -144,6 +144,14 @@ def generate(config, out=None, *, workers: int | None = None, backend: str | Non
     (default ``data/<name>``). Returns the card. ``max_shards`` stops after that many new shards
     (for tests and trial runs; the card is then not written and ``{}`` is returned)."""
     cfg = read_config(config)
+    if cfg["bodies"] is not None:                         # one member dataset per body
+        from fem.bodies import generate_bodies
+
+        if part is not None:
+            raise ValueError("a bodies config makes its own parts; part= is not taken")
+        return generate_bodies(cfg, out if out is not None else pathlib.Path("data") /
+                               cfg["name"], workers=workers, backend=backend,
+                               scheduler=scheduler, progress=progress, max_shards=max_shards)
     par = dict(cfg["parallel"])
     if workers is not None:
         par["workers"] = workers

@@ -37,6 +37,8 @@ def solve_shard(payload: dict) -> dict:
     opts = SolverOptions(**cfg["solver"])
     forces = np.asarray(cfg["forces"], dtype=float)
     rec = {k: [] for k in FLOATS + INTS + DOUBLES + STRINGS}
+    if cfg.get("linear"):
+        rec["linear"] = []
     failures = []
     for task, (pi, ti), placement, split in payload["tasks"]:
         th_mm = cfg["thickness_mm"][ti]
@@ -64,7 +66,10 @@ def solve_shard(payload: dict) -> dict:
                 failures.append({"task": task, "placement": pi, "thickness_mm": th_mm,
                                  "total": float(f), "reason": f"mesh: {e}"})
             continue
+        unit = None                                # the linear FEM's answer to 1 N of the pattern
         for f, s in zip(levels, sols):
+            if s.ok and "linear" in rec and unit is None:
+                unit = linear_answer(part, th_mm * 1e-3, load.force, cfg, mat, opts)
             if not s.ok:
                 failures.append({"task": task, "placement": pi, "thickness_mm": th_mm,
                                  "total": float(f), "reason": s.reason})
@@ -78,6 +83,8 @@ def solve_shard(payload: dict) -> dict:
             if lift is not None:
                 u = lift(u, part.n_vertices)
             rec["displacement"].append(u.astype(np.float32))
+            if unit is not None:
+                rec["linear"].append((unit * f).astype(np.float32))
             rec["total"].append(float(f))
             rec["split"].append(int(split))
             rec["kind"].append(placement["kind"])
@@ -90,6 +97,19 @@ def solve_shard(payload: dict) -> dict:
     return {"shard": payload["shard"], "records": rec, "failures": failures,
             "tasks": [t[0] for t in payload["tasks"]], "wall": time.perf_counter() - t0,
             "pid": os.getpid()}
+
+
+def linear_answer(part: BodyPart, thickness: float, pattern: np.ndarray, cfg: dict, mat,
+                  opts) -> np.ndarray:
+    """``(N, 3)`` m: the linear FEM's displacement under the force ``pattern`` ``(N,)`` (N) on a
+    uniform layer ``thickness`` (m), from the columns of its loaded vertices solved as the
+    on-demand operator solves them (:func:`fem.compliance.local_compliance`), so that a model
+    trained on it meets the same prior when it serves the body later."""
+    from fem.compliance import local_compliance
+
+    loaded = np.flatnonzero(pattern > 0)
+    G, _ = local_compliance(part, thickness, loaded, cfg["resolution"], mat, opts)
+    return np.einsum("nkc,k->nc", G, pattern[loaded])
 
 
 def payload(p: Plan, k: int, threads: int | None) -> dict:

@@ -37,6 +37,10 @@ FLOATS = ("thickness", "force", "displacement")
 INTS = ("task", "placement", "thickness_level", "split", "iterations")
 DOUBLES = ("total", "residual", "solve_time", "min_det_F", "max_compression")
 STRINGS = ("kind", "params")
+OPTIONAL = ("linear",)
+"""Per-sample arrays a dataset may hold: ``linear`` ``(S, N, 3)`` m, the linear FEM's answer to
+the same load on the same body (config ``linear: true``; the columns are solved as the on-demand
+operator solves them, :func:`fem.compliance.local_compliance`). Hashed when present."""
 
 
 def at_levels(arrays: dict, thickness_mm) -> np.ndarray:
@@ -51,7 +55,7 @@ def shard_path(folder, k: int) -> pathlib.Path:
 
 
 def _hash_arrays(h, arrays: dict) -> None:
-    for k in CONTENT:
+    for k in CONTENT + tuple(k for k in OPTIONAL if k in arrays):
         v = arrays[k]
         h.update(k.encode())
         if k in STRINGS:
@@ -97,8 +101,8 @@ def write_shard(folder, shard: int, records: dict, attrs: dict) -> pathlib.Path:
             h.attrs["n_samples"] = n
             for k, v in attrs.items():
                 h.attrs[k] = v if isinstance(v, (str, int, float)) else json.dumps(v)
-            for k in FLOATS:
-                shape = (0, 0, 3) if k == "displacement" else (0, 0)
+            for k in FLOATS + tuple(k for k in OPTIONAL if records.get(k) is not None):
+                shape = (0, 0, 3) if k in ("displacement", "linear") else (0, 0)
                 arr = np.stack(records[k]) if n else np.zeros(shape, np.float32)
                 h.create_dataset(k, data=arr, compression="gzip", compression_opts=4,
                                  shuffle=True)
@@ -120,7 +124,7 @@ def read_shard(path, keys=ARRAYS + STRINGS) -> tuple[dict, dict]:
     try:
         with h5py.File(path, "r") as h:
             attrs = dict(h.attrs)
-            names = set(keys) | set(CONTENT)
+            names = set(keys) | set(CONTENT) | {k for k in OPTIONAL if k in h}
             arrays = {k: h[k][()] for k in names}
     except (OSError, KeyError) as e:
         raise ValueError(f"dataset shard {path} is corrupt: {e}") from e
@@ -202,6 +206,11 @@ class Dataset:
     def __len__(self) -> int:
         return int(self.card["samples"])
 
+    @property
+    def parts(self) -> list[BodyPart]:
+        """The bodies' parts the samples live on (``arrays()["body"]`` indexes them): one."""
+        return [self.part]
+
     def __repr__(self) -> str:
         return (f"Dataset({str(self.folder)!r}, {len(self)} samples, "
                 f"{self.card['samples_per_split']})")
@@ -223,6 +232,7 @@ class Dataset:
     def _read_all(self) -> dict:
         v1 = self.card["format"] == "stmpl-dataset/1"
         parts: dict = {k: [] for k in ARRAYS + STRINGS}
+        optional: dict = {k: [] for k in OPTIONAL}
         digests, raw = [], hashlib.sha256()
         for s, entry in zip(self.shards, self.card["shards"]):
             arrays, attrs = read_shard(s)
@@ -234,6 +244,8 @@ class Dataset:
             digests.append(attrs["content"])
             for k in parts:
                 parts[k] += [arrays[k]] if k in ARRAYS else list(arrays[k])
+            for k in optional:
+                optional[k].append(arrays.get(k))
         if v1:
             if raw.hexdigest()[:16] != self.card["hash"]:
                 raise ValueError(f"dataset {self.folder}: shard contents do not match card.json "
@@ -243,6 +255,12 @@ class Dataset:
                              "card.json (edited files); generate the dataset again")
         out = {k: np.concatenate(parts[k]) for k in ARRAYS}
         out["kind"], out["params"] = parts["kind"], [json.loads(p) for p in parts["params"]]
+        for k, v in optional.items():        # every shard has it, or the dataset has none
+            if v and all(x is not None for x in v):
+                out[k] = np.concatenate(v)
+            elif any(x is not None for x in v):
+                raise ValueError(f"dataset {self.folder}: some shards hold {k!r}, others not")
+        out["body"] = np.zeros(len(out["total"]), np.int32)
         n = len(self.part.vertices)
         if out["displacement"].shape[1:] != (n, 3) and len(out["displacement"]):
             raise ValueError(f"dataset {self.folder}: displacement has shape "
@@ -255,11 +273,41 @@ SETUP = ("body", "part", "material", "resolution", "solver")
 agree on them (their forces, thicknesses and placements may differ)."""
 
 
+def same_mesh(a: BodyPart, b: BodyPart) -> str:
+    """What keeps two parts from being one mesh in two shapes (``""`` when they are: the same
+    name, vertex count, faces, UV chart and rims; the vertices may differ)."""
+    if a.name != b.name or a.n_vertices != b.n_vertices:
+        return f"{a.name} ({a.n_vertices} vertices) and {b.name} ({b.n_vertices} vertices)"
+    for k in ("faces", "face_uv", "uv_vertex"):
+        if not np.array_equal(getattr(a, k), getattr(b, k)):
+            return f"two {a.name} meshes with other {k}"
+    if len(a.rims) != len(b.rims) or any(not np.array_equal(x, y) for x, y in zip(a.rims,
+                                                                                 b.rims)):
+        return f"two {a.name} meshes with other rims"
+    return ""
+
+
+def _setup(card: dict) -> dict:
+    """A dataset's FEM set-up (:data:`SETUP`), its body's shape left out
+    (:data:`stmpl.body.spec.SHAPE_KEYS`: anny's phenotype, a tube's radius...)."""
+    from stmpl.body.spec import SHAPE_KEYS
+
+    cfg = card["config"]
+    out = {k: cfg.get(k) for k in SETUP}
+    body = out["body"] or {}
+    out["body"] = {k: v for k, v in body.items()
+                   if k not in SHAPE_KEYS.get(body.get("model"), set())}
+    return out
+
+
 class Datasets:
     """Several datasets of one part and one FEM set-up read as one (training on the reference
-    set beside a set of other contacts): the same interface as :class:`Dataset`, its arrays
-    concatenated in the order given, placement and task numbers shifted so that they stay
-    distinct, and a card whose ``hash`` is of the members' hashes.
+    set beside a set of other contacts, or on several bodies): the same interface as
+    :class:`Dataset`, its arrays concatenated in the order given, placement and task numbers
+    shifted so that they stay distinct, and a card whose ``hash`` is of the members' hashes.
+    Members may live on different bodies of one mesh (anny's phenotypes: the same part, faces
+    and chart in other shapes): ``parts`` holds each body's part once and ``arrays()["body"]``
+    says which one each sample lives on.
 
     >>> ds = Datasets(["data/reference_fine", "data/contacts_fine"])
     >>> ds.card["name"], ds.card["datasets"]       # 'reference_fine+contacts_fine', members
@@ -271,18 +319,21 @@ class Datasets:
                              f"{folders!r}; open one with Dataset")
         self.members = [Dataset(f) for f in folders]
         first = self.members[0]
+        hashes = [part_hash(ds.part) for ds in self.members]
         for ds in self.members[1:]:
-            if part_hash(ds.part) != part_hash(first.part):
+            why = same_mesh(first.part, ds.part)
+            if why:
                 raise ValueError(f"datasets {first.folder} and {ds.folder} live on different "
-                                 f"parts ({first.part.name}, {ds.part.name}); they cannot be "
-                                 "trained on together")
-            setup = {k: first.card["config"].get(k) for k in SETUP}
-            other = {k: ds.card["config"].get(k) for k in SETUP}
+                                 f"meshes ({why}); they cannot be trained on together")
+            setup, other = _setup(first.card), _setup(ds.card)
             if setup != other:
                 diff = sorted(k for k in SETUP if setup[k] != other[k])
                 raise ValueError(f"datasets {first.folder} and {ds.folder} differ in their FEM "
                                  f"set-up ({', '.join(diff)}); they cannot be trained on together")
         self.part = first.part
+        distinct = list(dict.fromkeys(hashes))            # each body once, in order of appearance
+        self.parts = [self.members[hashes.index(h)].part for h in distinct]
+        self._body = [distinct.index(h) for h in hashes]
         self.folder = " + ".join(str(ds.folder) for ds in self.members)
         cards = [ds.card for ds in self.members]
         levels = sorted({float(t) for c in cards for t in c["config"]["thickness_mm"]})
@@ -295,6 +346,9 @@ class Datasets:
             "config": {**cards[0]["config"], "thickness_mm": levels},
             "datasets": [{"folder": str(ds.folder), "name": ds.card["name"],
                           "hash": ds.card["hash"]} for ds in self.members]}
+        if len(self.parts) > 1:
+            self.card["bodies"] = [(p.source or {}).get("options", {}).get("phenotype")
+                                   for p in self.parts]
         self._all: dict | None = None
 
     def __len__(self) -> int:
@@ -312,14 +366,18 @@ class Datasets:
         _check_split(split)
         if self._all is None:
             parts, shift = [], {"placement": 0, "task": 0}
-            for ds in self.members:
+            for ds, body in zip(self.members, self._body):
                 a = dict(ds.arrays())
                 for k in shift:
                     a[k] = a[k] + shift[k]
                     shift[k] = int(a[k].max()) + 1 if len(a[k]) else shift[k]
+                a["body"] = np.full(len(a["total"]), body, np.int32)
                 parts.append(a)
-            self._all = {k: (np.concatenate([a[k] for a in parts]) if k in ARRAYS
-                             else [x for a in parts for x in a[k]]) for k in parts[0]}
+            have = [k for k in OPTIONAL if all(k in a for a in parts)]
+            self._all = {k: (np.concatenate([a[k] for a in parts])
+                             if isinstance(parts[0][k], np.ndarray)
+                             else [x for a in parts for x in a[k]])
+                         for k in list(ARRAYS) + list(STRINGS) + ["body"] + have}
         return _of_split(self._all, split)
 
 
@@ -337,10 +395,37 @@ def _of_split(a: dict, split: str | None) -> dict:
             for k, v in a.items()}
 
 
+BODIES_FORMAT = "stmpl-bodies/1"
+"""A folder of one dataset per body (``bodies.json`` and ``body-NN/``, :mod:`fem.bodies`)."""
+
+
+def member_folders(folder) -> list[pathlib.Path] | None:
+    """The member dataset folders a ``bodies.json`` in ``folder`` lists (None if there is
+    none); ``ValueError`` if it is unreadable, ``FileNotFoundError`` if a member is missing."""
+    folder = pathlib.Path(folder)
+    path = folder / "bodies.json"
+    if not path.is_file():
+        return None
+    try:
+        card = json.loads(path.read_text())
+        out = [folder / m["folder"] for m in card["members"]]
+    except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError) as e:
+        raise ValueError(f"{path} is corrupt: {e}") from e
+    if card.get("format") != BODIES_FORMAT:
+        raise ValueError(f"{path} has format {card.get('format')!r}, expected {BODIES_FORMAT}")
+    missing = [str(f) for f in out if not f.is_dir()]
+    if missing:
+        raise FileNotFoundError(f"{path} lists member datasets that are missing: {missing[:3]}")
+    return out
+
+
 def open_data(data) -> Dataset | Datasets:
-    """A :class:`Dataset` from one folder, :class:`Datasets` from a list of two or more."""
-    if isinstance(data, (list, tuple)):
-        if not data:
-            raise ValueError("no dataset folder given (an empty list)")
-        return Datasets(data) if len(data) > 1 else Dataset(data[0])
-    return Dataset(data)
+    """A :class:`Dataset` from one folder, :class:`Datasets` from a list of two or more; a
+    folder of one dataset per body (``bodies.json``) stands for its members."""
+    folders = list(data) if isinstance(data, (list, tuple)) else [data]
+    if not folders:
+        raise ValueError("no dataset folder given (an empty list)")
+    flat = []
+    for f in folders:
+        flat += member_folders(f) or [f]
+    return Datasets(flat) if len(flat) > 1 else Dataset(flat[0])

@@ -104,9 +104,59 @@ def test_datasets_of_one_part_read_as_one(tmp_path, tiny_config, tiny_dataset):
              tmp_path / "soft", progress=False)
     with pytest.raises(ValueError, match=r"differ in their FEM set-up \(material\)"):
         Datasets([tiny_dataset, tmp_path / "soft"])
-    generate(tiny_config(name="thin", body={**tiny_config()["body"], "radius": 0.03},
-                         thickness_mm=[7.5], forces=[0.05]), tmp_path / "thin", progress=False)
-    with pytest.raises(ValueError, match="live on different parts"):
-        Datasets([tiny_dataset, tmp_path / "thin"])
+    generate(tiny_config(name="coarse", body={**tiny_config()["body"], "n_around": 12},
+                         thickness_mm=[7.5], forces=[0.05]), tmp_path / "coarse",
+             progress=False)
+    with pytest.raises(ValueError, match="live on different meshes"):
+        Datasets([tiny_dataset, tmp_path / "coarse"])
     with pytest.raises(ValueError, match="empty list"):
         open_data([])
+    assert len(both.parts) == 1 and not both.arrays()["body"].any()
+
+
+def test_datasets_on_several_bodies_of_one_mesh(tmp_path, tiny_config, tiny_dataset):
+    """The same tube mesh at another radius is another body: its samples say which (``body``
+    indexes ``parts``), the card lists the bodies; the first body's samples come first."""
+    from stmpl.dataset import open_data
+
+    generate(tiny_config(name="thin", body={**tiny_config()["body"], "radius": 0.03},
+                         thickness_mm=[7.5], forces=[0.05]), tmp_path / "thin", progress=False)
+    both = open_data([tiny_dataset, tmp_path / "thin"])
+    a, b = Dataset(tiny_dataset), Dataset(tmp_path / "thin")
+    assert len(both.parts) == 2 and np.array_equal(both.parts[1].vertices, b.part.vertices)
+    assert np.abs(both.parts[0].vertices - both.parts[1].vertices).max() > 5e-3
+    body = both.arrays()["body"]
+    np.testing.assert_array_equal(body, np.r_[np.zeros(len(a), int), np.ones(len(b), int)])
+    assert len(both.card["bodies"]) == 2
+
+
+def test_a_linear_answer_is_kept_and_hashed(tmp_path, tiny_config):
+    """With ``linear: true`` every sample carries the linear FEM's answer to its load, the
+    operator's columns times the forces (a light press: within 3 % of the FEM's peak); an
+    edited answer fails the content check."""
+    import h5py
+
+    from fem.compliance import local_compliance
+    from fem.material import material
+
+    cfg = tiny_config(thickness_mm=[7.5], forces=[0.01, 0.02], linear=True,
+                      placements={"disk": {"centres": 2, "radii": [0.02]}})
+    generate(cfg, tmp_path / "d", progress=False)
+    ds = Dataset(tmp_path / "d")
+    a = ds.arrays()
+    assert a["linear"].shape == a["displacement"].shape
+    i = 0
+    loaded = np.flatnonzero(a["force"][i] > 0)
+    G, _ = local_compliance(ds.part, 7.5e-3, loaded, cfg["resolution"],
+                            material(**ds.card["config"]["material"]))
+    np.testing.assert_allclose(a["linear"][i], np.einsum("nkc,k->nc", G, a["force"][i][loaded]),
+                               rtol=1e-4, atol=1e-9)
+    np.testing.assert_allclose(a["linear"][1], 2 * a["linear"][0], rtol=1e-5)  # 0.02 N, 0.01 N
+    peak = np.linalg.norm(a["displacement"], axis=-1).max(1)
+    lin = np.linalg.norm(a["linear"], axis=-1).max(1)
+    assert np.all(np.abs(lin / peak - 1) < 0.03)
+    shard = sorted((tmp_path / "d").glob("shard-*.h5"))[0]
+    with h5py.File(shard, "r+") as h:
+        h["linear"][0, 0, 0] += 1e-4
+    with pytest.raises(ValueError, match="does not match card.json"):
+        Dataset(tmp_path / "d").arrays()

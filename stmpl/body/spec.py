@@ -17,6 +17,10 @@ KEYS = {"anny": {"model", "phenotype", "subdivisions"},
 """The keys each body model takes; ``subdivisions`` (any model) splits every triangle of the
 part into four that many times (:func:`stmpl.body.part.subdivide`), for a finer skin."""
 PRIMITIVES = ("tube", "sheet")
+SHAPE_KEYS = {"anny": {"phenotype"}, "smpl": {"betas"}, "tube": {"radius", "length", "taper"},
+              "sheet": {"width", "height"}}
+"""The keys that change a body's shape but not its mesh (the same vertices, faces and chart in
+another place): datasets differing only in them are one mesh on several bodies."""
 
 
 def check_spec(spec) -> dict:

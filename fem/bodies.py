@@ -1,0 +1,163 @@
+"""Datasets across bodies: a dataset config with a ``bodies`` entry is made as one member dataset
+per body (the same part of the same body model, in another shape), each an ordinary dataset in
+``<out>/body-NN/``, and a ``bodies.json`` that lists them; :func:`stmpl.dataset.open_data` reads
+the folder as one set (:class:`stmpl.dataset.Datasets`).
+
+``bodies`` takes ``phenotypes`` (a list of anny phenotypes, each a mapping of
+:data:`stmpl.body.anny_body.PHENOTYPES` to [0, 1]) and/or ``sample``: ``{count, seed, age}``,
+that many phenotypes drawn from anny's own distribution of realistic bodies (its
+``SimpleShapeDistribution``: height, weight, muscle and proportions conditioned on age and
+gender) for adults of ``age`` = [lo, hi] years (default [20, 70]). ``thickness``:
+``from_weight`` (default) gives every body the paper's heuristic, 5 mm at weight 0 to 10 mm at
+weight 1 (:func:`stmpl.tissue.from_weight`), so that weight drives both the shape and the tissue
+as in the paper; ``levels`` gives every body the config's ``thickness_mm``.
+
+Each member is generated, resumed and checked as any dataset (:func:`fem.generate.generate`);
+a member's placement seed is the config's plus its index, so the bodies' splits differ.
+"""
+
+from __future__ import annotations
+
+import json
+import pathlib
+
+import numpy as np
+
+from stmpl.dataset import BODIES_FORMAT as FORMAT
+
+THICKNESS = ("from_weight", "levels")
+DEFAULT_AGE = (20.0, 70.0)
+
+
+def check_bodies(cfg: dict) -> None:
+    """``ValueError`` naming what is wrong with a config's ``bodies`` entry."""
+    from fem.config import BODY_KEYS
+    from stmpl import config as checked
+    from stmpl.body.anny_body import check_phenotype
+
+    b = cfg["bodies"]
+    if not isinstance(b, dict) or set(b) - BODY_KEYS or not ({"phenotypes", "sample"} & set(b)):
+        raise ValueError(f"bodies takes phenotypes and/or sample (and thickness), got {b!r}")
+    if cfg["body"].get("model") != "anny":
+        raise ValueError("bodies: only anny bodies have phenotypes to vary (body.model is "
+                         f"{cfg['body'].get('model')!r})")
+    if "phenotype" in cfg["body"]:
+        raise ValueError("bodies: give the phenotypes under bodies, not body.phenotype")
+    for ph in b.get("phenotypes") or []:
+        if not isinstance(ph, dict):
+            raise ValueError(f"bodies.phenotypes must be a list of mappings, got {ph!r}")
+        check_phenotype(ph)
+    if "phenotypes" in b and not b["phenotypes"]:
+        raise ValueError("bodies.phenotypes is empty")
+    if "sample" in b:
+        s = b["sample"]
+        if not isinstance(s, dict) or set(s) - {"count", "seed", "age"}:
+            raise ValueError(f"bodies.sample takes count, seed and age, got {s!r}")
+        checked.integer(s.get("count"), "bodies.sample.count", 1)
+        checked.integer(s.get("seed", 0), "bodies.sample.seed", 0)
+        age = s.get("age", list(DEFAULT_AGE))
+        if not (isinstance(age, list) and len(age) == 2 and all(
+                isinstance(a, (int, float)) and not isinstance(a, bool) for a in age)
+                and 0 <= age[0] < age[1] <= 90):
+            raise ValueError(f"bodies.sample.age must be [lo, hi] years in 0..90, got {age!r}")
+    checked.one_of(b.get("thickness", "from_weight"), "bodies.thickness", THICKNESS)
+
+
+def sample_phenotypes(count: int, seed: int = 0, age=DEFAULT_AGE) -> list[dict]:
+    """``count`` phenotypes from anny's distribution of realistic bodies, adults of ``age``
+    [lo, hi] years (seeded; values rounded to 4 decimals so that configs and hashes carry them
+    exactly)."""
+    import torch
+    from anny.shape_distribution import SimpleShapeDistribution
+
+    from stmpl.body.anny_body import PHENOTYPES, AnnyBody
+
+    model = AnnyBody().anny
+    lo, hi = (torch.tensor(float(a), dtype=model.dtype) for a in age)
+    dist = SimpleShapeDistribution(model, morphological_age_distribution=torch.distributions
+                                   .Uniform(lo, hi))
+    state = torch.get_rng_state()
+    try:
+        torch.manual_seed(int(seed))
+        _, ph = dist.sample(int(count))
+    finally:
+        torch.set_rng_state(state)
+    return [{k: round(float(np.clip(float(ph[k][i]), 0.0, 1.0)), 4) for k in PHENOTYPES}
+            for i in range(int(count))]
+
+
+def phenotypes(cfg: dict) -> list[dict]:
+    """The config's bodies as phenotypes: the listed ones, then the sampled ones."""
+    b = cfg["bodies"]
+    out = [dict(p) for p in b.get("phenotypes") or []]
+    if "sample" in b:
+        s = b["sample"]
+        out += sample_phenotypes(s["count"], s.get("seed", 0), s.get("age", DEFAULT_AGE))
+    return out
+
+
+def members(cfg: dict) -> list[dict]:
+    """One dataset config per body: the config without ``bodies``, the body's phenotype in
+    ``body``, its thickness (the paper's heuristic, rounded to 0.01 mm, or the config's levels),
+    its own name (``<name>-body<NN>``) and placement seed (the config's plus its index)."""
+    out = []
+    how = cfg["bodies"].get("thickness", "from_weight")
+    for k, ph in enumerate(phenotypes(cfg)):
+        m = {key: v for key, v in cfg.items() if key != "bodies"}
+        m["body"] = {**cfg["body"], "phenotype": ph}
+        if how == "from_weight":
+            m["thickness_mm"] = [round(5.0 + 5.0 * ph.get("weight", 0.5), 2)]
+        m["name"] = f"{cfg['name']}-body{k:02d}"
+        m["seed"] = int(cfg["seed"]) + k
+        out.append(m)
+    return out
+
+
+def member_folder(out, k: int) -> pathlib.Path:
+    return pathlib.Path(out) / f"body-{k:02d}"
+
+
+def generate_bodies(cfg: dict, out, **kwargs) -> dict:
+    """Generate (or finish) every member of a ``bodies`` config in ``out`` and write
+    ``bodies.json`` when all are done. ``kwargs`` go to :func:`fem.generate.generate`. Returns
+    the bodies card (``{}`` if a member stopped early)."""
+    import hashlib
+
+    from fem.config import config_hash
+    from fem.generate import generate
+    from stmpl.files import atomic_write_text
+
+    out = pathlib.Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    ms = members(cfg)
+    saved = out / "bodies.yaml"
+    import yaml
+
+    if saved.exists():
+        from fem.config import read_config
+
+        if config_hash(read_config(yaml.safe_load(saved.read_text()))) != config_hash(cfg):
+            raise ValueError(f"{out} holds datasets from a different config; use another "
+                             "output folder or delete it")
+    else:
+        atomic_write_text(saved, yaml.safe_dump(cfg, sort_keys=False))
+    cards = []
+    for k, m in enumerate(ms):
+        if kwargs.get("progress", True):
+            ph = ", ".join(f"{a} {v:.2f}" for a, v in m["body"]["phenotype"].items())
+            print(f"body {k + 1}/{len(ms)}: {ph}; {m['thickness_mm'][0]:g} mm", flush=True)
+        card = generate(m, member_folder(out, k), **kwargs)
+        if not card:
+            return {}
+        cards.append(card)
+    card = {"format": FORMAT, "name": cfg["name"], "config": cfg,
+            "config_hash": config_hash(cfg),
+            "members": [{"folder": member_folder(out, k).name, "name": c["name"],
+                         "phenotype": ms[k]["body"]["phenotype"],
+                         "thickness_mm": ms[k]["thickness_mm"], "hash": c["hash"],
+                         "samples": c["samples"], "samples_per_split": c["samples_per_split"],
+                         "failures": c["failures"]} for k, c in enumerate(cards)],
+            "samples": sum(int(c["samples"]) for c in cards),
+            "hash": hashlib.sha256(" ".join(c["hash"] for c in cards).encode()).hexdigest()[:16]}
+    atomic_write_text(out / "bodies.json", json.dumps(card, indent=1))
+    return card
