@@ -61,7 +61,8 @@ def torch_device(name):
 
 
 class LearnedPredictor(BasePredictor):
-    """A predictor with a torch model trained on FEM data, for one body part.
+    """A predictor with a torch model trained on FEM data, for one body part (or, with the
+    option ``geometry``, for every body of that part's mesh: see :meth:`bodies_of`).
 
     Subclasses set ``kind`` and implement :meth:`build_model` and :meth:`raw`; they may
     override :meth:`loss`. With the option ``per_newton`` the network predicts the displacement
@@ -78,8 +79,13 @@ class LearnedPredictor(BasePredictor):
         self.per_newton = bool(self.config.get("per_newton", False))
         self.scale = float(self.config["disp_scale_mm"]) * 1e-3
         self.device = torch_device(device)
+        self._slots: dict = {}
+        self.body_parts: list = []
+        self._body_data: list[dict] = []
+        self._stacked: dict = {}
         self.model = self.build_model().to(self.device)
         self.meta: dict = {}
+        self.slot(part)                                   # the model's own body is slot 0
 
     @classmethod
     def options(cls, config: dict | None = None) -> dict:
@@ -97,20 +103,90 @@ class LearnedPredictor(BasePredictor):
             raise ValueError(f"disp_scale_mm must be > 0, got {out['disp_scale_mm']}")
         return out
 
+    # -- bodies
+    any_body = False
+    """Let a model of one body answer on other bodies of its mesh (their own areas, normals,
+    edge offsets and linear FEM as inputs, where the model has them): what a model trained on
+    one body is worth on others, the first point of a learning curve over bodies
+    (``benchmarks/bodies.py``). Off by default: such a model refuses another body."""
+
+    @property
+    def general(self) -> bool:
+        """Whether the model serves every body of its part's mesh (option ``geometry``: the
+        body's shape is an input; or :attr:`any_body`), not only the body it was built on."""
+        return bool(self.config.get("geometry", False)) or self.any_body
+
+    def body_tensors(self, part) -> dict:
+        """The per-body tensors the network's inputs need, for ``part`` (one body of the
+        mesh): vertex areas' inverse ``inv_area`` ``(N,)`` (1/m^2), ``normals`` ``(N, 3)``,
+        ``vertices`` ``(N, 3)`` m. Subclasses add their own."""
+        import torch
+
+        def t(x):
+            return torch.tensor(np.asarray(x), dtype=torch.float32, device=self.device)
+
+        return {"inv_area": t(1.0 / part.vertex_areas), "normals": t(part.normals),
+                "vertices": t(part.vertices)}
+
+    def slot(self, part) -> int:
+        """The index of ``part``'s body among those met (added, its tensors computed, the first
+        time: the model's own part is slot 0)."""
+        from stmpl.body.part import difference
+
+        key = getattr(self, "_last_slot", (None, None))
+        if key[0] is part:
+            return key[1]
+        digest = part.vertices.tobytes()
+        k = self._slots.get(digest)
+        if k is None:
+            if self.body_parts:
+                from stmpl.dataset import same_mesh
+
+                why = same_mesh(part, self.part)
+                if why:
+                    raise ValueError(f"another mesh than this {self.name} model's: {why}")
+                if not self.general and difference(part, self.part):
+                    raise ValueError(f"another body than this {self.name} model's: "
+                                     f"{difference(part, self.part)}")
+            k = self._slots[digest] = len(self.body_parts)
+            self.body_parts.append(part)
+            self._body_data.append(self.body_tensors(part))
+            self._stacked = {}
+        self._last_slot = (part, k)
+        return k
+
+    def bodies_of(self, parts) -> "torch.Tensor":
+        """``(B,)`` slots of the scenes' parts (:meth:`slot`)."""
+        import torch
+
+        return torch.tensor([self.slot(p) for p in parts], dtype=torch.long,
+                            device=self.device)
+
+    def body_tensor(self, name: str, body) -> "torch.Tensor":
+        """``(B, ...)``: the per-body tensor ``name`` of each sample's body (``body`` ``(B,)``
+        slots)."""
+        import torch
+
+        if name not in self._stacked:
+            self._stacked[name] = torch.stack([d[name] for d in self._body_data])
+        return self._stacked[name].index_select(0, body)
+
     # -- to implement
     def build_model(self):
         raise NotImplementedError
 
-    def raw(self, thickness, force):
+    def raw(self, thickness, force, body=None, base=None):
         """The network's ``(B, N, 3)`` output from ``thickness`` ``(B, N)`` (m) and ``force``
         ``(B, N)`` (N), torch tensors on ``self.device``: the displacement in units of
         ``self.scale`` (m), or with ``per_newton`` in units of ``self.scale`` per newton of
-        the scene's total force."""
+        the scene's total force. ``body``: ``(B,)`` slots of the samples' bodies
+        (:meth:`slot`; None: the model's own); ``base``: a prior's answer ``(B, N, 3)`` in m
+        when the caller has it (a dataset's ``linear``)."""
         raise NotImplementedError
 
-    def forward(self, thickness, force):
+    def forward(self, thickness, force, body=None, base=None):
         """``(B, N, 3)`` displacement in units of ``self.scale`` (m)."""
-        return self.denormalised(self.raw(thickness, force), force)
+        return self.denormalised(self.raw(thickness, force, body, base), force)
 
     def denormalised(self, r, force):
         """Network output ``(B, ..., 3)`` in the units of :meth:`raw` -> units of ``self.scale``
@@ -124,7 +200,7 @@ class LearnedPredictor(BasePredictor):
             t = t / total_force(force).clamp_min(MIN_TOTAL_N)[:, None, None]
         return t
 
-    def loss(self, thickness, force, target):
+    def loss(self, thickness, force, target, body=None, base=None):
         """Training loss for a batch; ``target`` ``(B, N, 3)`` in m. Option ``loss``: ``mse``
         (default, the paper's L2), the mean squared error over the vertices of :meth:`raw`
         against the normalised target (with ``per_newton`` each sample's error counts per
@@ -132,7 +208,7 @@ class LearnedPredictor(BasePredictor):
         mean Euclidean error over its peak displacement (the relative MEE the targets use);
         ``pooled``, the batch's mean Euclidean errors over its peaks, summed before the ratio
         (:func:`pooled_loss`: heavier presses weigh more)."""
-        pred, tgt = self.raw(thickness, force), self.normalised(target, force)
+        pred, tgt = self.raw(thickness, force, body, base), self.normalised(target, force)
         if self.config.get("loss", "mse") == "mse":
             return ((pred - tgt) ** 2).mean()
         return self.euclidean_loss(pred, tgt, force)
@@ -151,14 +227,22 @@ class LearnedPredictor(BasePredictor):
     # -- shared
     def check(self, scenes) -> None:
         from stmpl.body.part import difference
+        from stmpl.dataset import same_mesh
 
         for i, s in enumerate(scenes):
             if s.part is self.part or s.part is getattr(self, "_checked_part", None):
                 continue                       # the same object as last time: same mesh
-            why = difference(s.part, self.part)
-            if why:
-                raise ValueError(f"scene {i} is on another body part than this {self.name} "
-                                 f"predictor was trained on: {why}")
+            if self.general:
+                why = same_mesh(s.part, self.part)
+                if why:
+                    raise ValueError(f"scene {i} is on another mesh than this {self.name} "
+                                     f"predictor serves (any body of its {self.part.name}): "
+                                     f"{why}")
+            else:
+                why = difference(s.part, self.part)
+                if why:
+                    raise ValueError(f"scene {i} is on another body part than this "
+                                     f"{self.name} predictor was trained on: {why}")
             self._checked_part = s.part
 
     def predict_batch(self, scenes) -> list[np.ndarray]:
@@ -170,8 +254,11 @@ class LearnedPredictor(BasePredictor):
                          device=self.device)
         if self.model.training:
             self.model.eval()
+        body = None
+        if self.general and any(s.part is not self.part for s in scenes):
+            body = self.bodies_of([s.part for s in scenes])
         with torch.no_grad():
-            u = self.forward(t, f) * self.scale
+            u = self.forward(t, f, body) * self.scale
         return list(u.double().cpu().numpy())
 
     def n_parameters(self) -> int:

@@ -37,6 +37,10 @@ class LinearPrior:
         if out["prior"] not in PRIORS:
             raise ValueError(f"prior must be one of {PRIORS}, got {out['prior']!r}")
         check_operator(out.get("operator", "stored"))
+        if out.get("geometry") and out["prior"] == "linear" and out["operator"] != "on_demand":
+            raise ValueError("a model of every body (geometry: true) with the linear prior "
+                             "needs operator: on_demand (the linear FEM is solved for each "
+                             "body it meets)")
         return out
 
     @property
@@ -54,18 +58,58 @@ class LinearPrior:
         if self.prior:
             reattach(self, self.model.prior)
 
-    def base(self, thickness, force):
+    def base(self, thickness, force, body=None, base=None):
         """The linear FEM's ``(B, N, 3)`` answer in the units of ``raw``, or None without the
-        prior."""
+        prior: ``base`` (m) if the caller has it, else solved on each sample's body (``body``
+        ``(B,)`` slots; None: the model's own, :meth:`body_prior`)."""
         if not self.prior:
             return None
-        return self.normalised(self.model.prior(thickness, force), force)
+        if base is not None:
+            return self.normalised(base, force)
+        if body is None or not bool((body != 0).any()):
+            return self.normalised(self.model.prior(thickness, force), force)
+        import torch
+
+        u = torch.zeros(*force.shape, 3, device=force.device)
+        for k in torch.unique(body).tolist():
+            at = torch.nonzero(body == k).flatten()
+            u[at] = self.body_prior(k)(thickness[at], force[at])
+        return self.normalised(u, force)
+
+    def body_prior(self, k: int):
+        """The linear FEM of body slot ``k`` (the model's own: ``model.prior``), on demand: a
+        :class:`~fem.compliance.ColumnStore` for that body and the recorded FEM set-up, whose
+        levels gain each uniform layer's thickness exactly (the linear answer there is then the
+        FEM's, not interpolated, as the training data's ``linear`` was)."""
+        return self.model.prior if k == 0 else body_operator(self, k)
 
     @staticmethod
     def corrected(base, out):
         """The prior ``base`` plus the network's output ``out`` read as a correction (the
         output alone without a prior); any ``(..., 3)`` shapes that broadcast."""
         return out if base is None else base + CORRECTION_SCALE * out
+
+
+def body_operator(predictor, k: int):
+    """The on-demand linear FEM operator of ``predictor``'s body slot ``k``: a
+    :class:`~fem.compliance.ColumnStore` for that body's part and the FEM set-up the predictor's
+    own operator records (``meta["operator"]``), exact at each uniform layer's thickness; made
+    once per body and kept."""
+    ops = predictor.__dict__.setdefault("_body_operators", {})
+    if k not in ops:
+        from fem.compliance import ColumnStore
+        from models.linear.operator import ComplianceOperator
+
+        meta = predictor.meta.get("operator") or {}
+        if meta.get("mode") != "on_demand":
+            raise ValueError(f"{predictor.name}: the linear FEM of another body needs the "
+                             "on-demand operator (operator: on_demand)")
+        op = ComplianceOperator()
+        op.attach(ColumnStore(predictor.body_parts[k], meta["setup"],
+                              [float(x) * 1e-3 for x in meta["levels_mm"]]))
+        op.exact = True
+        ops[k] = op.to(predictor.device)
+    return ops[k]
 
 
 _ADJACENCY: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()

@@ -141,10 +141,10 @@ class _Later:
 def _make(name: str, d: dict, progress: bool):
     from importlib.metadata import entry_points
 
-    from stmpl.dataset import Dataset
+    from stmpl.dataset import open_data
 
     folder = pathlib.Path(d["folder"])
-    if not (folder / "card.json").is_file():
+    if not _finished(folder):
         if not d.get("config"):
             raise FileNotFoundError(f"dataset {name} not found at {folder} and no config "
                                     "to make it")
@@ -155,7 +155,12 @@ def _make(name: str, d: dict, progress: bool):
         if progress:
             print(f"making dataset {name} from {d['config']} into {folder}")
         makers["fem"].load()(d["config"], folder, progress=progress)
-    return Dataset(folder)
+    return open_data(folder)
+
+
+def _finished(folder: pathlib.Path) -> bool:
+    """Whether a finished dataset (or set of datasets, one per body) is in ``folder``."""
+    return (folder / "card.json").is_file() or (folder / "bodies.json").is_file()
 
 
 def _config_digest(d: dict) -> str | None:
@@ -173,14 +178,14 @@ def _datasets(cfg, progress: bool, recorded: dict) -> dict:
         folder = pathlib.Path(d["folder"])
         rec = recorded.get(name)
         digest = _config_digest(d)
-        if (not (folder / "card.json").is_file() and rec and digest
+        if (not _finished(folder) and rec and digest
                 and rec.get("config") == digest):
             out[name] = _Later(name, d, rec["card"], progress)
             continue
-        if (folder / "card.json").is_file():
-            from stmpl.dataset import Dataset
+        if _finished(folder):
+            from stmpl.dataset import open_data
 
-            out[name] = Dataset(folder)
+            out[name] = open_data(folder)
         else:
             out[name] = _make(name, d, progress)
         recorded[name] = {"config": digest,

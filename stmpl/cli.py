@@ -83,11 +83,11 @@ def cmd_ablate(args) -> int:
 
 
 def cmd_evaluate(args) -> int:
-    from stmpl.dataset import Dataset
+    from stmpl.dataset import open_data
     from stmpl.evaluate import evaluate
     from stmpl.spec import predictor_from_spec
 
-    ds = Dataset(args.data)
+    ds = open_data(args.data)
     predictors = {spec: predictor_from_spec(spec, args.device, fidelity=args.fidelity)
                   for spec in args.predictors}
     print(evaluate(predictors, ds, args.split, args.out, args.limit), end="")

@@ -40,7 +40,8 @@ STRINGS = ("kind", "params")
 OPTIONAL = ("linear",)
 """Per-sample arrays a dataset may hold: ``linear`` ``(S, N, 3)`` m, the linear FEM's answer to
 the same load on the same body (config ``linear: true``; the columns are solved as the on-demand
-operator solves them, :func:`fem.compliance.local_compliance`). Hashed when present."""
+operator solves them, :func:`fem.compliance.local_compliance`). Hashed when present; in
+:class:`Datasets` whose members differ, NaN for the samples of the members without it."""
 
 
 def at_levels(arrays: dict, thickness_mm) -> np.ndarray:
@@ -373,7 +374,11 @@ class Datasets:
                     shift[k] = int(a[k].max()) + 1 if len(a[k]) else shift[k]
                 a["body"] = np.full(len(a["total"]), body, np.int32)
                 parts.append(a)
-            have = [k for k in OPTIONAL if all(k in a for a in parts)]
+            have = [k for k in OPTIONAL if any(k in a for a in parts)]
+            for a in parts:                   # a member without it: NaN, "not known"
+                for k in have:
+                    if k not in a:
+                        a[k] = np.full(a["displacement"].shape, np.nan, np.float32)
             self._all = {k: (np.concatenate([a[k] for a in parts])
                              if isinstance(parts[0][k], np.ndarray)
                              else [x for a in parts for x in a[k]])

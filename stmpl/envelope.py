@@ -34,6 +34,7 @@ AXES = {
     "contact_pressure": ("max", "kPa", 1e-3, "mean pressure of a contact"),
     "peak_pressure": ("max", "kPa", 1e-3, "highest pressure on a vertex"),
     "rim_distance": ("min", "mm", 1e3, "distance of a contact from the part's open rims"),
+    "skin_area": ("range", "cm^2", 1e4, "skin area of the body's part (its size)"),
 }
 """The axes: ``range`` axes are checked at both ends, ``max`` axes at the top only (a lighter or
 more even load than the data's is no harder to answer), ``min`` axes at the bottom only (a
@@ -84,7 +85,8 @@ def features(part: BodyPart, thickness: np.ndarray, force: np.ndarray) -> dict:
     area = part.vertex_areas
     out = {"thickness": [float(t.min()), float(t.max())], "thickness_variation": 0.0,
            "contacts": 0, "contact_force": [], "contact_area": [], "contact_pressure": [],
-           "peak_pressure": float((f / area).max(initial=0.0))}
+           "peak_pressure": float((f / area).max(initial=0.0)),
+           "skin_area": float(area.sum())}
     found = contacts(part, f)
     for c in found:
         a = float(area[c].sum())
@@ -134,18 +136,27 @@ class Envelope:
         self.limits[axis] = {"max": float(hi), "source": source}
 
     @classmethod
-    def of(cls, part: BodyPart, thickness, force, name: str = "training", source: str = "",
+    def of(cls, part, thickness, force, name: str = "training", source: str = "", body=None,
            **notes) -> "Envelope":
-        """The envelope of ``S`` scenes on ``part``: ``thickness``, ``force`` ``(S, N)`` (m, N)."""
+        """The envelope of ``S`` scenes on ``part``: ``thickness``, ``force`` ``(S, N)`` (m, N)
+        (on several bodies: see :meth:`add`)."""
         env = cls()
-        env.add(name, part, thickness, force, source=source, **notes)
+        env.add(name, part, thickness, force, source=source, body=body, **notes)
         return env
 
-    def add(self, name: str, part: BodyPart, thickness, force, source: str = "",
+    def add(self, name: str, part, thickness, force, source: str = "", body=None,
             **notes) -> None:
-        """Add (or replace) box ``name``: the support of ``S`` scenes, ``(S, N)`` arrays."""
+        """Add (or replace) box ``name``: the support of ``S`` scenes, ``(S, N)`` arrays, on
+        ``part``, or on several bodies of one mesh: ``part`` a list of parts and ``body``
+        ``(S,)`` the index of each scene's."""
         t = np.asarray(thickness, dtype=float)
         f = np.asarray(force, dtype=float)
+        parts = list(part) if isinstance(part, (list, tuple)) else [part]
+        body = np.zeros(len(t), int) if body is None else np.asarray(body, dtype=int)
+        part = parts[0]
+        if body.shape != (len(t),) or (len(body) and (body.min() < 0 or body.max() >= len(parts))):
+            raise ValueError(f"body must give each of the {len(t)} scenes the index of its part "
+                             f"among {len(parts)}")
         if t.ndim != 2 or t.shape != f.shape or t.shape[1] != part.n_vertices:
             raise ValueError(f"thickness and force must both be (S, {part.n_vertices}), got "
                              f"{t.shape} and {f.shape}")
@@ -153,8 +164,8 @@ class Envelope:
             raise ValueError(f"an envelope box ({name!r}) needs at least one scene")
         lo = {a: np.inf for a in AXES}
         hi = {a: -np.inf for a in AXES}
-        for ts, fs in zip(t, f):
-            feat = features(part, ts, fs)
+        for ts, fs, b in zip(t, f, body):
+            feat = features(parts[b], ts, fs)
             for a in AXES:
                 vals = _values(feat, a)
                 if vals:
@@ -163,19 +174,22 @@ class Envelope:
                             if np.isfinite(lo[a])}
         self.info[name] = {"scenes": int(len(t)), "source": source, **notes}
 
-    def widen(self, name: str, part: BodyPart, thickness, force, base: str = "training",
-              axes=SHAPE_AXES, source: str = "", **notes) -> np.ndarray:
+    def widen(self, name: str, part, thickness, force, base: str = "training",
+              axes=SHAPE_AXES, source: str = "", body=None, **notes) -> np.ndarray:
         """Add box ``name``: box ``base`` widened along ``axes`` to cover those of ``S`` scenes
         (``(S, N)`` arrays) that fit ``base`` on every other axis; returns the ``(S,)`` mask
         of those scenes (measure a model on them before keeping the box: see
-        :func:`stmpl.zoo.measure`). Nothing is added when no scene qualifies."""
+        :func:`stmpl.zoo.measure`). Nothing is added when no scene qualifies. Several bodies:
+        ``part`` a list and ``body`` ``(S,)`` indices, as in :meth:`add`."""
         t = np.asarray(thickness, dtype=float)
         f = np.asarray(force, dtype=float)
+        parts = list(part) if isinstance(part, (list, tuple)) else [part]
+        body = np.zeros(len(t), int) if body is None else np.asarray(body, dtype=int)
         box = {a: list(b) for a, b in self.boxes[base].items()}
         others = {a: b for a, b in box.items() if a not in axes}
         mask = np.zeros(len(t), dtype=bool)
         for k, (ts, fs) in enumerate(zip(t, f)):
-            feat = features(part, ts, fs)
+            feat = features(parts[body[k]], ts, fs)
             if _outside(feat, others, base):
                 continue
             mask[k] = True

@@ -23,7 +23,9 @@ def scenes_of(ds, split: str, thickness_mm=None, limit: int | None = None):
         keep = keep[at_levels(a, thickness_mm)]
     if limit is not None:
         keep = keep[:limit]
-    scenes = [Scene(ds.part, a["thickness"][i].astype(float), a["force"][i].astype(float),
+    parts = getattr(ds, "parts", [ds.part])
+    body = a.get("body", np.zeros(len(a["total"]), int))
+    scenes = [Scene(parts[body[i]], a["thickness"][i].astype(float), a["force"][i].astype(float),
                     meta={"placement": int(a["placement"][i]), "total": float(a["total"][i])})
               for i in keep]
     return scenes, a["displacement"][keep].astype(float)
@@ -72,7 +74,9 @@ def evaluate_dataset(predictor, ds, split: str = "test", thickness_mm=None,
         if hasattr(predictor, "corner_displacement"):
             t, f = (torch.tensor(np.stack([getattr(s, k) for s in chunk]), dtype=torch.float32,
                                  device=predictor.device) for k in ("thickness", "force"))
-            corners = predictor.corner_displacement(t, f)
+            body = (predictor.bodies_of([s.part for s in chunk])
+                    if getattr(predictor, "general", False) else None)
+            corners = predictor.corner_displacement(t, f, body)
         else:
             corners = [d.displacement[part.uv_vertex] for d in out]
         for d, u, c in zip(out, truth[i:i + batch], corners):
@@ -96,10 +100,10 @@ def evaluate(predictors: dict, data, split: str = "test", out=None,
     """Evaluate each predictor (``{label: predictor}``) on ``data``'s split (a dataset folder or
     a :class:`~stmpl.dataset.Dataset`); returns the markdown table and, with ``out`` (a path
     without suffix or ending in .md), writes ``.md`` and ``.csv`` beside it."""
-    from stmpl.dataset import Dataset
+    from stmpl.dataset import Dataset, Datasets, open_data
     from stmpl.metrics import table
 
-    ds = data if isinstance(data, Dataset) else Dataset(data)
+    ds = data if isinstance(data, (Dataset, Datasets)) else open_data(data)
     results = {}
     for name, p in predictors.items():
         s = evaluate_dataset(p, ds, split, limit=limit)

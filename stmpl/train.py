@@ -93,14 +93,52 @@ def read_config(source) -> dict:
     return cfg
 
 
-def _split_tensors(ds, split, cfg, device):
+def _split_tensors(ds, split, cfg, device, p=None):
+    """A split's ``thickness``, ``force``, ``displacement``, ``body`` (slot of each sample's
+    body) and the prior's answers (m; None unless the model has a prior and the data carry
+    ``linear`` answers or span several bodies: then every sample's is at hand, the missing ones
+    solved on its body once here)."""
     import torch
 
     a, keep = _selection(ds, split, cfg)
 
     def t(x):
         return torch.tensor(np.asarray(x)[keep], dtype=torch.float32, device=device)
-    return t(a["thickness"]), t(a["force"]), t(a["displacement"])
+
+    body = (torch.tensor(a["body"][keep], dtype=torch.long, device=device)
+            if len(ds.parts) > 1 else None)                 # one body: the model's own
+    base = None
+    if getattr(p, "prior", False) and ("linear" in a or len(ds.parts) > 1):
+        base = _prior_answers(p, a, keep, torch.as_tensor(a["body"][keep], device=device),
+                              device)
+    return t(a["thickness"]), t(a["force"]), t(a["displacement"]), body, base
+
+
+def _prior_answers(p, a, keep, body, device):
+    """``(S, N, 3)`` m: the linear FEM's answer of every kept sample: the dataset's ``linear``
+    where it has one, else solved on the sample's body (:meth:`LinearPrior.body_prior`)."""
+    import torch
+
+    n = len(keep)
+    out = torch.zeros(n, *a["displacement"].shape[1:], dtype=torch.float32, device=device)
+    have = np.zeros(n, bool)
+    if "linear" in a:
+        lin = a["linear"][keep]
+        have = np.isfinite(lin).all((1, 2))
+        out[torch.as_tensor(have)] = torch.tensor(lin[have], dtype=torch.float32, device=device)
+    todo = np.flatnonzero(~have)
+    with torch.no_grad():
+        for i in range(0, len(todo), 256):
+            at = torch.as_tensor(todo[i:i + 256], device=device)
+            th = torch.tensor(a["thickness"][keep][todo[i:i + 256]], dtype=torch.float32,
+                              device=device)
+            f = torch.tensor(a["force"][keep][todo[i:i + 256]], dtype=torch.float32,
+                             device=device)
+            b = body.index_select(0, at)
+            for k in torch.unique(b).tolist():
+                sel = torch.nonzero(b == k).flatten()
+                out[at[sel]] = p.body_prior(k)(th[sel], f[sel])
+    return out
 
 
 def _selection(ds, split, cfg):
@@ -130,8 +168,9 @@ def envelope(ds, cfg):
     if len(keep) == 0:
         raise ValueError(f"dataset {cfg['data']} has no training samples (after the "
                          "thickness filter)")
-    return Envelope.of(ds.part, a["thickness"][keep], a["force"][keep], name="training",
-                       source=f"{ds.card['name']} ({ds.card['hash']}), train split")
+    return Envelope.of(ds.parts, a["thickness"][keep], a["force"][keep], name="training",
+                       source=f"{ds.card['name']} ({ds.card['hash']}), train split",
+                       body=a["body"][keep])
 
 
 def train(config, resume: bool = True, progress: bool = True):
@@ -152,6 +191,13 @@ def train(config, resume: bool = True, progress: bool = True):
     torch.manual_seed(cfg["seed"])
     np.random.seed(cfg["seed"])
     p = predictor.create(cfg["model"], ds.part, cfg["options"], device=cfg["device"])
+    if len(ds.parts) > 1 and not p.general:
+        raise ValueError(f"dataset {cfg['data']} spans {len(ds.parts)} bodies; a {cfg['model']} "
+                         "model of one body cannot learn them (give it the option geometry: "
+                         "true)")
+    for k, part in enumerate(ds.parts):
+        if p.slot(part) != k:
+            raise RuntimeError(f"body {k} of the dataset took another slot")
     p.envelope = envelope(ds, cfg)
     t_fit = time.perf_counter()
     if hasattr(p, "fit"):  # a part computed from the dataset, not learned (a FEM operator)
@@ -161,8 +207,8 @@ def train(config, resume: bool = True, progress: bool = True):
         return _write_checkpoint(p, cfg, ds, out, [], float("nan"),
                                  {"fit_seconds": round(t_fit, 3)})
     opt = torch.optim.Adam(p.model.parameters(), lr=cfg["lr"])
-    tr = _split_tensors(ds, "train", cfg, device)
-    va = _split_tensors(ds, "val", cfg, device)
+    tr = _split_tensors(ds, "train", cfg, device, p)
+    va = _split_tensors(ds, "val", cfg, device, p)
     if len(tr[0]) == 0 or len(va[0]) == 0:
         raise ValueError(f"dataset {cfg['data']} has no training or no validation samples "
                          "(after the thickness filter)")
@@ -207,16 +253,16 @@ def train(config, resume: bool = True, progress: bool = True):
             idx = perm[i:i + cfg["batch"]]
             for g in opt.param_groups:
                 g["lr"] = learning_rate(cfg, epoch * per_epoch + k, cfg["epochs"] * per_epoch)
-            loss = p.loss(tr[0][idx], tr[1][idx], tr[2][idx])
+            loss = p.loss(*(None if x is None else x[idx] for x in tr))
             opt.zero_grad()
             loss.backward()
             opt.step()
             total += float(loss.detach()) * len(idx)
         p.model.eval()
         with torch.no_grad():
-            vloss = float(np.mean([float(p.loss(va[0][i:i + 256], va[1][i:i + 256],
-                                                va[2][i:i + 256])) for i in
-                                   range(0, len(va[0]), 256)]))
+            vloss = float(np.mean([float(p.loss(*(None if x is None else x[i:i + 256]
+                                                  for x in va)))
+                                   for i in range(0, len(va[0]), 256)]))
         history.append({"epoch": epoch + 1, "train": total / len(perm), "val": vloss,
                         "seconds": round(before + time.perf_counter() - t0, 3)})
         if vloss < best:

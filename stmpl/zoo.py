@@ -210,9 +210,9 @@ def add(checkpoint, name: str, trained: dict | None = None, path=None,
         e["training"] = {k: v for k, v in e["training"].items() if k != "history"}
     if evaluate_on:
         from stmpl import predictor
-        from stmpl.dataset import Dataset
+        from stmpl.dataset import open_data
 
-        _measure(predictor.read(dst), e, [Dataset(d) for d in evaluate_on])
+        _measure(predictor.read(dst), e, [open_data(d) for d in evaluate_on])
     m["models"][name] = e
     atomic_write_text(f, json.dumps(m, indent=1, sort_keys=True))
     return e
@@ -223,12 +223,12 @@ def measure(names: list[str] | None, datasets: list, path=None, progress=print) 
     their manifest entries under each dataset's name (the files and the rest of the entries are
     untouched). Returns ``{name: {dataset: summary}}``."""
     from stmpl import predictor
-    from stmpl.dataset import Dataset
+    from stmpl.dataset import open_data
     from stmpl.files import atomic_write_text
 
     if not datasets:
         raise ValueError("measure needs at least one dataset folder")
-    sets = [Dataset(d) for d in datasets]
+    sets = [open_data(d) for d in datasets]
     m = manifest(path)
     out: dict = {}
     for name in names or sorted(m["models"]):
@@ -278,9 +278,10 @@ def _validate(p, ds) -> dict | None:
     scenes, truth = scenes_of(ds, "test")
     name = ds.card["name"]
     env = Envelope({"training": p.envelope.boxes["training"]})
-    mask = env.widen(name, ds.part, np.stack([s.thickness for s in scenes]),
+    mask = env.widen(name, [s.part for s in scenes], np.stack([s.thickness for s in scenes]),
                      np.stack([s.force for s in scenes]),
-                     source=f"{name} ({ds.card['hash']}), test split")
+                     source=f"{name} ({ds.card['hash']}), test split",
+                     body=np.arange(len(scenes)))
     idx = np.flatnonzero(mask)
     if len(idx) == 0:
         return None

@@ -33,7 +33,7 @@ def test_contract(name, ds, make):
 
 
 def test_learned_predictor_refuses_another_part_and_says_what_differs(ds):
-    p = predictor.create("naive", ds.part)
+    p = predictor.create("gnn", ds.part, {"latent": 8, "steps": 1})
     other = tube(n_around=8, n_along=4)
     s = Scene(other, np.full(other.n_vertices, 0.005), np.zeros(other.n_vertices))
     with pytest.raises(ValueError, match=f"another body part.*has {other.n_vertices} vertices, "
@@ -44,6 +44,12 @@ def test_learned_predictor_refuses_another_part_and_says_what_differs(ds):
     with pytest.raises(ValueError, match=r"same \d+-vertex tube mesh, but its vertices lie up "
                                          r"to [\d.]+ mm from the model's"):
         p.predict(s)
+    naive = predictor.create("naive", ds.part)        # knows no geometry: any body of the mesh
+    assert naive.general and naive.predict(s).displacement.shape == (wider.n_vertices, 3)
+    s = Scene(other, np.full(other.n_vertices, 0.005), np.zeros(other.n_vertices))
+    with pytest.raises(ValueError, match=r"another mesh.*tube \(32 vertices\) and tube "
+                                         r"\(192 vertices\)"):
+        naive.predict(s)
 
 
 def test_registry():

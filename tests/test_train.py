@@ -107,7 +107,8 @@ def test_cosine_schedule_and_placement_share(tiny_dataset):
     a = ds.arrays("train")
     places = np.unique(a["placement"])
     half = read_config({"model": "naive", "data": "x", "train_fraction": 0.5})
-    t, f, u = _split_tensors(ds, "train", half, torch.device("cpu"))
+    t, f, u, body, base = _split_tensors(ds, "train", half, torch.device("cpu"))
+    assert body is None and base is None          # one body, no prior
     # whole placements are kept, with all their samples, and about half of them
     kept = {int(p) for p in places if any(np.allclose(f[i].numpy(), a["force"][j])
                                           for i in range(len(f))

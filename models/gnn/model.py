@@ -129,6 +129,8 @@ class MeshGraphNet(nn.Module):
 
 class GNNPredictor(LinearPrior, LearnedPredictor):
     """Mesh GNN predictor. Options: ``latent`` (width), ``steps`` (message passing),
+    ``geometry`` (serve every body of the part's mesh: each scene's own rest-pose edge offsets,
+    normals and vertex areas are the inputs, not those of the body it was built on),
     ``per_newton`` (node inputs: the pressure per newton of the total and the total; output:
     the displacement per newton, ``disp_scale_mm`` then in mm/N), ``loss`` (``mse``,
     ``relative`` or ``pooled``, see :meth:`LearnedPredictor.loss`), ``prior`` (``none``, or
@@ -138,15 +140,27 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
 
     name = "gnn"
     defaults = {"latent": 128, "steps": 15, "per_newton": False, "loss": "mse", "prior": "none",
-                "operator": "stored"}
+                "operator": "stored", "geometry": False}
+
+    def edge_features(self, part) -> np.ndarray:
+        """``(2E, 4)`` edge inputs of a body of the mesh: the rest-pose offset ``x_j - x_i``
+        (m) along :attr:`edge_index` and its length."""
+        ei = self._ei
+        rel = part.vertices[ei[0]] - part.vertices[ei[1]]           # x_j - x_i, m
+        return np.concatenate([rel, np.linalg.norm(rel, axis=1, keepdims=True)], 1)
+
+    def body_tensors(self, part) -> dict:
+        out = super().body_tensors(part)
+        out["edge_attr"] = torch.tensor(self.edge_features(part), dtype=torch.float32,
+                                        device=self.device)
+        return out
 
     def build_model(self) -> nn.Module:
         part = self.part
         e = part.edges
-        ei = np.concatenate([e, e[:, ::-1]]).T                      # (2, 2E): both directions
-        rel = part.vertices[ei[0]] - part.vertices[ei[1]]           # x_j - x_i, m
-        length = float(np.linalg.norm(rel, axis=1).mean())
-        feats = np.concatenate([rel, np.linalg.norm(rel, axis=1, keepdims=True)], 1)
+        self._ei = ei = np.concatenate([e, e[:, ::-1]]).T             # (2, 2E): both directions
+        feats = self.edge_features(part)
+        length = float(feats[:, 3].mean())
         dev = self.device
         self.edge_index = torch.tensor(ei.copy(), dtype=torch.long, device=dev)
         self.edge_attr = torch.tensor(feats, dtype=torch.float32, device=dev)
@@ -168,34 +182,50 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
             nn.init.zeros_(net.decoder[-1].bias)
         return NormalisedGraphNet(node, edge, net, prior)
 
-    def raw(self, thickness, force):
+    def raw(self, thickness, force, body=None, base=None):
         B, N = thickness.shape
-        load = torch.stack(load_channels(force, self.inv_area, self.per_newton), -1)
-        base = self.base(thickness, force)
+        if body is None:
+            inv_area, normals = self.inv_area, self.normals.expand(B, -1, -1)
+        else:
+            inv_area, normals = self.body_tensor("inv_area", body), self.body_tensor("normals",
+                                                                                    body)
+        load = torch.stack(load_channels(force, inv_area, self.per_newton), -1)
+        base = self.base(thickness, force, body, base)
         extra = [] if base is None else [base]
-        x = torch.cat([load, thickness[..., None], self.normals.expand(B, -1, -1), *extra], -1)
+        x = torch.cat([load, thickness[..., None], normals, *extra], -1)
         x = x.reshape(B * N, x.shape[-1])
         if self.fidelity == "auto" and not self.model.training:
-            return self._raw_local(x, thickness, force, base)
+            return self._raw_local(x, thickness, force, base, body)
         E = self.edge_index.shape[1]
         offs = (torch.arange(B, device=x.device) * N).repeat_interleave(E)
         ei = self.edge_index.repeat(1, B) + offs
-        return self.corrected(base, self.model(x, None, ei, self.edges().repeat(B, 1))
+        return self.corrected(base, self.model(x, None, ei, self.batch_edges(body, B))
                               .reshape(B, N, 3))
 
-    def edges(self) -> torch.Tensor:
-        """The part's encoded edge features ``(E, latent)``: a pure function of the mesh and the
-        edge encoder's weights, so at inference they are kept until the weights change."""
+    def batch_edges(self, body, B: int) -> torch.Tensor:
+        """``(B E, latent)``: each sample's body's encoded edges, sample after sample."""
+        if body is None:
+            return self.edges().repeat(B, 1)
+        uniq, inv = torch.unique(body, return_inverse=True)
+        enc = torch.stack([self.edges(int(k)) for k in uniq])               # (U, E, latent)
+        return enc.index_select(0, inv).reshape(-1, enc.shape[-1])
+
+    def edges(self, k: int = 0) -> torch.Tensor:
+        """Body slot ``k``'s encoded edge features ``(E, latent)`` (0: the model's own part): a
+        pure function of the mesh and the edge encoder's weights, so at inference they are kept
+        until the weights change."""
+        attr = self.edge_attr if k == 0 else self._body_data[k]["edge_attr"]
         if self.model.training or torch.is_grad_enabled():
-            return self.model.encode_edges(self.edge_attr)
+            return self.model.encode_edges(attr)
         tensors = getattr(self, "_edge_tensors", (None, []))   # what the encoded edges depend on
         if tensors[0] is not self.model:
             self._edge_tensors = tensors = (self.model, [*self.model.net.edge_encoder.parameters(),
                                                          *self.model.edge_norm.buffers()])
         version = [id(self.model)] + [t._version for t in tensors[1]]
-        cached = getattr(self, "_edges", None)
+        cache = self.__dict__.setdefault("_edges", {})
+        cached = cache.get(k)
         if cached is None or cached[0] != version:
-            self._edges = cached = (version, self.model.encode_edges(self.edge_attr))
+            cache[k] = cached = (version, self.model.encode_edges(attr))
         return cached[1]
 
     def region(self, thickness: np.ndarray, force: np.ndarray,
@@ -236,7 +266,7 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
                 inner[b] = force[b] > 0
         return inner, sub
 
-    def _raw_local(self, x, thickness, force, base):
+    def _raw_local(self, x, thickness, force, base, body=None):
         """:meth:`raw` on the subgraphs of :meth:`region`: the network's output inside each
         scene's region, the prior (or zero) outside."""
         B, N = thickness.shape
@@ -252,8 +282,12 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         dev = x.device
         sub_ei = torch.as_tensor(np.stack([where[src[keep]], where[dst[keep]]]), device=dev)
         E = ei.shape[1]
-        sub_e = self.edges().index_select(0, torch.as_tensor(np.flatnonzero(keep) % E,
-                                                             device=dev))
+        if body is None:
+            sub_e = self.edges().index_select(0, torch.as_tensor(np.flatnonzero(keep) % E,
+                                                                 device=dev))
+        else:
+            sub_e = self.batch_edges(body, B).index_select(
+                0, torch.as_tensor(np.flatnonzero(keep), device=dev))
         idx = torch.as_tensor(nodes, device=dev)
         y = self.model(x.index_select(0, idx), None, sub_ei, sub_e)      # (nodes, 3)
         out = torch.zeros(B * N, 3, device=dev, dtype=y.dtype)

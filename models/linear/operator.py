@@ -83,11 +83,26 @@ class ComplianceOperator(nn.Module):
     when asked for) instead of being refused. The linear model sets it; a prior keeps the
     levels its network was trained with."""
 
+    exact = False
+    """On demand only: a uniform layer's thickness becomes a level of its own (its columns
+    solved when asked for), so the answer there is the linear FEM's, not interpolated between
+    levels. The priors of other bodies than a model's own set it (:meth:`LinearPrior.body_prior`),
+    as their training data's ``linear`` answers were solved at each body's thickness."""
+
     def weights(self, thickness: torch.Tensor) -> torch.Tensor:
         """``(B, N, L)`` interpolation weights of each vertex's thickness over the levels."""
         if len(self.levels) == 0:
             raise RuntimeError("the compliance operator is empty; fit the predictor first")
         lv = self.levels
+        if self.on_demand and self.exact and thickness.numel():
+            lo_row, hi_row = thickness.amin(-1), thickness.amax(-1)
+            uniform = torch.unique(lo_row[(hi_row - lo_row) <= 1e-9 * hi_row.clamp_min(1e-3)])
+            new = [t for t in uniform.tolist()
+                   if not bool((torch.abs(lv - t) <= 1e-9).any())]
+            if new:
+                self.levels = torch.sort(torch.cat([lv, torch.tensor(new, dtype=lv.dtype,
+                                                                     device=lv.device)]))[0]
+                lv = self.levels
         lo, hi = float(lv[0]), float(lv[-1])
         tmin, tmax = float(thickness.min()), float(thickness.max())
         tol = 1e-6 * hi
@@ -281,8 +296,12 @@ def fit_on_demand(predictor, op: ComplianceOperator, dataset, config: dict,
     store = ColumnStore(predictor.part, cfg, levels)
     op.attach(store)
     a = dataset.arrays()
+    own = a.get("body", np.zeros(len(a["total"]), int)) == 0      # the samples on this part
+    if "linear" in a:                                   # ... that carry no linear answer
+        own &= ~np.isfinite(a["linear"]).all((1, 2))
     t0 = time.perf_counter()
-    solve_needed(store, op, a["thickness"], a["force"], progress)
+    if own.any():
+        solve_needed(store, op, a["thickness"][own], a["force"][own], progress)
     record_on_demand(predictor, store, time.perf_counter() - t0)
 
 

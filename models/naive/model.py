@@ -28,9 +28,11 @@ class NaivePredictor(LearnedPredictor):
 
     name = "naive"
     defaults: dict = {}
+    general = True
+    """It knows no geometry, so it answers on every body of its part's mesh alike."""
 
     def build_model(self) -> nn.Module:
         return NaiveModel(self.scale)
 
-    def raw(self, thickness, force):
+    def raw(self, thickness, force, body=None, base=None):
         return self.model(thickness, force)

@@ -107,9 +107,8 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
                              f"{c['size']} with depth {c['depth']}")
         self.uvmap = UVMap(self.part, int(c["size"])).to(self.device)
         part = self.part
-        extent = float(np.ptp(part.vertices, axis=0).max())
-        geo = np.concatenate([(part.vertices - part.vertices.mean(0)) / extent, part.normals], 1)
-        self._geometry = torch.tensor(geo, dtype=torch.float32, device=self.device)
+        self._extent = float(np.ptp(part.vertices, axis=0).max())
+        self._geometry = self.geometry_channels(part)
         self._corner_vertex = torch.as_tensor(np.asarray(part.uv_vertex), dtype=torch.long,
                                               device=self.device)
         self._inv_area = torch.tensor(1.0 / part.vertex_areas / PRESSURE_SCALE,
@@ -123,29 +122,46 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
         nn.init.zeros_(last.bias)
         return WithPrior(net, ComplianceOperator())
 
-    def inputs(self, thickness, force, base=None) -> torch.Tensor:
+    def geometry_channels(self, part) -> torch.Tensor:
+        """``(N, 6)`` geometry inputs of a body of the mesh: the rest position about the
+        part's centre over the model's own part's extent, and the normal."""
+        geo = np.concatenate([(part.vertices - part.vertices.mean(0)) / self._extent,
+                              part.normals], 1)
+        return torch.tensor(geo, dtype=torch.float32, device=self.device)
+
+    def body_tensors(self, part) -> dict:
+        out = super().body_tensors(part)
+        out["geometry"] = self.geometry_channels(part)
+        return out
+
+    def inputs(self, thickness, force, base=None, body=None) -> torch.Tensor:
         """``(B, N, C)`` per-vertex input channels from ``(B, N)`` thickness (m) and force (N),
-        and with the prior its answer ``base`` (:meth:`base`, computed once by the caller)."""
-        chans = [*load_channels(force, self._inv_area, self.per_newton),
+        with the prior its answer ``base`` (:meth:`base`, computed once by the caller), on the
+        bodies ``body`` ``(B,)`` (slots; None: the model's own)."""
+        inv_area = (self._inv_area if body is None else
+                    self.body_tensor("inv_area", body) / PRESSURE_SCALE)
+        chans = [*load_channels(force, inv_area, self.per_newton),
                  normalised_thickness(thickness)]
         x = torch.stack(chans, -1)
         if self.config["geometry"]:
-            x = torch.cat([x, self._geometry.expand(x.shape[0], -1, -1)], -1)
+            geo = (self._geometry.expand(x.shape[0], -1, -1) if body is None else
+                   self.body_tensor("geometry", body))
+            x = torch.cat([x, geo], -1)
         if base is not None:
             x = torch.cat([x, base / PRIOR_SCALE], -1)
         return x
 
-    def images(self, thickness, force, base=None) -> torch.Tensor:
+    def images(self, thickness, force, base=None, body=None) -> torch.Tensor:
         """``(B, C, S, S)`` input images: :meth:`inputs` on the chart."""
-        return self.uvmap.rasterise(self.inputs(thickness, force, base))
+        return self.uvmap.rasterise(self.inputs(thickness, force, base, body))
 
-    def raw(self, thickness, force):
-        base = self.base(thickness, force)
+    def raw(self, thickness, force, body=None, base=None):
+        base = self.base(thickness, force, body, base)
         if self.fidelity == "auto" and base is not None and not self.model.training:
-            return self.corrected(base, self._sample_cropped(self.inputs(thickness, force, base),
-                                                             force, base))
+            return self.corrected(base, self._sample_cropped(
+                self.inputs(thickness, force, base, body), force, base))
         return self.corrected(base, self.uvmap.sample(self.model(self.images(thickness, force,
-                                                                             base))))
+                                                                             base, body))))
 
     @property
     def crop_margin(self) -> int:
@@ -169,12 +185,12 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
             out[b, v] = m.sample(self.model(m.rasterise(x[b:b + 1], win)), win, v)[0]
         return out
 
-    def loss(self, thickness, force, target):
+    def loss(self, thickness, force, target, body=None, base=None):
         """Masked L2 over the chart's pixels (``loss: mse``, the paper's), or with ``loss:
         relative`` (``pooled``) the relative (pooled) MEE at every UV corner (a seam vertex's
         copies each count), plus the optional total variation."""
-        base = self.base(thickness, force)
-        out = self.model(self.images(thickness, force, base))
+        base = self.base(thickness, force, body, base)
+        out = self.model(self.images(thickness, force, base, body))
         tgt = self.normalised(target, force)
         if self.config["loss"] != "mse":
             pred = self.corrected(None if base is None else base[:, self._corner_vertex],
@@ -196,11 +212,11 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
         dy = (out[..., 1:, :] - out[..., :-1, :]).abs() * m[1:] * m[:-1]
         return self.config["tv"] * (dx.mean() + dy.mean())
 
-    def corner_displacement(self, thickness, force) -> np.ndarray:
+    def corner_displacement(self, thickness, force, body=None) -> np.ndarray:
         """``(B, T, 3)`` displacement (m) at every UV corner, seam copies apart."""
         self.model.eval()
         with torch.no_grad():
-            base = self.base(thickness, force)
-            c = self.uvmap.sample_corners(self.model(self.images(thickness, force, base)))
+            base = self.base(thickness, force, body)
+            c = self.uvmap.sample_corners(self.model(self.images(thickness, force, base, body)))
             c = self.corrected(None if base is None else base[:, self._corner_vertex], c)
             return (self.denormalised(c, force) * self.scale).double().cpu().numpy()

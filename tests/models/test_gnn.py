@@ -93,12 +93,12 @@ def test_encoded_edges_are_kept_until_the_weights_change(ds, make):
     p = make("gnn/prior", ds)
     s = scenes_of(ds, "test", limit=1)[0][0]
     first = p.predict(s).displacement
-    kept = p._edges[1]
-    assert p.predict(s).displacement == pytest.approx(first) and p._edges[1] is kept
+    kept = p._edges[0][1]
+    assert p.predict(s).displacement == pytest.approx(first) and p._edges[0][1] is kept
     with torch.no_grad():
         p.model.net.edge_encoder[0].weight.mul_(2.0)
         torch.nn.init.normal_(p.model.net.decoder[-1].weight, std=0.5)
     with torch.no_grad():
         fresh = p.model.encode_edges(p.edge_attr)
     p.predict(s)
-    assert p._edges[1] is not kept and torch.equal(p._edges[1], fresh)
+    assert p._edges[0][1] is not kept and torch.equal(p._edges[0][1], fresh)

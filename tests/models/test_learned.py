@@ -23,7 +23,7 @@ def test_relative_loss_is_the_relative_mee(ds):
     t = torch.tensor(np.stack([s.thickness for s in scenes]), dtype=torch.float32)
     f = torch.tensor(np.stack([s.force for s in scenes]), dtype=torch.float32)
     u = torch.tensor(truth, dtype=torch.float32)
-    p.raw = lambda thickness, force: p.normalised(1.1 * u, force)
+    p.raw = lambda thickness, force, body=None, base=None: p.normalised(1.1 * u, force)
     mag = np.linalg.norm(truth, axis=-1)
     expected = np.mean(0.1 * mag.mean(-1) / mag.max(-1))
     assert float(p.loss(t, f, u)) == pytest.approx(expected, rel=2e-3)
@@ -32,7 +32,7 @@ def test_relative_loss_is_the_relative_mee(ds):
     u[1] *= 3.0
     mag[1] *= 3.0
     over = torch.tensor([1.1, 1.3])[:, None, None]
-    p.raw = lambda thickness, force: p.normalised(over * u, force)
+    p.raw = lambda thickness, force, body=None, base=None: p.normalised(over * u, force)
     err = np.array([0.1, 0.3])[:, None] * mag
     p.config["loss"] = "pooled"
     pooled = err.mean(-1).sum() / mag.max(-1).sum()
