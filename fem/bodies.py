@@ -3,14 +3,16 @@ per body (the same part of the same body model, in another shape), each an ordin
 ``<out>/body-NN/``, and a ``bodies.json`` that lists them; :func:`stmpl.dataset.open_data` reads
 the folder as one set (:class:`stmpl.dataset.Datasets`).
 
-``bodies`` takes ``phenotypes`` (a list of anny phenotypes, each a mapping of
+``bodies`` takes, for anny, ``phenotypes`` (a list of anny phenotypes, each a mapping of
 :data:`stmpl.body.anny_body.PHENOTYPES` to [0, 1]) and/or ``sample``: ``{count, seed, age}``,
 that many phenotypes drawn from anny's own distribution of realistic bodies (its
 ``SimpleShapeDistribution``: height, weight, muscle and proportions conditioned on age and
 gender) for adults of ``age`` = [lo, hi] years (default [20, 70]). ``thickness``:
 ``from_weight`` (default) gives every body the paper's heuristic, 5 mm at weight 0 to 10 mm at
 weight 1 (:func:`stmpl.tissue.from_weight`), so that weight drives both the shape and the tissue
-as in the paper; ``levels`` gives every body the config's ``thickness_mm``.
+as in the paper; ``levels`` gives every body the config's ``thickness_mm``. For an SMPL-format
+body (a file the user supplies) ``betas`` lists shape vectors, and ``from_weight`` is the paper's
+own heuristic through beta_2: 5 mm at -2 to 10 mm at 2 (:func:`stmpl.tissue.from_beta2`).
 
 Each member is generated, resumed and checked as any dataset (:func:`fem.generate.generate`);
 a member's placement seed is the config's plus its index, so the bodies' splits differ.
@@ -36,11 +38,31 @@ def check_bodies(cfg: dict) -> None:
     from stmpl.body.anny_body import check_phenotype
 
     b = cfg["bodies"]
+    model = cfg["body"].get("model")
+    if model == "smpl":
+        checked.one_of(b.get("thickness", "from_weight") if isinstance(b, dict) else None,
+                       "bodies.thickness", THICKNESS)
+        betas = b.get("betas")
+        if set(b) - {"betas", "thickness"} or not isinstance(betas, list) or not betas or any(
+                not isinstance(x, list) or not x or not all(
+                    isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)
+                    for v in x) for x in betas):
+            raise ValueError(f"bodies of an SMPL-format body take betas: a non-empty list of "
+                             f"shape vectors (and thickness), got {b!r}")
+        if "betas" in cfg["body"]:
+            raise ValueError("bodies: give the betas under bodies, not body.betas")
+        if b.get("thickness", "from_weight") == "from_weight" and any(
+                len(x) < 2 or not -2 <= x[1] <= 2 for x in betas):
+            raise ValueError("bodies: thickness from_weight on an SMPL body reads beta_2, which "
+                             "must be given and lie in [-2, 2] (the paper's sweep)")
+        return
+    if isinstance(b, dict) and "betas" in b:
+        raise ValueError("bodies.betas is for SMPL-format bodies; anny takes phenotypes")
     if not isinstance(b, dict) or set(b) - BODY_KEYS or not ({"phenotypes", "sample"} & set(b)):
         raise ValueError(f"bodies takes phenotypes and/or sample (and thickness), got {b!r}")
-    if cfg["body"].get("model") != "anny":
-        raise ValueError("bodies: only anny bodies have phenotypes to vary (body.model is "
-                         f"{cfg['body'].get('model')!r})")
+    if model != "anny":
+        raise ValueError("bodies: only anny bodies have phenotypes to vary, and SMPL-format "
+                         f"ones betas (body.model is {model!r})")
     if "phenotype" in cfg["body"]:
         raise ValueError("bodies: give the phenotypes under bodies, not body.phenotype")
     for ph in b.get("phenotypes") or []:
@@ -87,8 +109,11 @@ def sample_phenotypes(count: int, seed: int = 0, age=DEFAULT_AGE) -> list[dict]:
 
 
 def phenotypes(cfg: dict) -> list[dict]:
-    """The config's bodies as phenotypes: the listed ones, then the sampled ones."""
+    """The config's bodies as phenotypes: the listed ones, then the sampled ones (for an SMPL
+    body its betas, each as ``{"betas": [...]}``)."""
     b = cfg["bodies"]
+    if cfg["body"].get("model") == "smpl":
+        return [{"betas": [float(v) for v in x]} for x in b["betas"]]
     out = [dict(p) for p in b.get("phenotypes") or []]
     if "sample" in b:
         s = b["sample"]
@@ -102,10 +127,13 @@ def members(cfg: dict) -> list[dict]:
     its own name (``<name>-body<NN>``) and placement seed (the config's plus its index)."""
     out = []
     how = cfg["bodies"].get("thickness", "from_weight")
+    smpl = cfg["body"].get("model") == "smpl"
     for k, ph in enumerate(phenotypes(cfg)):
         m = {key: v for key, v in cfg.items() if key != "bodies"}
-        m["body"] = {**cfg["body"], "phenotype": ph}
-        if how == "from_weight":
+        m["body"] = {**cfg["body"], **(ph if smpl else {"phenotype": ph})}
+        if how == "from_weight" and smpl:
+            m["thickness_mm"] = [round(7.5 + 1.25 * ph["betas"][1], 2)]
+        elif how == "from_weight":
             m["thickness_mm"] = [round(5.0 + 5.0 * ph.get("weight", 0.5), 2)]
         m["name"] = f"{cfg['name']}-body{k:02d}"
         m["seed"] = int(cfg["seed"]) + k
@@ -144,7 +172,8 @@ def generate_bodies(cfg: dict, out, **kwargs) -> dict:
     cards = []
     for k, m in enumerate(ms):
         if kwargs.get("progress", True):
-            ph = ", ".join(f"{a} {v:.2f}" for a, v in m["body"]["phenotype"].items())
+            ph = (", ".join(f"{a} {v:.2f}" for a, v in m["body"]["phenotype"].items())
+                  if "phenotype" in m["body"] else f"betas {m['body']['betas']}")
             print(f"body {k + 1}/{len(ms)}: {ph}; {m['thickness_mm'][0]:g} mm", flush=True)
         card = generate(m, member_folder(out, k), **kwargs)
         if not card:
@@ -153,7 +182,8 @@ def generate_bodies(cfg: dict, out, **kwargs) -> dict:
     card = {"format": FORMAT, "name": cfg["name"], "config": cfg,
             "config_hash": config_hash(cfg),
             "members": [{"folder": member_folder(out, k).name, "name": c["name"],
-                         "phenotype": ms[k]["body"]["phenotype"],
+                         "phenotype": ms[k]["body"].get("phenotype") or
+                         {"betas": ms[k]["body"]["betas"]},
                          "thickness_mm": ms[k]["thickness_mm"], "hash": c["hash"],
                          "samples": c["samples"], "samples_per_split": c["samples_per_split"],
                          "failures": c["failures"]} for k, c in enumerate(cards)],

@@ -34,11 +34,12 @@ DEFAULTS = {
 }
 OPTIONAL = {"fidelity": "full", "linear": False, "bodies": None}
 """Keys whose default leaves a config's hash as it was before the key existed."""
-BODY_KEYS = {"phenotypes", "sample", "thickness"}
+BODY_KEYS = {"phenotypes", "sample", "betas", "thickness"}
 """``bodies``: ``phenotypes`` (a list of anny phenotypes), ``sample`` (``{count, seed, age}``:
-that many drawn from anny's shape distribution, adults of ``age`` [lo, hi] years), ``thickness``
-(``from_weight``, the paper's heuristic per body, or ``levels``: ``thickness_mm`` on every
-body); see :mod:`fem.bodies`."""
+that many drawn from anny's shape distribution, adults of ``age`` [lo, hi] years), or for an
+SMPL-format body ``betas`` (a list of shape vectors); ``thickness`` (``from_weight``, the
+paper's heuristic per body through anny's weight or SMPL's beta_2, or ``levels``:
+``thickness_mm`` on every body); see :mod:`fem.bodies`."""
 PLACEMENT_KEYS = {
     "disk": {"centres", "radii"},
     "ellipse": {"centres", "semi_axes", "angles"},
