@@ -225,6 +225,28 @@ class LearnedPredictor(BasePredictor):
         checkpoint does not carry. Nothing by default."""
 
     # -- shared
+    def predict(self, scenes, strict: bool | None = None):
+        """As :meth:`BasePredictor.predict`; a scene on the mirror twin of the model's part
+        (anny's right arm for a model of the left: :func:`stmpl.body.part.mirror_twin`) is
+        answered in the mirror: its loads and thickness on the mirrored mesh, the displacement
+        mirrored back (``info["mirrored"]``)."""
+        from stmpl.body.part import MIRROR, mirror_twin
+        from stmpl.scene import Deformation, Scene
+
+        single = isinstance(scenes, Scene)
+        batch = [scenes] if single else list(scenes)
+        twins = [mirror_twin(s.part, self.part) if isinstance(s, Scene) else None
+                 for s in batch]
+        if not any(t is not None for t in twins):
+            return super().predict(scenes, strict)
+        seen = [s if t is None else Scene(t, s.thickness, s.force, meta=s.meta)
+                for s, t in zip(batch, twins)]
+        out = super().predict(seen, strict)
+        back = [d if t is None else Deformation(s, d.displacement * MIRROR,
+                                                {**d.info, "mirrored": True})
+                for s, t, d in zip(batch, twins, out)]
+        return back[0] if single else back
+
     def check(self, scenes) -> None:
         from stmpl.body.part import difference
         from stmpl.dataset import same_mesh
