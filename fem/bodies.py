@@ -145,10 +145,11 @@ def member_folder(out, k: int) -> pathlib.Path:
     return pathlib.Path(out) / f"body-{k:02d}"
 
 
-def generate_bodies(cfg: dict, out, **kwargs) -> dict:
+def generate_bodies(cfg: dict, out, max_bodies: int | None = None, **kwargs) -> dict:
     """Generate (or finish) every member of a ``bodies`` config in ``out`` and write
-    ``bodies.json`` when all are done. ``kwargs`` go to :func:`fem.generate.generate`. Returns
-    the bodies card (``{}`` if a member stopped early)."""
+    ``bodies.json`` when all are done; ``max_bodies`` stops after the first that many (each
+    an ordinary dataset already). ``kwargs`` go to :func:`fem.generate.generate`. Returns the
+    bodies card (``{}`` if a member stopped early or ``max_bodies`` left some out)."""
     import hashlib
 
     from fem.config import config_hash
@@ -170,7 +171,11 @@ def generate_bodies(cfg: dict, out, **kwargs) -> dict:
     else:
         atomic_write_text(saved, yaml.safe_dump(cfg, sort_keys=False))
     cards = []
+    if max_bodies is not None and max_bodies < 1:
+        raise ValueError(f"max_bodies must be >= 1, got {max_bodies}")
     for k, m in enumerate(ms):
+        if max_bodies is not None and k >= max_bodies:
+            return {}
         if kwargs.get("progress", True):
             ph = (", ".join(f"{a} {v:.2f}" for a, v in m["body"]["phenotype"].items())
                   if "phenotype" in m["body"] else f"betas {m['body']['betas']}")

@@ -13,6 +13,8 @@ def add_generate(sub) -> None:
     ge.add_argument("--backend", choices=["serial", "processes", "dask"])
     ge.add_argument("--scheduler", help="Dask scheduler address (implies --backend dask)")
     ge.add_argument("--max-shards", type=int, help="stop after this many new shards")
+    ge.add_argument("--max-bodies", type=int,
+                    help="a config of several bodies: stop after the first this many")
     ge.add_argument("--quiet", action="store_true", help="no progress bar")
     ge.set_defaults(func=generate_command)
 
@@ -22,9 +24,9 @@ def generate_command(args) -> int:
 
     card = generate(args.config, args.out, workers=args.workers, backend=args.backend,
                     scheduler=args.scheduler, progress=not args.quiet,
-                    max_shards=args.max_shards)
+                    max_shards=args.max_shards, max_bodies=args.max_bodies)
     if not card:
-        print("stopped early (--max-shards); run again to finish")
+        print("stopped early (--max-shards or --max-bodies); run again to finish")
         return 0
     if "members" in card:                                # one dataset per body
         for m in card["members"]:

@@ -139,10 +139,11 @@ def _check_solvable(p: Plan) -> None:
 
 def generate(config, out=None, *, workers: int | None = None, backend: str | None = None,
              scheduler: str | None = None, progress: bool = True, part: BodyPart | None = None,
-             max_shards: int | None = None) -> dict:
+             max_shards: int | None = None, max_bodies: int | None = None) -> dict:
     """Generate (or finish) the dataset of ``config`` (a YAML path or a dict) in folder ``out``
     (default ``data/<name>``). Returns the card. ``max_shards`` stops after that many new shards
-    (for tests and trial runs; the card is then not written and ``{}`` is returned)."""
+    (for tests and trial runs; the card is then not written and ``{}`` is returned);
+    ``max_bodies``, for a config of several bodies, stops after that many bodies."""
     cfg = read_config(config)
     if cfg["bodies"] is not None:                         # one member dataset per body
         from fem.bodies import generate_bodies
@@ -151,7 +152,8 @@ def generate(config, out=None, *, workers: int | None = None, backend: str | Non
             raise ValueError("a bodies config makes its own parts; part= is not taken")
         return generate_bodies(cfg, out if out is not None else pathlib.Path("data") /
                                cfg["name"], workers=workers, backend=backend,
-                               scheduler=scheduler, progress=progress, max_shards=max_shards)
+                               scheduler=scheduler, progress=progress, max_shards=max_shards,
+                               max_bodies=max_bodies)
     par = dict(cfg["parallel"])
     if workers is not None:
         par["workers"] = workers

@@ -75,6 +75,9 @@ def test_two_bodies_make_one_set(tmp_path):
     from stmpl.dataset import Datasets, open_data
 
     cfg = _cfg(bodies={"phenotypes": [{"weight": 0.1}, {"weight": 0.9, "muscle": 0.8}]})
+    assert generate(cfg, tmp_path / "two", progress=False, max_bodies=1) == {}
+    assert (tmp_path / "two" / "body-00" / "card.json").is_file()
+    assert not (tmp_path / "two" / "body-01").exists()
     card = generate(cfg, tmp_path / "two", progress=False)
     assert [m["thickness_mm"] for m in card["members"]] == [[5.5], [9.5]]
     ds = open_data(tmp_path / "two")
