@@ -314,7 +314,7 @@ class Datasets:
     >>> ds.card["name"], ds.card["datasets"]       # 'reference_fine+contacts_fine', members
     """
 
-    def __init__(self, folders):
+    def __init__(self, folders, name: str | None = None):
         if isinstance(folders, (str, pathlib.Path)) or len(folders) < 2:
             raise ValueError(f"Datasets takes a list of two or more dataset folders, got "
                              f"{folders!r}; open one with Dataset")
@@ -339,7 +339,7 @@ class Datasets:
         cards = [ds.card for ds in self.members]
         levels = sorted({float(t) for c in cards for t in c["config"]["thickness_mm"]})
         self.card = {
-            "name": "+".join(c["name"] for c in cards),
+            "name": name or "+".join(c["name"] for c in cards),
             "hash": hashlib.sha256(" ".join(c["hash"] for c in cards).encode()).hexdigest()[:16],
             "samples": sum(int(c["samples"]) for c in cards),
             "samples_per_split": {s: sum(int(c["samples_per_split"][s]) for c in cards)
@@ -430,7 +430,18 @@ def open_data(data) -> Dataset | Datasets:
     folders = list(data) if isinstance(data, (list, tuple)) else [data]
     if not folders:
         raise ValueError("no dataset folder given (an empty list)")
-    flat = []
+    flat, names = [], []
     for f in folders:
-        flat += member_folders(f) or [f]
-    return Datasets(flat) if len(flat) > 1 else Dataset(flat[0])
+        members = member_folders(f)
+        flat += members or [f]
+        names.append(_bodies_name(f) if members else None)
+    if len(flat) == 1:
+        return Dataset(flat[0])
+    name = None                           # a set of bodies goes by its own name
+    if any(names):
+        name = "+".join(n or Dataset(f).card["name"] for n, f in zip(names, folders))
+    return Datasets(flat, name=name)
+
+
+def _bodies_name(folder) -> str:
+    return json.loads((pathlib.Path(folder) / "bodies.json").read_text())["name"]

@@ -81,7 +81,7 @@ def test_two_bodies_make_one_set(tmp_path):
     card = generate(cfg, tmp_path / "two", progress=False)
     assert [m["thickness_mm"] for m in card["members"]] == [[5.5], [9.5]]
     ds = open_data(tmp_path / "two")
-    assert isinstance(ds, Datasets) and len(ds.parts) == 2
+    assert isinstance(ds, Datasets) and len(ds.parts) == 2 and ds.card["name"] == "two"
     a = ds.arrays("test")
     assert set(a["body"]) == {0, 1}
     for b, t in ((0, 5.5e-3), (1, 9.5e-3)):
