@@ -300,6 +300,12 @@ def _validate(p, ds) -> dict | None:
             "peak_err": [float(peak.mean()), float(peak.std())], "kept": bool(kept)}
 
 
+LABELS = {"test": "in-distribution test", "bodies": "seen bodies",
+          "bodies_test": "unseen bodies", "bodies_grasps": "unseen bodies: grasps"}
+"""Column titles of the sets whose names do not say it: the test splits of the training bodies
+(``bodies_fine``) and of the held-out ones."""
+
+
 def _column(key: str) -> str:
     """The table column of a measured set: the same kind of set on another surface of the part
     (``ood_bands`` on the plain arm, ``ood_bands_fine`` on the subdivided one) shares it."""
@@ -314,8 +320,7 @@ def table(path=None) -> str:
     cols = sorted({_column(k) for e in models.values() for k in (e.get("metrics") or {})
                    if k not in ("val",)}, key=lambda k: (k != "test", k))
     head = "| model | kind | parameters | MB | trained on | " + " | ".join(
-        f"{'in-distribution test' if k == 'test' else k}: MEE mm / rel. % / peak %"
-        for k in cols) + " |"
+        f"{LABELS.get(k, k)}: MEE mm / rel. % / peak %" for k in cols) + " |"
     rows = [head, "|---|---|--:|--:|---|" + "--:|" * len(cols)]
     for n, e in sorted(models.items()):
         ds = e.get("dataset") or {}
