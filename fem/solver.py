@@ -148,10 +148,12 @@ class Solver:
         nf = len(self.free)
         fmap = np.full(3 * M, -1, dtype=np.int64)
         fmap[self.free] = np.arange(nf)
-        na, nb = np.repeat(tets, n, axis=1), np.tile(tets, (1, n))      # (T, n^2) node pairs
+        ea, eb = np.triu_indices(n)            # element node pairs a <= b: the only ones used
+        na, nb = tets[:, ea], tets[:, eb]                                 # (T, n(n+1)/2)
         lo, hi = np.minimum(na, nb), np.maximum(na, nb)
-        pairs, pinv = np.unique((lo * M + hi).ravel(), return_inverse=True)
-        pinv = pinv.reshape(-1, n, n)
+        pairs, inv = np.unique((lo * M + hi).ravel(), return_inverse=True)
+        pinv = np.zeros((len(tets), n, n), dtype=np.int64)
+        pinv[:, ea, eb] = inv.reshape(len(tets), -1)
         plo, phi = np.divmod(pairs, M)
         i, k = np.divmod(np.arange(9), 3)
         row = fmap[3 * plo[:, None] + i]                                 # (P, 9) entry (i, k)
