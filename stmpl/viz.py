@@ -246,7 +246,8 @@ def deformation_figure(deformation, nodes: np.ndarray, tets: np.ndarray, node_u:
     axs.set_xlim(-1e3 * reach, 1e3 * reach)
     axs.set_ylim(pts[:, 1].min() - 1.0, pts[:, 1].max() + 1.0)
     axs.set_aspect("equal")
-    axs.set_xlabel("along the limb (mm)")
+    axs.set_xlabel("along the limb (mm)" if part.axis is not None else
+                   "across the part, horizontally (mm)")
     axs.set_ylabel("outward (mm)")
     axs.set_title("section through the load centre: tissue at rest (grey) and deformed "
                   "(colour); the inner surface is fixed")
