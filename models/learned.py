@@ -263,8 +263,10 @@ class LearnedPredictor(BasePredictor):
             else:
                 why = difference(s.part, self.part)
                 if why:
+                    hint = ("; a model of every body (option geometry: true) serves it"
+                            if not same_mesh(s.part, self.part) else "")
                     raise ValueError(f"scene {i} is on another body part than this "
-                                     f"{self.name} predictor was trained on: {why}")
+                                     f"{self.name} predictor was trained on: {why}{hint}")
             self._checked_part = s.part
 
     def predict_batch(self, scenes) -> list[np.ndarray]:
