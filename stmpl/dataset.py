@@ -278,7 +278,10 @@ def same_mesh(a: BodyPart, b: BodyPart) -> str:
     """What keeps two parts from being one mesh in two shapes (``""`` when they are: the same
     name, vertex count, faces, UV chart and rims; the vertices may differ)."""
     if a.name != b.name or a.n_vertices != b.n_vertices:
-        return f"{a.name} ({a.n_vertices} vertices) and {b.name} ({b.n_vertices} vertices)"
+        why = ("another part" if a.name != b.name else
+               "another body model (an SMPL-format file?) or another resolution")
+        return (f"{a.name} ({a.n_vertices} vertices) and {b.name} ({b.n_vertices} vertices): "
+                f"{why}")
     for k in ("faces", "face_uv", "uv_vertex"):
         if not np.array_equal(getattr(a, k), getattr(b, k)):
             return f"two {a.name} meshes with other {k}"
