@@ -9,6 +9,12 @@
         its linear prior follow each body, but it learned from one): the one-body point of the
         learning curve over bodies.
 
+    python benchmarks/bodies.py --models zoo:gnn_arm_fine runs/gnn_bodies2_fine/... \
+        --curve 1 3 --data data/bodies_test_fine --any-body --out reports/bodies/curve
+        the learning curve over bodies: each model trained on that many bodies, pooled over
+        the held-out ones; a markdown table and a picture (relative MEE and |peak error|
+        against the number of training bodies, a line per set) beside ``--out``.
+
     python benchmarks/bodies.py --models zoo:gnn_arm_fine --first-call [--any-body]
         serving a body nobody has asked for before, from cold caches (a fresh stmpl cache
         folder; anny's own assets stay built): seconds to build its arm, and the first and
@@ -50,10 +56,12 @@ def _phenotype(ds) -> str:
         f"; {'/'.join(f'{x:g}' for x in t)} mm"
 
 
-def accuracy(models: list, data: list, any_body: bool, limit: int | None) -> None:
+def accuracy(models: list, data: list, any_body: bool, limit: int | None) -> dict:
+    """Each model on each body of each set, printed; returns ``{(spec, set): pooled}``."""
     from stmpl.evaluate import evaluate_dataset
     from stmpl.predictor import OutsideEnvelope
 
+    pooled = {}
     for spec in models:
         p = _read(spec, any_body)
         for folder in data:
@@ -79,6 +87,53 @@ def accuracy(models: list, data: list, any_body: bool, limit: int | None) -> Non
                 print(f"{spec:28s} {str(folder):28s} pooled over {len(rows)} bodies, "
                       f"{int(w.sum())} scenes: rel. MEE {rel:.2f} %, peak {peak:+.1f} %, "
                       f"MEE {mee:.4f} mm", flush=True)
+                pooled[spec, str(folder)] = {"rel_mee": rel, "peak_err": peak, "mee": mee,
+                                             "scenes": int(w.sum()), "bodies": len(rows)}
+    return pooled
+
+
+def curve(models: list, counts: list, data: list, pooled: dict, out) -> None:
+    """The learning curve over bodies: a table and a picture beside ``out``."""
+    import pathlib
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    out = pathlib.Path(out)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    lines = ["| training bodies | model | " + " | ".join(
+        f"{pathlib.Path(d).name}: rel. MEE % / peak %" for d in data) + " |",
+        "|--:|---|" + "--:|" * len(data)]
+    for n, spec in sorted(zip(counts, models)):
+        cells = [(f"{pooled[spec, d]['rel_mee']:.2f} / {pooled[spec, d]['peak_err']:+.1f}"
+                  if (spec, d) in pooled else "–") for d in data]
+        lines.append(f"| {n} | {spec} | " + " | ".join(cells) + " |")
+    out.with_suffix(".md").write_text("\n".join(lines) + "\n")
+    fig, axes = plt.subplots(1, 2, figsize=(10, 4))
+    for d in data:
+        pts = sorted((n, pooled[spec, d]) for n, spec in zip(counts, models)
+                     if (spec, d) in pooled)
+        if not pts:
+            continue
+        x = [n for n, _ in pts]
+        axes[0].plot(x, [r["rel_mee"] for _, r in pts], "o-", label=pathlib.Path(d).name)
+        axes[1].plot(x, [abs(r["peak_err"]) for _, r in pts], "o-", label=pathlib.Path(d).name)
+    for ax, what in zip(axes, ("relative MEE on held-out bodies, %",
+                               "|mean peak error| on held-out bodies, %")):
+        ax.set_xlabel("bodies trained on")
+        ax.set_ylabel(what)
+        ax.set_xscale("log", base=2)
+        ax.xaxis.set_major_formatter(matplotlib.ticker.FormatStrFormatter("%g"))
+        ax.grid(True, alpha=0.3)
+        ax.set_ylim(bottom=0)
+    axes[0].legend(fontsize=8)
+    fig.suptitle("How many bodies are enough: error on bodies no model saw")
+    fig.tight_layout()
+    fig.savefig(out.with_suffix(".png"), dpi=120)
+    print("\n".join(lines))
+    print(f"wrote {out.with_suffix('.md')} and {out.with_suffix('.png')}")
 
 
 def first_call(models: list, any_body: bool, seed: int = 11) -> None:
@@ -118,13 +173,20 @@ def main(argv=None) -> None:
     ap.add_argument("--any-body", action="store_true")
     ap.add_argument("--limit", type=int)
     ap.add_argument("--first-call", action="store_true")
+    ap.add_argument("--curve", type=int, nargs="+", metavar="N",
+                    help="bodies each model was trained on (one per --models): a curve")
+    ap.add_argument("--out", default="reports/bodies/curve", help="the curve's files, no suffix")
     a = ap.parse_args(argv)
+    if a.curve and len(a.curve) != len(a.models):
+        ap.error("--curve needs one number of bodies per model")
     print(f"machine: {platform.machine()}, {os.cpu_count()} cores; torch threads "
           f"{__import__('torch').get_num_threads()}")
     if a.first_call:
         first_call(a.models, a.any_body)
     if a.data:
-        accuracy(a.models, a.data, a.any_body, a.limit)
+        pooled = accuracy(a.models, a.data, a.any_body, a.limit)
+        if a.curve:
+            curve(a.models, a.curve, a.data, pooled, a.out)
 
 
 if __name__ == "__main__":
