@@ -160,3 +160,20 @@ def test_a_linear_answer_is_kept_and_hashed(tmp_path, tiny_config):
         h["linear"][0, 0, 0] += 1e-4
     with pytest.raises(ValueError, match="does not match card.json"):
         Dataset(tmp_path / "d").arrays()
+
+
+def test_a_broken_set_of_bodies_is_named(tmp_path):
+    """bodies.json that is unreadable, of another format, or lists a member that is missing:
+    one line naming the file."""
+    from stmpl.dataset import BODIES_FORMAT, open_data
+
+    (tmp_path / "bodies.json").write_text("{not json")
+    with pytest.raises(ValueError, match="bodies.json is corrupt"):
+        open_data(tmp_path)
+    (tmp_path / "bodies.json").write_text(json.dumps({"format": "x", "members": []}))
+    with pytest.raises(ValueError, match="has format 'x'"):
+        open_data(tmp_path)
+    (tmp_path / "bodies.json").write_text(json.dumps(
+        {"format": BODIES_FORMAT, "name": "b", "members": [{"folder": "body-00"}]}))
+    with pytest.raises(FileNotFoundError, match="missing"):
+        open_data(tmp_path)
