@@ -230,7 +230,7 @@ class LearnedPredictor(BasePredictor):
         (anny's right arm for a model of the left: :func:`stmpl.body.part.mirror_twin`) is
         answered in the mirror: its loads and thickness on the mirrored mesh, the displacement
         mirrored back (``info["mirrored"]``)."""
-        from stmpl.body.part import MIRROR, mirror_twin
+        from stmpl.body.mirror import MIRROR, mirror_twin
         from stmpl.scene import Deformation, Scene
 
         single = isinstance(scenes, Scene)

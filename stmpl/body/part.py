@@ -432,36 +432,3 @@ def difference(part: BodyPart, reference: BodyPart, atol: float = 1e-6) -> str:
                 f"{gap * 1e3:.3g} mm from the model's: another body shape{body}")
     return ""
 
-
-MIRROR = np.array([-1.0, 1.0, 1.0])
-"""The body's mirror: x (the body's left-right axis, for anny and SMPL alike) negated."""
-
-_TWINS: dict = {}
-
-
-def _counterpart(name: str) -> str | None:
-    for a, b in (("left_", "right_"), ("right_", "left_")):
-        if name.startswith(a):
-            return b + name[len(a):]
-    return None
-
-
-def mirror_twin(part: BodyPart, template: BodyPart) -> BodyPart | None:
-    """``part`` seen in the mirror as ``template``'s side: when ``part`` is the other side's
-    limb (``right_arm`` for a ``left_arm`` template) of a mesh that is its mirror twin (the
-    same vertex count, vertex ``i`` the mirror image of the template's vertex ``i`` across the
-    body's x = 0 plane on the same body, and the same triangles up to order and winding: anny's
-    arms are), the template's mesh with ``part``'s vertices mirrored (its normals mirrored too);
-    else None. Which body it is does not matter: the correspondence is the mesh's."""
-    if _counterpart(part.name) != template.name or part.n_vertices != template.n_vertices:
-        return None
-    key = (part.faces.tobytes(), template.faces.tobytes())
-    if key not in _TWINS:
-        a = {tuple(sorted(f)) for f in part.faces.tolist()}
-        _TWINS[key] = a == {tuple(sorted(f)) for f in template.faces.tolist()}
-    if not _TWINS[key]:
-        return None
-    src = dict(part.source or {})
-    src["mirrored_from"] = part.name
-    return dataclasses.replace(template, vertices=part.vertices * MIRROR,
-                               normals=part.normals * MIRROR, source=src)
