@@ -136,7 +136,8 @@ def contact_figure(deformations: dict, truth=None, objects=(), path=None, dpi: i
         ax.set_xlim(cx - reach, cx + reach)
         ax.set_ylim(cy - reach, cy + reach)
         ms = d.info.get("seconds")
-        head = f"{name}" + (f", {duration(ms)}" if ms is not None else "")
+        head = (f"{name}" + (" (in the mirror)" if d.info.get("mirrored") else "")
+                + (f", {duration(ms)}" if ms is not None else ""))
         lines = [head, f"deepest {mag.max():.2f} mm"]
         if truth is not None and d is not truth:
             err = np.linalg.norm(d.displacement - truth.displacement, axis=1)

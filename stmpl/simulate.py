@@ -144,6 +144,8 @@ def run(args) -> int:
             out[label(spec)] = d = p.predict(scene)
         print(f"{label(spec):<16} deepest {1e3 * d.magnitude.max():6.3f} mm  "
               f"{duration(d.info['seconds']):>10}"
+              + (f"  (a model of the {p.part.name}, answering in the mirror)"
+                 if d.info.get("mirrored") else "")
               + (f"  (first call {duration(first)}: the linear FEM's columns for this contact "
                  "were solved and cached)" if solved else ""))
         env = d.info.get("envelope")
