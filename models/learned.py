@@ -118,15 +118,14 @@ class LearnedPredictor(BasePredictor):
 
     def body_tensors(self, part) -> dict:
         """The per-body tensors the network's inputs need, for ``part`` (one body of the
-        mesh): vertex areas' inverse ``inv_area`` ``(N,)`` (1/m^2), ``normals`` ``(N, 3)``,
-        ``vertices`` ``(N, 3)`` m. Subclasses add their own."""
+        mesh): vertex areas' inverse ``inv_area`` ``(N,)`` (1/m^2) and ``normals`` ``(N, 3)``.
+        Subclasses add their own."""
         import torch
 
         def t(x):
             return torch.tensor(np.asarray(x), dtype=torch.float32, device=self.device)
 
-        return {"inv_area": t(1.0 / part.vertex_areas), "normals": t(part.normals),
-                "vertices": t(part.vertices)}
+        return {"inv_area": t(1.0 / part.vertex_areas), "normals": t(part.normals)}
 
     def slot(self, part) -> int:
         """The index of ``part``'s body among those met (added, its tensors computed, the first

@@ -66,15 +66,7 @@ class LinearPrior:
             return None
         if base is not None:
             return self.normalised(base, force)
-        if body is None or not bool((body != 0).any()):
-            return self.normalised(self.model.prior(thickness, force), force)
-        import torch
-
-        u = torch.zeros(*force.shape, 3, device=force.device)
-        for k in torch.unique(body).tolist():
-            at = torch.nonzero(body == k).flatten()
-            u[at] = self.body_prior(k)(thickness[at], force[at])
-        return self.normalised(u, force)
+        return self.normalised(on_bodies(self, self.model.prior, thickness, force, body), force)
 
     def body_prior(self, k: int):
         """The linear FEM of body slot ``k`` (the model's own: ``model.prior``), on demand: a
@@ -88,6 +80,22 @@ class LinearPrior:
         """The prior ``base`` plus the network's output ``out`` read as a correction (the
         output alone without a prior); any ``(..., 3)`` shapes that broadcast."""
         return out if base is None else base + CORRECTION_SCALE * out
+
+
+def on_bodies(predictor, own, thickness, force, body=None):
+    """``(B, N, 3)`` m: the linear FEM's answer of each sample on its own body: ``own`` (the
+    operator of the predictor's own part) for slot 0 or ``body`` None, :func:`body_operator`
+    for the others, each body's samples in one call."""
+    if body is None or not bool((body != 0).any()):
+        return own(thickness, force)
+    import torch
+
+    u = torch.zeros(*force.shape, 3, device=force.device)
+    for k in torch.unique(body).tolist():
+        at = torch.nonzero(body == k).flatten()
+        op = own if k == 0 else body_operator(predictor, k)
+        u[at] = op(thickness[at], force[at])
+    return u
 
 
 def body_operator(predictor, k: int):

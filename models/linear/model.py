@@ -52,18 +52,9 @@ class LinearPredictor(LearnedPredictor):
         return self.config["operator"] == "on_demand"
 
     def raw(self, thickness, force, body=None, base=None):
-        if body is None or not bool((body != 0).any()):
-            return self.model(thickness, force) / self.scale
-        import torch
+        from models.prior import on_bodies
 
-        from models.prior import body_operator
-
-        u = torch.zeros(*force.shape, 3, device=force.device)
-        for k in torch.unique(body).tolist():
-            at = torch.nonzero(body == k).flatten()
-            op = self.model if k == 0 else body_operator(self, k)
-            u[at] = op(thickness[at], force[at])
-        return u / self.scale
+        return on_bodies(self, self.model, thickness, force, body) / self.scale
 
     def fit(self, dataset, progress: bool = True) -> None:
         """Compute the operator for ``dataset``'s part and FEM set-up (on demand: the columns
