@@ -152,7 +152,8 @@ class Solver:
         na, nb = tets[:, ea], tets[:, eb]                                 # (T, n(n+1)/2)
         lo, hi = np.minimum(na, nb), np.maximum(na, nb)
         pairs, inv = np.unique((lo * M + hi).ravel(), return_inverse=True)
-        pinv = np.zeros((len(tets), n, n), dtype=np.int64)
+        idx = np.int32 if 18 * len(pairs) < 2**31 else np.int64      # halves the big arrays
+        pinv = np.zeros((len(tets), n, n), dtype=idx)
         pinv[:, ea, eb] = inv.reshape(len(tets), -1)
         plo, phi = np.divmod(pairs, M)
         i, k = np.divmod(np.arange(9), 3)
@@ -171,8 +172,8 @@ class Solver:
         K = sp.csr_matrix((tag.astype(float), (rr, cc)), shape=(nf, nf))
         K.sort_indices()
         tags = K.data.astype(np.int64)
-        up = np.full(9 * len(pairs), -1, dtype=np.int64)
-        dn = np.full(9 * len(pairs), -1, dtype=np.int64)
+        up = np.full(9 * len(pairs), -1, dtype=idx)
+        dn = np.full(9 * len(pairs), -1, dtype=idx)
         up[tags[tags > 0] - 1] = np.flatnonzero(tags > 0)
         dn[-tags[tags < 0] - 1] = np.flatnonzero(tags < 0)
         # element entry (a, i, b, k), p <= q -> pair entry (i, k), or (k, i) if node a > node b
@@ -180,11 +181,11 @@ class Solver:
         A, I, B, Kc = p // 3, p % 3, q // 3, q % 3
         self._local = (A, I, B, Kc)
         swap = tets[:, A] > tets[:, B]                                   # (T, E)
-        eid = 9 * pinv[:, A, B] + np.where(swap, 3 * Kc + I, 3 * I + Kc)
+        eid = pinv[:, A, B]
+        eid *= 9
+        eid += np.where(swap, (3 * Kc + I).astype(idx), (3 * I + Kc).astype(idx))
         self._pos2d = [up[eid]] if upper else [up[eid], dn[eid]]
-        self._pos = [pos.ravel() for pos in self._pos2d]
-        self._sel = [np.flatnonzero(pos >= 0) for pos in self._pos]
-        self._pos = [pos[sel] for pos, sel in zip(self._pos, self._sel)]
+        self._gather = None                  # the NumPy path's flat places, made when it runs
         self._nnz = K.nnz
         self._indices = K.indices.astype(np.int32)
         self._indptr = K.indptr.astype(np.int32)
@@ -229,8 +230,11 @@ class Solver:
             for pos in self._pos2d:
                 kernel(g, self.GG, aW, bW, cW, pos, data)
         else:
-            data = element_data(g, self.GG, aW, bW, cW, self._local, self._pos, self._sel,
-                                self._nnz)
+            if self._gather is None:     # each element entry's place in the data, if it has one
+                flat = [pos.ravel() for pos in self._pos2d]
+                sel = [np.flatnonzero(pos >= 0) for pos in flat]
+                self._gather = ([pos[s] for pos, s in zip(flat, sel)], sel)
+            data = element_data(g, self.GG, aW, bW, cW, self._local, *self._gather, self._nnz)
         nf = len(self.free)
         K = sp.csr_matrix((data, self._indices, self._indptr), shape=(nf, nf))
         return r - f, K

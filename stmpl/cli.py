@@ -178,9 +178,10 @@ def cmd_solve(args) -> int:
     return 0
 
 
-DEFAULT_MODEL = "zoo:gnn_arm_fine"
+DEFAULT_MODEL = "zoo:gnn_arm_bodies"
 """The predictor ``stmpl predict`` uses unless told: the shipped mesh GNN of the Anny left arm
-(the most accurate of the zoo's models), on the once-subdivided arm it was trained on."""
+of every body (the most accurate of the zoo's models; any phenotype, the right arm in the
+mirror), on the once-subdivided arm it was trained on."""
 
 
 def cmd_predict(args) -> int:

@@ -301,9 +301,10 @@ def _validate(p, ds) -> dict | None:
 
 
 LABELS = {"test": "in-distribution test", "bodies": "seen bodies",
-          "bodies_test": "unseen bodies", "bodies_grasps": "unseen bodies: grasps"}
-"""Column titles of the sets whose names do not say it: the test splits of the training bodies
-(``bodies_fine``) and of the held-out ones."""
+          "bodies_test": "unseen bodies", "bodies_bands": "unseen bodies: bands",
+          "bodies_letters": "unseen bodies: letters", "bodies_grasps": "unseen bodies: grasps"}
+"""Column titles of the sets whose names do not say it (the test splits of the training bodies,
+``bodies_fine``, and of the held-out ones), in the table's order; other sets follow by name."""
 
 
 def _column(key: str) -> str:
@@ -318,7 +319,8 @@ def table(path=None) -> str:
     error of the peak displacement (%); a set a model was not measured on is a dash."""
     models = manifest(path)["models"]
     cols = sorted({_column(k) for e in models.values() for k in (e.get("metrics") or {})
-                   if k not in ("val",)}, key=lambda k: (k != "test", k))
+                   if k not in ("val",)},
+                  key=lambda k: (list(LABELS).index(k) if k in LABELS else len(LABELS), k))
     head = "| model | kind | parameters | MB | trained on | " + " | ".join(
         f"{LABELS.get(k, k)}: MEE mm / rel. % / peak %" for k in cols) + " |"
     rows = [head, "|---|---|--:|--:|---|" + "--:|" * len(cols)]

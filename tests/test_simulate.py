@@ -14,7 +14,7 @@ def test_the_default_grasp(tmp_path, capsys, arm):
     out = capsys.readouterr().out
     arm = arm.subdivided(1)
     assert f"left_arm ({arm.n_vertices} vertices)" in out
-    assert "right hand (whole)" in out and "gnn_arm_fine" in out and " ms" in out
+    assert "right hand (whole)" in out and "gnn_arm_bodies" in out and " ms" in out
     body = trimesh.load(tmp_path / "pressed.ply", process=False)
     moved = np.linalg.norm(body.vertices - arm.vertices, axis=1)
     assert 1e-4 < moved.max() < 3e-3                       # a dent of under a millimetre or so
@@ -29,7 +29,7 @@ def test_letters_against_the_fem(tmp_path, capsys, arm):
                  "--res", "coarse", "--levels", "1", "--out-dir", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     assert "letters ECCV" in out and "FEM (coarse)" in out
-    line = [ln for ln in out.splitlines() if ln.strip().startswith("gnn_arm_fine: error")][0]
+    line = [ln for ln in out.splitlines() if ln.strip().startswith("gnn_arm_bodies: error")][0]
     assert float(line.split("error ")[1].split(" %")[0]) < 10   # a coarse FEM, a fine model
 
 
@@ -67,7 +67,19 @@ def test_a_press_past_the_envelope_is_said_and_a_failed_fem_is_one_line(tmp_path
     assert main(["simulate", "--sphere", "20", "--depth", "4", "--force", "5", "--compare",
                  "--res", "coarse", "--levels", "1", "--out-dir", str(tmp_path)]) == 0
     out = capsys.readouterr().out
-    assert "NOTE: gnn_arm_fine answers outside the data" in out
-    assert "mean pressure of a contact" in out and "WARNING: gnn_arm_fine pushes the skin" in out
+    assert "NOTE: gnn_arm_bodies answers outside the data" in out
+    assert "mean pressure of a contact" in out and "WARNING: gnn_arm_bodies pushes the skin" in out
     assert "FEM (coarse)     failed: the FEM solve failed at 5 N" in out
     assert "Traceback" not in out and (tmp_path / "simulate.png").is_file()
+
+
+def test_any_body_and_its_right_arm(tmp_path, capsys):
+    """The default model serves another anny body (heavy, little muscle), its tissue from its
+    weight by the paper's heuristic (0.9 -> 9.5 mm), and its right arm in the mirror."""
+    assert main(["simulate", "--weight", "0.9", "--muscle", "0.2", "--part", "right_arm",
+                 "--out-dir", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "right_arm (2109 vertices), 9.5 mm of tissue" in out
+    line = [ln for ln in out.splitlines() if ln.startswith("gnn_arm_bodies")][0]
+    assert "answering in the mirror" in line and "NOTE" not in out
+    assert 0.1 < float(line.split("deepest")[1].split("mm")[0]) < 3.0
