@@ -187,8 +187,8 @@ def generate_bodies(cfg: dict, out, max_bodies: int | None = None, **kwargs) -> 
     card = {"format": FORMAT, "name": cfg["name"], "config": cfg,
             "config_hash": config_hash(cfg),
             "members": [{"folder": member_folder(out, k).name, "name": c["name"],
-                         "phenotype": ms[k]["body"].get("phenotype") or
-                         {"betas": ms[k]["body"]["betas"]},
+                         "phenotype": ms[k]["body"]["phenotype"] if "phenotype" in ms[k]["body"]
+                         else {"betas": ms[k]["body"]["betas"]},
                          "thickness_mm": ms[k]["thickness_mm"], "hash": c["hash"],
                          "samples": c["samples"], "samples_per_split": c["samples_per_split"],
                          "failures": c["failures"]} for k, c in enumerate(cards)],

@@ -74,17 +74,18 @@ def test_two_bodies_make_one_set(tmp_path):
     own arm), read back as one set whose samples say which body; a second run redoes nothing."""
     from stmpl.dataset import Datasets, open_data
 
-    cfg = _cfg(bodies={"phenotypes": [{"weight": 0.1}, {"weight": 0.9, "muscle": 0.8}]})
+    cfg = _cfg(bodies={"phenotypes": [{}, {"weight": 0.9, "muscle": 0.8}]})  # {}: the default
     assert generate(cfg, tmp_path / "two", progress=False, max_bodies=1) == {}
     assert (tmp_path / "two" / "body-00" / "card.json").is_file()
     assert not (tmp_path / "two" / "body-01").exists()
     card = generate(cfg, tmp_path / "two", progress=False)
-    assert [m["thickness_mm"] for m in card["members"]] == [[5.5], [9.5]]
+    assert [m["thickness_mm"] for m in card["members"]] == [[7.5], [9.5]]
+    assert card["members"][0]["phenotype"] == {}
     ds = open_data(tmp_path / "two")
     assert isinstance(ds, Datasets) and len(ds.parts) == 2 and ds.card["name"] == "two"
     a = ds.arrays("test")
     assert set(a["body"]) == {0, 1}
-    for b, t in ((0, 5.5e-3), (1, 9.5e-3)):
+    for b, t in ((0, 7.5e-3), (1, 9.5e-3)):
         np.testing.assert_allclose(a["thickness"][a["body"] == b], t, rtol=1e-6)
     assert np.abs(ds.parts[0].vertices - ds.parts[1].vertices).max() > 2e-3   # another arm
     heavy = a["body"] == 1
