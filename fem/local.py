@@ -52,13 +52,15 @@ class Patch:
         return out
 
 
-def first_margin(part: BodyPart, thickness: np.ndarray, force: np.ndarray) -> float:
+def first_margin(part: BodyPart, thickness: np.ndarray, force: np.ndarray,
+                 thicknesses: float = THICKNESSES) -> float:
     """The first cut's margin, m: the radius of the loaded region (half its largest extent,
-    capped at 5 cm) plus :data:`THICKNESSES` times the thickest tissue under it."""
+    capped at 5 cm) plus ``thicknesses`` (default :data:`THICKNESSES`) times the thickest
+    tissue under it."""
     loaded = np.flatnonzero(force > 0)
     x = part.vertices[loaded]
     extent = float(np.linalg.norm(x.max(0) - x.min(0)))
-    return min(0.5 * extent, 0.05) + THICKNESSES * float(np.max(thickness[loaded]))
+    return min(0.5 * extent, 0.05) + thicknesses * float(np.max(thickness[loaded]))
 
 
 def patch(part: BodyPart, force: np.ndarray, margin: float) -> Patch:
