@@ -115,21 +115,31 @@ class AnnyBody(CachedBodyModel):
 
     def rest_mesh(self) -> BodyMesh:
         if self._mesh is None:
-            m = self.anny
-            with torch.no_grad():
-                out = m(phenotype_kwargs={k: float(v) for k, v in self.phenotype.items()})
-            w, bi = m.vertex_bone_weights.numpy(), m.vertex_bone_indices.numpy()
-            self._mesh = BodyMesh(
-                vertices=out["rest_vertices"][0].double().numpy(),
-                faces=m.faces.numpy().astype(np.int64),
-                uv=m.texture_coordinates.double().numpy(),
-                face_uv=m.face_texture_coordinate_indices.numpy().astype(np.int64),
-                dominant_bone=bi[np.arange(len(bi)), w.argmax(axis=1)],
-                bone_labels=tuple(m.bone_labels),
-                bone_heads=out["rest_bone_heads"][0].double().numpy(),
-                forward=np.array([0.0, -1.0, 0.0]),  # anny: z up, the face looks along -y
-            )
+            self._mesh = self._rest_mesh(self.phenotype)
         return self._mesh
+
+    def template_mesh(self) -> BodyMesh:
+        """The rest mesh at phenotype 0.5 everywhere (anny's template shape)."""
+        if all(abs(v - 0.5) < 1e-12 for v in self.phenotype.values()):
+            return self.rest_mesh()
+        return self._rest_mesh({})
+
+    def _rest_mesh(self, phenotype: dict[str, float]) -> BodyMesh:
+        """The whole-body rest mesh of ``phenotype`` (unset values 0.5)."""
+        m = self.anny
+        with torch.no_grad():
+            out = m(phenotype_kwargs={k: float(v) for k, v in phenotype.items()})
+        w, bi = m.vertex_bone_weights.numpy(), m.vertex_bone_indices.numpy()
+        return BodyMesh(
+            vertices=out["rest_vertices"][0].double().numpy(),
+            faces=m.faces.numpy().astype(np.int64),
+            uv=m.texture_coordinates.double().numpy(),
+            face_uv=m.face_texture_coordinate_indices.numpy().astype(np.int64),
+            dominant_bone=bi[np.arange(len(bi)), w.argmax(axis=1)],
+            bone_labels=tuple(m.bone_labels),
+            bone_heads=out["rest_bone_heads"][0].double().numpy(),
+            forward=np.array([0.0, -1.0, 0.0]),  # anny: z up, the face looks along -y
+        )
 
 
 def phenotype_options(parser) -> None:

@@ -23,8 +23,9 @@ from stmpl.files import atomic_savez
 
 log = logging.getLogger(__name__)
 
-CACHE_VERSION = 2
-"""Bump when part extraction changes: every cached part is rebuilt."""
+CACHE_VERSION = 3
+"""Bump when part extraction changes: every cached part is rebuilt (3: front-only parts cut on
+the template shape)."""
 
 
 def default_cache_dir() -> pathlib.Path:
@@ -54,7 +55,9 @@ class BodyMesh:
 @dataclass(frozen=True)
 class PartSpec:
     """Which vertices form a part: those whose dominant skinning bone is in ``bones``; with
-    ``front_only``, only those in front of the bones' mean head (along the body's forward axis).
+    ``front_only``, only those in front of the bones' mean head (along the body's forward axis),
+    judged on the model's template shape (:meth:`CachedBodyModel.template_mesh`) so that every
+    shape of the body cuts the same vertices: one mesh, whatever the phenotype or betas.
     ``axis_bones`` list the bone heads of the limb centre line, proximal to distal."""
 
     bones: tuple[str, ...]
@@ -93,6 +96,11 @@ class CachedBodyModel(torch.nn.Module):
     def rest_mesh(self) -> BodyMesh:
         raise NotImplementedError
 
+    def template_mesh(self) -> BodyMesh:
+        """The rest mesh of the model's template shape (anny's phenotype 0.5 everywhere, SMPL's
+        zero betas): where shape-dependent part boundaries are drawn. Default: the rest mesh."""
+        return self.rest_mesh()
+
     def part_names(self) -> list[str]:
         return list(self.PARTS)
 
@@ -123,9 +131,10 @@ class CachedBodyModel(torch.nn.Module):
             raise ValueError(f"part {name!r}: bones {missing} not in body model {self.name!r}")
         ids = [labels.index(b) for b in spec.bones]
         mask = np.isin(mesh.dominant_bone, ids)
-        if spec.front_only:
-            centre = mesh.bone_heads[ids].mean(axis=0)
-            mask &= (mesh.vertices - centre) @ mesh.forward > 0
+        if spec.front_only:                  # on the template: the same cut for every shape
+            t = self.template_mesh()
+            centre = t.bone_heads[ids].mean(axis=0)
+            mask &= (t.vertices - centre) @ t.forward > 0
         axis = mesh.bone_heads[[labels.index(b) for b in spec.axis_bones]] if spec.axis_bones \
             else None
         log.info("building part %s of %s", name, self.name)

@@ -74,22 +74,30 @@ class SMPLBody(CachedBodyModel):
             h.update(self.uv_path.read_bytes())
         return {"file_sha256": h.hexdigest(), "betas": self.betas.round(8).tolist()}
 
-    def shaped_vertices(self) -> np.ndarray:
-        """``(V, 3)`` rest vertices ``v_template + shapedirs @ betas``, m."""
-        return self.data["v_template"] + self.data["shapedirs"] @ self.betas
+    def shaped_vertices(self, betas: np.ndarray | None = None) -> np.ndarray:
+        """``(V, 3)`` rest vertices ``v_template + shapedirs @ betas`` (default this body's), m."""
+        b = self.betas if betas is None else betas
+        return self.data["v_template"] + self.data["shapedirs"] @ b
 
     def joints(self) -> np.ndarray:
         """``(J, 3)`` rest joint positions, m."""
         return np.asarray(self.data["J_regressor"] @ self.shaped_vertices())
 
-    def rest_mesh(self) -> BodyMesh:
+    def rest_mesh(self, betas: np.ndarray | None = None) -> BodyMesh:
+        """The whole-body rest mesh at this body's betas (or ``betas``)."""
         if self.uv is None:
             raise ValueError("this SMPL body has no UVs: pass uv_path=<OBJ with vt/ft lines>")
         d = self.data
-        return BodyMesh(vertices=self.shaped_vertices(), faces=d["f"], uv=self.uv,
+        v = self.shaped_vertices(betas)
+        return BodyMesh(vertices=v, faces=d["f"], uv=self.uv,
                         face_uv=self.face_uv, dominant_bone=d["weights"].argmax(axis=1),
-                        bone_labels=JOINTS[:d["weights"].shape[1]], bone_heads=self.joints(),
+                        bone_labels=JOINTS[:d["weights"].shape[1]],
+                        bone_heads=np.asarray(d["J_regressor"] @ v),
                         forward=np.array([0.0, 0.0, 1.0]))
+
+    def template_mesh(self) -> BodyMesh:
+        """The rest mesh at zero betas (the file's template shape)."""
+        return self.rest_mesh(np.zeros_like(self.betas))
 
 
 # --- readers ----------------------------------------------------------------------------------

@@ -61,6 +61,18 @@ def test_other_parts(anny_body):
     assert mean_normal @ np.array([0, -1.0, 0]) > 0.8  # anny faces -y: the belly looks forward
 
 
+def test_every_shape_cuts_the_same_belly(tmp_path, anny_body):
+    """A front-only part is cut on the template shape: a heavy, muscular body's belly is the
+    same mesh (vertices, faces, chart) as the default's, in its own shape."""
+    heavy = AnnyBody({"weight": 0.98, "muscle": 0.3, "proportions": 0.95}, cache_dir=tmp_path)
+    heavy._anny = anny_body.anny
+    a, b = anny_body.part("belly"), heavy.part("belly")
+    np.testing.assert_array_equal(a.body_index, b.body_index)
+    np.testing.assert_array_equal(a.faces, b.faces)
+    np.testing.assert_allclose(a.uv, b.uv)
+    assert np.abs(a.vertices - b.vertices).max() > 0.01          # another shape
+
+
 def test_bad_input(anny_body):
     assert isinstance(anny_body, BodyModel)
     with pytest.raises(ValueError, match="unknown part 'leg'"):
