@@ -179,9 +179,8 @@ def cmd_solve(args) -> int:
 
 
 DEFAULT_MODEL = "zoo:gnn_arm_bodies"
-"""The predictor ``stmpl predict`` uses unless told: the shipped mesh GNN of the Anny left arm
-of every body (the most accurate of the zoo's models; any phenotype, the right arm in the
-mirror), on the once-subdivided arm it was trained on."""
+"""The predictor ``stmpl predict`` uses unless told: the zoo's most accurate model, the GNN of
+the left arm of every anny body (the right arm in the mirror), on the once-subdivided arm."""
 
 
 def cmd_predict(args) -> int:

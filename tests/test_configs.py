@@ -23,7 +23,10 @@ def test_training_configs_load(path):
 
     cfg = read_config(path)  # checks the model options too (unknown keys, loss, scale)
     for d in cfg["data"] if isinstance(cfg["data"], list) else [cfg["data"]]:
-        data = pathlib.Path(d)          # each set a config of ours makes
+        data = pathlib.Path(d)          # each set a config of ours makes (or one of its bodies)
+        if data.name.startswith("body-"):
+            assert data.name[5:].isdigit()
+            data = data.parent
         assert data.parent == pathlib.Path("data")
         assert (CONFIGS / "data" / f"{data.name}.yaml").is_file()
 
