@@ -31,6 +31,9 @@ GRIPS = {"whole": ("thumb", "index", "middle", "ring", "little"),
 JOINT_ANGLE = np.deg2rad(85.0)
 """rad: how far each finger joint flexes at curl 1 (three joints: a closed fist)."""
 CURL_RANGE = (-0.6, 1.1)
+OPEN_CURL = -0.3
+"""The open hand of :func:`palm_press`: every finger stretched a little past rest (anny's rest
+hand is half curled; laid on a belly, its knuckles would touch first)."""
 PALM_CLEARANCE = 0.015
 """m: how far off the skin the palm stays in a grip that holds with the fingers alone."""
 
@@ -150,6 +153,41 @@ class Grasp:
         return Pressing(self.mesh(), np.eye(4), total, name)
 
 
+def palm_press(part: BodyPart, hand: Hand, uv=(0.5, 0.5), depth: float = 0.002,
+               spin: float = 0.0, total: float = 0.4, name: str = "right hand (palm)",
+               steps: int = 6) -> Pressing:
+    """The open hand laid on the skin at chart point ``uv``, palm towards it, fingers stretched
+    (:data:`OPEN_CURL`) along the surface's ``x`` turned by ``spin`` rad (:func:`stmpl.objects.surface_frame`), and
+    lowered along the normal until its deepest point lies ``depth`` m inside the skin: a
+    :class:`~stmpl.contact.Pressing` of ``total`` N for a part that is not a limb (a belly),
+    where :func:`grasp` has nothing to close around."""
+    import trimesh
+
+    from stmpl.objects import surface_frame
+
+    if not (np.isfinite(depth) and 0 < depth < 0.01):
+        raise ValueError(f"depth must lie in (0, 10) mm, got {depth * 1e3:g} mm")
+    x = hand.vertices({f: OPEN_CURL for f in FINGERS})
+    c, R = hand.frame()
+    f, n = R[:, 0], R[:, 1]                          # finger direction, out of the palm
+    z = -n                                           # the palm faces the object's -z
+    mesh = trimesh.Trimesh((x - c) @ np.stack([f, np.cross(z, f), z], 1), hand.faces,
+                           process=False)
+    pose = surface_frame(part, uv=uv, spin=spin)
+    normal = pose[:3, 2].copy()
+    pose[:3, 3] -= float(mesh.vertices[:, 2].min()) * normal     # palm-most point on the skin
+    skin = SkinDistance(part)
+    for _ in range(steps):            # a rigid shift along the normal: the deepest point to depth
+        s, over = skin.over(mesh.vertices @ pose[:3, :3].T + pose[:3, 3])
+        if not over.any():
+            raise ValueError(f"the hand at {tuple(uv)} lies past the rim of {part.name!r}")
+        gap = float(s[over].min()) + depth          # points past the part's rim do not count
+        pose[:3, 3] -= gap * normal
+        if abs(gap) < 0.02 * depth:
+            break
+    return Pressing(mesh, pose, total, name)
+
+
 class SkinDistance:
     """Signed distance (m, positive outside) to a part's skin, from a dense sampling of its
     surface with normals (about ``spacing`` m apart)."""
@@ -174,6 +212,13 @@ class SkinDistance:
     def __call__(self, x: np.ndarray) -> np.ndarray:
         _, i = self.tree.query(x)
         return np.einsum("ij,ij->i", x - self.points[i], self.normals[i])
+
+    def over(self, x: np.ndarray, reach: float = 0.003) -> tuple[np.ndarray, np.ndarray]:
+        """``(signed distance (P,), over (P,) bool)``: whether each point lies over (or under)
+        the skin, within ``reach`` m of its nearest sample sideways, not past the part's rim."""
+        d, i = self.tree.query(x)
+        s = np.einsum("ij,ij->i", x - self.points[i], self.normals[i])
+        return s, np.sqrt(np.maximum(d ** 2 - s ** 2, 0.0)) < reach
 
 
 def limb_point(part: BodyPart, along: float, around: float) -> tuple:

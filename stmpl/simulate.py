@@ -25,7 +25,8 @@ def add_arguments(sp) -> None:
     """The options of ``stmpl simulate`` on the argparse (sub)parser ``sp``."""
     from stmpl.hand import GRIPS
 
-    what = sp.add_argument_group("what presses (default: anny's right hand grasps the limb)")
+    what = sp.add_argument_group("what presses (default: anny's right hand grasps the limb, or "
+                                 "lies open on a part that is not one)")
     what.add_argument("--grip", default="whole", choices=sorted(GRIPS),
                       help="hand grip: whole hand, thumb and two fingers, or a pinch")
     what.add_argument("--along", type=float, default=0.7,
@@ -97,9 +98,12 @@ def pressings(args, part) -> list:
             pose = objects.press(part, mesh, uv=tuple(args.at), depth=args.depth * mm,
                                  spin=args.spin)
         return [contact.Pressing(mesh, pose, args.force, name)]
-    from stmpl.hand import Hand, grasp
+    from stmpl.hand import Hand, grasp, palm_press
 
     hand = Hand(phenotype={"height": args.hand_height})
+    if part.axis is None:          # nothing to grasp around: the open hand laid on the skin
+        return [palm_press(part, hand, tuple(args.at), args.depth * mm,
+                           np.pi / 2 + args.spin, args.force)]
     g = grasp(part, hand, args.along, args.around, args.grip, args.depth * mm)
     return [g.pressing(args.force, f"right hand ({args.grip})")]
 

@@ -74,3 +74,22 @@ def test_a_pinch_touches_with_thumb_and_index_only(hand, arm):
     assert d[hand.palm].min() > 0.01                       # the palm stays off the skin
     for f in ("middle", "ring", "little"):
         assert g.curls[f] == 1.0 and d[hand.finger_of[f]].min() > 0
+
+
+def test_an_open_hand_lies_on_a_belly(hand, anny_body):
+    """On a part with no limb axis the open hand is laid on the skin: its deepest point over the
+    skin lies the asked depth deep, the palm and the fingers touch, and fingers hanging past the
+    part's rim do not hold it up."""
+    from stmpl.hand import palm_press
+
+    belly = anny_body.part("belly")
+    p = palm_press(belly, hand, (0.45, 0.5), 0.004, np.pi / 2, 0.4)
+    world = p.posed().vertices
+    s, over = SkinDistance(belly).over(world)
+    assert -s[over].min() == pytest.approx(0.004, abs=1e-4)
+    touch = C.contact(belly, p)
+    assert len(touch.vertices) >= 8 and touch.force.sum() == pytest.approx(0.4)
+    deep = np.flatnonzero(over & (s < -0.001))                 # the hand's points in the skin
+    assert len(set(hand.palm) & set(deep)) > 0 and len(set(hand.finger_of["middle"]) & set(deep))
+    with pytest.raises(ValueError, match="depth must lie in"):
+        palm_press(belly, hand, depth=0.02)
