@@ -10,6 +10,7 @@ from importlib.metadata import entry_points
 
 from stmpl.body.anny_body import phenotype_of, phenotype_options
 from stmpl.body.smpl_body import smpl_options
+from stmpl.simulate import DEFAULT_MODEL, default_model
 
 log = logging.getLogger("stmpl")
 
@@ -178,18 +179,13 @@ def cmd_solve(args) -> int:
     return 0
 
 
-DEFAULT_MODEL = "zoo:gnn_arm_bodies"
-"""The predictor ``stmpl predict`` uses unless told: the zoo's most accurate model, the GNN of
-the left arm of every anny body (the right arm in the mirror), on the once-subdivided arm."""
-
-
 def cmd_predict(args) -> int:
     import numpy as np
 
     from stmpl.spec import label, predictor_from_spec
     from stmpl.viz import prediction_figure
 
-    specs = args.model or [DEFAULT_MODEL]
+    specs = args.model or [default_model(args.part)]
     preds = [predictor_from_spec(spec, args.device, fidelity=args.fidelity) for spec in specs]
     sub = args.subdivide
     if sub is None:     # the surface the first model was trained on, else the FEM's plain arm

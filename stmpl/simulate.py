@@ -19,6 +19,13 @@ import numpy as np
 
 DEFAULT_MODEL = "zoo:gnn_arm_bodies"
 """The shipped GNN of the left arm of every anny body (the right arm answered in the mirror)."""
+PART_MODELS = {"belly": "zoo:gnn_belly_bodies"}
+"""The default model of the parts that are not an arm."""
+
+
+def default_model(part: str) -> str:
+    """The zoo model ``stmpl simulate`` and ``predict`` use on ``part`` unless told."""
+    return PART_MODELS.get(part, DEFAULT_MODEL)
 
 
 def add_arguments(sp) -> None:
@@ -61,7 +68,7 @@ def add_arguments(sp) -> None:
     sp.add_argument("--thickness", type=float, help="tissue thickness, mm (default: the "
                     "paper's heuristic from --weight, 5 mm thin .. 10 mm heavy; 7.5 at 0.5)")
     sp.add_argument("--model", action="append", help=f"zoo:<name> or a checkpoint; repeat to "
-                    f"compare (default {DEFAULT_MODEL})")
+                    f"compare (default {DEFAULT_MODEL}; on the belly {PART_MODELS['belly']})")
     sp.add_argument("--compare", action="store_true", help="also solve the FEM, report errors")
     sp.add_argument("--fidelity", default="full", choices=["full", "auto"],
                     help="full: model the whole part; auto: only what the scene needs (the GNN "
@@ -121,7 +128,7 @@ def run(args) -> int:
     from stmpl.spec import label, predictor_from_spec
 
     t0 = time.perf_counter()
-    specs = args.model or [DEFAULT_MODEL]
+    specs = args.model or [default_model(args.part)]
     preds = [predictor_from_spec(spec, res=args.res, levels=args.levels,
                                  fidelity=args.fidelity) for spec in specs]
     sub = args.subdivide
