@@ -261,14 +261,15 @@ def _measure(p, entry: dict, sets: list) -> dict:
 
 def _validate(p, ds) -> dict | None:
     """The box by which dataset ``ds``'s test split widens ``p``'s training envelope (along the
-    load's layout, :data:`~stmpl.envelope.SHAPE_AXES`, from the scenes as intense as training
-    ones), with the model's relative MEE and peak error on those scenes and whether they keep
-    :data:`PROMISE`; ``None`` if ``p`` has no training envelope or no scene qualifies."""
+    load's layout, :data:`~stmpl.envelope.SHAPE_AXES`, and for a set of several bodies along the
+    body's size, ``skin_area``, from the scenes as intense as training ones), with the model's
+    relative MEE and peak error on those scenes and whether they keep :data:`PROMISE`; ``None``
+    if ``p`` has no training envelope or no scene qualifies."""
     import warnings
 
     import numpy as np
 
-    from stmpl.envelope import Envelope
+    from stmpl.envelope import SHAPE_AXES, Envelope
     from stmpl.evaluate import scenes_of
     from stmpl.metrics import sample_metrics
     from stmpl.predictor import OutsideEnvelope
@@ -281,7 +282,9 @@ def _validate(p, ds) -> dict | None:
     mask = env.widen(name, [s.part for s in scenes], np.stack([s.thickness for s in scenes]),
                      np.stack([s.force for s in scenes]),
                      source=f"{name} ({ds.card['hash']}), test split",
-                     body=np.arange(len(scenes)))
+                     body=np.arange(len(scenes)),
+                     axes=SHAPE_AXES + (("skin_area",) if len(getattr(ds, "parts", ())) > 1
+                                        else ()))
     idx = np.flatnonzero(mask)
     if len(idx) == 0:
         return None

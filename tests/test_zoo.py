@@ -216,3 +216,33 @@ def test_a_test_set_widens_the_envelope_only_where_the_promise_holds(tiny_datase
         q = zoo.read("naive_tiny", path=folder)
         assert ("tiny" in q.envelope.boxes) is kept
         assert (q.envelope.reasons(scenes[band]) == []) is kept
+
+
+def test_a_set_of_bodies_widens_the_body_size(tmp_path, monkeypatch):
+    """A model of every body trained on the default body only, measured on a set of two bodies
+    (one larger): where it keeps its promise there, the envelope grows to that body's size
+    (skin area), so its scenes are inside."""
+    from fem.generate import generate
+    from stmpl.dataset import open_data
+    from stmpl.envelope import Envelope
+
+    cfg = {"name": "two", "body": {"model": "anny"}, "part": "left_arm", "resolution": "coarse",
+           "forces": [0.1, 0.2], "placements": {"disk": {"centres": 1, "radii": [0.02]}},
+           "splits": [0.0, 0.0, 1.0], "parallel": {"backend": "serial", "workers": 1},
+           "thickness_mm": [7.5],
+           "bodies": {"phenotypes": [{}, {"weight": 1.0, "height": 0.8}], "thickness": "levels"}}
+    generate(cfg, tmp_path / "two", progress=False)
+    ds = open_data(tmp_path / "two")
+    a = ds.arrays("test")
+    p = predictor.create("naive", ds.parts[0])
+    mine = a["body"] == 0
+    p.envelope = Envelope.of(ds.parts[0], a["thickness"][mine], a["force"][mine])
+    ckpt = p.save(tmp_path / "run" / "m.safetensors", {"dataset": {"name": "one"}})
+    scenes, _ = scenes_of(ds, "test")
+    big = scenes[int(np.flatnonzero(~mine & (a["total"] < 0.15))[0])]
+    assert any("skin area" in r for r in p.envelope.reasons(big))
+    monkeypatch.setattr(zoo, "PROMISE", {"rel_mee": 1e9, "peak_err": 1e9})
+    e = zoo.add(ckpt, "naive_two", path=tmp_path / "zoo", evaluate_on=[tmp_path / "two"])
+    box = e["envelope"]["two"]["box"]["skin_area"]
+    assert box[1] > p.envelope.boxes["training"]["skin_area"][1]
+    assert zoo.read("naive_two", path=tmp_path / "zoo").envelope.reasons(big) == []
