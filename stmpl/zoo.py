@@ -312,8 +312,10 @@ LABELS = {"test": "in-distribution test", "bodies": "seen bodies",
 
 def _column(key: str) -> str:
     """The table column of a measured set: the same kind of set on another surface of the part
-    (``ood_bands`` on the plain arm, ``ood_bands_fine`` on the subdivided one) shares it."""
-    return key[:-5] if key.endswith("_fine") else key
+    (``ood_bands`` on the plain arm, ``ood_bands_fine`` on the subdivided one) or on another part
+    (``belly_test`` on the belly, ``bodies_test`` on the arm: held-out bodies) shares it."""
+    key = key[:-5] if key.endswith("_fine") else key
+    return "bodies_" + key[6:] if key.startswith("belly_") else key
 
 
 def table(path=None) -> str:

@@ -83,3 +83,15 @@ def test_any_body_and_its_right_arm(tmp_path, capsys):
     line = [ln for ln in out.splitlines() if ln.startswith("gnn_arm_bodies")][0]
     assert "answering in the mirror" in line and "NOTE" not in out
     assert 0.1 < float(line.split("deepest")[1].split("mm")[0]) < 3.0
+
+
+def test_the_belly_under_an_open_hand(tmp_path, capsys):
+    """On the belly, a part with no limb to grasp, the default is anny's open hand laid on it,
+    answered by the belly's own model of every body."""
+    assert main(["simulate", "--part", "belly", "--force", "0.2", "--depth", "4",
+                 "--out-dir", str(tmp_path)]) == 0
+    out = capsys.readouterr().out
+    assert "belly (977 vertices), 7.5 mm of tissue" in out and "right hand (palm)" in out
+    line = [ln for ln in out.splitlines() if ln.startswith("gnn_belly_bodies")][0]
+    assert 0.2 < float(line.split("deepest")[1].split("mm")[0]) < 5.0
+    assert (tmp_path / "simulate.png").is_file()
