@@ -48,6 +48,7 @@ PLACEMENT_KEYS = {
     "band": {"at", "widths"},
     "letter": {"chars", "uv", "heights", "strokes", "angles"},
     "grasp": {"along", "around", "grips", "hand_heights", "depth"},
+    "palm": {"uv", "spins", "hand_heights", "depth"},
 }
 BACKENDS = ("serial", "processes", "dask")
 # FIDELITIES (stmpl.predictor): ``full`` solves the whole part; ``auto`` the patch the load

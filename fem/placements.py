@@ -64,6 +64,12 @@ def placements(cfg: dict, part: BodyPart) -> list[dict]:
                     for a in spec.get("along", [0.7]) for r in spec.get("around", [0.0])
                     for g in spec.get("grips", ["whole"])
                     for h in spec.get("hand_heights", [0.5])]
+        elif kind == "palm":
+            out += [{"kind": kind, "params": {"uv": [float(u), float(v)], "spin": float(s),
+                                              "hand_height": float(h),
+                                              "depth": float(spec.get("depth", 0.002))}}
+                    for u, v in spec.get("uv", [[0.5, 0.5]]) for s in spec.get("spins", [0.0])
+                    for h in spec.get("hand_heights", [0.5])]
         elif kind == "letter":
             out += [{"kind": kind, "params": {"char": str(c), "uv": [float(u), float(v)],
                                               "height": float(h), "stroke": float(s),
@@ -79,8 +85,8 @@ def make_load(part: BodyPart, placement: dict, total: float = 1.0):
     from stmpl import loads
 
     params = dict(placement["params"])
-    if placement["kind"] == "grasp":          # the touched vertices were found by plan()
-        return loads.from_vertices(part, placement["touched"], total, "grasp", params)
+    if placement["kind"] in HANDS:            # the touched vertices were found by plan()
+        return loads.from_vertices(part, placement["touched"], total, placement["kind"], params)
     if "uv" in params:
         params["uv"] = tuple(params["uv"])
     try:
@@ -133,10 +139,10 @@ def plan(cfg: dict, part: BodyPart | None = None) -> Plan:
     part = part if part is not None else part_from_spec(cfg["body"], cfg["part"])
     pls, skipped, hands = [], [], {}
     for p in placements(cfg, part):
-        if p["kind"] == "grasp":
+        if p["kind"] in HANDS:
             try:
-                p["touched"] = grasp_contact(part, p["params"], hands)
-            except ValueError as e:              # a grasp that reaches no vertex: counted
+                p["touched"] = HANDS[p["kind"]](part, p["params"], hands)
+            except ValueError as e:              # a hand that reaches no vertex: counted
                 skipped.append({**p, "reason": str(e).split(":")[0]})
                 continue
         ld = make_load(part, p)
@@ -162,3 +168,27 @@ def grasp_contact(part: BodyPart, params: dict, hands: dict) -> list[int]:
     g = grasp(part, hands[h], params["along"], params["around"], params["grip"],
               params["depth"])
     return [int(v) for v in contact.contact(part, g.pressing(1.0)).vertices]
+
+
+def palm_contact(part: BodyPart, params: dict, hands: dict) -> list[int]:
+    """The vertices anny's open right hand touches, laid on the skin at chart point
+    ``params["uv"]`` (:func:`stmpl.hand.palm_press`, the fingers turned by ``spin`` rad from the
+    chart's ``x``, as ``stmpl simulate`` lays it on a part that is not a limb); ``ValueError``
+    when it touches none or lies past the part's rim."""
+    import math
+
+    from stmpl import contact
+    from stmpl.hand import Hand, palm_press
+
+    h = params["hand_height"]
+    if h not in hands:
+        hands[h] = Hand(phenotype={"height": h})
+    p = palm_press(part, hands[h], tuple(params["uv"]), params["depth"],
+                   math.pi / 2 + params["spin"], 1.0)
+    return [int(v) for v in contact.contact(part, p).vertices]
+
+
+HANDS = {"grasp": lambda part, params, hands: grasp_contact(part, params, hands),
+         "palm": lambda part, params, hands: palm_contact(part, params, hands)}
+"""Placement kinds whose load is the skin anny's hand touches, found once in :func:`plan`
+(looked up at call time, so a test can stand in for the hand)."""

@@ -305,7 +305,8 @@ def _validate(p, ds) -> dict | None:
 
 LABELS = {"test": "in-distribution test", "bodies": "seen bodies",
           "bodies_test": "unseen bodies", "bodies_bands": "unseen bodies: bands",
-          "bodies_letters": "unseen bodies: letters", "bodies_grasps": "unseen bodies: grasps"}
+          "bodies_letters": "unseen bodies: letters", "bodies_grasps": "unseen bodies: grasps",
+          "bodies_palms": "unseen bodies: palms"}
 """Column titles of the sets whose names do not say it (the test splits of the training bodies,
 ``bodies_fine``, and of the held-out ones), in the table's order; other sets follow by name."""
 

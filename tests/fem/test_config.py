@@ -1,5 +1,6 @@
 """The dataset config: what it refuses, by name, before anything is solved."""
 
+import numpy as np
 import pytest
 
 from fem.config import read_config
@@ -113,3 +114,30 @@ def test_grasps_without_contact_are_counted_not_solved(tmp_path, monkeypatch):
     assert card["placements"] == 1 and card["placements_skipped"] == {
         "count": 1, "by_reason": {"no contact": 1}}
     assert card["samples"] == 2 and card["samples_per_kind"] == {"grasp": 2}
+
+
+def test_palm_placements(anny_body):
+    """Palm placements: anny's open hand laid on a part that is not a limb (the belly), as
+    ``stmpl simulate --part belly`` lays it; each load the vertices the palm touches, the same
+    ones the simulate scene's contact finds."""
+    from stmpl import contact
+    from stmpl.hand import Hand, palm_press
+    from fem.placements import make_load
+
+    belly = anny_body.part("belly")
+    cfg = read_config({"name": "p", "body": {"model": "anny"}, "part": "belly",
+                       "thickness_mm": [7.5], "forces": [0.2],
+                       "placements": {"palm": {"uv": [[0.5, 0.5], [0.4, 0.55]],
+                                               "spins": [0.0, 1.5708], "depth": 0.003}}})
+    p = plan(cfg, belly)
+    assert len(p.placements) == 4 and p.skipped == []
+    pl = p.placements[0]
+    assert pl["params"] == {"uv": [0.5, 0.5], "spin": 0.0, "hand_height": 0.5, "depth": 0.003}
+    scene = contact.contact(belly, palm_press(belly, Hand(), (0.5, 0.5), 0.003, np.pi / 2, 0.2))
+    assert sorted(pl["touched"]) == sorted(int(v) for v in scene.vertices)
+    ld = make_load(belly, pl, total=0.2)
+    assert ld.kind == "palm" and ld.count == pl["vertices"] >= 3
+    assert ld.force.sum() == pytest.approx(0.2)
+    assert len({tuple(q["touched"]) for q in p.placements}) == 4     # four different presses
+    with pytest.raises(ValueError, match="placements.palm takes keys"):
+        read_config({**cfg, "placements": {"palm": {"centres": 3}}})
