@@ -60,12 +60,31 @@ def compare_datasets(full: str, auto: str) -> None:
           f"{ta / tb:.2f} x")
 
 
-def live(folder: str, count: int) -> None:
+VARIANT_KEYS = {"refine": "refine_radius (m) of the patch's mesh",
+                "thicknesses": "first margin: contact radius + this many thicknesses",
+                "tolerance": "largest motion of the ring inside the cut, of the deepest"}
+
+
+def variant(text: str) -> dict:
+    """``--variant refine=0.02,thicknesses=3,tolerance=0.01`` -> a dict of floats."""
+    out = {}
+    for item in text.split(","):
+        k, _, v = item.partition("=")
+        if k not in VARIANT_KEYS or not v:
+            raise argparse.ArgumentTypeError(f"--variant takes {sorted(VARIANT_KEYS)}=number, "
+                                             f"got {item!r}")
+        out[k] = float(v)
+    return out
+
+
+def live(folder: str, count: int, variants=({},)) -> None:
+    """Each of the first ``count`` placements solved on the whole part, then on the patch once
+    per variant of the local FEM (default: as shipped)."""
     from fem.config import read_config
-    from fem.local import simulate_local
+    from fem.local import TOLERANCE, first_margin, simulate_local
     from fem.material import material
     from fem.placements import make_load, plan
-    from fem.simulate import simulate
+    from fem.simulate import resolution, simulate
     from fem.solver import SolverOptions
     from stmpl.dataset import Dataset
 
@@ -74,9 +93,9 @@ def live(folder: str, count: int) -> None:
     p = plan(cfg, ds.part)
     mat, opts = material(**cfg["material"]), SolverOptions(**cfg["solver"])
     forces = np.asarray(cfg["forces"], float)
-    print(f"{'placement':<40} {'full s':>7} {'auto s':>7} {'ratio':>6} {'max err %':>9} "
-          f"{'patch':>11}")
-    ratios, errs = [], []
+    print(f"{'placement':<40} {'variant':<34} {'full s':>7} {'auto s':>7} {'ratio':>6} "
+          f"{'max err %':>9} {'patch':>11} ring moved % per attempt")
+    ratios, errs = {}, {}
     for i, pl in enumerate(p.placements[:count]):
         load = make_load(ds.part, pl)
         t = np.full(ds.part.n_vertices, cfg["thickness_mm"][len(cfg["thickness_mm"]) // 2] * 1e-3)
@@ -84,26 +103,40 @@ def live(folder: str, count: int) -> None:
         t0 = time.perf_counter()
         mesh, sols = simulate(ds.part, t, load.force, levels, cfg["resolution"], mat, opts)
         tf = time.perf_counter() - t0
-        t0 = time.perf_counter()
-        m2, s2, res = simulate_local(ds.part, t, load.force, levels, cfg["resolution"], mat,
-                                     opts)
-        tl = time.perf_counter() - t0
-        ok = [k for k, (x, y) in enumerate(zip(sols, s2)) if x.ok and y.ok]
-        e = max((np.linalg.norm(res.patch.lift(s2[k].part_displacement(m2), ds.part.n_vertices)
-                                - sols[k].part_displacement(mesh), axis=1).max()
-                 / np.linalg.norm(sols[k].part_displacement(mesh), axis=1).max())
-                for k in ok) if ok else np.nan
-        ratios.append(tf / tl)
-        errs.append(100 * e)
-        name = f"{pl['kind']} {pl['params']}"[:40]
-        print(f"{name:<40} {tf:7.1f} {tl:7.1f} {tf / tl:6.2f} {100 * e:9.3f} "
-              f"{len(res.patch.vertices):>5}/{ds.part.n_vertices}")
-    print(f"median ratio {np.median(ratios):.2f} x, largest error {np.nanmax(errs):.3f} % of the "
-          "deepest")
+        for v in variants:
+            res = resolution(cfg["resolution"]).to_dict()
+            if "refine" in v:
+                res["refine_radius"] = v["refine"]
+            margin = (first_margin(ds.part, t, load.force, v["thicknesses"])
+                      if "thicknesses" in v else None)
+            t0 = time.perf_counter()
+            m2, s2, r = simulate_local(ds.part, t, load.force, levels, res, mat, opts,
+                                       margin=margin, tolerance=v.get("tolerance", TOLERANCE))
+            tl = time.perf_counter() - t0
+            ok = [k for k, (x, y) in enumerate(zip(sols, s2)) if x.ok and y.ok]
+            e = max((np.linalg.norm(r.patch.lift(s2[k].part_displacement(m2), ds.part.n_vertices)
+                                    - sols[k].part_displacement(mesh), axis=1).max()
+                     / np.linalg.norm(sols[k].part_displacement(mesh), axis=1).max())
+                    for k in ok) if ok else np.nan
+            name = ",".join(f"{k}={x:g}" for k, x in v.items()) or "as shipped"
+            ratios.setdefault(name, []).append(tf / tl)
+            errs.setdefault(name, []).append(100 * e)
+            ring = " ".join(f"{100 * a['ring_moved']:.2f}" for a in r.attempts)
+            label = f"{pl['kind']} {pl['params']}"[:40]
+            print(f"{label:<40} {name:<34} {tf:7.1f} {tl:7.1f} {tf / tl:6.2f} {100 * e:9.3f} "
+                  f"{len(r.patch.vertices):>5}/{ds.part.n_vertices} {ring}", flush=True)
+    for name in ratios:
+        print(f"{name}: median ratio {np.median(ratios[name]):.2f} x, largest error "
+              f"{np.nanmax(errs[name]):.3f} % of the deepest")
 
 
-def models(specs, datasets, limit: int = 64, repeat: int = 5) -> None:
+def models(specs, datasets, limit: int = 64, repeat: int = 5, tolerances=()) -> None:
+    """``tolerances``: also run auto with these region tolerances (the share of the prior's
+    deepest displacement above which a vertex is in the region, :data:`models.prior.
+    REGION_TOLERANCE`), to show what a smaller region buys."""
     import warnings
+
+    import models.prior as prior
 
     from _timing import median_time
     from stmpl.dataset import Dataset
@@ -121,8 +154,10 @@ def models(specs, datasets, limit: int = 64, repeat: int = 5) -> None:
         for spec in specs:
             p = predictor_from_spec(spec)
             full = None
-            for fid in ("full", "auto"):
-                p.fidelity = fid
+            shipped = prior.REGION_TOLERANCE
+            for fid, tol in [("full", shipped), ("auto", shipped),
+                             *[("auto", x) for x in tolerances if x != shipped]]:
+                p.fidelity, prior.REGION_TOLERANCE = fid, tol
                 pred = [d.displacement for d in p.predict(scenes)]   # warm (columns cached)
                 t1 = median_time(lambda: p.predict(scenes[0]), repeat)
                 t64 = median_time(lambda: p.predict(scenes), max(1, repeat // 2)) / len(scenes)
@@ -135,9 +170,11 @@ def models(specs, datasets, limit: int = 64, repeat: int = 5) -> None:
                     d = max(np.linalg.norm(a - b, axis=1).max() / np.linalg.norm(b, axis=1).max()
                             for a, b in zip(pred, full))
                     diff = f"{100 * d:.3f}"
-                print(f"| {label(spec)} | {ds.card['name']} | {fid} | {1e3 * t1:.2f} | "
+                name = fid if tol == shipped else f"auto, region {100 * tol:g} %"
+                print(f"| {label(spec)} | {ds.card['name']} | {name} | {1e3 * t1:.2f} | "
                       f"{1e3 * t64:.3f} | {m['rel_mee'][0]:.3f} | {pk.mean():+.2f}, "
                       f"{np.abs(pk).max():.1f} | {diff} |", flush=True)
+            prior.REGION_TOLERANCE = shipped
 
 
 def main() -> None:
@@ -148,18 +185,24 @@ def main() -> None:
     g.add_argument("--models", nargs="+", metavar="SPEC")
     ap.add_argument("--data", nargs="+", help="--models: datasets whose test split is used")
     ap.add_argument("--limit", type=int, default=64, help="--models: scenes per dataset")
+    ap.add_argument("--region-tolerance", type=float, nargs="+", default=[],
+                    help="--models: also run auto with these region tolerances (0.02 = 2 %% "
+                         "of the prior's deepest displacement; shipped: 0.01)")
     ap.add_argument("--count", type=int, default=6)
+    ap.add_argument("--variant", type=variant, action="append",
+                    help="--live: a local-FEM variant beside the shipped one, e.g. "
+                         "refine=0.02,thicknesses=3,tolerance=0.01 (repeatable)")
     args = ap.parse_args()
     print(f"machine: {platform.processor() or platform.machine()}, "
           f"{__import__('os').cpu_count()} cores")
     if args.models:
         if not args.data:
             raise SystemExit("--models needs --data")
-        models(args.models, args.data, args.limit)
+        models(args.models, args.data, args.limit, tolerances=args.region_tolerance)
     elif args.datasets:
         compare_datasets(*args.datasets)
     else:
-        live(args.live, args.count)
+        live(args.live, args.count, [{}] + (args.variant or []))
 
 
 if __name__ == "__main__":
