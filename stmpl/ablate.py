@@ -131,11 +131,29 @@ class _Later:
         if self._ds is None:
             self._ds = _make(self.name, self.d, self.progress)
             if self._ds.card["hash"] != self.card["hash"]:
-                raise ValueError(f"dataset {self.name} made again from {self.d['config']} has "
-                                 f"hash {self._ds.card['hash']}, not the {self.card['hash']} "
-                                 "recorded in the ablation's cache (the generator changed); "
-                                 "delete the cache entry 'datasets' to start over")
+                raise ValueError(_remade_message(self.name, self._ds, self.card["hash"]))
         return self._ds
+
+
+def _remade_message(name: str, ds, recorded: str) -> str:
+    return (f"dataset {name} at {ds.folder} has hash {ds.card['hash']}, not the {recorded} "
+            "the ablation's cache recorded for the same dataset config (made again, and the "
+            "generator's answers changed): rerun with --accept-remade to check it against the "
+            "cached results and keep them, or delete the cache entry 'datasets' to start over")
+
+
+class _Remade:
+    """A dataset made again from the config an earlier run recorded, whose samples differ from
+    the recorded ones (its content hash does: a solver's last bits, a changed generator). It
+    stands under the recorded hash, so that cached results and training runs keep, once
+    :func:`_check_remade` has measured a cached set-up on it as on the recorded set."""
+
+    def __init__(self, ds, recorded_hash: str):
+        self._ds = ds
+        self.card = {**ds.card, "hash": recorded_hash, "remade_hash": ds.card["hash"]}
+
+    def __getattr__(self, name):
+        return getattr(self._ds, name)
 
 
 def _make(name: str, d: dict, progress: bool):
@@ -168,24 +186,31 @@ def _config_digest(d: dict) -> str | None:
     return hashlib.sha256(path.read_bytes()).hexdigest()[:16] if path.is_file() else None
 
 
-def _datasets(cfg, progress: bool, recorded: dict) -> dict:
+def _datasets(cfg, progress: bool, recorded: dict, accept_remade: bool = False) -> dict:
     """Every dataset of the config: opened where it is on disk; where it is not, and the cache
     recorded its card for the same dataset config, a :class:`_Later` (made only if a job needs
     it); otherwise made now from its config. ``recorded`` (``{name: {"config": digest, "card":
-    {...}}}``) gains every opened dataset's card."""
+    {...}}}``) gains every opened dataset's card. A dataset on disk made from the recorded config
+    but with another content hash is refused, or with ``accept_remade`` taken as a
+    :class:`_Remade` (to be checked by :func:`_check_remade`)."""
     out = {}
     for name, d in cfg["datasets"].items():
         folder = pathlib.Path(d["folder"])
         rec = recorded.get(name)
         digest = _config_digest(d)
-        if (not _finished(folder) and rec and digest
-                and rec.get("config") == digest):
+        same_config = bool(rec and digest and rec.get("config") == digest)
+        if not _finished(folder) and same_config:
             out[name] = _Later(name, d, rec["card"], progress)
             continue
         if _finished(folder):
             from stmpl.dataset import open_data
 
             out[name] = open_data(folder)
+            if same_config and out[name].card["hash"] != rec["card"]["hash"]:
+                if not accept_remade:
+                    raise ValueError(_remade_message(name, out[name], rec["card"]["hash"]))
+                out[name] = _Remade(out[name], rec["card"]["hash"])
+                continue                                  # the recorded card stands
         else:
             out[name] = _make(name, d, progress)
         recorded[name] = {"config": digest,
@@ -217,10 +242,72 @@ def _training_config(setup: dict, cfg: dict, ds) -> dict:
     return read_train(t)
 
 
-def run(config, progress: bool = True) -> dict:
+REMADE_TOLERANCE = {"rel_mee": 0.005, "peak_err": 0.05}
+"""How far (percentage points) a cached set-up may measure differently on a dataset made again
+for its results to stand: under half the last digit the tables print (rel. MEE to 0.01, peak
+error to 0.1), so that every cached row would read the same."""
+
+
+def _job_key(setup_key: str, ds, thick, cfg: dict, s: dict) -> str:
+    return _hash([setup_key, ds.card["hash"], thick, cfg["batch"], s.get("limit")])
+
+
+def _setup_key(spec: str, fidelity: str) -> str:
+    return spec_key(spec) + ("" if fidelity == "full" else f"@{fidelity}")
+
+
+def _check_remade(name: str, ds: _Remade, cfg: dict, cache: dict, progress: bool) -> dict:
+    """Measure the first set-up taken as it is (``predictor:``) that the cache measured on the
+    recorded dataset again on the remade one; its results stand for the recorded set's only if
+    they agree within :data:`REMADE_TOLERANCE`. The verdict is kept in the cache (under the
+    dataset's entry, ``remade``) and returned; a failed check raises."""
+    rec = cache["datasets"][name]
+    new = ds.card["remade_hash"]
+    if rec.get("remade", {}).get("hash") == new:
+        return rec["remade"]
+    for s in cfg["setups"]:
+        if "predictor" not in s or s.get("limit"):
+            continue
+        fidelity = s.get("fidelity", "full")
+        key = _job_key(_setup_key(s["predictor"], fidelity), ds, None, cfg, s)
+        if key in cache:
+            break
+    else:
+        raise ValueError(f"dataset {name} was made again (hash {new}, recorded "
+                         f"{ds.card['hash']}) and no set-up taken as it is (predictor:) has a "
+                         "cached result on the recorded one to check it against; delete the "
+                         "cache entry 'datasets' to start over")
+    from stmpl.evaluate import evaluate_dataset
+
+    if progress:
+        print(f"dataset {name} was made again (hash {new}, recorded {ds.card['hash']}): "
+              f"measuring {s['name']} on it against its cached result")
+    res = evaluate_dataset(_open(s["predictor"], fidelity), ds._ds, "test", batch=cfg["batch"])
+    old = cache[key]
+    verdict = {"hash": new, "checked_with": s["name"],
+               "samples": [int(old["samples"]), int(res["samples"])],
+               **{k: [float(old[k][0]), float(res[k][0])] for k in REMADE_TOLERANCE}}
+    off = [k for k, tol in REMADE_TOLERANCE.items()
+           if not abs(verdict[k][1] - verdict[k][0]) <= tol
+           and not (np.isnan(verdict[k][0]) and np.isnan(verdict[k][1]))]
+    if verdict["samples"][0] != verdict["samples"][1] or off:
+        raise ValueError(
+            f"dataset {name} made again measures differently: {s['name']} on it "
+            f"{res['samples']} samples, rel. MEE {verdict['rel_mee'][1]:.4f} %, peak "
+            f"{verdict['peak_err'][1]:+.2f} %; on the recorded set {old['samples']}, "
+            f"{verdict['rel_mee'][0]:.4f} %, {verdict['peak_err'][0]:+.2f} %: the cached "
+            "results cannot stand for it; delete the cache entry 'datasets' to start over")
+    rec["remade"] = verdict
+    return verdict
+
+
+def run(config, progress: bool = True, accept_remade: bool = False) -> dict:
     """Run (or complete) an ablation; writes the tables and ``ablation.md`` into the config's
     ``out`` and returns ``{"tables": {...}, "out": folder}``. A config of ``kind: stability``
-    runs the stability sweep instead (:func:`stmpl.stability.run`)."""
+    runs the stability sweep instead (:func:`stmpl.stability.run`). ``accept_remade``: a
+    dataset made again from its recorded config whose content hash changed is checked against
+    the cache (:func:`_check_remade`) and, if it measures the same, its cached results and
+    training runs keep; without it such a dataset is refused."""
     from stmpl.files import atomic_write_text
     from stmpl.train import train
 
@@ -234,7 +321,9 @@ def run(config, progress: bool = True) -> dict:
     cache_path = out / "cache.json"
     cache = json.loads(cache_path.read_text()) if cache_path.is_file() else {}
     recorded = cache.setdefault("datasets", {})
-    sets = _datasets(cfg, progress, recorded)
+    sets = _datasets(cfg, progress, recorded, accept_remade)
+    remade = {n: _check_remade(n, ds, cfg, cache, progress)
+              for n, ds in sets.items() if isinstance(ds, _Remade)}
     atomic_write_text(cache_path, json.dumps(cache, indent=1, sort_keys=True))
     ind = sets[cfg["in_distribution"]]
     seen = cfg["seen_thickness_mm"]
@@ -277,12 +366,12 @@ def run(config, progress: bool = True) -> dict:
             spec = s["predictor"]
         fidelity = s.get("fidelity", "full")
         p = _open(spec, fidelity)
-        setup_key = spec_key(spec) + ("" if fidelity == "full" else f"@{fidelity}")
+        setup_key = _setup_key(spec, fidelity)
         if bar is not None:
             bar.update(1)
         for _, d, thick, tab, row in [j for j in jobs if j[0] is s]:
             ds = sets[d]
-            key = _hash([setup_key, ds.card["hash"], thick, cfg["batch"], s.get("limit")])
+            key = _job_key(setup_key, ds, thick, cfg, s)
             if key not in cache:
                 from stmpl.evaluate import evaluate_dataset
 
@@ -305,7 +394,7 @@ def run(config, progress: bool = True) -> dict:
                            "chart": bool(s.get("chart", True)), **err})
         if bar is not None:
             bar.update(1)
-        _write(cfg, tables, out, points)             # the report so far
+        _write(cfg, tables, out, points, remade)     # the report so far
     if bar is not None:
         bar.close()
     return {"tables": tables, "out": out, "points": points}
@@ -356,7 +445,7 @@ def _open(spec: str, fidelity: str = "full"):
     return predictor_from_spec(spec, fidelity=fidelity)
 
 
-def _write(cfg, tables, out: pathlib.Path, points: list) -> None:
+def _write(cfg, tables, out: pathlib.Path, points: list, remade: dict | None = None) -> None:
     import platform
 
     from stmpl.files import atomic_write_text
@@ -368,6 +457,13 @@ def _write(cfg, tables, out: pathlib.Path, points: list) -> None:
              "than 0.001 mm, mean ± std over samples; rel. MEE against each sample's largest "
              "displacement; peak err: predicted against true largest displacement, signed. "
              "Rows in italics are the paper's as reported (its data, not ours).\n"]
+    for n, v in (remade or {}).items():
+        parts.append(f"Dataset {n} was made again (content hash {v['hash']}, not the recorded "
+                     f"one): {v['checked_with']} measures {v['rel_mee'][1]:.4f} % / "
+                     f"{v['peak_err'][1]:+.2f} % on it against {v['rel_mee'][0]:.4f} % / "
+                     f"{v['peak_err'][0]:+.2f} % on the recorded set ({v['samples'][1]} test "
+                     "samples), so the rows measured on the recorded set stand; rows measured "
+                     "since are on the remade one.\n")
     for k, rows in tables.items():
         if not rows:
             continue

@@ -75,7 +75,7 @@ def cmd_train(args) -> int:
 def cmd_ablate(args) -> int:
     from stmpl.ablate import run
 
-    res = run(args.config, progress=not args.quiet)
+    res = run(args.config, progress=not args.quiet, accept_remade=args.accept_remade)
     if "points" in res and "tables" not in res:
         print(f"wrote {res['out'] / 'stability.md'}, one picture per axis and the envelope map")
     else:
@@ -370,6 +370,9 @@ def parser() -> argparse.ArgumentParser:
                         "takes the set-ups, evaluates, writes the report (cached, resumable)")
     ab.add_argument("config", help="ablation config (YAML), e.g. configs/ablation/small.yaml")
     ab.add_argument("--quiet", action="store_true", help="no progress bar")
+    ab.add_argument("--accept-remade", action="store_true",
+                    help="a dataset made again whose content hash changed: keep the cached "
+                         "results if a cached set-up measures the same on it")
     ab.set_defaults(func=cmd_ablate)
 
     zo = sub.add_parser("zoo", help="the shipped models: list, verify, add, measure on more "

@@ -126,6 +126,80 @@ def test_a_cached_run_needs_no_data_and_makes_it_again_only_for_new_jobs(config,
         (tmp_path / "data" / "bands" / "card.json").read_text())["hash"]
 
 
+def _remake(config, tmp_path, monkeypatch, scale: float) -> None:
+    """Make the bands set again, every displacement scaled by ``scale`` (a remade set whose
+    solver rounded differently, or one that differs)."""
+    import shutil
+
+    import numpy as np
+
+    from fem import backends
+
+    real = backends.solve_shard
+
+    def solve(payload):
+        out = real(payload)
+        out["records"]["displacement"] = [np.float32(scale) * u
+                                          for u in out["records"]["displacement"]]
+        return out
+
+    shutil.rmtree(tmp_path / "data" / "bands")
+    with monkeypatch.context() as m:
+        m.setattr(backends, "solve_shard", solve)
+        ablate._make("bands", config["datasets"]["bands"], False)
+
+
+def test_a_dataset_made_again_stands_for_the_recorded_one_only_if_it_measures_the_same(
+        config, tmp_path, monkeypatch):
+    """A lost dataset made again may differ in its last bits (its content hash changes): it is
+    refused by name; with ``accept_remade`` a cached set-up is measured on it, and only if it
+    measures the same do the cached results stand (nothing else runs again); one that differs
+    more is refused."""
+    import json as _json
+
+    ablate.run(config, progress=False)
+    naive = next((tmp_path / "runs").glob("naive-*/*.safetensors"))
+    config["setups"].insert(0, {"name": "Naive as it is", "predictor": str(naive)})
+    first = ablate.run(config, progress=False)
+    recorded = _json.loads((tmp_path / "report" / "cache.json").read_text())
+    old_hash = recorded["datasets"]["bands"]["card"]["hash"]
+
+    _remake(config, tmp_path, monkeypatch, 1.000001)
+    new_hash = _json.loads((tmp_path / "data" / "bands" / "card.json").read_text())["hash"]
+    assert new_hash != old_hash
+    with pytest.raises(ValueError, match=f"bands .* has hash {new_hash}, not the {old_hash}.*"
+                                         "--accept-remade"):
+        ablate.run(config, progress=False)
+
+    from stmpl import evaluate
+
+    real, calls = evaluate.evaluate_dataset, []
+
+    def counted(p, ds, *a, **k):
+        calls.append(ds.card["hash"])
+        return real(p, ds, *a, **k)
+
+    monkeypatch.setattr("stmpl.evaluate.evaluate_dataset", counted)
+    monkeypatch.setattr("stmpl.train.train", lambda *a, **k: pytest.fail("trained again"))
+    again = ablate.run(config, progress=False, accept_remade=True)
+    assert calls == [new_hash]                          # the check alone, on the remade set
+    assert _json.dumps(again["tables"], sort_keys=True) == _json.dumps(first["tables"],
+                                                                      sort_keys=True)
+    cache = _json.loads((tmp_path / "report" / "cache.json").read_text())
+    verdict = cache["datasets"]["bands"]["remade"]
+    assert verdict["hash"] == new_hash and verdict["checked_with"] == "Naive as it is"
+    assert abs(verdict["rel_mee"][1] - verdict["rel_mee"][0]) < 1e-3
+    assert cache["datasets"]["bands"]["card"]["hash"] == old_hash
+    assert "bands was made again" in (tmp_path / "report" / "ablation.md").read_text()
+    ablate.run(config, progress=False, accept_remade=True)
+    assert calls == [new_hash]                          # checked once
+
+    _remake(config, tmp_path, monkeypatch, 1.1)         # 10 % deeper: not the same set
+    with pytest.raises(ValueError, match="bands made again measures differently: Naive as it "
+                                         "is on it"):
+        ablate.run(config, progress=False, accept_remade=True)
+
+
 @pytest.mark.parametrize("change,message", [
     ({"in_distribution": "nope"}, "in_distribution must be one of"),
     ({"out_of_distribution": ["nope"]}, "out_of_distribution must list"),
