@@ -19,7 +19,7 @@ stmpl simulate --letters ECCV --force 0.3 --depth 3 --compare --fidelity auto \
     --out-dir /tmp/stmpl_eccv && cp /tmp/stmpl_eccv/simulate.png simulate_eccv.png
 stmpl simulate --grip pinch --along 0.5 --around 0.5 --force 0.15 --compare --fidelity auto \
     --out-dir /tmp/stmpl_pinch && cp /tmp/stmpl_pinch/simulate.png simulate_pinch.png
-# The belly under anny's open hand (0.2 N, the hand's deepest point 4 mm in), the belly's models
+# The belly under anny's open hand (0.2 N, --depth 4), answered by the belly's own models
 stmpl simulate --part belly --force 0.2 --depth 4 --compare --fidelity auto \
     --model zoo:gnn_belly_bodies --model zoo:uv_unet_belly_bodies --model zoo:linear_belly_bodies \
     --out-dir /tmp/stmpl_belly && cp /tmp/stmpl_belly/simulate.png simulate_belly.png
