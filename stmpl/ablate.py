@@ -27,6 +27,7 @@ import time
 import numpy as np
 
 from stmpl.spec import key as spec_key
+from stmpl.ablation_sets import Remade, datasets, ready
 from stmpl.tables import PAPER, TITLES, table
 
 DEFAULTS = {
@@ -117,114 +118,6 @@ def _slug(name: str) -> str:
     return "".join(c if c.isalnum() else "_" for c in name).strip("_").lower()
 
 
-class _Later:
-    """A dataset that is not on this machine but whose card an earlier run recorded (from the
-    same dataset config): enough to look up cached results. It is made from its config the
-    first time something needs its samples."""
-
-    def __init__(self, name: str, d: dict, card: dict, progress: bool):
-        self.name, self.d, self.card, self.progress = name, d, card, progress
-        self.folder = pathlib.Path(d["folder"])
-        self._ds = None
-
-    def get(self):
-        if self._ds is None:
-            self._ds = _make(self.name, self.d, self.progress)
-            if self._ds.card["hash"] != self.card["hash"]:
-                raise ValueError(_remade_message(self.name, self._ds, self.card["hash"]))
-        return self._ds
-
-
-def _remade_message(name: str, ds, recorded: str) -> str:
-    return (f"dataset {name} at {ds.folder} has hash {ds.card['hash']}, not the {recorded} "
-            "the ablation's cache recorded for the same dataset config (made again, and the "
-            "generator's answers changed): rerun with --accept-remade to check it against the "
-            "cached results and keep them, or delete the cache entry 'datasets' to start over")
-
-
-class _Remade:
-    """A dataset made again from the config an earlier run recorded, whose samples differ from
-    the recorded ones (its content hash does: a solver's last bits, a changed generator). It
-    stands under the recorded hash, so that cached results and training runs keep, once
-    :func:`_check_remade` has measured a cached set-up on it as on the recorded set."""
-
-    def __init__(self, ds, recorded_hash: str):
-        self._ds = ds
-        self.card = {**ds.card, "hash": recorded_hash, "remade_hash": ds.card["hash"]}
-
-    def __getattr__(self, name):
-        return getattr(self._ds, name)
-
-
-def _make(name: str, d: dict, progress: bool):
-    from importlib.metadata import entry_points
-
-    from stmpl.dataset import open_data
-
-    folder = pathlib.Path(d["folder"])
-    if not _finished(folder):
-        if not d.get("config"):
-            raise FileNotFoundError(f"dataset {name} not found at {folder} and no config "
-                                    "to make it")
-        makers = {ep.name: ep for ep in entry_points(group="stmpl.generators")}
-        if "fem" not in makers:
-            raise ValueError("no dataset generator is installed (entry point "
-                             "stmpl.generators: fem); pip install -e .")
-        if progress:
-            print(f"making dataset {name} from {d['config']} into {folder}")
-        makers["fem"].load()(d["config"], folder, progress=progress)
-    return open_data(folder)
-
-
-def _finished(folder: pathlib.Path) -> bool:
-    """Whether a finished dataset (or set of datasets, one per body) is in ``folder``."""
-    return (folder / "card.json").is_file() or (folder / "bodies.json").is_file()
-
-
-def _config_digest(d: dict) -> str | None:
-    path = pathlib.Path(d.get("config") or "")
-    return hashlib.sha256(path.read_bytes()).hexdigest()[:16] if path.is_file() else None
-
-
-def _datasets(cfg, progress: bool, recorded: dict, accept_remade: bool = False) -> dict:
-    """Every dataset of the config: opened where it is on disk; where it is not, and the cache
-    recorded its card for the same dataset config, a :class:`_Later` (made only if a job needs
-    it); otherwise made now from its config. ``recorded`` (``{name: {"config": digest, "card":
-    {...}}}``) gains every opened dataset's card. A dataset on disk made from the recorded config
-    but with another content hash is refused, or with ``accept_remade`` taken as a
-    :class:`_Remade` (to be checked by :func:`_check_remade`)."""
-    out = {}
-    for name, d in cfg["datasets"].items():
-        folder = pathlib.Path(d["folder"])
-        rec = recorded.get(name)
-        digest = _config_digest(d)
-        same_config = bool(rec and digest and rec.get("config") == digest)
-        if not _finished(folder) and same_config:
-            out[name] = _Later(name, d, rec["card"], progress)
-            continue
-        if _finished(folder):
-            from stmpl.dataset import open_data
-
-            out[name] = open_data(folder)
-            if same_config and out[name].card["hash"] != rec["card"]["hash"]:
-                if not accept_remade:
-                    raise ValueError(_remade_message(name, out[name], rec["card"]["hash"]))
-                out[name] = _Remade(out[name], rec["card"]["hash"])
-                continue                                  # the recorded card stands
-        else:
-            out[name] = _make(name, d, progress)
-        recorded[name] = {"config": digest,
-                          "card": {"hash": out[name].card["hash"],
-                                   "config": {"thickness_mm":
-                                              out[name].card["config"]["thickness_mm"]}}}
-    return out
-
-
-def _ready(ds):
-    """The dataset itself (made now if it was only recorded)."""
-    return ds.get() if isinstance(ds, _Later) else ds
-
-
 def _training_config(setup: dict, cfg: dict, ds) -> dict:
     from stmpl.train import read_config as read_train
 
@@ -256,7 +149,7 @@ def _setup_key(spec: str, fidelity: str) -> str:
     return spec_key(spec) + ("" if fidelity == "full" else f"@{fidelity}")
 
 
-def _check_remade(name: str, ds: _Remade, cfg: dict, cache: dict, progress: bool) -> dict:
+def _check_remade(name: str, ds: Remade, cfg: dict, cache: dict, progress: bool) -> dict:
     """Measure the first set-up taken as it is (``predictor:``) that the cache measured on the
     recorded dataset again on the remade one; its results stand for the recorded set's only if
     they agree within :data:`REMADE_TOLERANCE`. The verdict is kept in the cache (under the
@@ -321,9 +214,9 @@ def run(config, progress: bool = True, accept_remade: bool = False) -> dict:
     cache_path = out / "cache.json"
     cache = json.loads(cache_path.read_text()) if cache_path.is_file() else {}
     recorded = cache.setdefault("datasets", {})
-    sets = _datasets(cfg, progress, recorded, accept_remade)
+    sets = datasets(cfg, progress, recorded, accept_remade)
     remade = {n: _check_remade(n, ds, cfg, cache, progress)
-              for n, ds in sets.items() if isinstance(ds, _Remade)}
+              for n, ds in sets.items() if isinstance(ds, Remade)}
     atomic_write_text(cache_path, json.dumps(cache, indent=1, sort_keys=True))
     ind = sets[cfg["in_distribution"]]
     seen = cfg["seen_thickness_mm"]
@@ -359,7 +252,7 @@ def run(config, progress: bool = True, accept_remade: bool = False) -> dict:
             t = _training_config(s, cfg, ind)
             ckpt = pathlib.Path(t["out"]) / f"{t['name']}.safetensors"
             if not ckpt.is_file():
-                _ready(ind)
+                ready(ind)
                 ckpt = train(t, progress=False)
             spec = str(ckpt)
         else:
@@ -376,7 +269,7 @@ def run(config, progress: bool = True, accept_remade: bool = False) -> dict:
                 from stmpl.evaluate import evaluate_dataset
 
                 t0 = time.perf_counter()
-                res = evaluate_dataset(p, _ready(ds), "test", thickness_mm=thick,
+                res = evaluate_dataset(p, ready(ds), "test", thickness_mm=thick,
                                        batch=cfg["batch"], limit=s.get("limit"))
                 cache[key] = {**res, "evaluated_seconds": time.perf_counter() - t0}
                 save()
@@ -385,7 +278,7 @@ def run(config, progress: bool = True, accept_remade: bool = False) -> dict:
                 bar.update(1)
         key = _hash(["latency", setup_key, ind.card["hash"]])
         if key not in cache:
-            cache[key] = _latency(p, _ready(ind))
+            cache[key] = _latency(p, ready(ind))
             save()
         err = _pooled([tables["table2"].get(f"{s['name']} / {o}")
                        for o in cfg["out_of_distribution"]] or [tables["table1"][s["name"]]])

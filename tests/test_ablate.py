@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from stmpl import ablate
+from stmpl import ablate, ablation_sets
 from stmpl.cli import main
 
 
@@ -109,7 +109,7 @@ def test_a_cached_run_needs_no_data_and_makes_it_again_only_for_new_jobs(config,
     def boom(*a, **k):
         raise AssertionError("a dataset was made again for cached jobs")
 
-    monkeypatch.setattr("stmpl.ablate._make", boom)
+    monkeypatch.setattr("stmpl.ablation_sets._make", boom)
     again = ablate.run(config, progress=False)
     assert json.dumps(again["tables"], sort_keys=True) == json.dumps(first["tables"],
                                                                     sort_keys=True)
@@ -146,7 +146,7 @@ def _remake(config, tmp_path, monkeypatch, scale: float) -> None:
     shutil.rmtree(tmp_path / "data" / "bands")
     with monkeypatch.context() as m:
         m.setattr(backends, "solve_shard", solve)
-        ablate._make("bands", config["datasets"]["bands"], False)
+        ablation_sets._make("bands", config["datasets"]["bands"], False)
 
 
 def test_a_dataset_made_again_stands_for_the_recorded_one_only_if_it_measures_the_same(
