@@ -26,8 +26,8 @@ import time
 
 import numpy as np
 
-from stmpl.spec import key as spec_key
 from stmpl.ablation_sets import Remade, datasets, ready
+from stmpl.spec import key as spec_key
 from stmpl.tables import PAPER, TITLES, table
 
 DEFAULTS = {

@@ -8,6 +8,7 @@ from __future__ import annotations
 import hashlib
 import pathlib
 
+
 class Later:
     """A dataset that is not on this machine but whose card an earlier run recorded (from the
     same dataset config): enough to look up cached results. It is made from its config the
