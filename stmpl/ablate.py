@@ -243,6 +243,8 @@ def run(config, progress: bool = True, accept_remade: bool = False) -> dict:
                    dynamic_ncols=True)
     tables: dict = {"table1": {}, "table2": {}, "table3": {}}
     points = []
+    cost = {"train": 0.0, "evaluate": 0.0, "wall": 0.0}     # seconds; what the report cost
+    t_run = time.perf_counter()
 
     def save():
         atomic_write_text(cache_path, json.dumps(cache, indent=1, sort_keys=True))
@@ -260,6 +262,8 @@ def run(config, progress: bool = True, accept_remade: bool = False) -> dict:
         fidelity = s.get("fidelity", "full")
         p = _open(spec, fidelity)
         setup_key = _setup_key(spec, fidelity)
+        if "train" in s:
+            cost["train"] += float(getattr(p, "meta", {}).get("training", {}).get("seconds", 0))
         if bar is not None:
             bar.update(1)
         for _, d, thick, tab, row in [j for j in jobs if j[0] is s]:
@@ -274,6 +278,7 @@ def run(config, progress: bool = True, accept_remade: bool = False) -> dict:
                 cache[key] = {**res, "evaluated_seconds": time.perf_counter() - t0}
                 save()
             tables[tab][row] = cache[key]
+            cost["evaluate"] += cache[key].get("evaluated_seconds", 0.0)
             if bar is not None:
                 bar.update(1)
         key = _hash(["latency", setup_key, ind.card["hash"]])
@@ -287,7 +292,8 @@ def run(config, progress: bool = True, accept_remade: bool = False) -> dict:
                            "chart": bool(s.get("chart", True)), **err})
         if bar is not None:
             bar.update(1)
-        _write(cfg, tables, out, points, remade)     # the report so far
+        cost["wall"] = time.perf_counter() - t_run
+        _write(cfg, tables, out, points, remade, cost)     # the report so far
     if bar is not None:
         bar.close()
     return {"tables": tables, "out": out, "points": points}
@@ -338,18 +344,35 @@ def _open(spec: str, fidelity: str = "full"):
     return predictor_from_spec(spec, fidelity=fidelity)
 
 
-def _write(cfg, tables, out: pathlib.Path, points: list, remade: dict | None = None) -> None:
+def _cpu() -> str:
+    """The processor's model name (Linux), else the architecture."""
     import platform
 
+    try:
+        for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or platform.machine()
+
+
+def _write(cfg, tables, out: pathlib.Path, points: list, remade: dict | None = None,
+           cost: dict | None = None) -> None:
     from stmpl.files import atomic_write_text
 
     parts = [f"# Ablation: {cfg['name']}\n",
              "Datasets: " + ", ".join(f"{n} ({d['folder']})" for n, d in cfg["datasets"].items())
-             + f". Machine: {platform.processor() or platform.machine()}, "
-             f"{__import__('os').cpu_count()} cores. Errors in mm on the vertices that move more "
+             + f". Machine: {_cpu()}, {__import__('os').cpu_count()} cores, torch "
+             f"{__import__('torch').__version__}. Errors in mm on the vertices that move more "
              "than 0.001 mm, mean ± std over samples; rel. MEE against each sample's largest "
              "displacement; peak err: predicted against true largest displacement, signed. "
              "Rows in italics are the paper's as reported (its data, not ours).\n"]
+    if cost:
+        parts.append(f"Compute behind this report: training {cost['train'] / 60:.0f} min, "
+                     f"evaluation {cost['evaluate'] / 60:.0f} min (summed over the runs that "
+                     f"made the cached results); this run took {cost['wall'] / 60:.1f} min, "
+                     "the rest came from the cache.\n")
     for n, v in (remade or {}).items():
         parts.append(f"Dataset {n} was made again (content hash {v['hash']}, not the recorded "
                      f"one): {v['checked_with']} measures {v['rel_mee'][1]:.4f} % / "
@@ -373,7 +396,7 @@ def _write(cfg, tables, out: pathlib.Path, points: list, remade: dict | None = N
                  "|---|--:|--:|--:|--:|"]
         lines += [f"| {p['label']} | {p['batch']} | {1e3 * p['seconds']:.3g} | "
                   f"{p['rel_mee']:.2f} | {p['peak_err']:+.1f} |" for p in points]
-        parts.insert(2, "## Speed against accuracy\n\n![speed against accuracy]"
+        parts.insert(2 + bool(cost), "## Speed against accuracy\n\n![speed against accuracy]"
                      "(speed_accuracy.png)\n\nTime per scene on this machine at batch 1 and "
                      "64 (median of repeats); error pooled over the out-of-distribution test "
                      "sets. The star is the paper's reported point (its GPU, its data), a "

@@ -11,6 +11,7 @@ import numpy as np
 FAMILIES = {  # family: colour
     "FEM": "#444444", "linear FEM": "#1f77b4", "UV-UNet": "#d62728", "GNN": "#2ca02c",
     "Naive": "#9467bd", "other": "#8c564b"}
+LABEL_STYLE = {"fontsize": 7, "color": "#333333"}
 PAPER_POINT = {"seconds": 0.002, "rel_mee": 5.57,
                "label": "paper's UV-UNet (reported: A6000 GPU, its data)"}
 
@@ -48,7 +49,7 @@ def speed_accuracy(points: list[dict], path, title: str = "") -> list[pathlib.Pa
 
     if not points:
         raise ValueError("no points to chart")
-    fig, axes = plt.subplots(1, 2, figsize=(13, 5.4))
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5.4), dpi=130)   # laid out as saved
     x = np.array([p["seconds"] * 1e3 for p in points])
     names = []                                  # (axes, points to name) once laid out
     for ax, key, what in ((axes[0], "rel_mee", "out-of-distribution relative MEE, %"),
@@ -80,10 +81,12 @@ def speed_accuracy(points: list[dict], path, title: str = "") -> list[pathlib.Pa
         ax.set_yscale("log")
         if ok.any():                     # room below the lowest points for their names
             ax.set_ylim(y[ok].min() / 1.8, y[ok].max() * 1.4)
+            ax.set_xlim(x[ok].min() / 1.6, x[ok].max() * 6)   # and right of the slowest
         ax.set_xlabel("time per scene, ms (log; this CPU unless marked)")
         ax.set_ylabel(what + " (log)")
         ax.grid(True, which="both", alpha=0.25)
-        fmt = matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}")
+        fmt = matplotlib.ticker.FuncFormatter(lambda v, _: f"{v / 1e3:g}k" if v >= 1e3
+                                              else f"{v:g}")   # 1k, 2k: ticks keep apart
         for axis in (ax.xaxis, ax.yaxis):                   # 1-2-5 ticks, labelled
             axis.set_major_locator(matplotlib.ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
             axis.set_major_formatter(fmt)
@@ -125,38 +128,90 @@ def _labels(ax, items: list, markers: list | None = None) -> None:
     marker and stays inside the axes; the names that find no such place line up in a column
     to the right of their points, each joined to its point by a thin leader line, in the
     points' vertical order (so the lines do not cross), right of every marker (``markers``,
-    ``(x, y)``: all the panel's points, unnamed ones too) at their height."""
+    ``(x, y)``: all the panel's points, unnamed ones too) at their height. A name beside its
+    point that the column covers looks for another place around its point (more of them),
+    or joins the column."""
     from matplotlib.text import Text
-    from matplotlib.transforms import Bbox
 
     fig = ax.figure
     fig.canvas.draw()
     renderer = fig.canvas.get_renderer()
-    frame = ax.get_window_extent(renderer)
-    scale = fig.dpi / 72.0                              # points -> display pixels
-    placed = []
     markers = [(x, y) for x, y, _ in items] + list(markers or [])
+    beside, crowded = _beside(ax, items, markers, [], renderer, NEAR)
+    for _ in range(3):
+        column = _column(ax, crowded, markers)
+        fig.canvas.draw()                               # puts the column's names in place
+        boxes = [Text.get_window_extent(a, renderer).padded(2 * fig.dpi / 72)
+                 for a in column]                       # the names, not their leaders
+        clash = [b for b in beside
+                 if any(b[0].get_window_extent(renderer).overlaps(c) for c in boxes)]
+        if not clash:
+            return
+        for a, _, _ in clash:
+            a.remove()
+        beside = [b for b in beside if b not in clash]
+        again, still = _beside(ax, [item for _, item, _ in clash], markers,
+                               [b[0].get_window_extent(renderer) for b in beside] + boxes,
+                               renderer, NEAR + FARTHER)
+        beside += again
+        if not still:
+            return
+        for a in column:                                # no other place: into the column
+            a.remove()
+        crowded += still
+
+
+NEAR = ((5, 4), (5, -11), (-5, 4), (-5, -11))         # name offsets from its point, points
+FARTHER = ((0, 8), (0, -15), (5, 12), (-5, 12), (5, -19), (-5, -19), (5, 22), (-5, 22),
+           (5, -29), (-5, -29))
+
+
+def _beside(ax, items: list, markers: list, obstacles: list, renderer,
+            offsets: tuple) -> tuple[list, list]:
+    """Put each name beside its point, at the first of ``offsets`` (points) where it overlaps
+    nothing (markers, names, display boxes ``obstacles``) and lies nearer its point than any
+    other; returns (``(annotation, item, offset)`` for the names placed, the ``(x, y, text)``
+    items that found no place)."""
+    from matplotlib.transforms import Bbox
+
+    frame = ax.get_window_extent(renderer)
+    scale = ax.figure.dpi / 72.0                        # points -> display pixels
+    names = list(obstacles)
+    marks = []
     for x, y in markers:                                # names keep off the markers
         cx, cy = ax.transData.transform((x, y))
-        placed.append(Bbox.from_bounds(cx - 4 * scale, cy - 4 * scale, 8 * scale, 8 * scale))
-    style = {"fontsize": 7, "color": "#333333"}
-    crowded = []
-    for x, y, text in sorted(items, key=lambda t: (t[0], t[1])):
-        for dx, dy in ((5, 4), (5, -11), (-5, 4), (-5, -11)):
+        marks.append(Bbox.from_bounds(cx - 4 * scale, cy - 4 * scale, 8 * scale, 8 * scale))
+    done, crowded = [], []
+    for item in sorted(items, key=lambda t: (t[0], t[1])):
+        x, y, text = item
+        for dx, dy in offsets:
             t = ax.annotate(text, (x, y), xytext=(dx, dy), textcoords="offset points",
-                            ha="left" if dx > 0 else "right", **style)
+                            ha="left" if dx > 0 else "right" if dx < 0 else "center",
+                            **LABEL_STYLE)
             box = t.get_window_extent(renderer)
             inside = (frame.x0 <= box.x0 and box.x1 <= frame.x1 and frame.y0 <= box.y0
                       and box.y1 <= frame.y1)
-            if inside and not any(box.overlaps(b) for b in placed) and \
+            air = box.padded(2 * scale)                 # names keep a little apart
+            if inside and not any(box.overlaps(b) for b in marks) and \
+                    not any(air.overlaps(b) for b in names) and \
                     _nearest(box, (x, y), markers, ax):
-                placed.append(box)
+                names.append(box)
+                done.append((t, item, (dx, dy)))
                 break
             t.remove()
         else:
-            crowded.append((x, y, text))
+            crowded.append(item)
+    return done, crowded
+
+
+def _column(ax, crowded: list, markers: list) -> list:
+    """The names of ``crowded`` (``(x, y, text)``) in a column right of their points and of
+    the markers at their height (left if there is no room), joined to them by leader lines;
+    returns the annotations."""
     if not crowded:
-        return
+        return []
+    frame = ax.get_window_extent(ax.figure.canvas.get_renderer())
+    scale = ax.figure.dpi / 72.0
     pix = [ax.transData.transform((x, y)) for x, y, _ in crowded]
     step = 11 * scale
     top, bottom = max(p[1] for p in pix) + step, min(p[1] for p in pix) - len(pix) * step
@@ -176,8 +231,11 @@ def _labels(ax, items: list, markers: list | None = None) -> None:
     if column + 110 * scale > frame.x1:                  # no room on the right: the left
         column, side = min(p[0] for p in pix) - 14 * scale, "right"
     to_data = ax.transData.inverted()
+    out = []
     for i, (x, y, text) in enumerate(crowded):
         at = to_data.transform((column, ys[i]))
-        ax.annotate(text, (x, y), xytext=tuple(at), textcoords="data", ha=side,
-                    va="center", arrowprops={"arrowstyle": "-", "color": "#777777", "lw": 0.6,
-                                             "shrinkA": 2, "shrinkB": 4 * scale}, **style)
+        out.append(ax.annotate(text, (x, y), xytext=tuple(at), textcoords="data", ha=side,
+                               va="center", arrowprops={"arrowstyle": "-", "color": "#777777",
+                                                        "lw": 0.6, "shrinkA": 2,
+                                                        "shrinkB": 4 * scale}, **LABEL_STYLE))
+    return out

@@ -21,3 +21,36 @@ def test_families_and_files(tmp_path):
             "peak_err": -8.0}]
     files = speed_accuracy(pts, tmp_path / "c")
     assert [f.suffix for f in files] == [".png", ".svg"] and files[0].stat().st_size > 20_000
+
+
+def test_names_do_not_overlap_one_another():
+    """A crowd of points (the paper ablation's cluster) and a slow one at the right edge whose
+    name the leader-line column would cover: every point is named once, no two names touch."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.text import Text
+
+    from stmpl.chart import _labels
+
+    fig, ax = plt.subplots(figsize=(6.5, 4.5), dpi=130)
+    rng = np.random.default_rng(0)
+    items = [(float(x), float(y), f"set-up {i}") for i, (x, y) in
+             enumerate(zip(10 ** rng.uniform(0.2, 1.7, 14), 10 ** rng.uniform(-0.45, -0.2, 14)))]
+    items += [(1900.0, 0.88, "FEM (medium mesh)"), (2100.0, 2.2, "FEM (coarse mesh)")]
+    ax.scatter([i[0] for i in items], [i[1] for i in items])
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set_xlim(0.1, 2100 * 6)
+    ax.set_ylim(0.2, 3)
+    _labels(ax, items)
+    fig.canvas.draw()
+    r = fig.canvas.get_renderer()
+    names = [t for t in ax.texts]
+    assert sorted(t.get_text() for t in names) == sorted(i[2] for i in items)
+    boxes = [Text.get_window_extent(t, r) for t in names]
+    clashes = [(names[i].get_text(), names[j].get_text()) for i in range(len(boxes))
+               for j in range(i) if boxes[i].overlaps(boxes[j])]
+    plt.close(fig)
+    assert not clashes
