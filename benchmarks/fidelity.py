@@ -77,9 +77,11 @@ def variant(text: str) -> dict:
     return out
 
 
-def live(folder: str, count: int, variants=({},)) -> None:
-    """Each of the first ``count`` placements solved on the whole part, then on the patch once
-    per variant of the local FEM (default: as shipped)."""
+def live(folder: str, count: int, variants=({},), every: int = 1) -> None:
+    """``count`` placements (every ``every``-th of the dataset's plan, from the first) solved on
+    the whole part, then on the patch once per variant of the local FEM (default: as shipped);
+    the summary gives each variant's median ratio and the ratio of the summed times (what
+    making those samples costs)."""
     from fem.config import read_config
     from fem.local import TOLERANCE, first_margin, simulate_local
     from fem.material import material
@@ -96,13 +98,15 @@ def live(folder: str, count: int, variants=({},)) -> None:
     print(f"{'placement':<40} {'variant':<34} {'full s':>7} {'auto s':>7} {'ratio':>6} "
           f"{'max err %':>9} {'patch':>11} ring moved % per attempt")
     ratios, errs = {}, {}
-    for i, pl in enumerate(p.placements[:count]):
+    full_s, auto_s = [], {}
+    for i, pl in enumerate(p.placements[::every][:count]):
         load = make_load(ds.part, pl)
         t = np.full(ds.part.n_vertices, cfg["thickness_mm"][len(cfg["thickness_mm"]) // 2] * 1e-3)
         levels = forces[forces / load.area <= cfg["max_pressure"]]
         t0 = time.perf_counter()
         mesh, sols = simulate(ds.part, t, load.force, levels, cfg["resolution"], mat, opts)
         tf = time.perf_counter() - t0
+        full_s.append(tf)
         for v in variants:
             res = resolution(cfg["resolution"]).to_dict()
             if "refine" in v:
@@ -120,13 +124,17 @@ def live(folder: str, count: int, variants=({},)) -> None:
                     for k in ok) if ok else np.nan
             name = ",".join(f"{k}={x:g}" for k, x in v.items()) or "as shipped"
             ratios.setdefault(name, []).append(tf / tl)
+            auto_s.setdefault(name, []).append(tl)
             errs.setdefault(name, []).append(100 * e)
             ring = " ".join(f"{100 * a['ring_moved']:.2f}" for a in r.attempts)
             label = f"{pl['kind']} {pl['params']}"[:40]
             print(f"{label:<40} {name:<34} {tf:7.1f} {tl:7.1f} {tf / tl:6.2f} {100 * e:9.3f} "
                   f"{len(r.patch.vertices):>5}/{ds.part.n_vertices} {ring}", flush=True)
     for name in ratios:
-        print(f"{name}: median ratio {np.median(ratios[name]):.2f} x, largest error "
+        print(f"{name}: median ratio {np.median(ratios[name]):.2f} x (range "
+              f"{min(ratios[name]):.2f}-{max(ratios[name]):.2f}), summed times "
+              f"{sum(full_s):.0f} s / {sum(auto_s[name]):.0f} s = "
+              f"{sum(full_s) / sum(auto_s[name]):.2f} x, largest error "
               f"{np.nanmax(errs[name]):.3f} % of the deepest")
 
 
@@ -189,6 +197,8 @@ def main() -> None:
                     help="--models: also run auto with these region tolerances (0.02 = 2 %% "
                          "of the prior's deepest displacement; shipped: 0.01)")
     ap.add_argument("--count", type=int, default=6)
+    ap.add_argument("--every", type=int, default=1,
+                    help="--live: take every n-th placement of the plan (spread over the part)")
     ap.add_argument("--variant", type=variant, action="append",
                     help="--live: a local-FEM variant beside the shipped one, e.g. "
                          "refine=0.02,thicknesses=3,tolerance=0.01 (repeatable)")
@@ -202,7 +212,7 @@ def main() -> None:
     elif args.datasets:
         compare_datasets(*args.datasets)
     else:
-        live(args.live, args.count, [{}] + (args.variant or []))
+        live(args.live, args.count, [{}] + (args.variant or []), args.every)
 
 
 if __name__ == "__main__":
