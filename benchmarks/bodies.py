@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import tempfile
 import time
 import warnings
@@ -189,8 +188,9 @@ def main(argv=None) -> None:
     a = ap.parse_args(argv)
     if a.curve and len(a.curve) != len(a.models):
         ap.error("--curve needs one number of bodies per model")
-    print(f"machine: {platform.machine()}, {os.cpu_count()} cores; torch threads "
-          f"{__import__('torch').get_num_threads()}")
+    from stmpl.machine import describe
+
+    print(f"machine: {describe()}")
     if a.first_call:
         first_call(a.models, a.any_body)
     if a.data:

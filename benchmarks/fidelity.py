@@ -22,7 +22,6 @@ displacement, and the solve time ratio:
 from __future__ import annotations
 
 import argparse
-import platform
 import time
 
 import numpy as np
@@ -203,8 +202,9 @@ def main() -> None:
                     help="--live: a local-FEM variant beside the shipped one, e.g. "
                          "refine=0.02,thicknesses=3,tolerance=0.01 (repeatable)")
     args = ap.parse_args()
-    print(f"machine: {platform.processor() or platform.machine()}, "
-          f"{__import__('os').cpu_count()} cores")
+    from stmpl.machine import describe
+
+    print(f"machine: {describe()}")
     if args.models:
         if not args.data:
             raise SystemExit("--models needs --data")

@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import tempfile
 import time
 
@@ -49,12 +48,12 @@ def main(argv=None) -> None:
     from fem.compliance import ColumnStore, compliance
     from fem.material import material
     from stmpl.body.spec import part_from_spec
+    from stmpl.machine import describe
 
     part = part_from_spec({"model": "anny", "subdivisions": args.subdivisions}, "left_arm")
     t = args.thickness_mm * 1e-3
     print(f"left arm, {args.subdivisions} subdivision(s): {part.n_vertices} vertices; "
-          f"layer {args.thickness_mm:g} mm; {platform.processor() or platform.machine()}, "
-          f"{os.cpu_count()} cores")
+          f"layer {args.thickness_mm:g} mm; {describe()}")
     print("| load | loaded vertices | patch vertices | cold s | memory ms | disk cache ms |"
           + (" whole-part s | max diff % |" if args.whole else ""))
     print("|---|--:|--:|--:|--:|--:|" + ("--:|--:|" if args.whole else ""))

@@ -11,7 +11,6 @@ resolution, 3 continuation levels): its deepest displacement and its time.
 from __future__ import annotations
 
 import argparse
-import platform
 import time
 
 import numpy as np
@@ -39,7 +38,9 @@ def main() -> None:
     arm = AnnyBody().part("left_arm")
     hand = Hand()
     tip = objects.sphere(0.008)
-    print(f"machine: {platform.processor() or platform.machine()}, {platform.system()}")
+    from stmpl.machine import describe
+
+    print(f"machine: {describe()}")
     rows = []
     for k in args.levels:
         part = arm.subdivided(k)

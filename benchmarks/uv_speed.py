@@ -7,8 +7,6 @@ Target (issue #2): rasterising the arm at 512x512 in under 50 ms on a 2-core CPU
 from __future__ import annotations
 
 import argparse
-import os
-import platform
 import time
 
 import numpy as np
@@ -16,6 +14,7 @@ import torch
 
 from _timing import median_time
 from stmpl.body import AnnyBody
+from stmpl.machine import describe
 from stmpl.uv import UVMap
 
 
@@ -26,8 +25,7 @@ def main() -> None:
     args = ap.parse_args()
     torch.manual_seed(0)
     part = AnnyBody().part("left_arm")
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-          f"torch {torch.__version__}, {torch.get_num_threads()} threads")
+    print(f"machine: {describe()}")
     print(f"part: left_arm, {part.n_vertices} vertices, {part.n_faces} faces")
     print(f"{'size':>5} {'build ms':>9} {'rast ms':>8} {'samp ms':>8} "
           f"{'rast B ms':>10} {'samp B ms':>10} {'B':>3} {'round-trip err %':>17}")

@@ -344,27 +344,14 @@ def _open(spec: str, fidelity: str = "full"):
     return predictor_from_spec(spec, fidelity=fidelity)
 
 
-def _cpu() -> str:
-    """The processor's model name (Linux), else the architecture."""
-    import platform
-
-    try:
-        for line in pathlib.Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
-
-
 def _write(cfg, tables, out: pathlib.Path, points: list, remade: dict | None = None,
            cost: dict | None = None) -> None:
     from stmpl.files import atomic_write_text
+    from stmpl.machine import describe
 
     parts = [f"# Ablation: {cfg['name']}\n",
              "Datasets: " + ", ".join(f"{n} ({d['folder']})" for n, d in cfg["datasets"].items())
-             + f". Machine: {_cpu()}, {__import__('os').cpu_count()} cores, torch "
-             f"{__import__('torch').__version__}. Errors in mm on the vertices that move more "
+             + f". Machine: {describe()}. Errors in mm on the vertices that move more "
              "than 0.001 mm, mean ± std over samples; rel. MEE against each sample's largest "
              "displacement; peak err: predicted against true largest displacement, signed. "
              "Rows in italics are the paper's as reported (its data, not ours).\n"]
