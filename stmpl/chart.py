@@ -138,14 +138,14 @@ def _labels(ax, items: list, markers: list | None = None) -> None:
     renderer = fig.canvas.get_renderer()
     markers = [(x, y) for x, y, _ in items] + list(markers or [])
     beside, crowded = _beside(ax, items, markers, [], renderer, NEAR)
-    for _ in range(3):
+    for last in (False, False, True):
         column = _column(ax, crowded, markers)
         fig.canvas.draw()                               # puts the column's names in place
         boxes = [Text.get_window_extent(a, renderer).padded(2 * fig.dpi / 72)
                  for a in column]                       # the names, not their leaders
         clash = [b for b in beside
                  if any(b[0].get_window_extent(renderer).overlaps(c) for c in boxes)]
-        if not clash:
+        if not clash or last:                           # the last round's column stays
             return
         for a, _, _ in clash:
             a.remove()
