@@ -36,6 +36,10 @@ DEFAULTS = {
     "axes": {},
     "out": None,
 }
+LINES = ("-", (0, (5, 2)), "-.", (0, (1, 1.2)))
+"""Line styles that tell apart the models of one family (which share its colour)."""
+MARKERS = ("o", "^", "s", "D")
+
 AXES = {
     "force": ("total force, N", "total"),
     "pressure": ("mean pressure on a 2 cm disk, kPa", "pressure_kpa"),
@@ -281,16 +285,17 @@ def figures(cfg, points: list, out: pathlib.Path) -> list:
         inside_of = {n: np.array([p["predictors"].get(n, {}).get("inside") is not False
                                   for p in pts], dtype=bool) for n in names}
         fig, axes = plt.subplots(1, 2, figsize=(12, 4.4))
+        rank = {n: [m for m in names if family(m) == family(n)].index(n) for n in names}
         for ax, key, what in ((axes[0], "rel_mee", "relative MEE against the FEM, %"),
                               (axes[1], "peak_err", "|peak error| against the FEM, %")):
             for n in names:
                 y = np.array([abs(p["predictors"].get(n, {}).get(key, np.nan)) for p in pts])
                 inside = inside_of[n]
-                c = FAMILIES[family(n)]
-                ax.plot(x, y, "-", c=c, lw=1.2, label=n)
-                ax.scatter(x[inside], y[inside], c=c, s=28, zorder=3)
-                ax.scatter(x[~inside], y[~inside], facecolors="white", edgecolors=c, s=28,
-                           zorder=3)
+                c = FAMILIES[family(n)]               # a family's colour; its models apart
+                ls, mk = LINES[rank[n] % len(LINES)], MARKERS[rank[n] % len(MARKERS)]
+                ax.plot(x, y, ls=ls, marker=mk, c=c, lw=1.2, ms=5.5, mfc=c, label=n)
+                ax.scatter(x[~inside], y[~inside], marker=mk, facecolors="white", edgecolors=c,
+                           s=30, zorder=3)
             for lim, ls in ((1, ":"), (5, "--")):
                 ax.axhline(lim, c="#888888", lw=0.8, ls=ls)
             fails = [p for p in pts if not p["fem"]["ok"]]
@@ -314,7 +319,7 @@ def figures(cfg, points: list, out: pathlib.Path) -> list:
         fig.legend(handles, labels, loc="lower center", ncol=len(labels), fontsize=8,
                    frameon=False, title="filled: inside its envelope; open: outside",
                    title_fontsize=7)
-        fig.suptitle(f"Stability along {axis}: dotted 1 %, dashed 5 %; red lines: the FEM "
+        fig.suptitle(f"Stability along {axis}: grey lines at 1 % and 5 %; red lines: the FEM "
                      "fails", fontsize=11)
         fig.tight_layout(rect=(0, 0.1, 1, 1))
         f = out / f"stability_{axis}.png"
