@@ -16,25 +16,38 @@ import argparse
 import numpy as np
 import torch
 
-from stmpl import zoo
-from stmpl.dataset import Dataset
+from stmpl.data.dataset import Dataset
 from stmpl.metrics import sample_metrics
+from stmpl.pipeline import zoo
 
 
 def by_force(p, a: dict, key: str = "force") -> dict:
     """``{force N: (relative MEE %, peak ratio)}`` of predictor ``p`` over arrays ``a`` (with
-    ``key="thickness"``, by thickness in mm instead)."""
-    t, f = (torch.tensor(a[k], dtype=torch.float32, device=p.device)
-            for k in ("thickness", "force"))
+    ``key="thickness"``, by thickness in mm instead).
+    """
+    t, f = (
+        torch.tensor(a[k], dtype=torch.float32, device=p.device) for k in ("thickness", "force")
+    )
     with torch.no_grad():
-        u = (torch.cat([p.forward(t[i:i + 256], f[i:i + 256]) for i in range(0, len(t), 256)])
-             * p.scale).double().cpu().numpy()
+        u = (
+            (
+                torch.cat(
+                    [p.forward(t[i : i + 256], f[i : i + 256]) for i in range(0, len(t), 256)]
+                )
+                * p.scale
+            )
+            .double()
+            .cpu()
+            .numpy()
+        )
     true = a["displacement"]
     rel = np.array([sample_metrics(true[i], u[i])["rel_mee"] for i in range(len(u))])
     peak = np.linalg.norm(u, axis=-1).max(1) / np.linalg.norm(true, axis=-1).max(1)
     tot = np.round(a["total"], 3) if key == "force" else np.round(a["thickness"][:, 0] * 1e3, 2)
-    return {float(x): (float(rel[tot == x].mean()), float(peak[tot == x].mean()))
-            for x in np.unique(tot)} | {"all": (float(rel.mean()), float(peak.mean()))}
+    return {
+        float(x): (float(rel[tot == x].mean()), float(peak[tot == x].mean()))
+        for x in np.unique(tot)
+    } | {"all": (float(rel.mean()), float(peak.mean()))}
 
 
 def main() -> None:
@@ -47,14 +60,19 @@ def main() -> None:
     a = ds.arrays("test")
     res = {n: by_force(zoo.read(n), a) for n in (args.models or zoo.names())}
     forces = [k for k in next(iter(res.values())) if k != "all"]
-    print(f"{args.data} test split ({len(a['total'])} samples): relative MEE % / predicted-to-true "
-          "peak")
+    print(
+        f"{args.data} test split ({len(a['total'])} samples): relative MEE % / predicted-to-true "
+        "peak"
+    )
     print()
     print("| model | " + " | ".join(f"{x:g} N" for x in forces) + " | all |")
     print("|---|" + "--:|" * (len(forces) + 1))
     for n, r in res.items():
-        print(f"| {n} | " + " | ".join(f"{r[k][0]:.2f} / {r[k][1]:.3f}" for k in forces + ["all"])
-              + " |")
+        print(
+            f"| {n} | "
+            + " | ".join(f"{r[k][0]:.2f} / {r[k][1]:.3f}" for k in forces + ["all"])
+            + " |"
+        )
     thick = {n: by_force(zoo.read(n), a, "thickness") for n in res}
     levels = [k for k in next(iter(thick.values())) if k != "all"]
     print()
@@ -72,8 +90,12 @@ def main() -> None:
         for n, r in res.items():
             ax1.plot(forces, [r[k][0] for k in forces], "o-", label=n)
             ax2.plot(forces, [r[k][1] for k in forces], "o-", label=n)
-        ax1.set(xlabel="total force, N", ylabel="MEE / max displacement, %", ylim=(0, None),
-                title="mean error")
+        ax1.set(
+            xlabel="total force, N",
+            ylabel="MEE / max displacement, %",
+            ylim=(0, None),
+            title="mean error",
+        )
         ax2.axhline(1.0, color="k", lw=0.8)
         ax2.set(xlabel="total force, N", ylabel="predicted / true peak", title="peak")
         ax1.grid(alpha=0.3)

@@ -22,9 +22,9 @@ from __future__ import annotations
 import argparse
 import json
 import math
-import os
 import pathlib
-import platform
+
+from stmpl.machine import describe
 
 
 def main() -> None:
@@ -34,14 +34,19 @@ def main() -> None:
     ap.add_argument("--steps", type=int, default=3000, help="optimiser steps per share")
     ap.add_argument("--out", default=None, help="folder of the runs, table and plot")
     ap.add_argument("--data", help="dataset folder (default: the config's)")
-    ap.add_argument("--trained", nargs="+", default=[], metavar="SHARE=CHECKPOINT",
-                    help="shares already trained elsewhere with the same config and steps")
+    ap.add_argument(
+        "--trained",
+        nargs="+",
+        default=[],
+        metavar="SHARE=CHECKPOINT",
+        help="shares already trained elsewhere with the same config and steps",
+    )
     args = ap.parse_args()
     import torch
 
-    from stmpl.dataset import Dataset
-    from stmpl.evaluate import evaluate_dataset
-    from stmpl.train import _split_tensors, read_config, train
+    from stmpl.data.dataset import Dataset
+    from stmpl.pipeline.evaluate import evaluate_dataset
+    from stmpl.pipeline.train import _split_tensors, read_config, train
 
     base = read_config(args.config)
     if args.data:
@@ -60,8 +65,13 @@ def main() -> None:
         trained[float(share)] = pathlib.Path(path)
     rows = []
     for frac in sorted(set(args.fractions) | set(trained)):
-        cfg = {**base, "train_fraction": frac, "name": f"{base['name']}-f{frac:g}",
-               "out": str(out / f"f{frac:g}"), "patience": 10 ** 6}
+        cfg = {
+            **base,
+            "train_fraction": frac,
+            "name": f"{base['name']}-f{frac:g}",
+            "out": str(out / f"f{frac:g}"),
+            "patience": 10**6,
+        }
         n = len(_split_tensors(ds, "train", read_config(cfg), torch.device("cpu"))[0])
         cfg["epochs"] = max(1, math.ceil(args.steps / math.ceil(n / cfg["batch"])))
         if frac in trained:
@@ -70,31 +80,49 @@ def main() -> None:
             done = p.meta["training"]["epochs"]
             recipe = p.meta["training"].get("config", {})  # older checkpoints lack it
             same = {k: recipe.get(k) for k in ("batch", "lr", "schedule", "seed")}
-            if (p.name != base["model"] or p.config != type(p).options(base["options"])
-                    or p.meta["dataset"]["hash"] != ds.card["hash"] or done != cfg["epochs"]
-                    or any(v is not None and v != base[k] for k, v in same.items())):
-                raise SystemExit(f"{path} was not trained with {args.config}'s model, options "
-                                 f"and data for {cfg['epochs']} epochs (it has {done})")
+            if (
+                p.name != base["model"]
+                or p.config != type(p).options(base["options"])
+                or p.meta["dataset"]["hash"] != ds.card["hash"]
+                or done != cfg["epochs"]
+                or any(v is not None and v != base[k] for k, v in same.items())
+            ):
+                raise SystemExit(
+                    f"{path} was not trained with {args.config}'s model, options "
+                    f"and data for {cfg['epochs']} epochs (it has {done})"
+                )
         else:
             path = train(cfg, progress=True)
             p = predictor.read(path)
         seconds = p.meta["training"]["seconds"]
         m = {s: evaluate_dataset(p, ds, s) for s in ("val", "test")}
-        rows.append({"fraction": frac, "placements": max(1, round(frac * n_places)),
-                     "samples": n, "epochs": cfg["epochs"], "seconds": round(seconds, 1),
-                     "checkpoint": str(path),
-                     **{f"{s}_{k}": m[s][k][0] for s in m for k in ("mee", "rel_mee")}})
+        rows.append(
+            {
+                "fraction": frac,
+                "placements": max(1, round(frac * n_places)),
+                "samples": n,
+                "epochs": cfg["epochs"],
+                "seconds": round(seconds, 1),
+                "checkpoint": str(path),
+                **{f"{s}_{k}": m[s][k][0] for s in m for k in ("mee", "rel_mee")},
+            }
+        )
         print(json.dumps(rows[-1]), flush=True)
-    lines = [f"Learning curve of `{args.config}` on {base['data']} (hash {ds.card['hash']}), "
-             f"{args.steps} steps of batch {base['batch']} per share; {platform.processor() or platform.machine()}, "
-             f"{os.cpu_count()} cores, torch {torch.__version__}, {torch.get_num_threads()} threads.",
-             "", "| share | placements | samples | epochs | train s | val MEE mm | val rel. % | "
-             "test MEE mm | test rel. % |", "|---:|---:|---:|---:|---:|---:|---:|---:|---:|"]
+    lines = [
+        f"Learning curve of `{args.config}` on {base['data']} (hash {ds.card['hash']}), "
+        f"{args.steps} steps of batch {base['batch']} per share; {describe()}.",
+        "",
+        "| share | placements | samples | epochs | train s | val MEE mm | val rel. % | "
+        "test MEE mm | test rel. % |",
+        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
     for r in rows:
         secs = f"{r['seconds']:.0f}" if r["seconds"] > 0 else "-"
-        lines.append(f"| {r['fraction']:g} | {r['placements']} | {r['samples']} | {r['epochs']} "
-                     f"| {secs} | {r['val_mee']:.4f} | {r['val_rel_mee']:.2f} | "
-                     f"{r['test_mee']:.4f} | {r['test_rel_mee']:.2f} |")
+        lines.append(
+            f"| {r['fraction']:g} | {r['placements']} | {r['samples']} | {r['epochs']} "
+            f"| {secs} | {r['val_mee']:.4f} | {r['val_rel_mee']:.2f} | "
+            f"{r['test_mee']:.4f} | {r['test_rel_mee']:.2f} |"
+        )
     table = "\n".join(lines) + "\n"
     print(table)
     (out / "curve.md").write_text(table)
@@ -122,9 +150,16 @@ def plot(rows: list[dict], path, title: str) -> None:
     for axis in (ax.xaxis, ax.yaxis):
         axis.set_major_formatter(FormatStrFormatter("%g"))
         axis.set_minor_formatter(NullFormatter())
-    ax.set_yticks(np.round(np.geomspace(min(min(r["val_rel_mee"], r["test_rel_mee"]) for r in rows),
-                                        max(max(r["val_rel_mee"], r["test_rel_mee"]) for r in rows),
-                                        4), 1))
+    ax.set_yticks(
+        np.round(
+            np.geomspace(
+                min(min(r["val_rel_mee"], r["test_rel_mee"]) for r in rows),
+                max(max(r["val_rel_mee"], r["test_rel_mee"]) for r in rows),
+                4,
+            ),
+            1,
+        )
+    )
     ax.set_xlabel("training placements")
     ax.set_ylabel("MEE / max displacement, %")
     ax.set_title(title)

@@ -21,20 +21,25 @@ import time
 
 import numpy as np
 
-SETUP = {"material": {"name": "neo_hookean", "E": 1000.0, "nu": 0.4},
-         "resolution": "reference", "solver": None}
+SETUP = {
+    "material": {"name": "neo_hookean", "E": 1000.0, "nu": 0.4},
+    "resolution": "reference",
+    "solver": None,
+}
 
 
 def loads(part):
     from stmpl import loads as L
-    from stmpl.contact import contact
-    from stmpl.hand import Hand, grasp
+    from stmpl.contact.hand import Hand, grasp
+    from stmpl.contact.pressing import contact
 
     g = grasp(part, Hand(phenotype={"height": 0.5}), 0.7, 0.0, "whole", 0.002)
-    return {"disk 2 cm": L.disk(part, uv=(0.3, 0.5), radius=0.02, total=0.3).force,
-            "ellipse 4x2 cm": L.ellipse(part, uv=(0.6, 0.4), semi_axes=(0.04, 0.02), total=0.3).force,
-            "band 3 cm": L.band(part, at=0.5, width=0.03, total=0.3).force,
-            "grasp (whole hand)": contact(part, [g.pressing(0.3, "hand")]).force}
+    return {
+        "disk 2 cm": L.disk(part, uv=(0.3, 0.5), radius=0.02, total=0.3).force,
+        "ellipse 4x2 cm": L.ellipse(part, uv=(0.6, 0.4), semi_axes=(0.04, 0.02), total=0.3).force,
+        "band 3 cm": L.band(part, at=0.5, width=0.03, total=0.3).force,
+        "grasp (whole hand)": contact(part, [g.pressing(0.3, "hand")]).force,
+    }
 
 
 def main(argv=None) -> None:
@@ -52,10 +57,14 @@ def main(argv=None) -> None:
 
     part = part_from_spec({"model": "anny", "subdivisions": args.subdivisions}, "left_arm")
     t = args.thickness_mm * 1e-3
-    print(f"left arm, {args.subdivisions} subdivision(s): {part.n_vertices} vertices; "
-          f"layer {args.thickness_mm:g} mm; {describe()}")
-    print("| load | loaded vertices | patch vertices | cold s | memory ms | disk cache ms |"
-          + (" whole-part s | max diff % |" if args.whole else ""))
+    print(
+        f"left arm, {args.subdivisions} subdivision(s): {part.n_vertices} vertices; "
+        f"layer {args.thickness_mm:g} mm; {describe()}"
+    )
+    print(
+        "| load | loaded vertices | patch vertices | cold s | memory ms | disk cache ms |"
+        + (" whole-part s | max diff % |" if args.whole else "")
+    )
     print("|---|--:|--:|--:|--:|--:|" + ("--:|--:|" if args.whole else ""))
     for name, f in loads(part).items():
         cols = np.flatnonzero(f > 0)
@@ -70,8 +79,10 @@ def main(argv=None) -> None:
         ColumnStore(part, SETUP, [t]).columns(0, cols)
         disk = time.perf_counter() - t0
         u = np.einsum("nkc,k->nc", G, f[cols])
-        row = (f"| {name} | {len(cols)} | {store.log[-1]['vertices']} | {cold:.1f} | "
-               f"{1e3 * mem:.1f} | {1e3 * disk:.0f} |")
+        row = (
+            f"| {name} | {len(cols)} | {store.log[-1]['vertices']} | {cold:.1f} | "
+            f"{1e3 * mem:.1f} | {1e3 * disk:.0f} |"
+        )
         if args.whole:
             t0 = time.perf_counter()
             W = compliance(part, t, "reference", material(**SETUP["material"]), columns=cols)

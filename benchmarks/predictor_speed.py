@@ -7,7 +7,7 @@ the bare forward pass, and scenes per second at batch 64. The FEM (reference res
 once for scale.
 
 Run: python benchmarks/predictor_speed.py [--repeat 30] [--device cpu|cuda] [--fem]
-Target (issue #4): <= 5 ms per scene at batch 1 on this CPU for each learned predictor.
+Target: <= 5 ms per scene at batch 1 on this CPU for each learned predictor.
 """
 
 from __future__ import annotations
@@ -21,13 +21,13 @@ from _timing import median_time
 
 CONFIGS = {
     "naive": {},
-    "uv_unet-paper": {},                            # 128 px, width 16, depth 5, dropout 0.5
-    "uv_unet-plain": {"depth": 3, "dropout": 0.0, "per_newton": True},     # no prior
+    "uv_unet-paper": {},  # 128 px, width 16, depth 5, dropout 0.5
+    "uv_unet-plain": {"depth": 3, "dropout": 0.0, "per_newton": True},  # no prior
     "uv_unet-256": {"size": 256, "depth": 6},
-    "gnn-mgn": {},                                  # MeshGraphNets: latent 128, 15 steps
+    "gnn-mgn": {},  # MeshGraphNets: latent 128, 15 steps
     "gnn-64x8": {"latent": 64, "steps": 8},
-    "gnn-32x8": {"latent": 32, "steps": 8, "per_newton": True},            # the first zoo GNN
-    "gnn-plain": {"latent": 32, "steps": 6, "per_newton": True},           # no prior
+    "gnn-32x8": {"latent": 32, "steps": 8, "per_newton": True},  # the first zoo GNN
+    "gnn-plain": {"latent": 32, "steps": 6, "per_newton": True},  # no prior
     # on the linear FEM operator of the arm (the zoo's linear_arm operator, installed)
     "linear": {},
     "uv_unet-shipped": {"depth": 3, "dropout": 0.0, "per_newton": True, "prior": "linear"},
@@ -47,20 +47,25 @@ def main() -> None:
 
     torch.manual_seed(0)
     arm = AnnyBody().part("left_arm")
-    scene = Scene.from_load(arm, tissue.constant(arm, 0.0075),
-                            loads.disk(arm, uv=(0.5, 0.5), radius=0.02, total=0.3))
+    scene = Scene.from_load(
+        arm, tissue.constant(arm, 0.0075), loads.disk(arm, uv=(0.5, 0.5), radius=0.02, total=0.3)
+    )
     batch = [scene] * 64
     dev = args.device
-    from stmpl import zoo
+    from stmpl.pipeline import zoo
 
-    operator = zoo.read("linear_arm", device=dev)   # the arm's linear FEM operator, 5 levels
-    print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
-          f"torch {torch.__version__}, {torch.get_num_threads()} threads, device {dev}"
-          + (f" ({torch.cuda.get_device_name()})" if dev.startswith("cuda") else ""))
+    operator = zoo.read("linear_arm", device=dev)  # the arm's linear FEM operator, 5 levels
+    print(
+        f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} cores, "
+        f"torch {torch.__version__}, {torch.get_num_threads()} threads, device {dev}"
+        + (f" ({torch.cuda.get_device_name()})" if dev.startswith("cuda") else "")
+    )
     print(f"left arm, {arm.n_vertices} vertices; median of {args.repeat} runs")
     print()
-    print("| predictor | parameters | MB | predict() ms, batch 1 | forward ms, batch 1 | "
-          "scenes/s, batch 64 |")
+    print(
+        "| predictor | parameters | MB | predict() ms, batch 1 | forward ms, batch 1 | "
+        "scenes/s, batch 64 |"
+    )
     print("|---|--:|--:|--:|--:|--:|")
     t1 = torch.tensor(scene.thickness[None], dtype=torch.float32, device=dev)
     f1 = torch.tensor(scene.force[None], dtype=torch.float32, device=dev)
@@ -81,8 +86,10 @@ def main() -> None:
         t_fwd = median_time(fwd, args.repeat, 2)
         t_b = median_time(lambda: p.predict(batch), max(3, args.repeat // 5), 2)
         n = p.n_parameters()
-        print(f"| {label} | {n} | {4 * n / 2**20:.1f} | {1e3 * t_pred:.2f} | {1e3 * t_fwd:.2f} | "
-              f"{64 / t_b:.0f} |")
+        print(
+            f"| {label} | {n} | {4 * n / 2**20:.1f} | {1e3 * t_pred:.2f} | {1e3 * t_fwd:.2f} | "
+            f"{64 / t_b:.0f} |"
+        )
     if args.fem:
         p = predictor.create("fem")
         t = median_time(lambda: p.predict(scene), 3)

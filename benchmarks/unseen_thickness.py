@@ -12,8 +12,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from stmpl import AnnyBody, loads, predictor, tissue, zoo
+from stmpl import AnnyBody, loads, predictor, tissue
 from stmpl.metrics import sample_metrics
+from stmpl.pipeline import zoo
 from stmpl.scene import Scene
 
 THICKNESS_M = (0.0055, 0.007, 0.0081, 0.0095)
@@ -29,16 +30,22 @@ def main() -> None:
     rows = []
     for t in THICKNESS_M:
         for uv, r, total in DISKS:
-            s = Scene.from_load(arm, tissue.constant(arm, t),
-                                loads.disk(arm, uv=uv, radius=r, total=total))
+            s = Scene.from_load(
+                arm, tissue.constant(arm, t), loads.disk(arm, uv=uv, radius=r, total=total)
+            )
             truth = fem.predict(s).displacement
-            rel = {n: sample_metrics(truth, m.predict(s).displacement)["rel_mee"]
-                   for n, m in models.items()}
+            rel = {
+                n: sample_metrics(truth, m.predict(s).displacement)["rel_mee"]
+                for n, m in models.items()
+            }
             rows.append(rel)
-            print(f"| {t * 1e3:g} | disk {r * 100:g} cm, {total:g} N | "
-                  + " | ".join(f"{v:.2f}" for v in rel.values()) + " |", flush=True)
-    print("| mean | | " + " | ".join(f"{np.mean([r[n] for r in rows]):.2f}" for n in models)
-          + " |")
+            print(
+                f"| {t * 1e3:g} | disk {r * 100:g} cm, {total:g} N | "
+                + " | ".join(f"{v:.2f}" for v in rel.values())
+                + " |",
+                flush=True,
+            )
+    print("| mean | | " + " | ".join(f"{np.mean([r[n] for r in rows]):.2f}" for n in models) + " |")
 
 
 if __name__ == "__main__":

@@ -10,12 +10,25 @@ Lower level: ``shell_mesh(part, thickness, layers, subdivisions, refine_near=...
 ``Solver(mesh, material, order=2).solve(force)`` / ``.continuation(force, totals)``.
 """
 
+from fem.linear_solvers import available_linear_solvers
 from fem.material import LinearElastic, NeoHookean, material
 from fem.mesh import Quality, ShellMesh, shell_mesh
 from fem.simulate import REFERENCE, RESOLUTIONS, Resolution, simulate
-from fem.linear_solvers import available_linear_solvers
 from fem.solver import Solution, Solver, SolverOptions
 
-__all__ = ["LinearElastic", "NeoHookean", "material", "Quality", "ShellMesh", "shell_mesh",
-           "Solution", "Solver", "SolverOptions", "available_linear_solvers", "REFERENCE",
-           "RESOLUTIONS", "Resolution", "simulate"]
+__all__ = [
+    "LinearElastic",
+    "NeoHookean",
+    "material",
+    "Quality",
+    "ShellMesh",
+    "shell_mesh",
+    "Solution",
+    "Solver",
+    "SolverOptions",
+    "available_linear_solvers",
+    "REFERENCE",
+    "RESOLUTIONS",
+    "Resolution",
+    "simulate",
+]

@@ -5,7 +5,10 @@ over machines). Each yields solved shards as they finish.
 
 from __future__ import annotations
 
+import concurrent.futures as cf
+import multiprocessing as mp
 import os
+import threading
 import time
 
 from fem.placements import Plan
@@ -14,8 +17,8 @@ from fem.worker import payload, solve_shard
 
 def _watch_parent(parent: int) -> None:
     """Worker initialiser: leave when the generating process is gone (killed), rather than
-    finish orphaned shards that nobody will write."""
-    import threading
+    finish orphaned shards that nobody will write.
+    """
 
     def watch():
         while True:
@@ -35,11 +38,12 @@ def run(p: Plan, todo: list[int], par: dict, threads: int):
             yield solve_shard(payload(p, k, None))
         return
     if par["backend"] == "processes":
-        import concurrent.futures as cf
-        import multiprocessing as mp
-
-        with cf.ProcessPoolExecutor(par["workers"], mp_context=mp.get_context("spawn"),
-                                    initializer=_watch_parent, initargs=(os.getpid(),)) as ex:
+        with cf.ProcessPoolExecutor(
+            par["workers"],
+            mp_context=mp.get_context("spawn"),
+            initializer=_watch_parent,
+            initargs=(os.getpid(),),
+        ) as ex:
             futs = [ex.submit(solve_shard, payload(p, k, threads)) for k in todo]
             try:
                 for f in cf.as_completed(futs):
@@ -49,14 +53,19 @@ def run(p: Plan, todo: list[int], par: dict, threads: int):
                     f.cancel()
                 raise
         return
-    from dask.distributed import Client, LocalCluster, as_completed
+    from dask.distributed import (
+        Client,
+        LocalCluster,
+        as_completed,
+    )  # deferred: the distributed backend only
 
     cluster = None
     if par["scheduler"]:
         client = Client(par["scheduler"])
     else:
-        cluster = LocalCluster(n_workers=par["workers"], threads_per_worker=1, processes=True,
-                               dashboard_address=None)
+        cluster = LocalCluster(
+            n_workers=par["workers"], threads_per_worker=1, processes=True, dashboard_address=None
+        )
         client = Client(cluster)
     try:
         futs = [client.submit(solve_shard, payload(p, k, threads), pure=False) for k in todo]

@@ -1,7 +1,7 @@
 """Datasets across bodies: a dataset config with a ``bodies`` entry is made as one member dataset
 per body (the same part of the same body model, in another shape), each an ordinary dataset in
-``<out>/body-NN/``, and a ``bodies.json`` that lists them; :func:`stmpl.dataset.open_data` reads
-the folder as one set (:class:`stmpl.dataset.Datasets`).
+``<out>/body-NN/``, and a ``bodies.json`` that lists them; :func:`stmpl.data.dataset.open_data`
+reads the folder as one set (:class:`stmpl.data.dataset.Datasets`).
 
 ``bodies`` takes, for anny, ``phenotypes`` (a list of anny phenotypes, each a mapping of
 :data:`stmpl.body.anny_body.PHENOTYPES` to [0, 1]) and/or ``sample``: ``{count, seed, age}``,
@@ -14,55 +14,73 @@ as in the paper; ``levels`` gives every body the config's ``thickness_mm``. For 
 body (a file the user supplies) ``betas`` lists shape vectors, and ``from_weight`` is the paper's
 own heuristic through beta_2: 5 mm at -2 to 10 mm at 2 (:func:`stmpl.tissue.from_beta2`).
 
-Each member is generated, resumed and checked as any dataset (:func:`fem.generate.generate`);
+Each member is generated, resumed and checked as any dataset (:func:`fem.generate.generate_bodies`);
 a member's placement seed is the config's plus its index, so the bodies' splits differ.
 """
 
 from __future__ import annotations
 
-import json
 import pathlib
 
 import numpy as np
 
-from stmpl.dataset import BODIES_FORMAT as FORMAT
+from stmpl import config as checked
+from stmpl.body.anny_body import PHENOTYPES, AnnyBody, check_phenotype
 
+BODY_KEYS = {"phenotypes", "sample", "betas", "thickness"}
+"""The keys of a config's ``bodies`` entry."""
 THICKNESS = ("from_weight", "levels")
 DEFAULT_AGE = (20.0, 70.0)
 
 
 def check_bodies(cfg: dict) -> None:
     """``ValueError`` naming what is wrong with a config's ``bodies`` entry."""
-    from fem.config import BODY_KEYS
-    from stmpl import config as checked
-    from stmpl.body.anny_body import check_phenotype
-
     b = cfg["bodies"]
     model = cfg["body"].get("model")
     if model == "smpl":
-        checked.one_of(b.get("thickness", "from_weight") if isinstance(b, dict) else None,
-                       "bodies.thickness", THICKNESS)
+        checked.one_of(
+            b.get("thickness", "from_weight") if isinstance(b, dict) else None,
+            "bodies.thickness",
+            THICKNESS,
+        )
         betas = b.get("betas")
-        if set(b) - {"betas", "thickness"} or not isinstance(betas, list) or not betas or any(
-                not isinstance(x, list) or not x or not all(
+        if (
+            set(b) - {"betas", "thickness"}
+            or not isinstance(betas, list)
+            or not betas
+            or any(
+                not isinstance(x, list)
+                or not x
+                or not all(
                     isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)
-                    for v in x) for x in betas):
-            raise ValueError(f"bodies of an SMPL-format body take betas: a non-empty list of "
-                             f"shape vectors (and thickness), got {b!r}")
+                    for v in x
+                )
+                for x in betas
+            )
+        ):
+            raise ValueError(
+                f"bodies of an SMPL-format body take betas: a non-empty list of "
+                f"shape vectors (and thickness), got {b!r}"
+            )
         if "betas" in cfg["body"]:
             raise ValueError("bodies: give the betas under bodies, not body.betas")
         if b.get("thickness", "from_weight") == "from_weight" and any(
-                len(x) < 2 or not -2 <= x[1] <= 2 for x in betas):
-            raise ValueError("bodies: thickness from_weight on an SMPL body reads beta_2, which "
-                             "must be given and lie in [-2, 2] (the paper's sweep)")
+            len(x) < 2 or not -2 <= x[1] <= 2 for x in betas
+        ):
+            raise ValueError(
+                "bodies: thickness from_weight on an SMPL body reads beta_2, which "
+                "must be given and lie in [-2, 2] (the paper's sweep)"
+            )
         return
     if isinstance(b, dict) and "betas" in b:
         raise ValueError("bodies.betas is for SMPL-format bodies; anny takes phenotypes")
     if not isinstance(b, dict) or set(b) - BODY_KEYS or not ({"phenotypes", "sample"} & set(b)):
         raise ValueError(f"bodies takes phenotypes and/or sample (and thickness), got {b!r}")
     if model != "anny":
-        raise ValueError("bodies: only anny bodies have phenotypes to vary, and SMPL-format "
-                         f"ones betas (body.model is {model!r})")
+        raise ValueError(
+            "bodies: only anny bodies have phenotypes to vary, and SMPL-format "
+            f"ones betas (body.model is {model!r})"
+        )
     if "phenotype" in cfg["body"]:
         raise ValueError("bodies: give the phenotypes under bodies, not body.phenotype")
     for ph in b.get("phenotypes") or []:
@@ -78,9 +96,12 @@ def check_bodies(cfg: dict) -> None:
         checked.integer(s.get("count"), "bodies.sample.count", 1)
         checked.integer(s.get("seed", 0), "bodies.sample.seed", 0)
         age = s.get("age", list(DEFAULT_AGE))
-        if not (isinstance(age, list) and len(age) == 2 and all(
-                isinstance(a, (int, float)) and not isinstance(a, bool) for a in age)
-                and 0 <= age[0] < age[1] <= 90):
+        if not (
+            isinstance(age, list)
+            and len(age) == 2
+            and all(isinstance(a, (int, float)) and not isinstance(a, bool) for a in age)
+            and 0 <= age[0] < age[1] <= 90
+        ):
             raise ValueError(f"bodies.sample.age must be [lo, hi] years in 0..90, got {age!r}")
     checked.one_of(b.get("thickness", "from_weight"), "bodies.thickness", THICKNESS)
 
@@ -88,29 +109,34 @@ def check_bodies(cfg: dict) -> None:
 def sample_phenotypes(count: int, seed: int = 0, age=DEFAULT_AGE) -> list[dict]:
     """``count`` phenotypes from anny's distribution of realistic bodies, adults of ``age``
     [lo, hi] years (seeded; values rounded to 4 decimals so that configs and hashes carry them
-    exactly)."""
-    import torch
-    from anny.shape_distribution import SimpleShapeDistribution
+    exactly).
+    """
+    import torch  # deferred: about a second to import; the core's types do not need it
 
-    from stmpl.body.anny_body import PHENOTYPES, AnnyBody
+    # deferred: anny's shape distribution (torch, warp)
+    from anny.shape_distribution import SimpleShapeDistribution  # noqa: I001
 
     model = AnnyBody().anny
     lo, hi = (torch.tensor(float(a), dtype=model.dtype) for a in age)
-    dist = SimpleShapeDistribution(model, morphological_age_distribution=torch.distributions
-                                   .Uniform(lo, hi))
+    dist = SimpleShapeDistribution(
+        model, morphological_age_distribution=torch.distributions.Uniform(lo, hi)
+    )
     state = torch.get_rng_state()
     try:
         torch.manual_seed(int(seed))
         _, ph = dist.sample(int(count))
     finally:
         torch.set_rng_state(state)
-    return [{k: round(float(np.clip(float(ph[k][i]), 0.0, 1.0)), 4) for k in PHENOTYPES}
-            for i in range(int(count))]
+    return [
+        {k: round(float(np.clip(float(ph[k][i]), 0.0, 1.0)), 4) for k in PHENOTYPES}
+        for i in range(int(count))
+    ]
 
 
 def phenotypes(cfg: dict) -> list[dict]:
     """The config's bodies as phenotypes: the listed ones, then the sampled ones (for an SMPL
-    body its betas, each as ``{"betas": [...]}``)."""
+    body its betas, each as ``{"betas": [...]}``).
+    """
     b = cfg["bodies"]
     if cfg["body"].get("model") == "smpl":
         return [{"betas": [float(v) for v in x]} for x in b["betas"]]
@@ -124,7 +150,8 @@ def phenotypes(cfg: dict) -> list[dict]:
 def members(cfg: dict) -> list[dict]:
     """One dataset config per body: the config without ``bodies``, the body's phenotype in
     ``body``, its thickness (the paper's heuristic, rounded to 0.01 mm, or the config's levels),
-    its own name (``<name>-body<NN>``) and placement seed (the config's plus its index)."""
+    its own name (``<name>-body<NN>``) and placement seed (the config's plus its index).
+    """
     out = []
     how = cfg["bodies"].get("thickness", "from_weight")
     smpl = cfg["body"].get("model") == "smpl"
@@ -143,56 +170,3 @@ def members(cfg: dict) -> list[dict]:
 
 def member_folder(out, k: int) -> pathlib.Path:
     return pathlib.Path(out) / f"body-{k:02d}"
-
-
-def generate_bodies(cfg: dict, out, max_bodies: int | None = None, **kwargs) -> dict:
-    """Generate (or finish) every member of a ``bodies`` config in ``out`` and write
-    ``bodies.json`` when all are done; ``max_bodies`` stops after the first that many (each
-    an ordinary dataset already). ``kwargs`` go to :func:`fem.generate.generate`. Returns the
-    bodies card (``{}`` if a member stopped early or ``max_bodies`` left some out)."""
-    import hashlib
-
-    from fem.config import config_hash
-    from fem.generate import generate
-    from stmpl.files import atomic_write_text
-
-    out = pathlib.Path(out)
-    out.mkdir(parents=True, exist_ok=True)
-    ms = members(cfg)
-    saved = out / "bodies.yaml"
-    import yaml
-
-    if saved.exists():
-        from fem.config import read_config
-
-        if config_hash(read_config(yaml.safe_load(saved.read_text()))) != config_hash(cfg):
-            raise ValueError(f"{out} holds datasets from a different config; use another "
-                             "output folder or delete it")
-    else:
-        atomic_write_text(saved, yaml.safe_dump(cfg, sort_keys=False))
-    cards = []
-    if max_bodies is not None and max_bodies < 1:
-        raise ValueError(f"max_bodies must be >= 1, got {max_bodies}")
-    for k, m in enumerate(ms):
-        if max_bodies is not None and k >= max_bodies:
-            return {}
-        if kwargs.get("progress", True):
-            ph = (", ".join(f"{a} {v:.2f}" for a, v in m["body"]["phenotype"].items())
-                  if "phenotype" in m["body"] else f"betas {m['body']['betas']}")
-            print(f"body {k + 1}/{len(ms)}: {ph}; {m['thickness_mm'][0]:g} mm", flush=True)
-        card = generate(m, member_folder(out, k), **kwargs)
-        if not card:
-            return {}
-        cards.append(card)
-    card = {"format": FORMAT, "name": cfg["name"], "config": cfg,
-            "config_hash": config_hash(cfg),
-            "members": [{"folder": member_folder(out, k).name, "name": c["name"],
-                         "phenotype": ms[k]["body"]["phenotype"] if "phenotype" in ms[k]["body"]
-                         else {"betas": ms[k]["body"]["betas"]},
-                         "thickness_mm": ms[k]["thickness_mm"], "hash": c["hash"],
-                         "samples": c["samples"], "samples_per_split": c["samples_per_split"],
-                         "failures": c["failures"]} for k, c in enumerate(cards)],
-            "samples": sum(int(c["samples"]) for c in cards),
-            "hash": hashlib.sha256(" ".join(c["hash"] for c in cards).encode()).hexdigest()[:16]}
-    atomic_write_text(out / "bodies.json", json.dumps(card, indent=1))
-    return card

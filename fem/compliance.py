@@ -25,16 +25,27 @@ import time
 
 import numpy as np
 
+from fem.local import GROW, first_margin, patch
+from fem.material import material
 from fem.material import material as make_material
 from fem.mesh import shell_mesh
 from fem.simulate import resolution
 from fem.solver import Solver, SolverOptions
-from stmpl.body.part import BodyPart
+from stmpl.body.model import default_cache_dir
+from stmpl.files import atomic_savez
+from stmpl.part import BodyPart
 
 
-def compliance(part: BodyPart, thickness: float | np.ndarray, res="reference", material=None,
-               options: SolverOptions | None = None, block: int = 64,
-               progress=None, columns=None) -> np.ndarray:
+def compliance(
+    part: BodyPart,
+    thickness: float | np.ndarray,
+    res="reference",
+    material=None,
+    options: SolverOptions | None = None,
+    block: int = 64,
+    progress=None,
+    columns=None,
+) -> np.ndarray:
     """``(N, N, 3)`` compliance ``G`` (m/N): ``G[i, j]`` is vertex ``i``'s displacement under a
     unit normal force on vertex ``j`` of a layer of ``thickness`` (m, a scalar or ``(N,)``).
     With ``columns`` ``(k,)`` (vertex indices) only those: ``(N, k, 3)``.
@@ -79,8 +90,9 @@ def sparsify(G: np.ndarray, tol: float = 1e-3) -> tuple[np.ndarray, np.ndarray, 
     where ``|G_ij|`` reaches ``tol`` times the level's largest entry at some level.
 
     Returns ``(index (2, nnz) [i; j], values (L, nnz, 3), dropped)``, ``dropped`` the largest
-    left-out ``|G_ij|`` relative to its level's largest (<= ``tol``)."""
-    mag = np.linalg.norm(G, axis=-1)                                  # (L, N, N)
+    left-out ``|G_ij|`` relative to its level's largest (<= ``tol``).
+    """
+    mag = np.linalg.norm(G, axis=-1)  # (L, N, N)
     rel = mag / mag.reshape(len(G), -1).max(1)[:, None, None]
     keep = (rel >= tol).any(0)
     i, j = np.nonzero(keep)
@@ -100,24 +112,31 @@ COLUMN_THICKNESSES = 3.0
 """On-demand columns start from the patch within this many thicknesses of the loaded vertices
 (plus their radius and two edges), where the local FEM starts at six (its answer is held to half
 the tolerance); the ring test above still grows it where that is too tight. Measured on a 2 cm
-disk at 6.5 mm on a new body, mid-forearm and near the wrist (session 13): six thicknesses cut
+disk at 6.5 mm on a new body, mid-forearm and near the wrist: six thicknesses cut
 779 / 498 of the 2109 vertices, the ring moved 2-3e-4 of a column's largest and the load's
 answer lay within 1e-4 of the whole part's deepest; three cut 579 / 445, the ring moved 2e-3 and
 the answer within 9e-4 of the whole part's, in 20-25 % less time."""
 
 
-def local_compliance(part: BodyPart, thickness: float, columns, res="reference", material=None,
-                     options: SolverOptions | None = None, margin: float | None = None,
-                     tolerance: float = COLUMN_TOLERANCE, grow: float | None = None
-                     ) -> tuple[np.ndarray, dict]:
+def local_compliance(
+    part: BodyPart,
+    thickness: float,
+    columns,
+    res="reference",
+    material=None,
+    options: SolverOptions | None = None,
+    margin: float | None = None,
+    tolerance: float = COLUMN_TOLERANCE,
+    grow: float | None = None,
+) -> tuple[np.ndarray, dict]:
     """The columns ``(N, k, 3)`` (m/N) of :func:`compliance` for the vertices ``columns``
     ``(k,)`` of a uniform layer ``thickness`` (m), solved on the patch within ``margin`` of them
     (default :func:`fem.local.first_margin` at :data:`COLUMN_THICKNESSES`); the patch grows by
     ``grow`` (default :data:`fem.local.GROW`) until every column moves the ring next to its cut
     by at most ``tolerance`` of its own largest displacement, up to the whole part. Rows outside
-    the patch are zero. Returns the columns and a summary (margin, patch vertices, attempts, seconds)."""
-    from fem.local import GROW, first_margin, patch
-
+    the patch are zero. Returns the columns and a summary (margin, patch vertices, attempts,
+    seconds).
+    """
     n = part.n_vertices
     cols = np.unique(np.asarray(columns, dtype=np.int64))
     if len(cols) == 0:
@@ -139,17 +158,30 @@ def local_compliance(part: BodyPart, thickness: float, columns, res="reference",
         where = np.full(n, -1)
         where[p.vertices] = np.arange(len(p.vertices))
         g = compliance(p.part, t[p.vertices], res, material, options, columns=where[cols])
-        mag = np.linalg.norm(g, axis=-1)                                   # (n_p, k)
-        moved = 0.0 if p.whole or len(p.ring) == 0 else float(
-            (mag[p.ring].max(0) / np.maximum(mag.max(0), 1e-300)).max())
-        attempts.append({"margin_m": m, "vertices": int(len(p.vertices)), "whole": p.whole,
-                         "seconds": time.perf_counter() - t0, "ring_moved": moved})
+        mag = np.linalg.norm(g, axis=-1)  # (n_p, k)
+        moved = (
+            0.0
+            if p.whole or len(p.ring) == 0
+            else float((mag[p.ring].max(0) / np.maximum(mag.max(0), 1e-300)).max())
+        )
+        attempts.append(
+            {
+                "margin_m": m,
+                "vertices": int(len(p.vertices)),
+                "whole": p.whole,
+                "seconds": time.perf_counter() - t0,
+                "ring_moved": moved,
+            }
+        )
         if p.whole or moved <= tolerance:
             out = np.zeros((n, len(cols), 3))
             out[p.vertices] = g
             order = np.searchsorted(cols, np.asarray(columns, dtype=np.int64))
-            return out[:, order], {"margin_m": m, "vertices": int(len(p.vertices)),
-                                   "attempts": attempts}
+            return out[:, order], {
+                "margin_m": m,
+                "vertices": int(len(p.vertices)),
+                "attempts": attempts,
+            }
         m *= grow
 
 
@@ -157,23 +189,24 @@ STORE_VERSION = 1
 
 
 class ColumnStore:
-    """The compliance operator of one body part and FEM set-up at thickness ``levels`` (m),
-    column by column as scenes ask for them (:func:`local_compliance`), kept in memory (one
-    dense ``(N, N, 3)`` float32 array per level used, each column contiguous) and, with ``cache``, on disk in stmpl's
-    cache directory (``compliance/``), so a later process starts warm.
+    """The compliance operator of one body part and FEM set-up at thickness ``levels`` (m), column
+    by column as scenes ask for them (:func:`local_compliance`), kept in memory (one dense ``(N, N,
+    3)`` float32 array per level used, each column contiguous) and, with ``cache``, on disk in
+    stmpl's cache directory (``compliance/``), so a later process starts warm.
 
     ``setup``: a dataset config's ``material``, ``resolution`` and ``solver`` entries.
     """
 
-    def __init__(self, part: BodyPart, setup: dict, levels, cache: bool = True,
-                 progress: bool = False):
-        from fem.material import material
-        from fem.solver import SolverOptions
+    def __init__(
+        self, part: BodyPart, setup: dict, levels, cache: bool = True, progress: bool = False
+    ):
 
         self.part = part
-        self.setup = {"material": setup.get("material") or {},
-                      "resolution": setup.get("resolution") or "reference",
-                      "solver": setup.get("solver") or {}}
+        self.setup = {
+            "material": setup.get("material") or {},
+            "resolution": setup.get("resolution") or "reference",
+            "solver": setup.get("solver") or {},
+        }
         self.levels = [float(x) for x in levels]
         self.material = material(**(self.setup["material"] or {}))
         self.options = SolverOptions(**(self.setup["solver"] or {}))
@@ -183,15 +216,17 @@ class ColumnStore:
         self._by_column: dict[int, np.ndarray] = {}
         self._done: dict[int, np.ndarray] = {}
         self.log: list[dict] = []
-        h = hashlib.sha256(json.dumps([STORE_VERSION, self.setup, COLUMN_TOLERANCE],
-                                      sort_keys=True).encode())
+        h = hashlib.sha256(
+            json.dumps([STORE_VERSION, self.setup, COLUMN_TOLERANCE], sort_keys=True).encode()
+        )
         for k in ("vertices", "faces"):
             h.update(np.ascontiguousarray(getattr(part, k)).tobytes())
         self.key = h.hexdigest()[:16]
 
     def level(self, thickness: float) -> int:
         """The index of the level at ``thickness`` (m), added if the store has none there (its
-        columns are solved when asked for, like any other's)."""
+        columns are solved when asked for, like any other's).
+        """
         t = float(thickness)
         if not (np.isfinite(t) and t > 0):
             raise ValueError(f"a level must be a positive thickness, got {t!r} m")
@@ -203,8 +238,6 @@ class ColumnStore:
 
     def path(self, level: int) -> pathlib.Path:
         """The disk cache file of level ``level`` (an index into ``levels``)."""
-        from stmpl.body.model import default_cache_dir
-
         mm = f"{self.levels[level] * 1e3:.6g}"
         return default_cache_dir() / "compliance" / f"{self.part.name}-{self.key}-{mm}mm.npz"
 
@@ -219,7 +252,8 @@ class ColumnStore:
 
     def _read(self, level: int) -> None:
         """Take the columns the level's cache file holds that memory does not (another process
-        may have added some since)."""
+        may have added some since).
+        """
         G, done = self._G[level], self._done[level]
         path = self.path(level)
         if not (self.cache and path.is_file()):
@@ -233,7 +267,7 @@ class ColumnStore:
                 G[:, cols[new]] = vals[:, new]
                 done[cols[new]] = True
         except (OSError, ValueError, KeyError):
-            pass                                          # a broken cache file is recomputed
+            pass  # a broken cache file is recomputed
 
     @property
     def computed(self) -> int:
@@ -248,40 +282,47 @@ class ColumnStore:
 
     def ensure(self, level: int, columns, save: bool = True) -> int:
         """Compute the missing ``columns`` at ``level`` (one patch around all of them); with
-        ``save``, write the level's cache file if anything was computed. Returns how many."""
+        ``save``, write the level's cache file if anything was computed. Returns how many.
+        """
         G, done = self._level(level)
         todo = self.missing(level, columns)
         if len(todo) == 0:
             return 0
         t0 = time.perf_counter()
-        g, info = local_compliance(self.part, self.levels[level], todo, self.res, self.material,
-                                   self.options)
+        g, info = local_compliance(
+            self.part, self.levels[level], todo, self.res, self.material, self.options
+        )
         if not np.all(np.isfinite(g)):
             raise ArithmeticError("the compliance operator has non-finite entries")
         G[:, todo] = g
         done[todo] = True
-        self.log.append({"level_mm": self.levels[level] * 1e3, "columns": int(len(todo)),
-                         "seconds": time.perf_counter() - t0, **info})
+        self.log.append(
+            {
+                "level_mm": self.levels[level] * 1e3,
+                "columns": int(len(todo)),
+                "seconds": time.perf_counter() - t0,
+                **info,
+            }
+        )
         if save:
             self.save(level)
         return len(todo)
 
     def save(self, level: int | None = None) -> None:
         """Write the computed columns of ``level`` (all levels in memory if None) to disk."""
-        from stmpl.files import atomic_savez
-
         if not self.cache:
             return
-        for lv in ([level] if level is not None else list(self._G)):
+        for lv in [level] if level is not None else list(self._G):
             G, done = self._level(lv)
-            self._read(lv)                                # keep what other processes added
+            self._read(lv)  # keep what other processes added
             cols = np.flatnonzero(done)
             atomic_savez(self.path(lv), {"columns": cols, "values": G[:, cols]})
 
     def columns(self, level: int, columns, ensure: bool = True) -> np.ndarray:
         """``(N, k, 3)`` float32 columns at ``level`` for the vertices ``columns`` ``(k,)``,
-        computed first where missing (``ensure=False``: the caller has made sure)."""
+        computed first where missing (``ensure=False``: the caller has made sure).
+        """
         if ensure:
             self.ensure(level, columns)
-        self._level(level)                  # each column contiguous: the gather is k copies
+        self._level(level)  # each column contiguous: the gather is k copies
         return self._by_column[level][np.asarray(columns, dtype=np.int64)].transpose(1, 0, 2)

@@ -9,9 +9,14 @@ import json
 
 import numpy as np
 
+from fem.bodies import check_bodies
+from fem.material import material
+from fem.simulate import resolution
+from fem.solver import SolverOptions
 from stmpl import config as checked
 from stmpl.body.spec import check_spec
 from stmpl.predictor import FIDELITIES
+from stmpl.tissue import THICKNESS_RANGE
 
 DEFAULTS = {
     "name": None,
@@ -34,7 +39,6 @@ DEFAULTS = {
 }
 OPTIONAL = {"fidelity": "full", "linear": False, "bodies": None}
 """Keys whose default leaves a config's hash as it was before the key existed."""
-BODY_KEYS = {"phenotypes", "sample", "betas", "thickness"}
 """``bodies``: ``phenotypes`` (a list of anny phenotypes), ``sample`` (``{count, seed, age}``:
 that many drawn from anny's shape distribution, adults of ``age`` [lo, hi] years), or for an
 SMPL-format body ``betas`` (a list of shape vectors); ``thickness`` (``from_weight``, the
@@ -64,44 +68,47 @@ def read_config(source) -> dict:
 
 def _numbers(values, name: str) -> np.ndarray:
     """A 1-D float array of ``values`` (a non-empty list of numbers, no bools)."""
-    if not isinstance(values, (list, tuple)) or not values or any(
-            isinstance(x, bool) or not isinstance(x, (int, float)) for x in values):
+    if (
+        not isinstance(values, (list, tuple))
+        or not values
+        or any(isinstance(x, bool) or not isinstance(x, (int, float)) for x in values)
+    ):
         raise ValueError(f"{name} must be a non-empty list of numbers, got {values!r}")
     return np.asarray(values, dtype=float)
 
 
 def check(cfg: dict) -> None:
     """Raise ``ValueError`` naming the first key of ``cfg`` that is out of place."""
-    from stmpl.tissue import THICKNESS_RANGE
-
     check_spec(cfg["body"])
     if not isinstance(cfg["part"], str):
         raise ValueError(f"part must be a part name, got {cfg['part']!r}")
     th = _numbers(cfg["thickness_mm"], "thickness_mm")
     lo, hi = (1e3 * x for x in THICKNESS_RANGE)
     if not np.all((th >= lo) & (th <= hi)):
-        raise ValueError(f"thickness_mm must be a list of values in [{lo}, {hi}] mm, got "
-                         f"{cfg['thickness_mm']}")
+        raise ValueError(
+            f"thickness_mm must be a list of values in [{lo}, {hi}] mm, got {cfg['thickness_mm']}"
+        )
     f = _numbers(cfg["forces"], "forces")
     if not np.all(np.isfinite(f)) or f.min() <= 0 or np.any(np.diff(f) <= 0):
         raise ValueError(f"forces must be a rising list of totals > 0 N, got {cfg['forces']}")
     checked.number(cfg["max_pressure"], "max_pressure", 0, low_open=True, unit="Pa")
     pl = cfg["placements"]
     if not isinstance(pl, dict) or not pl:
-        raise ValueError("placements must name at least one load kind: "
-                         f"{sorted(PLACEMENT_KEYS)}")
+        raise ValueError(f"placements must name at least one load kind: {sorted(PLACEMENT_KEYS)}")
     for kind, spec in pl.items():
         if kind not in PLACEMENT_KEYS:
             raise ValueError(f"unknown placement kind {kind!r}; use {sorted(PLACEMENT_KEYS)}")
         if not isinstance(spec, dict) or set(spec) - PLACEMENT_KEYS[kind]:
-            raise ValueError(f"placements.{kind} takes keys {sorted(PLACEMENT_KEYS[kind])}, "
-                             f"got {spec!r}")
+            raise ValueError(
+                f"placements.{kind} takes keys {sorted(PLACEMENT_KEYS[kind])}, got {spec!r}"
+            )
         if "centres" in spec:
             checked.integer(spec["centres"], f"placements.{kind}.centres", 1)
     s = _numbers(cfg["splits"], "splits")
     if s.shape != (3,) or s.min() < 0 or abs(s.sum() - 1) > 1e-9:
-        raise ValueError(f"splits must be three shares (train, val, test) summing to 1, got "
-                         f"{cfg['splits']}")
+        raise ValueError(
+            f"splits must be three shares (train, val, test) summing to 1, got {cfg['splits']}"
+        )
     checked.integer(cfg["seed"], "seed", 0)
     checked.integer(cfg["shard_tasks"], "shard_tasks", 1)
     par = cfg["parallel"]
@@ -111,9 +118,6 @@ def check(cfg: dict) -> None:
     checked.integer(par["workers"], "parallel.workers", 1)
     if not isinstance(cfg["material"], dict) or not isinstance(cfg["solver"], dict):
         raise ValueError("material and solver must be mappings")
-    from fem.material import material
-    from fem.simulate import resolution
-    from fem.solver import SolverOptions
 
     for key, make in (("material", material), ("solver", SolverOptions)):
         try:
@@ -125,15 +129,13 @@ def check(cfg: dict) -> None:
     if not isinstance(cfg["linear"], bool):
         raise ValueError(f"linear must be true or false, got {cfg['linear']!r}")
     if cfg["bodies"] is not None:
-        from fem.bodies import check_bodies
-
         check_bodies(cfg)
 
 
 def config_hash(cfg: dict) -> str:
     """Hash of everything that decides the samples (not how they are computed in parallel)."""
     key = {k: v for k, v in cfg.items() if k not in ("parallel", "name")}
-    for k, default in OPTIONAL.items():     # defaults: hashes from before the key existed hold
+    for k, default in OPTIONAL.items():  # defaults: hashes from before the key existed hold
         if k in key and key[k] == default:
             del key[k]
     return hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]

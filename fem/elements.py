@@ -52,8 +52,9 @@ def _dN_p2(L: np.ndarray) -> np.ndarray:
     return d
 
 
-P1 = TetElement(1, 4, np.full((1, 4), 0.25), np.ones(1),
-                np.broadcast_to(np.eye(4), (1, 4, 4)).copy())
+P1 = TetElement(
+    1, 4, np.full((1, 4), 0.25), np.ones(1), np.broadcast_to(np.eye(4), (1, 4, 4)).copy()
+)
 _pts = np.full((4, 4), _b) + np.eye(4) * (_a - _b)
 P2 = TetElement(2, 10, _pts, np.full(4, 0.25), _dN_p2(_pts))
 ELEMENTS = {1: P1, 2: P2}
@@ -70,7 +71,8 @@ def shape_p2(L: np.ndarray) -> np.ndarray:
 
 def quadratic(tets: np.ndarray, n_nodes: int):
     """P2 connectivity from P1 tets ``(T, 4)``: ``(tets10 (T, 10), edges (E, 2))``; the
-    midpoint of edge ``e`` is node ``n_nodes + e``."""
+    midpoint of edge ``e`` is node ``n_nodes + e``.
+    """
     e = np.sort(tets[:, EDGES].reshape(-1, 2), axis=1)
     edges, inv = np.unique(e, axis=0, return_inverse=True)
     return np.concatenate([tets, n_nodes + inv.reshape(-1, 6)], axis=1), edges
@@ -79,9 +81,16 @@ def quadratic(tets: np.ndarray, n_nodes: int):
 # Triangle quadrature of degree 4 (6 points; Strang & Fix), barycentric, weights sum to 1.
 _t1, _t2 = 0.445948490915965, 0.091576213509771
 _w1, _w2 = 0.223381589678011, 0.109951743655322
-TRI_POINTS = np.array([[_t1, _t1, 1 - 2 * _t1], [_t1, 1 - 2 * _t1, _t1],
-                       [1 - 2 * _t1, _t1, _t1], [_t2, _t2, 1 - 2 * _t2],
-                       [_t2, 1 - 2 * _t2, _t2], [1 - 2 * _t2, _t2, _t2]])
+TRI_POINTS = np.array(
+    [
+        [_t1, _t1, 1 - 2 * _t1],
+        [_t1, 1 - 2 * _t1, _t1],
+        [1 - 2 * _t1, _t1, _t1],
+        [_t2, _t2, 1 - 2 * _t2],
+        [_t2, 1 - 2 * _t2, _t2],
+        [1 - 2 * _t2, _t2, _t2],
+    ]
+)
 TRI_WEIGHTS = np.array([_w1] * 3 + [_w2] * 3)
 
 

@@ -8,39 +8,54 @@ and the main process writes it as ``shard-NNNNN.h5`` in one atomic rename, so a 
 moment loses only shards in flight and a second run picks up the rest: no sample is lost or
 written twice. Finally ``card.json`` sums up the dataset: config, counts per split, kind and
 thickness, failures by reason, timings, code version and the content hash (the format:
-:mod:`stmpl.dataset`).
+:mod:`stmpl.data.dataset`).
 """
 
 from __future__ import annotations
 
 import datetime as _dt
+import hashlib
 import json
 import os
 import pathlib
+import subprocess
 import time
 
 import numpy as np
 import yaml
+from tqdm import tqdm
 
+import stmpl
 from fem.backends import run
+from fem.bodies import member_folder, members
 from fem.config import config_hash, read_config
 from fem.placements import Plan, plan
-from stmpl.body.part import BodyPart
-from stmpl.dataset import (FORMAT, SPLITS, content_hash, part_hash, read_shard_meta, shard_path,
-                           write_shard)
+from stmpl.data.dataset import BODIES_FORMAT
+from stmpl.data.format import (
+    FORMAT,
+    SPLITS,
+    content_hash,
+    part_hash,
+    read_shard_meta,
+    shard_path,
+    write_shard,
+)
 from stmpl.files import atomic_savez, atomic_write_text
+from stmpl.part import BodyPart
 
 
 def code_version() -> dict:
-    import subprocess
-
-    import stmpl
 
     out = {"stmpl": stmpl.__version__}
     try:
         here = pathlib.Path(__file__).resolve().parent
-        out["git"] = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=here,
-                                    capture_output=True, text=True, timeout=5).stdout.strip()
+        out["git"] = subprocess.run(
+            ["git", "rev-parse", "--short", "HEAD"],
+            cwd=here,
+            capture_output=True,
+            text=True,
+            timeout=5,
+        ).stdout.strip()
     except (OSError, subprocess.SubprocessError):
         pass
     return out
@@ -83,34 +98,49 @@ def write_card(out: pathlib.Path, p: Plan, chash: str, runs: list) -> dict:
         "name": p.cfg["name"],
         "config": p.cfg,
         "config_hash": chash,
-        "part": {"name": p.part.name, "vertices": p.part.n_vertices, "faces": p.part.n_faces,
-                 "source": p.part.source},
+        "part": {
+            "name": p.part.name,
+            "vertices": p.part.n_vertices,
+            "faces": p.part.n_faces,
+            "source": p.part.source,
+        },
         "placements": len(p.placements),
-        "placements_skipped": {"count": len(p.skipped),
-                               "by_reason": _count(p.skipped, lambda x: x["reason"])},
+        "placements_skipped": {
+            "count": len(p.skipped),
+            "by_reason": _count(p.skipped, lambda x: x["reason"]),
+        },
         "placements_per_split": {s: int((p.split == i).sum()) for i, s in enumerate(SPLITS)},
         "tasks": len(p.tasks),
         "samples": int(len(split)),
         "samples_per_split": {s: int((split == i).sum()) for i, s in enumerate(SPLITS)},
         "samples_per_kind": {k: kinds.count(k) for k in sorted(set(kinds))},
-        "samples_per_thickness_mm": {f"{t:g}": int((level == i).sum()) for i, t in
-                                     enumerate(th)},
-        "samples_per_force_N": {f"{f:g}": int(np.isclose(total, f).sum())
-                                for f in p.cfg["forces"]},
+        "samples_per_thickness_mm": {f"{t:g}": int((level == i).sum()) for i, t in enumerate(th)},
+        "samples_per_force_N": {f"{f:g}": int(np.isclose(total, f).sum()) for f in p.cfg["forces"]},
         "attempted": int(len(p.tasks) * len(p.cfg["forces"])),
         "failures": len(failures),
         "failures_by_reason": _count(failures, lambda f: f["reason"].split(":")[0]),
         "failures_by_thickness_and_force": _count(
-            failures, lambda f: f"{f['thickness_mm']:g} mm @ {f['total']:g} N"),
-        "max_compression": {"median": median(comp),
-                            "max": float(comp.max()) if len(comp) else None},
-        "timing": {"solve_seconds_total": float(st.sum()),
-                   "solve_seconds_median_per_sample": median(st),
-                   "newton_iterations_median": median(its),
-                   "worker_seconds_total": float(sum(m["wall"] for m in metas)),
-                   "runs": runs},
-        "shards": [{"file": shard_path(out, m["shard"]).name, "samples": m["n_samples"],
-                    "content": m["content"]} for m in metas],
+            failures, lambda f: f"{f['thickness_mm']:g} mm @ {f['total']:g} N"
+        ),
+        "max_compression": {
+            "median": median(comp),
+            "max": float(comp.max()) if len(comp) else None,
+        },
+        "timing": {
+            "solve_seconds_total": float(st.sum()),
+            "solve_seconds_median_per_sample": median(st),
+            "newton_iterations_median": median(its),
+            "worker_seconds_total": float(sum(m["wall"] for m in metas)),
+            "runs": runs,
+        },
+        "shards": [
+            {
+                "file": shard_path(out, m["shard"]).name,
+                "samples": m["n_samples"],
+                "content": m["content"],
+            }
+            for m in metas
+        ],
         "code": code_version(),
         "created": _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds"),
         "hash": content_hash(part_hash(written), [m["content"] for m in metas]),
@@ -120,8 +150,9 @@ def write_card(out: pathlib.Path, p: Plan, chash: str, runs: list) -> dict:
 
 
 def read_part(out: pathlib.Path) -> BodyPart:
-    """The part a dataset folder's ``part.npz`` holds (as :class:`stmpl.dataset.Dataset` reads
-    it, so the hashes agree)."""
+    """The part a dataset folder's ``part.npz`` holds (as :class:`stmpl.data.dataset.Dataset` reads
+    it, so the hashes agree).
+    """
     with np.load(out / "part.npz") as z:
         arrays = {k: z[k] for k in z.files}
     return BodyPart.from_arrays(str(arrays["name"]), arrays, json.loads(str(arrays["source"])))
@@ -129,31 +160,48 @@ def read_part(out: pathlib.Path) -> BodyPart:
 
 def _check_solvable(p: Plan) -> None:
     """Refuse a config with nothing to solve: every force level of every placement over
-    ``max_pressure``."""
+    ``max_pressure``.
+    """
     smallest = min(p.cfg["forces"]) / max(pl["area"] for pl in p.placements)
     if smallest > p.cfg["max_pressure"]:
-        raise ValueError(f"nothing to solve: even the smallest force ({min(p.cfg['forces']):g} N)"
-                         f" on the largest placement gives {smallest:.0f} Pa, above max_pressure "
-                         f"{p.cfg['max_pressure']:g} Pa")
+        raise ValueError(
+            f"nothing to solve: even the smallest force ({min(p.cfg['forces']):g} N)"
+            f" on the largest placement gives {smallest:.0f} Pa, above max_pressure "
+            f"{p.cfg['max_pressure']:g} Pa"
+        )
 
 
-def generate(config, out=None, *, workers: int | None = None, backend: str | None = None,
-             scheduler: str | None = None, progress: bool = True, part: BodyPart | None = None,
-             max_shards: int | None = None, max_bodies: int | None = None) -> dict:
+def generate(
+    config,
+    out=None,
+    *,
+    workers: int | None = None,
+    backend: str | None = None,
+    scheduler: str | None = None,
+    progress: bool = True,
+    part: BodyPart | None = None,
+    max_shards: int | None = None,
+    max_bodies: int | None = None,
+) -> dict:
     """Generate (or finish) the dataset of ``config`` (a YAML path or a dict) in folder ``out``
     (default ``data/<name>``). Returns the card. ``max_shards`` stops after that many new shards
     (for tests and trial runs; the card is then not written and ``{}`` is returned);
-    ``max_bodies``, for a config of several bodies, stops after that many bodies."""
+    ``max_bodies``, for a config of several bodies, stops after that many bodies.
+    """
     cfg = read_config(config)
-    if cfg["bodies"] is not None:                         # one member dataset per body
-        from fem.bodies import generate_bodies
-
+    if cfg["bodies"] is not None:  # one member dataset per body
         if part is not None:
             raise ValueError("a bodies config makes its own parts; part= is not taken")
-        return generate_bodies(cfg, out if out is not None else pathlib.Path("data") /
-                               cfg["name"], workers=workers, backend=backend,
-                               scheduler=scheduler, progress=progress, max_shards=max_shards,
-                               max_bodies=max_bodies)
+        return generate_bodies(
+            cfg,
+            out if out is not None else pathlib.Path("data") / cfg["name"],
+            workers=workers,
+            backend=backend,
+            scheduler=scheduler,
+            progress=progress,
+            max_shards=max_shards,
+            max_bodies=max_bodies,
+        )
     par = dict(cfg["parallel"])
     if workers is not None:
         par["workers"] = workers
@@ -161,8 +209,11 @@ def generate(config, out=None, *, workers: int | None = None, backend: str | Non
         par["backend"] = backend
     if scheduler is not None:
         par["backend"], par["scheduler"] = "dask", scheduler
-    if isinstance(par["workers"], bool) or not isinstance(par["workers"], int) \
-            or par["workers"] < 1:
+    if (
+        isinstance(par["workers"], bool)
+        or not isinstance(par["workers"], int)
+        or par["workers"] < 1
+    ):
         raise ValueError(f"workers must be an integer >= 1, got {par['workers']!r}")
     if max_shards is not None and max_shards < 1:
         raise ValueError(f"max_shards must be >= 1, got {max_shards}")
@@ -175,12 +226,19 @@ def generate(config, out=None, *, workers: int | None = None, backend: str | Non
     if saved.exists():
         old = yaml.safe_load(saved.read_text())
         if config_hash(read_config(old)) != chash:
-            raise ValueError(f"{out} holds a dataset from a different config; use another "
-                             "output folder or delete it")
+            raise ValueError(
+                f"{out} holds a dataset from a different config; use another "
+                "output folder or delete it"
+            )
     if not saved.exists():
-        atomic_savez(out / "part.npz", {**p.part.arrays(),
-                                        "name": np.array(p.part.name),
-                                        "source": np.array(json.dumps(p.part.source))})
+        atomic_savez(
+            out / "part.npz",
+            {
+                **p.part.arrays(),
+                "name": np.array(p.part.name),
+                "source": np.array(json.dumps(p.part.source)),
+            },
+        )
         atomic_write_text(saved, yaml.safe_dump(cfg, sort_keys=False))
     for stale in out.glob("shard-*.h5.*.tmp"):
         stale.unlink(missing_ok=True)
@@ -195,30 +253,111 @@ def generate(config, out=None, *, workers: int | None = None, backend: str | Non
     bar = None
     totals = {"samples": 0, "failed": 0}
     if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=p.n_shards, initial=p.n_shards - len(todo), unit="shard",
-                   desc=f"generate {cfg['name']}", dynamic_ncols=True)
+        bar = tqdm(
+            total=p.n_shards,
+            initial=p.n_shards - len(todo),
+            unit="shard",
+            desc=f"generate {cfg['name']}",
+            dynamic_ncols=True,
+        )
     done = 0
     try:
         for result in run(p, todo, par, threads):
-            write_shard(out, result["shard"], result["records"],
-                        {"config_hash": chash, "tasks": result["tasks"],
-                         "failures": result["failures"], "wall": float(result["wall"])})
+            write_shard(
+                out,
+                result["shard"],
+                result["records"],
+                {
+                    "config_hash": chash,
+                    "tasks": result["tasks"],
+                    "failures": result["failures"],
+                    "wall": float(result["wall"]),
+                },
+            )
             done += 1
             totals["samples"] += len(result["records"]["task"])
             totals["failed"] += len(result["failures"])
             if bar is not None:
                 bar.update(1)
-                bar.set_postfix(totals)          # running totals of this run
+                bar.set_postfix(totals)  # running totals of this run
     finally:
         if bar is not None:
             bar.close()
         if done:
-            runs.append({"started": started, "wall_seconds": round(time.perf_counter() - t0, 2),
-                         "shards": done, "backend": par["backend"], "workers": par["workers"]})
+            runs.append(
+                {
+                    "started": started,
+                    "wall_seconds": round(time.perf_counter() - t0, 2),
+                    "shards": done,
+                    "backend": par["backend"],
+                    "workers": par["workers"],
+                }
+            )
             atomic_write_text(runs_path, json.dumps(runs, indent=1))
-    if max_shards is not None and any(read_shard_meta(shard_path(out, k), chash) is None
-                                      for k in range(p.n_shards)):
+    if max_shards is not None and any(
+        read_shard_meta(shard_path(out, k), chash) is None for k in range(p.n_shards)
+    ):
         return {}
     return write_card(out, p, chash, runs)
+
+
+def generate_bodies(cfg: dict, out, max_bodies: int | None = None, **kwargs) -> dict:
+    """Generate (or finish) every member of a ``bodies`` config in ``out`` and write
+    ``bodies.json`` when all are done; ``max_bodies`` stops after the first that many (each
+    an ordinary dataset already). ``kwargs`` go to :func:`generate`. Returns the
+    bodies card (``{}`` if a member stopped early or ``max_bodies`` left some out).
+    """
+    out = pathlib.Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    ms = members(cfg)
+    saved = out / "bodies.yaml"
+    if saved.exists():
+        if config_hash(read_config(yaml.safe_load(saved.read_text()))) != config_hash(cfg):
+            raise ValueError(
+                f"{out} holds datasets from a different config; use another "
+                "output folder or delete it"
+            )
+    else:
+        atomic_write_text(saved, yaml.safe_dump(cfg, sort_keys=False))
+    cards = []
+    if max_bodies is not None and max_bodies < 1:
+        raise ValueError(f"max_bodies must be >= 1, got {max_bodies}")
+    for k, m in enumerate(ms):
+        if max_bodies is not None and k >= max_bodies:
+            return {}
+        if kwargs.get("progress", True):
+            ph = (
+                ", ".join(f"{a} {v:.2f}" for a, v in m["body"]["phenotype"].items())
+                if "phenotype" in m["body"]
+                else f"betas {m['body']['betas']}"
+            )
+            print(f"body {k + 1}/{len(ms)}: {ph}; {m['thickness_mm'][0]:g} mm", flush=True)
+        card = generate(m, member_folder(out, k), **kwargs)
+        if not card:
+            return {}
+        cards.append(card)
+    card = {
+        "format": BODIES_FORMAT,
+        "name": cfg["name"],
+        "config": cfg,
+        "config_hash": config_hash(cfg),
+        "members": [
+            {
+                "folder": member_folder(out, k).name,
+                "name": c["name"],
+                "phenotype": ms[k]["body"]["phenotype"]
+                if "phenotype" in ms[k]["body"]
+                else {"betas": ms[k]["body"]["betas"]},
+                "thickness_mm": ms[k]["thickness_mm"],
+                "hash": c["hash"],
+                "samples": c["samples"],
+                "samples_per_split": c["samples_per_split"],
+                "failures": c["failures"],
+            }
+            for k, c in enumerate(cards)
+        ],
+        "samples": sum(int(c["samples"]) for c in cards),
+        "hash": hashlib.sha256(" ".join(c["hash"] for c in cards).encode()).hexdigest()[:16],
+    }
+    atomic_write_text(out / "bodies.json", json.dumps(card, indent=1))
+    return card

@@ -12,14 +12,17 @@ def element_data(g, GG, aW, bW, cW, local, pos, sel, nnz: int) -> np.ndarray:
     """The tangent's CSR data (``(nnz,)``) with NumPy, from ``g`` ``(T, Q, n, 3)``
     (``H^T grad N``), ``GG`` ``(T, Q, n, n)``, the weighted tangent parts ``aW, bW, cW``
     ``(T, Q)``, the element entries ``local = (A, I, B, K)`` and their places ``pos`` among the
-    data (``sel`` selects the entries that have one)."""
+    data (``sel`` selects the entries that have one).
+    """
     A, I, B, Kc = local
     vals = 0.0
     for q in range(g.shape[1]):
         gq = g[:, q]
-        vals = vals + (bW[:, q, None] * gq[:, A, I] * gq[:, B, Kc]
-                       + cW[:, q, None] * gq[:, A, Kc] * gq[:, B, I]
-                       + (I == Kc) * (aW[:, q, None] * GG[:, q][:, A, B]))
+        vals = vals + (
+            bW[:, q, None] * gq[:, A, I] * gq[:, B, Kc]
+            + cW[:, q, None] * gq[:, A, Kc] * gq[:, B, I]
+            + (I == Kc) * (aW[:, q, None] * GG[:, q][:, A, B])
+        )
     flat = vals.ravel()
     data = np.zeros(nnz)
     for p, s in zip(pos, sel):
@@ -30,9 +33,10 @@ def element_data(g, GG, aW, bW, cW, local, pos, sel, nnz: int) -> np.ndarray:
 def make_kernel():
     """A Numba kernel that adds the upper entries of every element matrix,
     ``K_aibk = sum_q (aW d_ik G_a.G_b + bW g_ai g_bk + cW g_ak g_bi)``, straight into the CSR
-    data (4x faster than the NumPy path here); ``None`` when Numba is absent."""
+    data (4x faster than the NumPy path here); ``None`` when Numba is absent.
+    """
     try:
-        from numba import njit
+        from numba import njit  # deferred: compiles the FEM's kernels
     except ImportError:
         return None
 
@@ -50,8 +54,10 @@ def make_kernel():
                         e += 1
                         if j < 0:
                             continue
-                        v = (bW[t, qp] * g[t, qp, A, i] * g[t, qp, B, k]
-                             + cW[t, qp] * g[t, qp, A, k] * g[t, qp, B, i])
+                        v = (
+                            bW[t, qp] * g[t, qp, A, i] * g[t, qp, B, k]
+                            + cW[t, qp] * g[t, qp, A, k] * g[t, qp, B, i]
+                        )
                         if i == k:
                             v += aW[t, qp] * GG[t, qp, A, B]
                         data[j] += v

@@ -6,9 +6,13 @@ non-positive pivot raises :class:`IndefiniteTangent`.
 
 from __future__ import annotations
 
+import glob
 import os
+import sys
+import warnings
 
 import numpy as np
+from scipy.sparse.linalg import cg, splu
 
 
 class IndefiniteTangent(ArithmeticError):
@@ -21,10 +25,13 @@ class _SuperLU:
     name, upper = "superlu", False
 
     def factor(self, K):
-        from scipy.sparse.linalg import splu
 
-        self._lu = splu(K.tocsc(), permc_spec="MMD_AT_PLUS_A",
-                        options={"SymmetricMode": True}, diag_pivot_thresh=0.0)
+        self._lu = splu(
+            K.tocsc(),
+            permc_spec="MMD_AT_PLUS_A",
+            options={"SymmetricMode": True},
+            diag_pivot_thresh=0.0,
+        )
         neg = int(np.sum(self._lu.U.diagonal() <= 0))
         if neg:
             raise IndefiniteTangent(f"{neg} non-positive pivots")
@@ -36,10 +43,8 @@ class _SuperLU:
 def _find_mkl() -> None:
     """Point pypardiso at MKL's runtime where pip puts it (``<prefix>/lib``): otherwise its
     first solver searches the whole environment for it, recursively (about 0.9 s, the largest
-    part of a process's first small solve)."""
-    import glob
-    import sys
-
+    part of a process's first small solve).
+    """
     if os.environ.get("PYPARDISO_MKL_RT"):
         return
     for d in ("lib", "Lib", "Library/bin"):
@@ -52,13 +57,14 @@ def _find_mkl() -> None:
 class _Pardiso:
     """MKL PARDISO through pypardiso, in symmetric positive definite (Cholesky) mode: the fastest
     factorisation here, and a failed one (error -4, zero or negative pivot) reports an
-    indefinite tangent. The symbolic analysis is done once per pattern and reused."""
+    indefinite tangent. The symbolic analysis is done once per pattern and reused.
+    """
 
     name, upper = "pardiso", True
 
     def __init__(self):
         _find_mkl()
-        import pypardiso
+        import pypardiso  # deferred: an optional linear solver (MKL)
 
         self._error = pypardiso.pardiso_wrapper.PyPardisoError
         self._solver = pypardiso.PyPardisoSolver(mtype=2)
@@ -105,13 +111,12 @@ class _AMGCG:
     name, upper = "cg", False
 
     def factor(self, K):
-        import pyamg
+        import pyamg  # deferred: an optional linear solver
 
         self._K = K
         self._M = pyamg.smoothed_aggregation_solver(K, symmetry="symmetric").aspreconditioner()
 
     def solve(self, b):
-        from scipy.sparse.linalg import cg
 
         if b.ndim == 2:
             return np.stack([self.solve(c) for c in b.T], axis=1)
@@ -141,20 +146,24 @@ def available_linear_solvers() -> list[str]:
 
 def make_linear_solver(name: str = "auto"):
     """A linear solver by name; ``"auto"`` takes PARDISO if it loads (MKL found), else SciPy's
-    SuperLU, with a warning since it is several times slower."""
+    SuperLU, with a warning since it is several times slower.
+    """
     if name == "auto":
         try:
             return LINEAR_SOLVERS["pardiso"]()
         except (ImportError, OSError) as e:
-            import warnings
-
-            warnings.warn(f"PARDISO is not available ({e}); the FEM falls back to SciPy's "
-                          "SuperLU, several times slower", RuntimeWarning, stacklevel=2)
+            warnings.warn(
+                f"PARDISO is not available ({e}); the FEM falls back to SciPy's "
+                "SuperLU, several times slower",
+                RuntimeWarning,
+                stacklevel=2,
+            )
             return LINEAR_SOLVERS["superlu"]()
     if name not in LINEAR_SOLVERS:
         raise ValueError(f"unknown linear solver {name!r}")
     try:
         return LINEAR_SOLVERS[name]()
     except (ImportError, OSError) as e:
-        raise ImportError(f"linear solver {name!r} needs a package that is not installed: "
-                          f"{e}") from e
+        raise ImportError(
+            f"linear solver {name!r} needs a package that is not installed: {e}"
+        ) from e

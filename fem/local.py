@@ -22,8 +22,13 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
 
-from stmpl.body.part import BodyPart, boundary_loops
+from fem.simulate import simulate
+from stmpl.geometry import boundary_loops
+from stmpl.part import BodyPart
 
 TOLERANCE = 0.005
 """How far the vertices next to the cut may move, relative to the deepest displacement."""
@@ -37,7 +42,8 @@ THICKNESSES = 6.0
 class Patch:
     """A part cut to a region: ``part`` (the patch as a :class:`BodyPart`, its cut among its
     rims), ``vertices`` ``(n,)`` the patch's vertices in the whole part, ``margin`` (m) and
-    ``ring`` the patch vertices one edge inside the cut."""
+    ``ring`` the patch vertices one edge inside the cut.
+    """
 
     part: BodyPart
     vertices: np.ndarray
@@ -52,11 +58,13 @@ class Patch:
         return out
 
 
-def first_margin(part: BodyPart, thickness: np.ndarray, force: np.ndarray,
-                 thicknesses: float = THICKNESSES) -> float:
+def first_margin(
+    part: BodyPart, thickness: np.ndarray, force: np.ndarray, thicknesses: float = THICKNESSES
+) -> float:
     """The first cut's margin, m: the radius of the loaded region (half its largest extent,
     capped at 5 cm) plus ``thicknesses`` (default :data:`THICKNESSES`) times the thickest
-    tissue under it."""
+    tissue under it.
+    """
     loaded = np.flatnonzero(force > 0)
     x = part.vertices[loaded]
     extent = float(np.linalg.norm(x.max(0) - x.min(0)))
@@ -65,18 +73,17 @@ def first_margin(part: BodyPart, thickness: np.ndarray, force: np.ndarray,
 
 def patch(part: BodyPart, force: np.ndarray, margin: float) -> Patch:
     """The patch of ``part`` within ``margin`` (m, straight-line) of a loaded vertex: the faces
-    whose three vertices are that near, the connected pieces that hold a load."""
-    from scipy.spatial import cKDTree
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
+    whose three vertices are that near, the connected pieces that hold a load.
+    """
     loaded = np.flatnonzero(force > 0)
     if len(loaded) == 0:
         raise ValueError("the load has no loaded vertex (force is zero everywhere)")
-    near = cKDTree(part.vertices[loaded]).query(part.vertices, distance_upper_bound=margin)[0] \
+    near = (
+        cKDTree(part.vertices[loaded]).query(part.vertices, distance_upper_bound=margin)[0]
         <= margin
+    )
     on = np.zeros(part.n_vertices, bool)
-    on[loaded] = True                  # the faces around a loaded vertex, however long, belong
+    on[loaded] = True  # the faces around a loaded vertex, however long, belong
     fidx = np.flatnonzero(near[part.faces].all(1) | on[part.faces].any(1))
     n = part.n_vertices
     if len(fidx) == len(part.faces):
@@ -96,19 +103,21 @@ def patch(part: BodyPart, force: np.ndarray, margin: float) -> Patch:
         return Patch(part, np.arange(n), margin, np.zeros(0, np.int64), whole=True)
     sub = _sub_part(part, verts, fidx)
     cut = np.concatenate(sub.rims) if sub.rims else np.zeros(0, np.int64)
-    if part.rims:                        # the part's own rims are held in the whole solve too
+    if part.rims:  # the part's own rims are held in the whole solve too
         cut = cut[~np.isin(verts[cut], np.concatenate(part.rims))]
     e = sub.edges
     on = np.zeros(sub.n_vertices, bool)
     on[cut] = True
-    ring = np.unique(np.concatenate([e[on[e[:, 0]] & ~on[e[:, 1]], 1],
-                                     e[on[e[:, 1]] & ~on[e[:, 0]], 0]]))
+    ring = np.unique(
+        np.concatenate([e[on[e[:, 0]] & ~on[e[:, 1]], 1], e[on[e[:, 1]] & ~on[e[:, 0]], 0]])
+    )
     return Patch(sub, verts, margin, ring)
 
 
 def _sub_part(part: BodyPart, verts: np.ndarray, fidx: np.ndarray) -> BodyPart:
     """The patch of ``part`` made of faces ``fidx`` on vertices ``verts`` (whole-part indices),
-    normals from the whole part, rims = every boundary loop of the patch."""
+    normals from the whole part, rims = every boundary loop of the patch.
+    """
     where = np.full(part.n_vertices, -1)
     where[verts] = np.arange(len(verts))
     fuv = part.face_uv[fidx]
@@ -117,23 +126,36 @@ def _sub_part(part: BodyPart, verts: np.ndarray, fidx: np.ndarray) -> BodyPart:
     cwhere[corners] = np.arange(len(corners))
     f = where[part.faces[fidx]]
     return dataclasses.replace(
-        part, name=f"{part.name}[patch]", vertices=part.vertices[verts], faces=f,
-        normals=part.normals[verts], uv=part.uv[corners], face_uv=cwhere[fuv],
-        uv_vertex=where[part.uv_vertex[corners]], rims=boundary_loops(f), axis=None,
-        body_index=None if part.body_index is None else part.body_index[verts])
+        part,
+        name=f"{part.name}[patch]",
+        vertices=part.vertices[verts],
+        faces=f,
+        normals=part.normals[verts],
+        uv=part.uv[corners],
+        face_uv=cwhere[fuv],
+        uv_vertex=where[part.uv_vertex[corners]],
+        rims=boundary_loops(f),
+        axis=None,
+        body_index=None if part.body_index is None else part.body_index[verts],
+    )
 
 
 @dataclass
 class LocalResult:
     """What a local solve did: the patch solved last, each attempt's margin, size, time and the
-    share the ring next to the cut moved (relative to the deepest displacement)."""
+    share the ring next to the cut moved (relative to the deepest displacement).
+    """
 
     patch: Patch
     attempts: list = field(default_factory=list)
 
     def summary(self) -> dict:
-        return {"margin_m": self.patch.margin, "vertices": int(len(self.patch.vertices)),
-                "whole": self.patch.whole, "attempts": self.attempts}
+        return {
+            "margin_m": self.patch.margin,
+            "vertices": int(len(self.patch.vertices)),
+            "whole": self.patch.whole,
+            "attempts": self.attempts,
+        }
 
 
 FAILED_ATTEMPTS = 2
@@ -143,27 +165,39 @@ returned, instead of growing on to the whole part (which took minutes on the fin
 load that buckles)."""
 
 
-def simulate_local(part: BodyPart, thickness, force, totals=None, res="reference",
-                   material=None, options=None, margin: float | None = None,
-                   tolerance: float = TOLERANCE, grow: float = GROW):
+def simulate_local(
+    part: BodyPart,
+    thickness,
+    force,
+    totals=None,
+    res="reference",
+    material=None,
+    options=None,
+    margin: float | None = None,
+    tolerance: float = TOLERANCE,
+    grow: float = GROW,
+):
     """:func:`fem.simulate.simulate` on the patch the load moves. Returns ``(mesh, solutions,
     result)``: the patch's mesh and solutions (``Solution.part_displacement`` on the patch),
-    and a :class:`LocalResult`; :meth:`Patch.lift` gives the whole part's displacement."""
-    from fem.simulate import simulate
-
+    and a :class:`LocalResult`; :meth:`Patch.lift` gives the whole part's displacement.
+    """
     t = np.asarray(thickness, dtype=float)
     f = np.asarray(force, dtype=float)
     m = first_margin(part, t, f) if margin is None else float(margin)
     result = None
-    failed = 0                        # attempts in a row in which no level converged
+    failed = 0  # attempts in a row in which no level converged
     while True:
         p = patch(part, f, m)
         t0 = time.perf_counter()
-        mesh, sols = simulate(p.part, t[p.vertices], f[p.vertices], totals, res, material,
-                              options)
+        mesh, sols = simulate(p.part, t[p.vertices], f[p.vertices], totals, res, material, options)
         moved = _ring_moved(p, mesh, sols)
-        att = {"margin_m": m, "vertices": int(len(p.vertices)), "whole": p.whole,
-               "seconds": time.perf_counter() - t0, "ring_moved": moved}
+        att = {
+            "margin_m": m,
+            "vertices": int(len(p.vertices)),
+            "whole": p.whole,
+            "seconds": time.perf_counter() - t0,
+            "ring_moved": moved,
+        }
         result = result or LocalResult(p)
         result.patch = p
         result.attempts.append(att)
@@ -177,7 +211,8 @@ def _ring_moved(p: Patch, mesh, sols) -> float:
     """How far the ring next to the cut moved at the last level that converged, relative to the
     deepest displacement there: ``inf`` when no level converged (a patch too tight may be what
     failed, so it grows; a failure with the ring still is the load's own) or the patch has no
-    ring (all of it on the cut); 0 for the whole part."""
+    ring (all of it on the cut); 0 for the whole part.
+    """
     if p.whole:
         return 0.0
     ok = [s for s in sols if s.ok]

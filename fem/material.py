@@ -31,9 +31,11 @@ _I = np.eye(3)
 
 def det3(F: np.ndarray) -> np.ndarray:
     """``(T,)`` determinants of ``(T, 3, 3)`` matrices (closed form, faster than LAPACK here)."""
-    return (F[:, 0, 0] * (F[:, 1, 1] * F[:, 2, 2] - F[:, 1, 2] * F[:, 2, 1])
-            - F[:, 0, 1] * (F[:, 1, 0] * F[:, 2, 2] - F[:, 1, 2] * F[:, 2, 0])
-            + F[:, 0, 2] * (F[:, 1, 0] * F[:, 2, 1] - F[:, 1, 1] * F[:, 2, 0]))
+    return (
+        F[:, 0, 0] * (F[:, 1, 1] * F[:, 2, 2] - F[:, 1, 2] * F[:, 2, 1])
+        - F[:, 0, 1] * (F[:, 1, 0] * F[:, 2, 2] - F[:, 1, 2] * F[:, 2, 0])
+        + F[:, 0, 2] * (F[:, 1, 0] * F[:, 2, 1] - F[:, 1, 1] * F[:, 2, 0])
+    )
 
 
 def inv3(F: np.ndarray):
@@ -64,7 +66,8 @@ def lame(E: float, nu: float) -> tuple[float, float]:
 @dataclass(frozen=True)
 class Material:
     """An isotropic material given by ``E`` (Pa) and ``nu``; subclasses define ``energy`` and
-    ``tangent_parts``, from which the stress and the full tangent follow."""
+    ``tangent_parts``, from which the stress and the full tangent follow.
+    """
 
     E: float = 1000.0
     nu: float = 0.4
@@ -86,7 +89,7 @@ class Material:
         return self.tangent_parts(F)[0]
 
     def stress_tangent(self, F: np.ndarray, tangent: bool = True):
-        """``(P, A)``: ``(T, 3, 3)`` stress and ``(T, 3, 3, 3, 3)`` tangent (``None`` if not asked)."""
+        """``(P, A)``: ``(T, 3, 3)`` stress and ``(T, 3, 3, 3, 3)`` tangent (``None`` unasked)."""
         P, parts = self.tangent_parts(F)
         return P, (tangent_from_parts(*parts) if tangent else None)
 
@@ -145,9 +148,11 @@ class LinearElastic(Material):
 
 def tangent_from_parts(a, b, c, H) -> np.ndarray:
     """``(T, 3, 3, 3, 3)`` tangent ``A_iJkL = a d_ik d_JL + b H_Ji H_Lk + c H_Li H_Jk``."""
-    return (a[:, None, None, None, None] * np.einsum("ik,JL->iJkL", _I, _I)[None]
-            + b[:, None, None, None, None] * np.einsum("tJi,tLk->tiJkL", H, H)
-            + c[:, None, None, None, None] * np.einsum("tLi,tJk->tiJkL", H, H))
+    return (
+        a[:, None, None, None, None] * np.einsum("ik,JL->iJkL", _I, _I)[None]
+        + b[:, None, None, None, None] * np.einsum("tJi,tLk->tiJkL", H, H)
+        + c[:, None, None, None, None] * np.einsum("tLi,tJk->tiJkL", H, H)
+    )
 
 
 MATERIALS = {"neo_hookean": NeoHookean, "linear": LinearElastic}

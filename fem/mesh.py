@@ -1,4 +1,5 @@
-"""The tissue shell: a tetrahedral mesh of the soft layer between the skin and the fixed inner surface.
+"""The tissue shell: a tetrahedral mesh of the soft layer between the skin and the fixed inner
+surface.
 
 The skin is the body part's surface, optionally refined by midpoint subdivision (each triangle into
 four; new nodes on the flat triangles, so the skin keeps its exact shape). The inner surface is the
@@ -19,8 +20,10 @@ from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
+from scipy.spatial import cKDTree
 
-from stmpl.body.part import BodyPart, triangle_areas
+from stmpl.geometry import triangle_areas
+from stmpl.part import BodyPart
 
 
 @dataclass(frozen=True, eq=False)
@@ -38,9 +41,11 @@ class Quality:
         return {k: getattr(self, k) for k in self.__dataclass_fields__}
 
     def __str__(self) -> str:
-        return (f"{self.n_tets} tets, volume {self.min_volume:.3g}..{self.max_volume:.3g} m^3, "
-                f"{self.n_inverted} inverted, dihedral {self.min_dihedral:.1f}..."
-                f"{self.max_dihedral:.1f} deg")
+        return (
+            f"{self.n_tets} tets, volume {self.min_volume:.3g}..{self.max_volume:.3g} m^3, "
+            f"{self.n_inverted} inverted, dihedral {self.min_dihedral:.1f}..."
+            f"{self.max_dihedral:.1f} deg"
+        )
 
 
 @dataclass(frozen=True, eq=False)
@@ -118,8 +123,14 @@ class ShellMesh:
         """Volumes and dihedral angles of all elements."""
         vol = self.volumes
         dih = dihedral_angles(self.nodes, self.tets)
-        return Quality(len(self.tets), float(vol.min()), float(vol.max()), int((vol <= 0).sum()),
-                       float(dih.min()), float(dih.max()))
+        return Quality(
+            len(self.tets),
+            float(vol.min()),
+            float(vol.max()),
+            int((vol <= 0).sum()),
+            float(dih.min()),
+            float(dih.max()),
+        )
 
     def nodal_forces(self, force: np.ndarray, mode: str = "traction") -> np.ndarray:
         """``(M, 3)`` nodal force vectors (N) for per-vertex normal forces on the part.
@@ -143,8 +154,10 @@ class ShellMesh:
         if mode != "traction":
             raise ValueError(f"unknown load mode {mode!r}; use 'traction' or 'nodal'")
         p = self.interp @ (force / self.part.vertex_areas)
-        pf = p[self.skin_faces]                                       # (K, 3)
-        load = self.skin_face_areas[:, None] * (pf + pf.sum(1, keepdims=True)) / 12   # int p phi_a over each face
+        pf = p[self.skin_faces]  # (K, 3)
+        load = (
+            self.skin_face_areas[:, None] * (pf + pf.sum(1, keepdims=True)) / 12
+        )  # int p phi_a over each face
         mag = np.zeros(self.n_skin)
         np.add.at(mag, self.skin_faces.ravel(), load.ravel())
         out[: self.n_skin] = -mag[:, None] * self.skin_normals
@@ -152,14 +165,15 @@ class ShellMesh:
 
     def to_vtu(self, path, point_data: dict | None = None, cell_data: dict | None = None):
         """Write the mesh (and ``(M,)``/``(M, 3)`` point arrays) as a VTU file for ParaView."""
-        import meshio
+        import meshio  # deferred: the .vtu export only
 
         pd = {"layer": np.repeat(np.arange(self.layers + 1), self.n_skin).astype(float)}
         for k, v in (point_data or {}).items():
             v = np.asarray(v, dtype=float)
             if v.shape[0] != self.n_nodes:
-                raise ValueError(f"point data {k!r} has {v.shape[0]} rows, mesh has "
-                                 f"{self.n_nodes} nodes")
+                raise ValueError(
+                    f"point data {k!r} has {v.shape[0]} rows, mesh has {self.n_nodes} nodes"
+                )
             pd[k] = v
         cd = {"volume": [self.volumes]}
         cd.update({k: [np.asarray(v, dtype=float)] for k, v in (cell_data or {}).items()})
@@ -167,9 +181,15 @@ class ShellMesh:
         return path
 
 
-def shell_mesh(part: BodyPart, thickness: np.ndarray, layers: int = 2, subdivisions: int = 0,
-               refine_near: np.ndarray | None = None, refine_radius: float = 0.03,
-               normal_smoothing: int = 2) -> ShellMesh:
+def shell_mesh(
+    part: BodyPart,
+    thickness: np.ndarray,
+    layers: int = 2,
+    subdivisions: int = 0,
+    refine_near: np.ndarray | None = None,
+    refine_radius: float = 0.03,
+    normal_smoothing: int = 2,
+) -> ShellMesh:
     """Build the tissue shell of ``part`` with per-vertex ``thickness`` ``(N,)`` in metres.
 
     ``subdivisions`` levels of midpoint refinement apply to the whole skin, or, given
@@ -193,15 +213,18 @@ def shell_mesh(part: BodyPart, thickness: np.ndarray, layers: int = 2, subdivisi
     check_surface(part.vertices, part.faces)
 
     offset = smooth_normals(part.vertices, part.faces, part.normals, normal_smoothing)
-    x, f, normals, interp = part.vertices.copy(), part.faces.copy(), part.normals.copy(), \
-        sp.identity(n, format="csr")
+    x, f, normals, interp = (
+        part.vertices.copy(),
+        part.faces.copy(),
+        part.normals.copy(),
+        sp.identity(n, format="csr"),
+    )
     if refine_near is not None:
-        from scipy.spatial import cKDTree
-
         pts = np.asarray(refine_near, dtype=float).reshape(-1, 3)
         if len(pts) == 0 or not np.all(np.isfinite(pts)) or not refine_radius > 0:
-            raise ValueError("refine_near needs finite (K, 3) points, K >= 1, and "
-                             "refine_radius > 0")
+            raise ValueError(
+                "refine_near needs finite (K, 3) points, K >= 1, and refine_radius > 0"
+            )
         tree = cKDTree(pts)
     for _ in range(subdivisions):
         marked = None
@@ -219,9 +242,21 @@ def shell_mesh(part: BodyPart, thickness: np.ndarray, layers: int = 2, subdivisi
     tets = np.concatenate([_prism_tets(f, k * S, (k + 1) * S) for k in range(layers)])
     vol = tet_volumes(nodes, tets)
     tets[vol < 0] = tets[vol < 0][:, [0, 2, 1, 3]]
-    mesh = ShellMesh(part, nodes, tets, f, normals, thick, interp, int(layers), int(subdivisions),
-                     info={"normal_smoothing": normal_smoothing,
-                           "refine_radius": None if refine_near is None else refine_radius})
+    mesh = ShellMesh(
+        part,
+        nodes,
+        tets,
+        f,
+        normals,
+        thick,
+        interp,
+        int(layers),
+        int(subdivisions),
+        info={
+            "normal_smoothing": normal_smoothing,
+            "refine_radius": None if refine_near is None else refine_radius,
+        },
+    )
     _check_folds(mesh, f, x, offset, thick)
     return mesh
 
@@ -234,14 +269,16 @@ def check_surface(vertices: np.ndarray, faces: np.ndarray) -> None:
     tiny = 1e-10 * max(area.mean(), 1e-30)
     if np.any(area <= tiny):
         i = int(np.argmin(area))
-        raise ValueError(f"degenerate surface: face {i} {faces[i].tolist()} has area {area[i]:.3g} "
-                         f"m^2")
+        raise ValueError(
+            f"degenerate surface: face {i} {faces[i].tolist()} has area {area[i]:.3g} m^2"
+        )
     e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
     uniq, counts = np.unique(e, axis=0, return_counts=True)
     if np.any(counts > 2):
         bad = uniq[counts > 2][0]
-        raise ValueError(f"non-manifold surface: edge {bad.tolist()} is shared by "
-                         f"{counts.max()} faces")
+        raise ValueError(
+            f"non-manifold surface: edge {bad.tolist()} is shared by {counts.max()} faces"
+        )
     # consistent orientation: each interior edge is used once in each direction
     d = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
     _, dcounts = np.unique(d, axis=0, return_counts=True)
@@ -249,8 +286,9 @@ def check_surface(vertices: np.ndarray, faces: np.ndarray) -> None:
         raise ValueError("surface faces are not consistently oriented")
 
 
-def smooth_normals(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray,
-                   iterations: int = 2) -> np.ndarray:
+def smooth_normals(
+    vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray, iterations: int = 2
+) -> np.ndarray:
     """``(N, 3)`` unit normals averaged with their edge neighbours ``iterations`` times."""
     n = len(vertices)
     e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
@@ -262,8 +300,7 @@ def smooth_normals(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray,
     return out
 
 
-def midpoint_subdivide(vertices: np.ndarray, faces: np.ndarray,
-                       marked: np.ndarray | None = None):
+def midpoint_subdivide(vertices: np.ndarray, faces: np.ndarray, marked: np.ndarray | None = None):
     """Refine triangles at their edge midpoints, conformingly (red-green refinement).
 
     Marked faces (all when ``marked`` is ``None``) split into four; the marks spread until no
@@ -275,7 +312,7 @@ def midpoint_subdivide(vertices: np.ndarray, faces: np.ndarray,
     n, m = len(vertices), len(faces)
     e = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
     edges, inv = np.unique(e, axis=0, return_inverse=True)
-    fe = inv.reshape(3, m).T                                          # (M, 3) edge ab, bc, ca
+    fe = inv.reshape(3, m).T  # (M, 3) edge ab, bc, ca
     split = np.zeros(len(edges), dtype=bool)
     split[fe[np.ones(m, bool) if marked is None else np.asarray(marked, bool)].ravel()] = True
     while True:
@@ -295,12 +332,16 @@ def midpoint_subdivide(vertices: np.ndarray, faces: np.ndarray,
     a, b, c = faces.T
     ab, bc, ca = mid[fe].T
     red = k == 3
-    out = [faces[k == 0],
-           np.stack([a, ab, ca], 1)[red], np.stack([ab, b, bc], 1)[red],
-           np.stack([ca, bc, c], 1)[red], np.stack([ab, bc, ca], 1)[red]]
-    for j in range(3):                                                # green: split edge j
+    out = [
+        faces[k == 0],
+        np.stack([a, ab, ca], 1)[red],
+        np.stack([ab, b, bc], 1)[red],
+        np.stack([ca, bc, c], 1)[red],
+        np.stack([ab, bc, ca], 1)[red],
+    ]
+    for j in range(3):  # green: split edge j
         g = (k == 1) & split[fe[:, j]]
-        p, q, r = np.roll(faces, -j, axis=1)[g].T                     # split edge is p-q
+        p, q, r = np.roll(faces, -j, axis=1)[g].T  # split edge is p-q
         mpq = mid[fe[g, j]]
         out += [np.stack([p, mpq, r], 1), np.stack([mpq, q, r], 1)]
     return P @ vertices, np.concatenate(out), P
@@ -309,20 +350,25 @@ def midpoint_subdivide(vertices: np.ndarray, faces: np.ndarray,
 def tet_volumes(nodes: np.ndarray, tets: np.ndarray) -> np.ndarray:
     """``(T,)`` signed volumes, m^3 (positive for right-handed ``(x1-x0, x2-x0, x3-x0)``)."""
     x = nodes[tets]
-    return np.einsum("ti,ti->t", np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]),
-                     x[:, 3] - x[:, 0]) / 6.0
+    return (
+        np.einsum("ti,ti->t", np.cross(x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]), x[:, 3] - x[:, 0])
+        / 6.0
+    )
 
 
 def dihedral_angles(nodes: np.ndarray, tets: np.ndarray) -> np.ndarray:
     """``(T, 6)`` interior dihedral angles at the six edges, degrees."""
     x = nodes[tets]
-    faces = [(1, 2, 3), (0, 3, 2), (0, 1, 3), (0, 2, 1)]              # opposite vertex 0..3
+    faces = [(1, 2, 3), (0, 3, 2), (0, 1, 3), (0, 2, 1)]  # opposite vertex 0..3
     nrm = []
     for i, j, k in faces:
         c = np.cross(x[:, j] - x[:, i], x[:, k] - x[:, i])
         nrm.append(c / np.maximum(np.linalg.norm(c, axis=1, keepdims=True), 1e-300))
-    out = [np.pi - np.arccos(np.clip(np.einsum("ti,ti->t", nrm[a], nrm[b]), -1, 1))
-           for a in range(4) for b in range(a + 1, 4)]
+    out = [
+        np.pi - np.arccos(np.clip(np.einsum("ti,ti->t", nrm[a], nrm[b]), -1, 1))
+        for a in range(4)
+        for b in range(a + 1, 4)
+    ]
     return np.degrees(np.stack(out, 1))
 
 
@@ -333,17 +379,22 @@ def _prism_tets(faces: np.ndarray, lo: int, hi: int) -> np.ndarray:
     bottom vertex to the higher-numbered top vertex, the same choice from both sides.
     """
     a, b, c = np.sort(faces, axis=1).T
-    return np.concatenate([np.stack([a + lo, b + lo, c + lo, c + hi], 1),
-                           np.stack([a + lo, b + lo, b + hi, c + hi], 1),
-                           np.stack([a + lo, a + hi, b + hi, c + hi], 1)])
+    return np.concatenate(
+        [
+            np.stack([a + lo, b + lo, c + lo, c + hi], 1),
+            np.stack([a + lo, b + lo, b + hi, c + hi], 1),
+            np.stack([a + lo, a + hi, b + hi, c + hi], 1),
+        ]
+    )
 
 
 def _check_folds(mesh: ShellMesh, faces, skin, offset, thick) -> None:
     """Raise if the inner surface folds (a face flips) or any element is inverted or flat."""
     inner = skin - thick[:, None] * offset
     n_out = np.cross(skin[faces[:, 1]] - skin[faces[:, 0]], skin[faces[:, 2]] - skin[faces[:, 0]])
-    n_in = np.cross(inner[faces[:, 1]] - inner[faces[:, 0]],
-                    inner[faces[:, 2]] - inner[faces[:, 0]])
+    n_in = np.cross(
+        inner[faces[:, 1]] - inner[faces[:, 0]], inner[faces[:, 2]] - inner[faces[:, 0]]
+    )
     flipped = np.einsum("ti,ti->t", n_out, n_in) <= 0
     vol = tet_volumes(mesh.nodes, mesh.tets)
     tiny = 1e-6 * np.abs(vol).mean()
@@ -357,13 +408,16 @@ def _check_folds(mesh: ShellMesh, faces, skin, offset, thick) -> None:
         raise ValueError(
             f"tissue thickness {1e3 * thick[vert]:.2f} mm at skin node {vert} folds the inner "
             f"surface (local radius of curvature about {1e3 * r:.1f} mm); "
-            f"{int(flipped.sum())} inner faces flip, {int(bad_tet.sum())} elements are flat")
+            f"{int(flipped.sum())} inner faces flip, {int(bad_tet.sum())} elements are flat"
+        )
 
 
 def _curvature_radius(x, faces, n) -> np.ndarray:
     """``(S,)`` smallest radius of normal curvature over each node's edges (m)."""
-    e = np.unique(np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]],
-                                          faces[:, [2, 0]]]), axis=1), axis=0)
+    e = np.unique(
+        np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1),
+        axis=0,
+    )
     d = x[e[:, 0]] - x[e[:, 1]]
     k = np.abs(np.einsum("ti,ti->t", n[e[:, 0]] - n[e[:, 1]], d)) / np.einsum("ti,ti->t", d, d)
     kmax = np.zeros(len(x))

@@ -6,20 +6,27 @@ and checked before any solving), their split (train / val / test by placement) a
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import dataclass
 
 import numpy as np
 
-from stmpl.body.part import BodyPart
+import stmpl.contact.pressing as contact
+from stmpl import loads
 from stmpl.body.spec import part_from_spec
+from stmpl.contact.hand import Hand, grasp, palm_press
+from stmpl.part import BodyPart
 
 
 def farthest_points(part: BodyPart, count: int) -> np.ndarray:
     """``count`` vertex indices spread evenly over the part (farthest-point sampling from the
-    vertex nearest the centroid; deterministic)."""
+    vertex nearest the centroid; deterministic).
+    """
     if count > part.n_vertices:
-        raise ValueError(f"{count} centres asked for on {part.name}, which has only "
-                         f"{part.n_vertices} vertices (each centre is a distinct vertex)")
+        raise ValueError(
+            f"{count} centres asked for on {part.name}, which has only "
+            f"{part.n_vertices} vertices (each centre is a distinct vertex)"
+        )
     x = part.vertices
     first = int(np.argmin(np.linalg.norm(x - x.mean(0), axis=1)))
     out, d = [first], np.linalg.norm(x - x[first], axis=1)
@@ -32,73 +39,128 @@ def farthest_points(part: BodyPart, count: int) -> np.ndarray:
 
 def placements(cfg: dict, part: BodyPart) -> list[dict]:
     """Every load placement of the config as ``{"kind", "params"}`` (params for the
-    :mod:`stmpl.loads` primitive, total force left out), kinds in alphabetical order."""
+    :mod:`stmpl.loads` primitive, total force left out), kinds in alphabetical order.
+    """
     out = []
     for kind in sorted(cfg["placements"]):  # canonical order: a YAML round trip keeps task ids
         spec = cfg["placements"][kind]
         if kind in ("disk", "ellipse", "spots"):
             centres = [int(v) for v in farthest_points(part, int(spec.get("centres", 8)))]
         if kind == "disk":
-            out += [{"kind": kind, "params": {"at": c, "radius": float(r)}}
-                    for c in centres for r in spec.get("radii", [0.02])]
+            out += [
+                {"kind": kind, "params": {"at": c, "radius": float(r)}}
+                for c in centres
+                for r in spec.get("radii", [0.02])
+            ]
         elif kind == "ellipse":
-            out += [{"kind": kind, "params": {"at": c, "semi_axes": [float(a), float(b)],
-                                              "angle": float(t)}}
-                    for c in centres for a, b in spec.get("semi_axes", [[0.03, 0.015]])
-                    for t in spec.get("angles", [0.0])]
+            out += [
+                {
+                    "kind": kind,
+                    "params": {"at": c, "semi_axes": [float(a), float(b)], "angle": float(t)},
+                }
+                for c in centres
+                for a, b in spec.get("semi_axes", [[0.03, 0.015]])
+                for t in spec.get("angles", [0.0])
+            ]
         elif kind == "seam_disk":
-            out += [{"kind": kind, "params": {"at": float(a), "radius": float(r)}}
-                    for a in spec.get("at", [0.5]) for r in spec.get("radii", [0.02])]
+            out += [
+                {"kind": kind, "params": {"at": float(a), "radius": float(r)}}
+                for a in spec.get("at", [0.5])
+                for r in spec.get("radii", [0.02])
+            ]
         elif kind == "spots":
-            out += [{"kind": kind, "params": {"at": c, "count": int(k), "radius": float(r),
-                                              "spread": float(spec.get("spread", 0.04))}}
-                    for c in centres for k in spec.get("counts", [3])
-                    for r in spec.get("radii", [0.008])]
+            out += [
+                {
+                    "kind": kind,
+                    "params": {
+                        "at": c,
+                        "count": int(k),
+                        "radius": float(r),
+                        "spread": float(spec.get("spread", 0.04)),
+                    },
+                }
+                for c in centres
+                for k in spec.get("counts", [3])
+                for r in spec.get("radii", [0.008])
+            ]
         elif kind == "band":
-            out += [{"kind": kind, "params": {"at": float(a), "width": float(w)}}
-                    for a in spec.get("at", [0.5]) for w in spec.get("widths", [0.03])]
+            out += [
+                {"kind": kind, "params": {"at": float(a), "width": float(w)}}
+                for a in spec.get("at", [0.5])
+                for w in spec.get("widths", [0.03])
+            ]
         elif kind == "grasp":
-            out += [{"kind": kind, "params": {"along": float(a), "around": float(r),
-                                              "grip": str(g), "hand_height": float(h),
-                                              "depth": float(spec.get("depth", 0.002))}}
-                    for a in spec.get("along", [0.7]) for r in spec.get("around", [0.0])
-                    for g in spec.get("grips", ["whole"])
-                    for h in spec.get("hand_heights", [0.5])]
+            out += [
+                {
+                    "kind": kind,
+                    "params": {
+                        "along": float(a),
+                        "around": float(r),
+                        "grip": str(g),
+                        "hand_height": float(h),
+                        "depth": float(spec.get("depth", 0.002)),
+                    },
+                }
+                for a in spec.get("along", [0.7])
+                for r in spec.get("around", [0.0])
+                for g in spec.get("grips", ["whole"])
+                for h in spec.get("hand_heights", [0.5])
+            ]
         elif kind == "palm":
-            out += [{"kind": kind, "params": {"uv": [float(u), float(v)], "spin": float(s),
-                                              "hand_height": float(h),
-                                              "depth": float(spec.get("depth", 0.002))}}
-                    for u, v in spec.get("uv", [[0.5, 0.5]]) for s in spec.get("spins", [0.0])
-                    for h in spec.get("hand_heights", [0.5])]
+            out += [
+                {
+                    "kind": kind,
+                    "params": {
+                        "uv": [float(u), float(v)],
+                        "spin": float(s),
+                        "hand_height": float(h),
+                        "depth": float(spec.get("depth", 0.002)),
+                    },
+                }
+                for u, v in spec.get("uv", [[0.5, 0.5]])
+                for s in spec.get("spins", [0.0])
+                for h in spec.get("hand_heights", [0.5])
+            ]
         elif kind == "letter":
-            out += [{"kind": kind, "params": {"char": str(c), "uv": [float(u), float(v)],
-                                              "height": float(h), "stroke": float(s),
-                                              "angle": float(t)}}
-                    for c in spec.get("chars", ["A"]) for u, v in spec.get("uv", [[0.5, 0.5]])
-                    for h in spec.get("heights", [0.08]) for s in spec.get("strokes", [0.01])
-                    for t in spec.get("angles", [0.0])]
+            out += [
+                {
+                    "kind": kind,
+                    "params": {
+                        "char": str(c),
+                        "uv": [float(u), float(v)],
+                        "height": float(h),
+                        "stroke": float(s),
+                        "angle": float(t),
+                    },
+                }
+                for c in spec.get("chars", ["A"])
+                for u, v in spec.get("uv", [[0.5, 0.5]])
+                for h in spec.get("heights", [0.08])
+                for s in spec.get("strokes", [0.01])
+                for t in spec.get("angles", [0.0])
+            ]
     return out
 
 
 def make_load(part: BodyPart, placement: dict, total: float = 1.0):
     """The :class:`~stmpl.loads.Load` of a placement; names the placement if it is impossible."""
-    from stmpl import loads
-
     params = dict(placement["params"])
-    if placement["kind"] in HANDS:            # the touched vertices were found by plan()
+    if placement["kind"] in HANDS:  # the touched vertices were found by plan()
         return loads.from_vertices(part, placement["touched"], total, placement["kind"], params)
     if "uv" in params:
         params["uv"] = tuple(params["uv"])
     try:
         return loads.PRIMITIVES[placement["kind"]](part, total=total, **params)
     except (ValueError, IndexError) as e:
-        raise ValueError(f"impossible load placement {placement['kind']} "
-                         f"{json.dumps(placement['params'])}: {e}") from e
+        raise ValueError(
+            f"impossible load placement {placement['kind']} {json.dumps(placement['params'])}: {e}"
+        ) from e
 
 
 def split_of(n_placements: int, shares, seed: int) -> np.ndarray:
     """``(P,)`` split index (0 train, 1 val, 2 test) per placement, shuffled with ``seed``."""
     order = np.random.default_rng(seed).permutation(n_placements)
+
     def count(share):  # every split with a share gets a placement once there are three
         n = int(round(share * n_placements))
         return max(n, 1) if share > 0 and n_placements >= 3 else n
@@ -107,8 +169,8 @@ def split_of(n_placements: int, shares, seed: int) -> np.ndarray:
     n_train = n_placements - n_val - n_test
     out = np.empty(n_placements, dtype=np.int8)
     out[order[:n_train]] = 0
-    out[order[n_train:n_train + n_val]] = 1
-    out[order[n_train + n_val:]] = 2
+    out[order[n_train : n_train + n_val]] = 1
+    out[order[n_train + n_val :]] = 2
     return out
 
 
@@ -135,22 +197,24 @@ class Plan:
 
 def plan(cfg: dict, part: BodyPart | None = None) -> Plan:
     """Expand a config into tasks; every placement is built once here so a bad one fails now,
-    before any solving."""
+    before any solving.
+    """
     part = part if part is not None else part_from_spec(cfg["body"], cfg["part"])
     pls, skipped, hands = [], [], {}
     for p in placements(cfg, part):
         if p["kind"] in HANDS:
             try:
                 p["touched"] = HANDS[p["kind"]](part, p["params"], hands)
-            except ValueError as e:              # a hand that reaches no vertex: counted
+            except ValueError as e:  # a hand that reaches no vertex: counted
                 skipped.append({**p, "reason": str(e).split(":")[0]})
                 continue
         ld = make_load(part, p)
         p["vertices"], p["area"] = int(ld.count), float(ld.area)
         pls.append(p)
     if not pls:
-        raise ValueError(f"no placement of the config touches the part ({len(skipped)} grasps "
-                         "found no contact)")
+        raise ValueError(
+            f"no placement of the config touches the part ({len(skipped)} grasps found no contact)"
+        )
     split = split_of(len(pls), cfg["splits"], cfg["seed"])
     tasks = [(i, j) for i in range(len(pls)) for j in range(len(cfg["thickness_mm"]))]
     return Plan(cfg, part, pls, split, tasks, skipped)
@@ -158,37 +222,33 @@ def plan(cfg: dict, part: BodyPart | None = None) -> Plan:
 
 def grasp_contact(part: BodyPart, params: dict, hands: dict) -> list[int]:
     """The vertices anny's right hand touches in the grasp ``params`` describe (hands of each
-    size are built once, in ``hands``); ``ValueError`` when it touches none."""
-    from stmpl import contact
-    from stmpl.hand import Hand, grasp
-
+    size are built once, in ``hands``); ``ValueError`` when it touches none.
+    """
     h = params["hand_height"]
     if h not in hands:
         hands[h] = Hand(phenotype={"height": h})
-    g = grasp(part, hands[h], params["along"], params["around"], params["grip"],
-              params["depth"])
+    g = grasp(part, hands[h], params["along"], params["around"], params["grip"], params["depth"])
     return [int(v) for v in contact.contact(part, g.pressing(1.0)).vertices]
 
 
 def palm_contact(part: BodyPart, params: dict, hands: dict) -> list[int]:
-    """The vertices anny's open right hand touches, laid on the skin at chart point
-    ``params["uv"]`` (:func:`stmpl.hand.palm_press`, the fingers turned by ``spin`` rad from the
-    chart's ``x``, as ``stmpl simulate`` lays it on a part that is not a limb); ``ValueError``
-    when it touches none or lies past the part's rim."""
-    import math
-
-    from stmpl import contact
-    from stmpl.hand import Hand, palm_press
-
+    """The vertices anny's open right hand touches, laid on the skin at chart point ``params["uv"]``
+    (:func:`stmpl.contact.hand.palm_press`, the fingers turned by ``spin`` rad from the chart's
+    ``x``, as ``stmpl simulate`` lays it on a part that is not a limb); ``ValueError`` when it
+    touches none or lies past the part's rim.
+    """
     h = params["hand_height"]
     if h not in hands:
         hands[h] = Hand(phenotype={"height": h})
-    p = palm_press(part, hands[h], tuple(params["uv"]), params["depth"],
-                   math.pi / 2 + params["spin"], 1.0)
+    p = palm_press(
+        part, hands[h], tuple(params["uv"]), params["depth"], math.pi / 2 + params["spin"], 1.0
+    )
     return [int(v) for v in contact.contact(part, p).vertices]
 
 
-HANDS = {"grasp": lambda part, params, hands: grasp_contact(part, params, hands),
-         "palm": lambda part, params, hands: palm_contact(part, params, hands)}
+HANDS = {
+    "grasp": lambda part, params, hands: grasp_contact(part, params, hands),
+    "palm": lambda part, params, hands: palm_contact(part, params, hands),
+}
 """Placement kinds whose load is the skin anny's hand touches, found once in :func:`plan`
 (looked up at call time, so a test can stand in for the hand)."""

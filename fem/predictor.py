@@ -1,5 +1,6 @@
 """The ground truth as a predictor: the tissue-shell FEM behind :class:`stmpl.predictor.Predictor`
-(registered as ``fem`` through the ``stmpl.predictors`` entry point)."""
+(registered as ``fem`` through the ``stmpl.predictors`` entry point).
+"""
 
 from __future__ import annotations
 
@@ -23,7 +24,8 @@ class FEMFailed(PredictionFailed):
 @dataclass(frozen=True)
 class Shell:
     """The last solved tissue shell: its mesh and the solution per continuation level (for
-    pictures of the section and ParaView files)."""
+    pictures of the section and ParaView files).
+    """
 
     mesh: ShellMesh
     solutions: list[Solution]
@@ -52,8 +54,9 @@ class FEMPredictor(BasePredictor):
     name = "fem"
     batched = False
 
-    def __init__(self, res="reference", levels: int = 1, material=None, options=None,
-                 fidelity: str = "full"):
+    def __init__(
+        self, res="reference", levels: int = 1, material=None, options=None, fidelity: str = "full"
+    ):
         self.res = resolution(res)
         if isinstance(levels, bool) or int(levels) != levels or levels < 1:
             raise ValueError(f"levels must be an integer >= 1, got {levels!r}")
@@ -76,21 +79,25 @@ class FEMPredictor(BasePredictor):
             local = None
             try:
                 if self.fidelity == "auto":
-                    mesh, sols, local = simulate_local(s.part, s.thickness, s.force, totals,
-                                                       self.res, self.material, self.options)
+                    mesh, sols, local = simulate_local(
+                        s.part, s.thickness, s.force, totals, self.res, self.material, self.options
+                    )
                 else:
-                    mesh, sols = simulate(s.part, s.thickness, s.force, totals, self.res,
-                                          self.material, self.options)
-            except ValueError as e:            # a scene it cannot mesh (a thickness that folds)
+                    mesh, sols = simulate(
+                        s.part, s.thickness, s.force, totals, self.res, self.material, self.options
+                    )
+            except ValueError as e:  # a scene it cannot mesh (a thickness that folds)
                 raise FEMFailed(f"the FEM cannot build the tissue for this scene: {e}") from e
             sol = sols[-1]
             if not sol.ok:
                 raise FEMFailed(f"the FEM solve failed at {sol.total_force:.3g} N: {sol.reason}")
             self.last_shell = Shell(mesh, sols)
-            self._last[id(s)] = {**{k: v for k, v in sol.diagnostics().items() if k != "reason"},
-                                 "levels": [x.diagnostics() for x in sols],
-                                 "mesh": {"nodes": mesh.n_nodes, "tets": int(len(mesh.tets))},
-                                 "local": None if local is None else local.summary()}
+            self._last[id(s)] = {
+                **{k: v for k, v in sol.diagnostics().items() if k != "reason"},
+                "levels": [x.diagnostics() for x in sols],
+                "mesh": {"nodes": mesh.n_nodes, "tets": int(len(mesh.tets))},
+                "local": None if local is None else local.summary(),
+            }
             u = sol.part_displacement(mesh)
             out.append(u if local is None else local.patch.lift(u, s.part.n_vertices))
         return out

@@ -16,7 +16,7 @@ import numpy as np
 from fem.material import NeoHookean
 from fem.mesh import ShellMesh, shell_mesh
 from fem.solver import Solution, Solver, SolverOptions
-from stmpl.body.part import BodyPart
+from stmpl.part import BodyPart
 
 
 @dataclass(frozen=True)
@@ -51,9 +51,11 @@ def resolution(res: str | Resolution | dict) -> Resolution:
         if res == "reference":
             res = REFERENCE
         if res not in RESOLUTIONS:
-            raise ValueError(f"unknown resolution {res!r}; choose one of "
-                             f"{sorted(RESOLUTIONS) + ['reference']} or give "
-                             "subdivisions/layers/refine_radius")
+            raise ValueError(
+                f"unknown resolution {res!r}; choose one of "
+                f"{sorted(RESOLUTIONS) + ['reference']} or give "
+                "subdivisions/layers/refine_radius"
+            )
         return RESOLUTIONS[res]
     if isinstance(res, dict):
         unknown = set(res) - {"subdivisions", "layers", "refine_radius", "order"}
@@ -63,8 +65,12 @@ def resolution(res: str | Resolution | dict) -> Resolution:
     raise TypeError(f"resolution must be a name, a dict or a Resolution, got {type(res)}")
 
 
-def mesh_for_load(part: BodyPart, thickness: np.ndarray, force: np.ndarray,
-              res: str | Resolution | dict = "reference") -> ShellMesh:
+def mesh_for_load(
+    part: BodyPart,
+    thickness: np.ndarray,
+    force: np.ndarray,
+    res: str | Resolution | dict = "reference",
+) -> ShellMesh:
     """The tissue shell for one load pattern ``force`` ``(N,)``, refined around its vertices."""
     r = resolution(res)
     force = np.asarray(force, dtype=float)
@@ -72,21 +78,38 @@ def mesh_for_load(part: BodyPart, thickness: np.ndarray, force: np.ndarray,
     if len(loaded) == 0:
         raise ValueError("the load has no loaded vertex (force is zero everywhere)")
     near = None if r.refine_radius is None else part.vertices[loaded]
-    return shell_mesh(part, thickness, layers=r.layers, subdivisions=r.subdivisions,
-                      refine_near=near, refine_radius=r.refine_radius or 0.03)
+    return shell_mesh(
+        part,
+        thickness,
+        layers=r.layers,
+        subdivisions=r.subdivisions,
+        refine_near=near,
+        refine_radius=r.refine_radius or 0.03,
+    )
 
 
-def simulate(part: BodyPart, thickness: np.ndarray, force: np.ndarray, totals=None,
-             res: str | Resolution | dict = "reference", material=None,
-             options: SolverOptions | None = None) -> tuple[ShellMesh, list[Solution]]:
+def simulate(
+    part: BodyPart,
+    thickness: np.ndarray,
+    force: np.ndarray,
+    totals=None,
+    res: str | Resolution | dict = "reference",
+    material=None,
+    options: SolverOptions | None = None,
+) -> tuple[ShellMesh, list[Solution]]:
     """Solve the load pattern ``force`` ``(N,)`` (N per vertex) on ``part`` with per-vertex
     ``thickness`` ``(N,)`` (m), scaled to each total force in ``totals`` (N, rising; default
     the pattern's own total), by continuation. Returns the mesh and one :class:`Solution` per
-    level; failed levels carry their reason and no displacement."""
+    level; failed levels carry their reason and no displacement.
+    """
     force = np.asarray(force, dtype=float)
     mesh = mesh_for_load(part, thickness, force, res)
-    solver = Solver(mesh, material if material is not None else NeoHookean(), options=options,
-                    order=resolution(res).order)
+    solver = Solver(
+        mesh,
+        material if material is not None else NeoHookean(),
+        options=options,
+        order=resolution(res).order,
+    )
     totals = [float(force.sum())] if totals is None else [float(t) for t in totals]
     if any(b <= a for a, b in zip(totals, totals[1:])):
         raise ValueError(f"totals must rise strictly, got {totals}")

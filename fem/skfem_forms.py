@@ -15,12 +15,22 @@ import numpy as np
 
 def neo_hookean_forms(mu: float, lam: float):
     """``(residual LinearForm, tangent BilinearForm)``; pass the current displacement as
-    ``prev=basis.interpolate(u)``."""
-    import skfem
-    from skfem.helpers import ddot, det, eye, grad, inv, mul, trace, transpose
+    ``prev=basis.interpolate(u)``.
+    """
+    import skfem  # deferred: the reference assembly only
+    from skfem.helpers import (
+        ddot,
+        det,
+        eye,
+        grad,
+        inv,
+        mul,
+        trace,
+        transpose,
+    )  # deferred: the reference assembly only
 
     def parts(w):
-        g = grad(w["prev"])                                     # (3, 3, elements, points)
+        g = grad(w["prev"])  # (3, 3, elements, points)
         F = eye(np.ones_like(g[0, 0]), 3) + g
         return F, inv(F), np.log(det(F))
 
@@ -33,18 +43,23 @@ def neo_hookean_forms(mu: float, lam: float):
     def tangent(du, v, w):
         F, H, lnJ = parts(w)
         dF = grad(du)
-        AdF = (mu * dF + lam * trace(mul(H, dF)) * transpose(H)
-               + (mu - lam * lnJ) * mul(transpose(H), mul(transpose(dF), transpose(H))))
+        AdF = (
+            mu * dF
+            + lam * trace(mul(H, dF)) * transpose(H)
+            + (mu - lam * lnJ) * mul(transpose(H), mul(transpose(dF), transpose(H)))
+        )
         return ddot(AdF, grad(v))
 
     return residual, tangent
 
 
-def assemble(nodes: np.ndarray, tets: np.ndarray, u: np.ndarray, mu: float, lam: float,
-             order: int = 1):
+def assemble(
+    nodes: np.ndarray, tets: np.ndarray, u: np.ndarray, mu: float, lam: float, order: int = 1
+):
     """scikit-fem's ``(residual (3M,), tangent CSR)`` over all DOFs in its own numbering, for
-    P1 (``u`` ``(M, 3)``) or P2 (``u`` in scikit-fem's DOF order) tetrahedra."""
-    import skfem
+    P1 (``u`` ``(M, 3)``) or P2 (``u`` in scikit-fem's DOF order) tetrahedra.
+    """
+    import skfem  # deferred: the reference assembly only
 
     mesh = skfem.MeshTet(nodes.T, tets.T)
     el = skfem.ElementTetP1() if order == 1 else skfem.ElementTetP2()

@@ -1,5 +1,6 @@
 """The outcome of one FEM solve: the displacement when it converged to a physical state, else
-the reason it did not (never a displacement), with the solver's diagnostics."""
+the reason it did not (never a displacement), with the solver's diagnostics.
+"""
 
 from __future__ import annotations
 
@@ -37,11 +38,18 @@ class Solution:
 
     def diagnostics(self) -> dict:
         """JSON-ready scalars."""
-        return {"ok": self.ok, "reason": self.reason, "iterations": self.iterations,
-                "residual": self.residual, "min_det_F": self.min_det_F, "time": self.time,
-                "total_force": self.total_force, "substeps": self.substeps,
-                "max_displacement": self.max_displacement,
-                "max_compression": self.max_compression}
+        return {
+            "ok": self.ok,
+            "reason": self.reason,
+            "iterations": self.iterations,
+            "residual": self.residual,
+            "min_det_F": self.min_det_F,
+            "time": self.time,
+            "total_force": self.total_force,
+            "substeps": self.substeps,
+            "max_displacement": self.max_displacement,
+            "max_compression": self.max_compression,
+        }
 
     def part_displacement(self, mesh: ShellMesh) -> np.ndarray:
         """``(N, 3)`` displacement of the body part's vertices, m."""

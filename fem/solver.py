@@ -27,9 +27,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from fem.elements import ELEMENTS, TRI_EDGES, TRI_POINTS, TRI_WEIGHTS, quadratic, tri_shape
-from fem.material import NeoHookean, det3
 from fem.kernel import element_data, kernel
 from fem.linear_solvers import LINEAR_SOLVERS, IndefiniteTangent, make_linear_solver
+from fem.material import NeoHookean, det3
 from fem.mesh import ShellMesh
 from fem.solution import Solution
 
@@ -66,11 +66,12 @@ class SolverOptions:
 
     def __post_init__(self) -> None:
         if self.linear_solver not in ("auto", *LINEAR_SOLVERS):
-            raise ValueError(f"unknown linear_solver {self.linear_solver!r}; choose auto or one "
-                             f"of {sorted(LINEAR_SOLVERS)}")
+            raise ValueError(
+                f"unknown linear_solver {self.linear_solver!r}; choose auto or one "
+                f"of {sorted(LINEAR_SOLVERS)}"
+            )
         if self.force_mode not in ("traction", "nodal"):
-            raise ValueError(f"unknown force_mode {self.force_mode!r}; use 'traction' or "
-                             "'nodal'")
+            raise ValueError(f"unknown force_mode {self.force_mode!r}; use 'traction' or 'nodal'")
         if self.rims not in ("fixed", "free"):
             raise ValueError(f"rims must be 'fixed' or 'free', got {self.rims!r}")
         if not (self.rtol > 0 and self.max_iter >= 1 and self.max_compression > 0):
@@ -91,8 +92,14 @@ class Solver:
         order: element order, 1 (4-node) or 2 (10-node tetrahedra, four quadrature points).
     """
 
-    def __init__(self, mesh: ShellMesh, material=None, fixed: np.ndarray | None = None,
-                 options: SolverOptions | None = None, order: int = 1):
+    def __init__(
+        self,
+        mesh: ShellMesh,
+        material=None,
+        fixed: np.ndarray | None = None,
+        options: SolverOptions | None = None,
+        order: int = 1,
+    ):
         if order not in ELEMENTS:
             raise ValueError(f"element order must be 1 or 2, got {order!r}")
         self.mesh = mesh
@@ -109,10 +116,10 @@ class Solver:
             if fixed.shape != (M, 3):
                 raise ValueError(f"fixed must have shape ({M}, 3), got {fixed.shape}")
             mask |= fixed
-        X = mesh.nodes[mesh.tets]                                      # (T, 4, 3)
-        Dm = (X[:, 1:] - X[:, :1]).transpose(0, 2, 1)                  # columns are edges
+        X = mesh.nodes[mesh.tets]  # (T, 4, 3)
+        Dm = (X[:, 1:] - X[:, :1]).transpose(0, 2, 1)  # columns are edges
         Dinv = np.linalg.inv(Dm)
-        G1 = np.concatenate([-Dinv.sum(1, keepdims=True), Dinv], 1)    # (T, 4, 3) grad L_k
+        G1 = np.concatenate([-Dinv.sum(1, keepdims=True), Dinv], 1)  # (T, 4, 3) grad L_k
         self.V = mesh.volumes
         if np.any(self.V <= 0):
             raise ValueError("mesh has inverted or flat elements; check its quality()")
@@ -125,10 +132,10 @@ class Solver:
         self.fixed = mask
         self.free = np.flatnonzero(~mask.ravel())
         el = self.element
-        self.G = np.einsum("qak,tkj->tqaj", el.dN, G1)                 # (T, Q, n, 3) grad N_a
-        self.W = self.V[:, None] * el.weights[None]                     # (T, Q) weights, m^3
-        self.GG = np.matmul(self.G, self.G.transpose(0, 1, 3, 2))      # (T, Q, n, n)
-        self.GW = self.G * self.W[:, :, None, None]                     # weighted gradients
+        self.G = np.einsum("qak,tkj->tqaj", el.dN, G1)  # (T, Q, n, 3) grad N_a
+        self.W = self.V[:, None] * el.weights[None]  # (T, Q) weights, m^3
+        self.GG = np.matmul(self.G, self.G.transpose(0, 1, 3, 2))  # (T, Q, n, n)
+        self.GW = self.G * self.W[:, :, None, None]  # weighted gradients
         self._force_idx = (3 * self.conn[:, :, None] + np.arange(3)).ravel()
         self.linear = make_linear_solver(self.options.linear_solver)
         self._pattern(upper=self.linear.upper)
@@ -143,28 +150,29 @@ class Solver:
         the CSR data of the free-DOF tangent (both triangles unless ``upper``).
 
         Works on unique node pairs (``T n^2`` keys, not ``9 T n^2``): each pair's 3 x 3 block
-        is numbered once, and SciPy's CSR conversion orders the entries."""
+        is numbered once, and SciPy's CSR conversion orders the entries.
+        """
         M, tets, n = self.n_all, self.conn, self.element.n
         nf = len(self.free)
         fmap = np.full(3 * M, -1, dtype=np.int64)
         fmap[self.free] = np.arange(nf)
-        ea, eb = np.triu_indices(n)            # element node pairs a <= b: the only ones used
-        na, nb = tets[:, ea], tets[:, eb]                                 # (T, n(n+1)/2)
+        ea, eb = np.triu_indices(n)  # element node pairs a <= b: the only ones used
+        na, nb = tets[:, ea], tets[:, eb]  # (T, n(n+1)/2)
         lo, hi = np.minimum(na, nb), np.maximum(na, nb)
         pairs, inv = np.unique((lo * M + hi).ravel(), return_inverse=True)
-        idx = np.int32 if 18 * len(pairs) < 2**31 else np.int64      # halves the big arrays
+        idx = np.int32 if 18 * len(pairs) < 2**31 else np.int64  # halves the big arrays
         pinv = np.zeros((len(tets), n, n), dtype=idx)
         pinv[:, ea, eb] = inv.reshape(len(tets), -1)
         plo, phi = np.divmod(pairs, M)
         i, k = np.divmod(np.arange(9), 3)
-        row = fmap[3 * plo[:, None] + i]                                 # (P, 9) entry (i, k)
+        row = fmap[3 * plo[:, None] + i]  # (P, 9) entry (i, k)
         col = fmap[3 * phi[:, None] + k]
         ok = (row >= 0) & (col >= 0) & ((plo[:, None] < phi[:, None]) | (i <= k))
         ids = np.flatnonzero(ok.ravel())
         r, c = row.ravel()[ids], col.ravel()[ids]
         if upper:
             rr, cc, tag = r, c, ids + 1
-        else:                                                            # mirror off-diagonals
+        else:  # mirror off-diagonals
             off = r != c
             rr = np.concatenate([r, c[off]])
             cc = np.concatenate([c, r[off]])
@@ -180,20 +188,21 @@ class Solver:
         p, q = np.triu_indices(3 * n)
         A, I, B, Kc = p // 3, p % 3, q // 3, q % 3
         self._local = (A, I, B, Kc)
-        swap = tets[:, A] > tets[:, B]                                   # (T, E)
+        swap = tets[:, A] > tets[:, B]  # (T, E)
         eid = pinv[:, A, B]
         eid *= 9
         eid += np.where(swap, (3 * Kc + I).astype(idx), (3 * I + Kc).astype(idx))
         self._pos2d = [up[eid]] if upper else [up[eid], dn[eid]]
-        self._gather = None                  # the NumPy path's flat places, made when it runs
+        self._gather = None  # the NumPy path's flat places, made when it runs
         self._nnz = K.nnz
         self._indices = K.indices.astype(np.int32)
         self._indptr = K.indptr.astype(np.int32)
 
     def deformation_gradient(self, u: np.ndarray) -> np.ndarray:
         """``(T, Q, 3, 3)`` ``F = I + sum_a u_a (x) grad N_a`` at the quadrature points, for
-        nodal displacement ``u`` ``(n_all, 3)``."""
-        ue = u[self.conn].transpose(0, 2, 1)[:, None]                  # (T, 1, 3, n)
+        nodal displacement ``u`` ``(n_all, 3)``.
+        """
+        ue = u[self.conn].transpose(0, 2, 1)[:, None]  # (T, 1, 3, n)
         return np.eye(3) + np.matmul(ue, self.G)
 
     def _F(self, u: np.ndarray) -> np.ndarray:
@@ -210,27 +219,30 @@ class Solver:
 
     def _scatter_force(self, P: np.ndarray) -> np.ndarray:
         """``(n_all, 3)`` internal nodal forces ``f_a = sum_q w V P grad N_a`` from stresses
-        ``(T Q, 3, 3)``."""
+        ``(T Q, 3, 3)``.
+        """
         T, Q = self.W.shape
         P = P.reshape(T, Q, 3, 3)
-        fe = np.matmul(self.GW, P.transpose(0, 1, 3, 2)).sum(1)        # (T, n, 3)
-        return np.bincount(self._force_idx, weights=fe.ravel(),
-                           minlength=3 * self.n_all).reshape(-1, 3)
+        fe = np.matmul(self.GW, P.transpose(0, 1, 3, 2)).sum(1)  # (T, n, 3)
+        return np.bincount(self._force_idx, weights=fe.ravel(), minlength=3 * self.n_all).reshape(
+            -1, 3
+        )
 
     def assemble(self, u: np.ndarray, f: np.ndarray):
         """``(r (n_all, 3), K)``: residual and the tangent on free DOFs (CSR; upper triangle only
-        when the linear solver wants it)."""
+        when the linear solver wants it).
+        """
         T, Q = self.W.shape
         P, (a, b, c, H) = self.material.tangent_parts(self._F(u))
         r = self._scatter_force(P)
-        g = np.matmul(self.G, np.asarray(H).reshape(T, Q, 3, 3))      # (T, Q, n, 3) H^T grad N
+        g = np.matmul(self.G, np.asarray(H).reshape(T, Q, 3, 3))  # (T, Q, n, 3) H^T grad N
         aW, bW, cW = (np.asarray(x).reshape(T, Q) * self.W for x in (a, b, c))
         if kernel is not None:
             data = np.zeros(self._nnz)
             for pos in self._pos2d:
                 kernel(g, self.GG, aW, bW, cW, pos, data)
         else:
-            if self._gather is None:     # each element entry's place in the data, if it has one
+            if self._gather is None:  # each element entry's place in the data, if it has one
                 flat = [pos.ravel() for pos in self._pos2d]
                 sel = [np.flatnonzero(pos >= 0) for pos in flat]
                 self._gather = ([pos[s] for pos, s in zip(flat, sel)], sel)
@@ -256,12 +268,12 @@ class Solver:
         p = mesh.interp @ (np.asarray(force, float) / mesh.part.vertex_areas)
         tri = mesh.skin_faces
         key = self.edges[:, 0] * self.n_all + self.edges[:, 1]
-        te = np.sort(tri[:, TRI_EDGES], axis=2)                          # (K, 3, 2)
+        te = np.sort(tri[:, TRI_EDGES], axis=2)  # (K, 3, 2)
         mid = mesh.n_nodes + np.searchsorted(key, te[..., 0] * self.n_all + te[..., 1])
-        nodes6 = np.concatenate([tri, mid], axis=1)                      # (K, 6)
+        nodes6 = np.concatenate([tri, mid], axis=1)  # (K, 6)
         area = mesh.skin_face_areas
-        pq = TRI_POINTS @ p[tri].T                                       # (Qs, K)
-        N6 = tri_shape(2, TRI_POINTS)                                    # (Qs, 6)
+        pq = TRI_POINTS @ p[tri].T  # (Qs, K)
+        N6 = tri_shape(2, TRI_POINTS)  # (Qs, 6)
         load = area[:, None] * np.einsum("q,qk,qa->ka", TRI_WEIGHTS, pq, N6)  # (K, 6)
         mag = np.bincount(nodes6.ravel(), weights=load.ravel(), minlength=self.n_all)
         normals = np.zeros((self.n_all, 3))
@@ -270,7 +282,8 @@ class Solver:
         skin_edge = (e[:, 0] < mesh.n_skin) & (e[:, 1] < mesh.n_skin)
         nm = mesh.skin_normals[e[skin_edge, 0]] + mesh.skin_normals[e[skin_edge, 1]]
         normals[mesh.n_nodes + np.flatnonzero(skin_edge)] = nm / np.linalg.norm(
-            nm, axis=1, keepdims=True)
+            nm, axis=1, keepdims=True
+        )
         return -mag[:, None] * normals
 
     # ------------------------------------------------------------------ solving
@@ -284,8 +297,9 @@ class Solver:
         t0 = time.perf_counter()
         u = np.zeros((self.n_all, 3)) if u0 is None else np.array(u0, dtype=float)
         if u.shape != (self.n_all, 3):
-            raise ValueError(f"u0 must have shape ({self.n_all}, 3) (a Solution's state), got "
-                             f"{u.shape}")
+            raise ValueError(
+                f"u0 must have shape ({self.n_all}, 3) (a Solution's state), got {u.shape}"
+            )
         f_target = self.external_forces(force)
         f_start = self._balanced_force(u) if u0 is not None else np.zeros_like(f_target)
         # march from the start state's load to the target, halving the step on failure
@@ -308,7 +322,8 @@ class Solver:
     def continuation(self, force: np.ndarray, totals) -> list[Solution]:
         """Solve the load pattern ``force`` ``(N,)`` scaled to each total in ``totals`` (N, rising),
         each level warm-started from the last converged one. After a failure the remaining levels
-        are reported as failed without being tried (a higher force cannot be carried either)."""
+        are reported as failed without being tried (a higher force cannot be carried either).
+        """
         force = self._check_force(force)
         base = force.sum()
         if base <= 0:
@@ -316,8 +331,18 @@ class Solver:
         out, u, failed = [], None, None
         for total in totals:
             if failed is not None:
-                out.append(Solution(False, f"skipped: a lower force ({failed:.3g} N) failed", None,
-                                    0, float("nan"), float("nan"), 0.0, float(total)))
+                out.append(
+                    Solution(
+                        False,
+                        f"skipped: a lower force ({failed:.3g} N) failed",
+                        None,
+                        0,
+                        float("nan"),
+                        float("nan"),
+                        0.0,
+                        float(total),
+                    )
+                )
                 continue
             sol = self.solve(force * (total / base), u0=u)
             out.append(sol)
@@ -347,7 +372,8 @@ class Solver:
         """Newton iterations from ``u`` under nodal forces ``f``. The factorised tangent is kept
         while the residual still contracts by ``options.reuse`` per step (a solve with stored
         factors costs a sixth of a factorisation); otherwise, or when a kept factorisation gives
-        no usable step, the tangent is assembled and factorised afresh."""
+        no usable step, the tangent is assembled and factorised afresh.
+        """
         opt = self.options
         free = self.free
         fnorm = max(np.linalg.norm(f.reshape(-1)[free]), 1e-30)
@@ -360,14 +386,23 @@ class Solver:
             rel = float(np.linalg.norm(rf) / fnorm)
             history.append(rel)
             if rel <= opt.rtol:
-                return {"ok": True, "u": u, "iterations": it, "residual": rel,
-                        "factorisations": factorisations}
+                return {
+                    "ok": True,
+                    "u": u,
+                    "iterations": it,
+                    "residual": rel,
+                    "factorisations": factorisations,
+                }
             if it == opt.max_iter:
                 break
-            if (len(history) > opt.stagnation
-                    and history[-1] > 0.5 * history[-1 - opt.stagnation]):
-                return {"ok": False, "reason": f"stagnated: residual {rel:.2e} did not halve in "
-                        f"{opt.stagnation} iterations", "iterations": it, "residual": rel}
+            if len(history) > opt.stagnation and history[-1] > 0.5 * history[-1 - opt.stagnation]:
+                return {
+                    "ok": False,
+                    "reason": f"stagnated: residual {rel:.2e} did not halve in "
+                    f"{opt.stagnation} iterations",
+                    "iterations": it,
+                    "residual": rel,
+                }
             if len(history) > 1 and rel > opt.reuse * history[-2]:
                 refresh = True
             if refresh:
@@ -375,25 +410,41 @@ class Solver:
                     _, K = self.assemble(u, f)
                     self.linear.factor(K)
                 except IndefiniteTangent:
-                    return {"ok": False, "reason": "indefinite tangent: the layer buckles",
-                            "iterations": it + 1, "residual": rel}
+                    return {
+                        "ok": False,
+                        "reason": "indefinite tangent: the layer buckles",
+                        "iterations": it + 1,
+                        "residual": rel,
+                    }
                 except (RuntimeError, ValueError) as e:
-                    return {"ok": False, "reason": f"linear solve failed: {e}",
-                            "iterations": it, "residual": rel}
+                    return {
+                        "ok": False,
+                        "reason": f"linear solve failed: {e}",
+                        "iterations": it,
+                        "residual": rel,
+                    }
                 factorisations += 1
             fresh, refresh = refresh, False
             try:
                 du = self.linear.solve(-rf)
             except RuntimeError as e:
-                return {"ok": False, "reason": f"linear solve failed: {e}", "iterations": it,
-                        "residual": rel}
+                return {
+                    "ok": False,
+                    "reason": f"linear solve failed: {e}",
+                    "iterations": it,
+                    "residual": rel,
+                }
             slope = float(rf @ du)
             if not np.all(np.isfinite(du)) or slope >= 0:
                 if not fresh:  # kept factors gave no descent: refactorise next iteration
                     refresh = True
                     continue
-                return {"ok": False, "reason": "indefinite tangent: no descent direction",
-                        "iterations": it + 1, "residual": rel}
+                return {
+                    "ok": False,
+                    "reason": "indefinite tangent: no descent direction",
+                    "iterations": it + 1,
+                    "residual": rel,
+                }
             step = np.zeros(u.size)
             step[free] = du
             step = step.reshape(-1, 3)
@@ -401,8 +452,9 @@ class Solver:
             for _ in range(12):
                 trial = u + alpha * step
                 Et = self.energy(trial, f)
-                if np.isfinite(Et) and (Et <= E + 1e-4 * alpha * slope
-                                        or (Et - E) <= 1e-12 * abs(E)):
+                if np.isfinite(Et) and (
+                    Et <= E + 1e-4 * alpha * slope or (Et - E) <= 1e-12 * abs(E)
+                ):
                     accepted = True
                     break
                 alpha *= 0.5
@@ -411,18 +463,34 @@ class Solver:
                     refresh = True
                     continue
                 inv = not np.isfinite(self.energy(u + 2.0**-11 * step, f))
-                reason = ("element inversion: every step along the Newton direction makes "
-                          "det F <= 0" if inv else "line search failed to lower the energy")
+                reason = (
+                    "element inversion: every step along the Newton direction makes det F <= 0"
+                    if inv
+                    else "line search failed to lower the energy"
+                )
                 return {"ok": False, "reason": reason, "iterations": it + 1, "residual": rel}
             u, E = trial, Et
             r = self.residual(u, f)
             refresh = alpha < 1.0  # a damped step: the tangent has moved on
-        return {"ok": False, "reason": f"no convergence in {opt.max_iter} iterations (residual "
-                f"{rel:.2e})", "iterations": opt.max_iter, "residual": rel}
+        return {
+            "ok": False,
+            "reason": f"no convergence in {opt.max_iter} iterations (residual {rel:.2e})",
+            "iterations": opt.max_iter,
+            "residual": rel,
+        }
 
     def _fail(self, res, iters, t0, force, substeps) -> Solution:
-        return Solution(False, res["reason"], None, iters, res["residual"], float("nan"),
-                        time.perf_counter() - t0, float(force.sum()), substeps)
+        return Solution(
+            False,
+            res["reason"],
+            None,
+            iters,
+            res["residual"],
+            float("nan"),
+            time.perf_counter() - t0,
+            float(force.sum()),
+            substeps,
+        )
 
     def _checked_solution(self, res, u, iters, t0, force, substeps) -> Solution:
         detF = float(det3(self._F(u)).min())
@@ -432,12 +500,24 @@ class Solver:
         comp = float(inward.max())
         umax = float(np.linalg.norm(skin_u, axis=1).max())
         elapsed = time.perf_counter() - t0
-        base = dict(iterations=iters, residual=res["residual"], min_det_F=detF, time=elapsed,
-                    total_force=float(force.sum()), substeps=substeps, max_displacement=umax,
-                    max_compression=comp)
+        base = dict(
+            iterations=iters,
+            residual=res["residual"],
+            min_det_F=detF,
+            time=elapsed,
+            total_force=float(force.sum()),
+            substeps=substeps,
+            max_displacement=umax,
+            max_compression=comp,
+        )
         if detF <= 0:
             return Solution(False, f"inverted element (min det F {detF:.3g})", None, **base)
         if comp > self.options.max_compression:
-            return Solution(False, f"non-physical: the skin moves inward {comp:.2f} x the "
-                            f"thickness (limit {self.options.max_compression})", None, **base)
+            return Solution(
+                False,
+                f"non-physical: the skin moves inward {comp:.2f} x the "
+                f"thickness (limit {self.options.max_compression})",
+                None,
+                **base,
+            )
         return Solution(True, "", u[: m.n_nodes], state=u, **base)

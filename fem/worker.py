@@ -12,27 +12,30 @@ import time
 
 import numpy as np
 
+from fem.compliance import local_compliance
+from fem.local import simulate_local
+from fem.material import material
 from fem.placements import Plan, make_load
-from stmpl.body.part import BodyPart
+from fem.simulate import simulate
+from fem.solver import SolverOptions
+from stmpl.data.format import DOUBLES, FLOATS, INTS, STRINGS
+from stmpl.part import BodyPart
 
 
 def solve_shard(payload: dict) -> dict:
     """Solve the tasks of one shard (runs in a worker). Returns per-sample arrays, failures and
-    timings; plain NumPy and JSON types only."""
+    timings; plain NumPy and JSON types only.
+    """
     threads = payload.get("threads")
     if threads:
         for var in ("MKL_NUM_THREADS", "OMP_NUM_THREADS"):
             os.environ.setdefault(var, str(threads))
-    from fem.material import material
-    from fem.local import simulate_local
-    from fem.simulate import simulate
-    from fem.solver import SolverOptions
-    from stmpl.dataset import DOUBLES, FLOATS, INTS, STRINGS
 
     t0 = time.perf_counter()
     cfg = payload["cfg"]
-    part = BodyPart.from_arrays(payload["part_name"], payload["part_arrays"],
-                                payload["part_source"])
+    part = BodyPart.from_arrays(
+        payload["part_name"], payload["part_arrays"], payload["part_source"]
+    )
     mat = material(**cfg["material"])
     opts = SolverOptions(**cfg["solver"])
     forces = np.asarray(cfg["forces"], dtype=float)
@@ -47,32 +50,55 @@ def solve_shard(payload: dict) -> dict:
         pressure = forces / load.area
         levels = forces[pressure <= cfg["max_pressure"]]
         for f in forces[pressure > cfg["max_pressure"]]:
-            failures.append({"task": task, "placement": pi, "thickness_mm": th_mm,
-                             "total": float(f), "reason": f"over max_pressure: "
-                             f"{f / load.area:.0f} Pa > {cfg['max_pressure']:.0f} Pa"})
+            failures.append(
+                {
+                    "task": task,
+                    "placement": pi,
+                    "thickness_mm": th_mm,
+                    "total": float(f),
+                    "reason": f"over max_pressure: "
+                    f"{f / load.area:.0f} Pa > {cfg['max_pressure']:.0f} Pa",
+                }
+            )
         if len(levels) == 0:
             continue
         lift = None
         try:
             if cfg.get("fidelity", "full") == "auto":
-                mesh, sols, local = simulate_local(part, thickness, load.force, levels,
-                                                   cfg["resolution"], mat, opts)
+                mesh, sols, local = simulate_local(
+                    part, thickness, load.force, levels, cfg["resolution"], mat, opts
+                )
                 lift = local.patch.lift
             else:
-                mesh, sols = simulate(part, thickness, load.force, levels, cfg["resolution"],
-                                      mat, opts)
+                mesh, sols = simulate(
+                    part, thickness, load.force, levels, cfg["resolution"], mat, opts
+                )
         except ValueError as e:  # a shell that cannot be meshed (folds) is a failure too
             for f in levels:
-                failures.append({"task": task, "placement": pi, "thickness_mm": th_mm,
-                                 "total": float(f), "reason": f"mesh: {e}"})
+                failures.append(
+                    {
+                        "task": task,
+                        "placement": pi,
+                        "thickness_mm": th_mm,
+                        "total": float(f),
+                        "reason": f"mesh: {e}",
+                    }
+                )
             continue
-        unit = None                                # the linear FEM's answer to 1 N of the pattern
+        unit = None  # the linear FEM's answer to 1 N of the pattern
         for f, s in zip(levels, sols):
             if s.ok and "linear" in rec and unit is None:
                 unit = linear_answer(part, th_mm * 1e-3, load.force, cfg, mat, opts)
             if not s.ok:
-                failures.append({"task": task, "placement": pi, "thickness_mm": th_mm,
-                                 "total": float(f), "reason": s.reason})
+                failures.append(
+                    {
+                        "task": task,
+                        "placement": pi,
+                        "thickness_mm": th_mm,
+                        "total": float(f),
+                        "reason": s.reason,
+                    }
+                )
                 continue
             rec["task"].append(task)
             rec["placement"].append(pi)
@@ -94,21 +120,26 @@ def solve_shard(payload: dict) -> dict:
             rec["solve_time"].append(s.time)
             rec["min_det_F"].append(s.min_det_F)
             rec["max_compression"].append(s.max_compression)
-    return {"shard": payload["shard"], "records": rec, "failures": failures,
-            "tasks": [t[0] for t in payload["tasks"]], "wall": time.perf_counter() - t0,
-            "pid": os.getpid()}
+    return {
+        "shard": payload["shard"],
+        "records": rec,
+        "failures": failures,
+        "tasks": [t[0] for t in payload["tasks"]],
+        "wall": time.perf_counter() - t0,
+        "pid": os.getpid(),
+    }
 
 
-def linear_answer(part: BodyPart, thickness: float, pattern: np.ndarray, cfg: dict, mat,
-                  opts) -> np.ndarray:
+def linear_answer(
+    part: BodyPart, thickness: float, pattern: np.ndarray, cfg: dict, mat, opts
+) -> np.ndarray:
     """``(N, 3)`` m: the linear FEM's displacement under the force ``pattern`` ``(N,)`` (N) on a
     uniform layer ``thickness`` (m), from the columns of its loaded vertices solved as the
     on-demand operator solves them (:func:`fem.compliance.local_compliance`), so that a model
     trained on it meets the same prior when it serves the body later (to the columns' tolerance:
-    sets made before session 13 started their patches at six thicknesses, not three, and their
-    answers differ by under 1e-3 of the deepest)."""
-    from fem.compliance import local_compliance
-
+    older sets started their patches at six thicknesses, not three, and their
+    answers differ by under 1e-3 of the deepest).
+    """
     loaded = np.flatnonzero(pattern > 0)
     G, _ = local_compliance(part, thickness, loaded, cfg["resolution"], mat, opts)
     return np.einsum("nkc,k->nc", G, pattern[loaded])
@@ -121,6 +152,12 @@ def payload(p: Plan, k: int, threads: int | None) -> dict:
         pi, ti = p.tasks[t]
         pl = {k: v for k, v in p.placements[pi].items() if k in ("kind", "params", "touched")}
         tasks.append((t, (pi, ti), pl, int(p.split[pi])))
-    return {"shard": k, "cfg": p.cfg, "part_name": p.part.name,
-            "part_arrays": p.part.arrays(), "part_source": p.part.source, "tasks": tasks,
-            "threads": threads}
+    return {
+        "shard": k,
+        "cfg": p.cfg,
+        "part_name": p.part.name,
+        "part_arrays": p.part.arrays(),
+        "part_source": p.part.source,
+        "tasks": tasks,
+        "threads": threads,
+    }

@@ -29,7 +29,8 @@ def total_force(force):
 
 def force_pattern(force):
     """``(B, N)`` per-vertex force divided by the scene's total (1 where loaded alone; zero for
-    an unloaded scene)."""
+    an unloaded scene).
+    """
     return force / total_force(force).clamp_min(MIN_TOTAL_N)[:, None]
 
 
@@ -37,7 +38,8 @@ def load_channels(force, inv_area, per_newton: bool) -> list:
     """The load as ``(B, N)`` input channels from ``force`` ``(B, N)`` (N) and ``inv_area``
     ``(N,)`` (1 / vertex area, in whatever pressure unit the model wants): the pressure
     ``F_i / A_i``; or with ``per_newton`` the pressure per newton of the total, and the total
-    force (N) on every vertex."""
+    force (N) on every vertex.
+    """
     if per_newton:
         return [force_pattern(force) * inv_area, total_force(force)[:, None].expand_as(force)]
     return [force * inv_area]

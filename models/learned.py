@@ -6,9 +6,16 @@ models (``models/<kind>/model.py``) implement only their network and its inputs.
 from __future__ import annotations
 
 import numpy as np
+import torch
 
 from models.features import MIN_TOTAL_N, total_force
+from stmpl import checkpoint
+from stmpl.body.mirror import MIRROR, mirror_twin
+from stmpl.data.dataset import same_mesh
+from stmpl.envelope import Envelope
+from stmpl.part import BodyPart, difference
 from stmpl.predictor import BasePredictor
+from stmpl.scene import Deformation, Scene
 
 DISP_SCALE_MM = 10.0
 """Default displacement normalisation, mm: [-10, 10] mm maps to [-1, 1]. The paper's 30 mm
@@ -25,11 +32,10 @@ LOSS_EPS = 1e-6
 
 def relative_loss(pred, target):
     """Mean over samples of ``mean_i |pred_i - target_i| / max_i |target_i|`` for ``(B, N, 3)``
-    tensors: the relative MEE, smooth at zero error (``LOSS_EPS``)."""
-    import torch
-
-    norm = torch.sqrt(((pred - target) ** 2).sum(-1) + LOSS_EPS ** 2)      # (B, N)
-    peak = target.norm(dim=-1).amax(-1)                                    # (B,)
+    tensors: the relative MEE, smooth at zero error (``LOSS_EPS``).
+    """
+    norm = torch.sqrt(((pred - target) ** 2).sum(-1) + LOSS_EPS**2)  # (B, N)
+    peak = target.norm(dim=-1).amax(-1)  # (B,)
     return (norm.mean(-1) / (peak + LOSS_EPS)).mean()
 
 
@@ -38,19 +44,16 @@ def pooled_loss(pred, target, weight=None):
     tensors, each sample weighted by ``weight`` ``(B,)`` (per-newton tensors: the total force, so
     the sums are of absolute displacements): ``sum_b w_b MEE_b / sum_b w_b max_i |target_bi|``.
     Unlike :func:`relative_loss`, a heavy press weighs more than a light one, as it does in the
-    mean MEE over a test set (and in its ratio to Naive's)."""
-    import torch
-
-    norm = torch.sqrt(((pred - target) ** 2).sum(-1) + LOSS_EPS ** 2)      # (B, N)
-    peak = target.norm(dim=-1).amax(-1)                                    # (B,)
+    mean MEE over a test set (and in its ratio to Naive's).
+    """
+    norm = torch.sqrt(((pred - target) ** 2).sum(-1) + LOSS_EPS**2)  # (B, N)
+    peak = target.norm(dim=-1).amax(-1)  # (B,)
     w = torch.ones_like(peak) if weight is None else weight
     return (w * norm.mean(-1)).sum() / ((w * peak).sum() + LOSS_EPS)
 
 
 def torch_device(name):
     """``torch.device(name)`` if this machine has it; else ``ValueError`` naming it."""
-    import torch
-
     try:
         dev = torch.device(name)
     except (RuntimeError, TypeError) as e:
@@ -85,17 +88,19 @@ class LearnedPredictor(BasePredictor):
         self._stacked: dict = {}
         self.model = self.build_model().to(self.device)
         self.meta: dict = {}
-        self.slot(part)                                   # the model's own body is slot 0
+        self.slot(part)  # the model's own body is slot 0
 
     @classmethod
     def options(cls, config: dict | None = None) -> dict:
         """The model options ``config`` over the defaults, checked (unknown keys, the loss, the
-        displacement scale) without building anything; raises ``ValueError``."""
+        displacement scale) without building anything; raises ``ValueError``.
+        """
         allowed = {**cls.defaults, "disp_scale_mm": DISP_SCALE_MM}
         unknown = set(config or {}) - set(allowed)
         if unknown:
-            raise ValueError(f"unknown {cls.name} model options {sorted(unknown)}; allowed: "
-                             f"{sorted(allowed)}")
+            raise ValueError(
+                f"unknown {cls.name} model options {sorted(unknown)}; allowed: {sorted(allowed)}"
+            )
         out = {**allowed, **(config or {})}
         if out.get("loss", "mse") not in LOSSES:
             raise ValueError(f"loss must be one of {LOSSES}, got {out['loss']!r}")
@@ -113,14 +118,15 @@ class LearnedPredictor(BasePredictor):
     @property
     def general(self) -> bool:
         """Whether the model serves every body of its part's mesh (option ``geometry``: the
-        body's shape is an input; or :attr:`any_body`), not only the body it was built on."""
+        body's shape is an input; or :attr:`any_body`), not only the body it was built on.
+        """
         return bool(self.config.get("geometry", False)) or self.any_body
 
     def body_tensors(self, part) -> dict:
         """The per-body tensors the network's inputs need, for ``part`` (one body of the
         mesh): vertex areas' inverse ``inv_area`` ``(N,)`` (1/m^2) and ``normals`` ``(N, 3)``.
-        Subclasses add their own."""
-        import torch
+        Subclasses add their own.
+        """
 
         def t(x):
             return torch.tensor(np.asarray(x), dtype=torch.float32, device=self.device)
@@ -129,9 +135,8 @@ class LearnedPredictor(BasePredictor):
 
     def slot(self, part) -> int:
         """The index of ``part``'s body among those met (added, its tensors computed, the first
-        time: the model's own part is slot 0)."""
-        from stmpl.body.part import difference
-
+        time: the model's own part is slot 0).
+        """
         key = getattr(self, "_last_slot", (None, None))
         if key[0] is part:
             return key[1]
@@ -139,14 +144,13 @@ class LearnedPredictor(BasePredictor):
         k = self._slots.get(digest)
         if k is None:
             if self.body_parts:
-                from stmpl.dataset import same_mesh
-
                 why = same_mesh(part, self.part)
                 if why:
                     raise ValueError(f"another mesh than this {self.name} model's: {why}")
                 if not self.general and difference(part, self.part):
-                    raise ValueError(f"another body than this {self.name} model's: "
-                                     f"{difference(part, self.part)}")
+                    raise ValueError(
+                        f"another body than this {self.name} model's: {difference(part, self.part)}"
+                    )
             k = self._slots[digest] = len(self.body_parts)
             self.body_parts.append(part)
             self._body_data.append(self.body_tensors(part))
@@ -156,16 +160,12 @@ class LearnedPredictor(BasePredictor):
 
     def bodies_of(self, parts) -> "torch.Tensor":
         """``(B,)`` slots of the scenes' parts (:meth:`slot`)."""
-        import torch
-
-        return torch.tensor([self.slot(p) for p in parts], dtype=torch.long,
-                            device=self.device)
+        return torch.tensor([self.slot(p) for p in parts], dtype=torch.long, device=self.device)
 
     def body_tensor(self, name: str, body) -> "torch.Tensor":
         """``(B, ...)``: the per-body tensor ``name`` of each sample's body (``body`` ``(B,)``
-        slots)."""
-        import torch
-
+        slots).
+        """
         if name not in self._stacked:
             self._stacked[name] = torch.stack([d[name] for d in self._body_data])
         return self._stacked[name].index_select(0, body)
@@ -180,7 +180,8 @@ class LearnedPredictor(BasePredictor):
         ``self.scale`` (m), or with ``per_newton`` in units of ``self.scale`` per newton of
         the scene's total force. ``body``: ``(B,)`` slots of the samples' bodies
         (:meth:`slot`; None: the model's own); ``base``: a prior's answer ``(B, N, 3)`` in m
-        when the caller has it (a dataset's ``linear``)."""
+        when the caller has it (a dataset's ``linear``).
+        """
         raise NotImplementedError
 
     def forward(self, thickness, force, body=None, base=None):
@@ -189,7 +190,8 @@ class LearnedPredictor(BasePredictor):
 
     def denormalised(self, r, force):
         """Network output ``(B, ..., 3)`` in the units of :meth:`raw` -> units of ``self.scale``
-        (the inverse of :meth:`normalised` without the scale)."""
+        (the inverse of :meth:`normalised` without the scale).
+        """
         return r * total_force(force)[:, None, None] if self.per_newton else r
 
     def normalised(self, target, force):
@@ -206,7 +208,8 @@ class LearnedPredictor(BasePredictor):
         newton, so a light press weighs as much as a heavy one); ``relative``, each sample's
         mean Euclidean error over its peak displacement (the relative MEE the targets use);
         ``pooled``, the batch's mean Euclidean errors over its peaks, summed before the ratio
-        (:func:`pooled_loss`: heavier presses weigh more)."""
+        (:func:`pooled_loss`: heavier presses weigh more).
+        """
         pred, tgt = self.raw(thickness, force, body, base), self.normalised(target, force)
         if self.config.get("loss", "mse") == "mse":
             return ((pred - tgt) ** 2).mean()
@@ -214,67 +217,76 @@ class LearnedPredictor(BasePredictor):
 
     def euclidean_loss(self, pred, tgt, force):
         """The ``relative`` or ``pooled`` loss of ``(B, N, 3)`` outputs against targets in the
-        units of :meth:`raw` (``pooled`` weighs per-newton samples by their total force)."""
+        units of :meth:`raw` (``pooled`` weighs per-newton samples by their total force).
+        """
         if self.config["loss"] == "relative":
             return relative_loss(pred, tgt)
         return pooled_loss(pred, tgt, total_force(force) if self.per_newton else None)
 
     def restored(self) -> None:
         """Called when a checkpoint has been loaded (``self.meta`` set): rebuild what the
-        checkpoint does not carry. Nothing by default."""
+        checkpoint does not carry. Nothing by default.
+        """
 
     # -- shared
     def predict(self, scenes, strict: bool | None = None):
         """As :meth:`BasePredictor.predict`; a scene on the mirror twin of the model's part
-        (anny's right arm for a model of the left: :func:`stmpl.body.part.mirror_twin`) is
+        (anny's right arm for a model of the left: :func:`stmpl.part.mirror_twin`) is
         answered in the mirror: its loads and thickness on the mirrored mesh, the displacement
-        mirrored back (``info["mirrored"]``)."""
-        from stmpl.body.mirror import MIRROR, mirror_twin
-        from stmpl.scene import Deformation, Scene
-
+        mirrored back (``info["mirrored"]``).
+        """
         single = isinstance(scenes, Scene)
         batch = [scenes] if single else list(scenes)
-        twins = [mirror_twin(s.part, self.part) if isinstance(s, Scene) else None
-                 for s in batch]
+        twins = [mirror_twin(s.part, self.part) if isinstance(s, Scene) else None for s in batch]
         if not any(t is not None for t in twins):
             return super().predict(scenes, strict)
-        seen = [s if t is None else Scene(t, s.thickness, s.force, meta=s.meta)
-                for s, t in zip(batch, twins)]
+        seen = [
+            s if t is None else Scene(t, s.thickness, s.force, meta=s.meta)
+            for s, t in zip(batch, twins)
+        ]
         out = super().predict(seen, strict)
-        back = [d if t is None else Deformation(s, d.displacement * MIRROR,
-                                                {**d.info, "mirrored": True})
-                for s, t, d in zip(batch, twins, out)]
+        back = [
+            d
+            if t is None
+            else Deformation(s, d.displacement * MIRROR, {**d.info, "mirrored": True})
+            for s, t, d in zip(batch, twins, out)
+        ]
         return back[0] if single else back
 
     def check(self, scenes) -> None:
-        from stmpl.body.part import difference
-        from stmpl.dataset import same_mesh
 
         for i, s in enumerate(scenes):
             if s.part is self.part or s.part is getattr(self, "_checked_part", None):
-                continue                       # the same object as last time: same mesh
+                continue  # the same object as last time: same mesh
             if self.general:
                 why = same_mesh(s.part, self.part)
                 if why:
-                    raise ValueError(f"scene {i} is on another mesh than this {self.name} "
-                                     f"predictor serves (any body of its {self.part.name}): "
-                                     f"{why}")
+                    raise ValueError(
+                        f"scene {i} is on another mesh than this {self.name} "
+                        f"predictor serves (any body of its {self.part.name}): "
+                        f"{why}"
+                    )
             else:
                 why = difference(s.part, self.part)
                 if why:
-                    hint = ("; a model of every body (option geometry: true) serves it"
-                            if not same_mesh(s.part, self.part) else "")
-                    raise ValueError(f"scene {i} is on another body part than this "
-                                     f"{self.name} predictor was trained on: {why}{hint}")
+                    hint = (
+                        "; a model of every body (option geometry: true) serves it"
+                        if not same_mesh(s.part, self.part)
+                        else ""
+                    )
+                    raise ValueError(
+                        f"scene {i} is on another body part than this "
+                        f"{self.name} predictor was trained on: {why}{hint}"
+                    )
             self._checked_part = s.part
 
     def predict_batch(self, scenes) -> list[np.ndarray]:
-        import torch
-
-        t = torch.tensor(np.stack([s.thickness for s in scenes]), dtype=torch.float32,
-                         device=self.device)
-        f = torch.tensor(np.stack([s.force for s in scenes]), dtype=torch.float32,
-                         device=self.device)
+        t = torch.tensor(
+            np.stack([s.thickness for s in scenes]), dtype=torch.float32, device=self.device
+        )
+        f = torch.tensor(
+            np.stack([s.force for s in scenes]), dtype=torch.float32, device=self.device
+        )
         if self.model.training:
             self.model.eval()
         body = None
@@ -289,29 +301,29 @@ class LearnedPredictor(BasePredictor):
 
     def save(self, path, meta: dict | None = None):
         """Write a checkpoint (``.safetensors`` + sidecar) with ``meta`` (card hash, metrics)."""
-        import torch
-
-        from stmpl import checkpoint
-
         tensors = {f"model.{k}": v for k, v in self.model.state_dict().items()}
         for k, v in self.part.arrays().items():
             tensors[f"part.{k}"] = torch.as_tensor(np.asarray(v))
-        side = {"kind": self.name, "config": self.config, "part": self.part.name,
-                "part_source": self.part.source, "disp_scale_m": self.scale,
-                "parameters": self.n_parameters(), **self.meta, **(meta or {})}
+        side = {
+            "kind": self.name,
+            "config": self.config,
+            "part": self.part.name,
+            "part_source": self.part.source,
+            "disp_scale_m": self.scale,
+            "parameters": self.n_parameters(),
+            **self.meta,
+            **(meta or {}),
+        }
         if self.envelope is not None:
             side["envelope"] = self.envelope.to_dict()
         return checkpoint.write(path, tensors, side)
 
     @classmethod
     def from_checkpoint(cls, path, device: str = "cpu"):
-        from stmpl import checkpoint
-        from stmpl.body.part import BodyPart
 
         tensors, meta = checkpoint.read(path)
         if meta["kind"] != cls.name:
-            raise ValueError(f"checkpoint {path} holds a {meta['kind']!r} model, not "
-                             f"{cls.name!r}")
+            raise ValueError(f"checkpoint {path} holds a {meta['kind']!r} model, not {cls.name!r}")
         arrays = {k[5:]: v.numpy() for k, v in tensors.items() if k.startswith("part.")}
         part = BodyPart.from_arrays(meta["part"], arrays, meta.get("part_source"))
         p = cls(part, meta["config"], device=device)
@@ -323,8 +335,6 @@ class LearnedPredictor(BasePredictor):
         p.meta = {k: v for k, v in meta.items() if k not in ("config", "kind", "envelope")}
         p.restored()
         if "envelope" in meta:
-            from stmpl.envelope import Envelope
-
             try:
                 p.envelope = Envelope.from_dict(meta["envelope"])
             except ValueError as e:

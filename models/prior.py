@@ -9,8 +9,15 @@ import weakref
 
 import numpy as np
 
-from models.linear.operator import (check_operator, fit_on_demand, fit_operator, install,
-                                    reattach)
+from fem.compliance import ColumnStore
+from models.linear.operator import (
+    ComplianceOperator,
+    check_operator,
+    fit_on_demand,
+    fit_operator,
+    install,
+    reattach,
+)
 
 PRIORS = ("none", "linear")
 REGION_TOLERANCE = 0.01
@@ -29,7 +36,8 @@ class LinearPrior:
     :data:`models.linear.operator.OPERATORS`):
     with ``linear`` its model holds a :class:`ComplianceOperator` as ``model.prior``,
     :meth:`fit` computes it from the dataset, :meth:`base` gives its answer and
-    :meth:`corrected` adds the network's correction to it."""
+    :meth:`corrected` adds the network's correction to it.
+    """
 
     @classmethod
     def options(cls, config: dict | None = None) -> dict:
@@ -38,9 +46,11 @@ class LinearPrior:
             raise ValueError(f"prior must be one of {PRIORS}, got {out['prior']!r}")
         check_operator(out.get("operator", "stored"))
         if out.get("geometry") and out["prior"] == "linear" and out["operator"] != "on_demand":
-            raise ValueError("a model of every body (geometry: true) with the linear prior "
-                             "needs operator: on_demand (the linear FEM is solved for each "
-                             "body it meets)")
+            raise ValueError(
+                "a model of every body (geometry: true) with the linear prior "
+                "needs operator: on_demand (the linear FEM is solved for each "
+                "body it meets)"
+            )
         return out
 
     @property
@@ -61,7 +71,8 @@ class LinearPrior:
     def base(self, thickness, force, body=None, base=None):
         """The linear FEM's ``(B, N, 3)`` answer in the units of ``raw``, or None without the
         prior: ``base`` (m) if the caller has it, else solved on each sample's body (``body``
-        ``(B,)`` slots; None: the model's own, :meth:`body_prior`)."""
+        ``(B,)`` slots; None: the model's own, :meth:`body_prior`).
+        """
         if not self.prior:
             return None
         if base is not None:
@@ -72,23 +83,26 @@ class LinearPrior:
         """The linear FEM of body slot ``k`` (the model's own: ``model.prior``), on demand: a
         :class:`~fem.compliance.ColumnStore` for that body and the recorded FEM set-up, whose
         levels gain each uniform layer's thickness exactly (the linear answer there is then the
-        FEM's, not interpolated, as the training data's ``linear`` was)."""
+        FEM's, not interpolated, as the training data's ``linear`` was).
+        """
         return self.model.prior if k == 0 else body_operator(self, k)
 
     @staticmethod
     def corrected(base, out):
         """The prior ``base`` plus the network's output ``out`` read as a correction (the
-        output alone without a prior); any ``(..., 3)`` shapes that broadcast."""
+        output alone without a prior); any ``(..., 3)`` shapes that broadcast.
+        """
         return out if base is None else base + CORRECTION_SCALE * out
 
 
 def on_bodies(predictor, own, thickness, force, body=None):
     """``(B, N, 3)`` m: the linear FEM's answer of each sample on its own body: ``own`` (the
     operator of the predictor's own part) for slot 0 or ``body`` None, :func:`body_operator`
-    for the others, each body's samples in one call."""
+    for the others, each body's samples in one call.
+    """
     if body is None or not bool((body != 0).any()):
         return own(thickness, force)
-    import torch
+    import torch  # deferred: about a second to import; the core's types do not need it
 
     u = torch.zeros(*force.shape, 3, device=force.device)
     for k in torch.unique(body).tolist():
@@ -102,19 +116,22 @@ def body_operator(predictor, k: int):
     """The on-demand linear FEM operator of ``predictor``'s body slot ``k``: a
     :class:`~fem.compliance.ColumnStore` for that body's part and the FEM set-up the predictor's
     own operator records (``meta["operator"]``), exact at each uniform layer's thickness; made
-    once per body and kept."""
+    once per body and kept.
+    """
     ops = predictor.__dict__.setdefault("_body_operators", {})
     if k not in ops:
-        from fem.compliance import ColumnStore
-        from models.linear.operator import ComplianceOperator
-
         meta = predictor.meta.get("operator") or {}
         if meta.get("mode") != "on_demand":
-            raise ValueError(f"{predictor.name}: the linear FEM of another body needs the "
-                             "on-demand operator (operator: on_demand)")
+            raise ValueError(
+                f"{predictor.name}: the linear FEM of another body needs the "
+                "on-demand operator (operator: on_demand)"
+            )
         op = ComplianceOperator()
-        op.attach(ColumnStore(predictor.body_parts[k], meta["setup"],
-                              [float(x) * 1e-3 for x in meta["levels_mm"]]))
+        op.attach(
+            ColumnStore(
+                predictor.body_parts[k], meta["setup"], [float(x) * 1e-3 for x in meta["levels_mm"]]
+            )
+        )
         op.exact = True
         ops[k] = op.to(predictor.device)
     return ops[k]
@@ -127,13 +144,14 @@ _ADJACENCY: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
 def moved(part, force: np.ndarray, base: np.ndarray, rings: int = 1) -> np.ndarray:
     """``fidelity="auto"``: per scene the ``(B, N)`` mask of the loaded vertices (``force``
     ``(B, N)`` > 0) and of those the prior's answer ``base`` ``(B, N, 3)`` moves by more than
-    :data:`REGION_TOLERANCE` of its deepest, grown by ``rings`` rings of mesh neighbours."""
+    :data:`REGION_TOLERANCE` of its deepest, grown by ``rings`` rings of mesh neighbours.
+    """
     adjacency = _ADJACENCY.get(part)
     if adjacency is None:
         adjacency = _ADJACENCY[part] = part.adjacency.astype(np.float32)
     mag = np.linalg.norm(base, axis=-1)
     m = (force > 0) | (mag > REGION_TOLERANCE * mag.max(-1, keepdims=True))
-    m &= (force > 0).any(-1, keepdims=True)               # an unloaded scene moves nothing
+    m &= (force > 0).any(-1, keepdims=True)  # an unloaded scene moves nothing
     for _ in range(rings):
         m = m | (adjacency @ m.T.astype(np.float32) > 0).T
     return m

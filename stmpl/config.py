@@ -19,7 +19,8 @@ def read(source, defaults: dict, what: str, merge: tuple = (), name: str = "conf
     """A complete config from a YAML path or a mapping: ``defaults`` overridden by the source's
     keys (the mappings named in ``merge`` are merged one level deep instead of replaced). An
     unset ``name`` becomes the file's stem (``name`` for a mapping). ``what`` names the config
-    in errors ("dataset config", "training config")."""
+    in errors ("dataset config", "training config").
+    """
     if isinstance(source, (str, os.PathLike)):
         path = pathlib.Path(source)
         if not path.is_file():
@@ -34,8 +35,7 @@ def read(source, defaults: dict, what: str, merge: tuple = (), name: str = "conf
     else:
         raw, default_name = source, name
     if not isinstance(raw, dict):
-        raise ValueError(f"a {what} must be a mapping of keys to values, got "
-                         f"{type(raw).__name__}")
+        raise ValueError(f"a {what} must be a mapping of keys to values, got {type(raw).__name__}")
     unknown = set(raw) - set(defaults)
     if unknown:
         raise ValueError(f"unknown {what} keys {sorted(unknown)}; allowed: {sorted(defaults)}")
@@ -52,17 +52,27 @@ def read(source, defaults: dict, what: str, merge: tuple = (), name: str = "conf
 
 def integer(value, name: str, minimum: int | None = None) -> int:
     """``value`` if it is an integer (not a bool) of at least ``minimum``; else ``ValueError``."""
-    if isinstance(value, bool) or not isinstance(value, int) or (minimum is not None
-                                                                 and value < minimum):
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int)
+        or (minimum is not None and value < minimum)
+    ):
         bound = f" >= {minimum}" if minimum is not None else ""
         raise ValueError(f"{name} must be an integer{bound}, got {value!r}")
     return value
 
 
-def number(value, name: str, low: float | None = None, high: float | None = None,
-           low_open: bool = False, unit: str = "") -> float:
+def number(
+    value,
+    name: str,
+    low: float | None = None,
+    high: float | None = None,
+    low_open: bool = False,
+    unit: str = "",
+) -> float:
     """``value`` as a float if it is a finite number (not a bool) in the range; else
-    ``ValueError`` naming the key. ``low_open``: ``low`` itself is excluded."""
+    ``ValueError`` naming the key. ``low_open``: ``low`` itself is excluded.
+    """
     ok = not isinstance(value, bool) and isinstance(value, (int, float))
     if ok:
         x = float(value)
@@ -75,8 +85,9 @@ def number(value, name: str, low: float | None = None, high: float | None = None
         lo = "" if low is None else (f" > {low:g}" if low_open else f" >= {low:g}")
         hi = "" if high is None else f" <= {high:g}"
         rng = lo + ("," if lo and hi else "") + hi
-        raise ValueError(f"{name} must be a number{rng}{(' ' + unit) if unit else ''}, got "
-                         f"{value!r}")
+        raise ValueError(
+            f"{name} must be a number{rng}{(' ' + unit) if unit else ''}, got {value!r}"
+        )
     return float(value)
 
 

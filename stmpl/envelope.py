@@ -19,15 +19,19 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from stmpl.body.part import BodyPart
+from stmpl.part import BodyPart
 
 FORMAT = "stmpl-envelope/1"
 
 AXES = {
     # name: (kind, unit, scale for printing, what it is)
     "thickness": ("range", "mm", 1e3, "tissue thickness"),
-    "thickness_variation": ("max", "%", 1e2,
-                            "thickness variation within two thicknesses of a contact"),
+    "thickness_variation": (
+        "max",
+        "%",
+        1e2,
+        "thickness variation within two thicknesses of a contact",
+    ),
     "contacts": ("max", "", 1.0, "number of contacts"),
     "contact_force": ("max", "N", 1.0, "force of a contact"),
     "contact_area": ("range", "cm^2", 1e4, "area of a contact"),
@@ -57,19 +61,20 @@ the stability sweep (reports/stability): the shipped GNN, trained on uniform lay
 
 def contacts(part: BodyPart, force: np.ndarray) -> list[np.ndarray]:
     """The contacts of a load: connected patches (over the mesh's edges) of the vertices with
-    ``force > 0``, each a ``(K,)`` array of vertex indices; ``force`` ``(N,)``."""
+    ``force > 0``, each a ``(K,)`` array of vertex indices; ``force`` ``(N,)``.
+    """
     on = np.asarray(force) > 0
     loaded = np.flatnonzero(on)
     if len(loaded) == 0:
         return []
     e = part.edges
-    e = e[on[e[:, 0]] & on[e[:, 1]]]                  # edges inside the load
+    e = e[on[e[:, 0]] & on[e[:, 1]]]  # edges inside the load
     label = np.arange(part.n_vertices)
-    while True:                                       # each vertex takes its patch's least index
+    while True:  # each vertex takes its patch's least index
         new = label.copy()
         np.minimum.at(new, e[:, 0], label[e[:, 1]])
         np.minimum.at(new, e[:, 1], label[e[:, 0]])
-        new = new[new]                                # jump along the chain
+        new = new[new]  # jump along the chain
         if np.array_equal(new, label):
             break
         label = new
@@ -79,33 +84,42 @@ def contacts(part: BodyPart, force: np.ndarray) -> list[np.ndarray]:
 
 def features(part: BodyPart, thickness: np.ndarray, force: np.ndarray) -> dict:
     """A scene's place on every axis of :data:`AXES` (SI units): scalars, and for the per-contact
-    axes a list with one value per contact. ``thickness``, ``force`` ``(N,)`` m and N."""
+    axes a list with one value per contact. ``thickness``, ``force`` ``(N,)`` m and N.
+    """
     t = np.asarray(thickness, dtype=float)
     f = np.asarray(force, dtype=float)
     area = part.vertex_areas
-    out = {"thickness": [float(t.min()), float(t.max())], "thickness_variation": 0.0,
-           "contacts": 0, "contact_force": [], "contact_area": [], "contact_pressure": [],
-           "peak_pressure": float((f / area).max(initial=0.0)),
-           "skin_area": float(area.sum())}
+    out = {
+        "thickness": [float(t.min()), float(t.max())],
+        "thickness_variation": 0.0,
+        "contacts": 0,
+        "contact_force": [],
+        "contact_area": [],
+        "contact_pressure": [],
+        "peak_pressure": float((f / area).max(initial=0.0)),
+        "skin_area": float(area.sum()),
+    }
     found = contacts(part, f)
     for c in found:
         a = float(area[c].sum())
         out["contact_force"].append(float(f[c].sum()))
         out["contact_area"].append(a)
         out["contact_pressure"].append(float(f[c].sum()) / a)
-        if out["thickness"][0] < out["thickness"][1]:           # else uniform: none
+        if out["thickness"][0] < out["thickness"][1]:  # else uniform: none
             tc = t[_around(part, c, 2.0 * float(t[c].max()))]
-            out["thickness_variation"] = max(out["thickness_variation"],
-                                             float((tc.max() - tc.min()) / tc.mean()))
+            out["thickness_variation"] = max(
+                out["thickness_variation"], float((tc.max() - tc.min()) / tc.mean())
+            )
     out["contacts"] = len(out["contact_force"])
-    if part.rims:                        # per contact: its vertex nearest an open rim
+    if part.rims:  # per contact: its vertex nearest an open rim
         out["rim_distance"] = [float(part.rim_distance[c].min()) for c in found]
     return out
 
 
 def _around(part: BodyPart, vertices: np.ndarray, reach: float) -> np.ndarray:
     """The vertices within ``reach`` (m, straight line) of any of ``vertices``: the tissue a
-    contact moves, whatever the mesh's resolution."""
+    contact moves, whatever the mesh's resolution.
+    """
     near = part.tree.query_ball_point(part.vertices[vertices], reach)
     return np.unique(np.concatenate([np.asarray(x, dtype=np.int64) for x in near]))
 
@@ -118,17 +132,19 @@ def _values(feat: dict, axis: str) -> list[float]:
 @dataclass
 class Envelope:
     """Named boxes over :data:`AXES`: ``{box: {axis: [lo, hi]}}`` in SI units, with the number
-    of scenes each box was made from and where they came from."""
+    of scenes each box was made from and where they came from.
+    """
 
     boxes: dict = field(default_factory=dict)
-    info: dict = field(default_factory=dict)     # {box: {"scenes": int, "source": str, ...}}
+    info: dict = field(default_factory=dict)  # {box: {"scenes": int, "source": str, ...}}
     limits: dict = field(default_factory=dict)
     """Bounds over every box, set where a model was measured to break its promise inside its
     data's support (the stability sweep): ``{axis: {"max": value, "source": str}}`` (SI)."""
 
     def limit(self, axis: str, hi: float, source: str = "") -> None:
         """Cap ``axis`` (a ``max`` or ``range`` axis of :data:`AXES`) at ``hi`` (SI) for every
-        box: a scene above it lies outside whatever box it fits."""
+        box: a scene above it lies outside whatever box it fits.
+        """
         if axis not in AXES or AXES[axis][0] == "min":
             raise ValueError(f"a limit needs a max or range axis of {sorted(AXES)}, got {axis!r}")
         if not np.isfinite(hi) or hi <= 0:
@@ -136,30 +152,36 @@ class Envelope:
         self.limits[axis] = {"max": float(hi), "source": source}
 
     @classmethod
-    def of(cls, part, thickness, force, name: str = "training", source: str = "", body=None,
-           **notes) -> "Envelope":
+    def of(
+        cls, part, thickness, force, name: str = "training", source: str = "", body=None, **notes
+    ) -> "Envelope":
         """The envelope of ``S`` scenes on ``part``: ``thickness``, ``force`` ``(S, N)`` (m, N)
-        (on several bodies: see :meth:`add`)."""
+        (on several bodies: see :meth:`add`).
+        """
         env = cls()
         env.add(name, part, thickness, force, source=source, body=body, **notes)
         return env
 
-    def add(self, name: str, part, thickness, force, source: str = "", body=None,
-            **notes) -> None:
+    def add(self, name: str, part, thickness, force, source: str = "", body=None, **notes) -> None:
         """Add (or replace) box ``name``: the support of ``S`` scenes, ``(S, N)`` arrays, on
         ``part``, or on several bodies of one mesh: ``part`` a list of parts and ``body``
-        ``(S,)`` the index of each scene's."""
+        ``(S,)`` the index of each scene's.
+        """
         t = np.asarray(thickness, dtype=float)
         f = np.asarray(force, dtype=float)
         parts = list(part) if isinstance(part, (list, tuple)) else [part]
         body = np.zeros(len(t), int) if body is None else np.asarray(body, dtype=int)
         part = parts[0]
         if body.shape != (len(t),) or (len(body) and (body.min() < 0 or body.max() >= len(parts))):
-            raise ValueError(f"body must give each of the {len(t)} scenes the index of its part "
-                             f"among {len(parts)}")
+            raise ValueError(
+                f"body must give each of the {len(t)} scenes the index of its part "
+                f"among {len(parts)}"
+            )
         if t.ndim != 2 or t.shape != f.shape or t.shape[1] != part.n_vertices:
-            raise ValueError(f"thickness and force must both be (S, {part.n_vertices}), got "
-                             f"{t.shape} and {f.shape}")
+            raise ValueError(
+                f"thickness and force must both be (S, {part.n_vertices}), got "
+                f"{t.shape} and {f.shape}"
+            )
         if len(t) == 0:
             raise ValueError(f"an envelope box ({name!r}) needs at least one scene")
         lo = {a: np.inf for a in AXES}
@@ -170,17 +192,28 @@ class Envelope:
                 vals = _values(feat, a)
                 if vals:
                     lo[a], hi[a] = min(lo[a], min(vals)), max(hi[a], max(vals))
-        self.boxes[name] = {a: [float(lo[a]), float(hi[a])] for a in AXES
-                            if np.isfinite(lo[a])}
+        self.boxes[name] = {a: [float(lo[a]), float(hi[a])] for a in AXES if np.isfinite(lo[a])}
         self.info[name] = {"scenes": int(len(t)), "source": source, **notes}
 
-    def widen(self, name: str, part, thickness, force, base: str = "training",
-              axes=SHAPE_AXES, source: str = "", body=None, **notes) -> np.ndarray:
+    def widen(
+        self,
+        name: str,
+        part,
+        thickness,
+        force,
+        base: str = "training",
+        axes=SHAPE_AXES,
+        source: str = "",
+        body=None,
+        **notes,
+    ) -> np.ndarray:
         """Add box ``name``: box ``base`` widened along ``axes`` to cover those of ``S`` scenes
         (``(S, N)`` arrays) that fit ``base`` on every other axis; returns the ``(S,)`` mask
         of those scenes (measure a model on them before keeping the box: see
-        :func:`stmpl.zoo.measure`). Nothing is added when no scene qualifies. Several bodies:
-        ``part`` a list and ``body`` ``(S,)`` indices, as in :meth:`add`."""
+        :func:`stmpl.pipeline.zoo.measure`). Nothing is added when no scene qualifies. Several
+        bodies:
+        ``part`` a list and ``body`` ``(S,)`` indices, as in :meth:`add`.
+        """
         t = np.asarray(thickness, dtype=float)
         f = np.asarray(force, dtype=float)
         parts = list(part) if isinstance(part, (list, tuple)) else [part]
@@ -199,24 +232,38 @@ class Envelope:
                     box[a] = [min(box[a][0], min(vals)), max(box[a][1], max(vals))]
         if mask.any():
             self.boxes[name] = box
-            self.info[name] = {"scenes": int(mask.sum()), "source": source, "base": base,
-                               "widened": list(axes), **notes}
+            self.info[name] = {
+                "scenes": int(mask.sum()),
+                "source": source,
+                "base": base,
+                "widened": list(axes),
+                **notes,
+            }
         return mask
 
     def reasons(self, scene=None, *, part=None, thickness=None, force=None) -> list[str]:
         """Why a scene lies outside: ``[]`` when it fits a box and keeps every limit, else one
-        sentence per limit it passes and per axis it leaves in the box it comes closest to
-        fitting. Give a Scene or ``part, thickness,
-        force``."""
+        sentence per limit it passes and per axis it leaves in the box it comes closest to fitting.
+        Give a Scene or ``part, thickness, force``.
+        """
         if scene is not None:
             part, thickness, force = scene.part, scene.thickness, scene.force
         if not self.boxes:
             return []
         feat = features(part, thickness, force)
-        capped = [why for a, lim in self.limits.items()
-                  for why in _outside(feat, {a: [0.0, lim["max"]]}, "", most=(
-                      "where it was measured to stop keeping its promise: "
-                      + (lim.get("source") or "a limit")))]
+        capped = [
+            why
+            for a, lim in self.limits.items()
+            for why in _outside(
+                feat,
+                {a: [0.0, lim["max"]]},
+                "",
+                most=(
+                    "where it was measured to stop keeping its promise: "
+                    + (lim.get("source") or "a limit")
+                ),
+            )
+        ]
         best = None
         for name, box in self.boxes.items():
             why = _outside(feat, box, name)
@@ -225,11 +272,15 @@ class Envelope:
                 break
             if best is None or len(why) < len(best):
                 best = why
-        return capped + best         # a cap first, then the data's own bounds the scene leaves
+        return capped + best  # a cap first, then the data's own bounds the scene leaves
 
     def to_dict(self) -> dict:
-        return {"format": FORMAT, "boxes": self.boxes, "info": self.info,
-                **({"limits": self.limits} if self.limits else {})}
+        return {
+            "format": FORMAT,
+            "boxes": self.boxes,
+            "info": self.info,
+            **({"limits": self.limits} if self.limits else {}),
+        }
 
     @classmethod
     def from_dict(cls, d: dict) -> "Envelope":
@@ -244,11 +295,16 @@ class Envelope:
             for a, b in box.items():
                 if a not in AXES:
                     raise ValueError(f"envelope box {name!r} has an unknown axis {a!r}")
-                if (not isinstance(b, list) or len(b) != 2
-                        or not all(isinstance(x, (int, float)) and np.isfinite(x) for x in b)
-                        or b[0] > b[1]):
-                    raise ValueError(f"envelope box {name!r}, axis {a!r}: need [lo, hi] "
-                                     f"finite and rising, got {b!r}")
+                if (
+                    not isinstance(b, list)
+                    or len(b) != 2
+                    or not all(isinstance(x, (int, float)) and np.isfinite(x) for x in b)
+                    or b[0] > b[1]
+                ):
+                    raise ValueError(
+                        f"envelope box {name!r}, axis {a!r}: need [lo, hi] "
+                        f"finite and rising, got {b!r}"
+                    )
         env = cls(dict(boxes), dict(d.get("info") or {}))
         for a, lim in (d.get("limits") or {}).items():
             if not isinstance(lim, dict) or not isinstance(lim.get("max"), (int, float)):
@@ -261,19 +317,26 @@ class Envelope:
         lines = []
         for a, lim in self.limits.items():
             kind, unit, k, what = AXES[a]
-            lines.append(f"{what}: limited to {lim['max'] * k:.3g} {unit} "
-                         f"({lim.get('source') or 'a limit'})")
+            lines.append(
+                f"{what}: limited to {lim['max'] * k:.3g} {unit} ({lim.get('source') or 'a limit'})"
+            )
         for a, (lo, hi) in self.boxes[box].items():
             kind, unit, k, what = AXES[a]
-            rng = (f"{lo * k:.3g}-{hi * k:.3g}" if kind == "range" else
-                   f"from {lo * k:.3g}" if kind == "min" else f"up to {hi * k:.3g}")
+            rng = (
+                f"{lo * k:.3g}-{hi * k:.3g}"
+                if kind == "range"
+                else f"from {lo * k:.3g}"
+                if kind == "min"
+                else f"up to {hi * k:.3g}"
+            )
             lines.append(f"{what}: {rng} {unit}".rstrip())
         return "\n".join(lines)
 
 
 def _outside(feat: dict, box: dict, name: str, most: str | None = None) -> list[str]:
     """Why ``feat`` leaves ``box`` (one sentence per axis; ``[]`` inside): each bound named as
-    "the most (least) in ``name``", or an upper bound as ``most`` when given."""
+    "the most (least) in ``name``", or an upper bound as ``most`` when given.
+    """
     why = []
     for a, (kind, unit, k, what) in AXES.items():
         if a not in box:
@@ -285,13 +348,18 @@ def _outside(feat: dict, box: dict, name: str, most: str | None = None) -> list[
         top = hi * (1 + SLACK) + (VARIATION_ALLOWANCE if a == "thickness_variation" else 0.0)
         if kind == "min":
             if min(vals) < lo * (1 - SLACK):
-                why.append(f"{what} {min(vals) * k:.3g} {unit} < {lo * k:.3g} {unit} "
-                           f"(the least in {name})")
+                why.append(
+                    f"{what} {min(vals) * k:.3g} {unit} < {lo * k:.3g} {unit} (the least in {name})"
+                )
             continue
         if max(vals) > top:
-            why.append(f"{what} {max(vals) * k:.3g} {unit} > {hi * k:.3g} {unit} "
-                       f"({most or f'the most in {name}'})".replace("  ", " "))
+            why.append(
+                f"{what} {max(vals) * k:.3g} {unit} > {hi * k:.3g} {unit} "
+                f"({most or f'the most in {name}'})".replace("  ", " ")
+            )
         elif kind == "range" and min(vals) < lo * (1 - SLACK):
-            why.append(f"{what} {min(vals) * k:.3g} {unit} < {lo * k:.3g} {unit} "
-                       f"(the least in {name})".replace("  ", " "))
+            why.append(
+                f"{what} {min(vals) * k:.3g} {unit} < {lo * k:.3g} {unit} "
+                f"(the least in {name})".replace("  ", " ")
+            )
     return why

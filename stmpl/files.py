@@ -1,5 +1,6 @@
 """Atomic file writes: a temporary file beside the target, then a rename, so a reader never sees
-half a file and a killed writer leaves the old one in place."""
+half a file and a killed writer leaves the old one in place.
+"""
 
 from __future__ import annotations
 
@@ -35,7 +36,8 @@ def atomic_savez(path, arrays: dict, compressed: bool = False) -> pathlib.Path:
 
 class atomic_path:
     """``with atomic_path(target) as tmp:`` write ``tmp``; it becomes ``target`` only when the
-    block ends without an error (a temporary file in the same folder, then ``os.replace``)."""
+    block ends without an error (a temporary file in the same folder, then ``os.replace``).
+    """
 
     def __init__(self, path, suffix: str = ".tmp"):
         self.path = pathlib.Path(path)
@@ -43,8 +45,9 @@ class atomic_path:
 
     def __enter__(self) -> pathlib.Path:
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=self.path.parent, prefix=self.path.name + ".",
-                                   suffix=self.suffix)
+        fd, tmp = tempfile.mkstemp(
+            dir=self.path.parent, prefix=self.path.name + ".", suffix=self.suffix
+        )
         os.close(fd)
         self.tmp = pathlib.Path(tmp)
         return self.tmp

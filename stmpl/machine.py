@@ -1,6 +1,7 @@
 """The machine a figure was measured on, in one line: its processor's model name, its cores and
 the torch build (and the threads torch uses), so that a benchmark or a report says where its
-times come from without a hand-written note."""
+times come from without a hand-written note.
+"""
 
 from __future__ import annotations
 
@@ -22,7 +23,9 @@ def cpu(cpuinfo: str = "/proc/cpuinfo") -> str:
 
 def describe() -> str:
     """E.g. ``"AMD EPYC, 2 cores, torch 2.13.0+cpu (2 threads)"``."""
-    import torch
+    import torch  # deferred: about a second to import; the core's types do not need it
 
-    return (f"{cpu()}, {os.cpu_count()} cores, torch {torch.__version__} "
-            f"({torch.get_num_threads()} threads)")
+    return (
+        f"{cpu()}, {os.cpu_count()} cores, torch {torch.__version__} "
+        f"({torch.get_num_threads()} threads)"
+    )

@@ -22,7 +22,8 @@ THRESHOLDS_MM = (0.1, 0.125, 0.15, 0.2, 0.5)
 def sample_metrics(true: np.ndarray, pred: np.ndarray, seam: np.ndarray | None = None) -> dict:
     """Measures of one sample. ``true``, ``pred``: ``(N, 3)`` displacements, m. With ``seam``
     (indices of the UV seam's vertices) also ``seam_mee``: the MEE over the active seam
-    vertices, mm (NaN when none is active)."""
+    vertices, mm (NaN when none is active).
+    """
     true, pred = np.asarray(true, float), np.asarray(pred, float)
     if true.shape != pred.shape or true.ndim != 2 or true.shape[1] != 3:
         raise ValueError(f"true and pred must both be (N, 3), got {true.shape} and {pred.shape}")
@@ -32,15 +33,27 @@ def sample_metrics(true: np.ndarray, pred: np.ndarray, seam: np.ndarray | None =
     active = mag > ACTIVE_MM
     out = {"active": int(active.sum()), "max_disp": float(mag.max())}
     if not active.any():
-        return {**out, "mae_x": np.nan, "mae_y": np.nan, "mae_z": np.nan, "mee": np.nan,
-                "rel_mee": np.nan, "max_err": np.nan, "peak_err": np.nan,
-                **{f"ee<={t:g}": np.nan for t in THRESHOLDS_MM},
-                **({"seam_mee": np.nan} if seam is not None else {})}
+        return {
+            **out,
+            "mae_x": np.nan,
+            "mae_y": np.nan,
+            "mae_z": np.nan,
+            "mee": np.nan,
+            "rel_mee": np.nan,
+            "max_err": np.nan,
+            "peak_err": np.nan,
+            **{f"ee<={t:g}": np.nan for t in THRESHOLDS_MM},
+            **({"seam_mee": np.nan} if seam is not None else {}),
+        }
     err = (pred - true)[active] * 1e3
     ee = np.linalg.norm(err, axis=1)
-    out.update(mae_x=float(np.abs(err[:, 0]).mean()), mae_y=float(np.abs(err[:, 1]).mean()),
-               mae_z=float(np.abs(err[:, 2]).mean()), mee=float(ee.mean()),
-               max_err=float(ee.max()))
+    out.update(
+        mae_x=float(np.abs(err[:, 0]).mean()),
+        mae_y=float(np.abs(err[:, 1]).mean()),
+        mae_z=float(np.abs(err[:, 2]).mean()),
+        mee=float(ee.mean()),
+        max_err=float(ee.max()),
+    )
     out["rel_mee"] = 100.0 * out["mee"] / out["max_disp"]
     out["peak_err"] = 100.0 * (np.linalg.norm(pred, axis=1).max() * 1e3 / out["max_disp"] - 1.0)
     for t in THRESHOLDS_MM:
@@ -55,7 +68,8 @@ def sample_metrics(true: np.ndarray, pred: np.ndarray, seam: np.ndarray | None =
 
 def seam_gap(part, corner_displacement: np.ndarray) -> float:
     """Mean over seam vertices of the largest distance between their UV copies' predictions, mm.
-    ``corner_displacement``: ``(T, 3)`` per UV corner (``part.uv`` order), m."""
+    ``corner_displacement``: ``(T, 3)`` per UV corner (``part.uv`` order), m.
+    """
     c = np.asarray(corner_displacement, float)
     if c.shape != (len(part.uv), 3):
         raise ValueError(f"corner displacement must be ({len(part.uv)}, 3), got {c.shape}")
@@ -82,30 +96,48 @@ def summarise(rows: list[dict]) -> dict:
     return out
 
 
-COLUMNS = [("mae_x", "MAE x"), ("mae_y", "MAE y"), ("mae_z", "MAE z"), ("mee", "MEE"),
-           ("rel_mee", "MEE / max %"), ("max_err", "max err"), ("peak_err", "peak err %")] + \
-    [(f"ee<={t:g}", f"EE<={t:g} %") for t in THRESHOLDS_MM] + \
-    [("seam_mee", "seam MEE"), ("seam_gap", "seam gap")]
+COLUMNS = (
+    [
+        ("mae_x", "MAE x"),
+        ("mae_y", "MAE y"),
+        ("mae_z", "MAE z"),
+        ("mee", "MEE"),
+        ("rel_mee", "MEE / max %"),
+        ("max_err", "max err"),
+        ("peak_err", "peak err %"),
+    ]
+    + [(f"ee<={t:g}", f"EE<={t:g} %") for t in THRESHOLDS_MM]
+    + [("seam_mee", "seam MEE"), ("seam_gap", "seam gap")]
+)
 
 
 def table(results: dict[str, dict], fmt: str = "markdown") -> str:
     """A table of summaries ``{predictor name: summarise(...)}`` as markdown or CSV."""
     if fmt == "csv":
-        head = ["predictor", "samples"] + [f"{k}_{s}" for k, _ in COLUMNS for s in ("mean",
-                                                                                  "std")]
+        head = ["predictor", "samples"] + [f"{k}_{s}" for k, _ in COLUMNS for s in ("mean", "std")]
         lines = [",".join(head)]
         for name, s in results.items():
-            vals = [name, str(s["samples"])] + [f"{x:.6g}" for k, _ in COLUMNS
-                                                for x in s.get(k, (np.nan, np.nan))]
+            vals = [name, str(s["samples"])] + [
+                f"{x:.6g}" for k, _ in COLUMNS for x in s.get(k, (np.nan, np.nan))
+            ]
             lines.append(",".join(vals))
         return "\n".join(lines) + "\n"
     if fmt != "markdown":
         raise ValueError(f"fmt must be markdown or csv, got {fmt!r}")
-    head = "| predictor | n | " + " | ".join(label + (" mm" if "%" not in label else "")
-                                              for _, label in COLUMNS) + " |"
+    head = (
+        "| predictor | n | "
+        + " | ".join(label + (" mm" if "%" not in label else "") for _, label in COLUMNS)
+        + " |"
+    )
     lines = [head, "|---|--:|" + "--:|" * len(COLUMNS)]
     for name, s in results.items():
-        cells = ["–" if k not in s else f"{s[k][0]:.3f} ± {s[k][1]:.3f}" if "%" not in label
-                 else f"{s[k][0]:.1f} ± {s[k][1]:.1f}" for k, label in COLUMNS]
+        cells = [
+            "–"
+            if k not in s
+            else f"{s[k][0]:.3f} ± {s[k][1]:.3f}"
+            if "%" not in label
+            else f"{s[k][0]:.1f} ± {s[k][1]:.1f}"
+            for k, label in COLUMNS
+        ]
         lines.append(f"| {name} | {s['samples']} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"

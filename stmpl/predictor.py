@@ -20,6 +20,7 @@ from typing import Protocol, Sequence, runtime_checkable
 
 import numpy as np
 
+from stmpl.checkpoint import read_sidecar
 from stmpl.scene import Deformation, Scene
 
 GROUP = "stmpl.predictors"
@@ -40,18 +41,21 @@ class Predictor(Protocol):
 class ImpossibleAnswer(RuntimeWarning):
     """A prediction moved the skin further inward than the tissue is thick (through the fixed
     surface beneath): physically impossible, flagged (``Deformation.info["physical"]``) and
-    warned about, never passed off as an answer."""
+    warned about, never passed off as an answer.
+    """
 
 
 class OutsideEnvelope(RuntimeWarning):
     """A scene lies outside the data a predictor's answers are backed by (its
     :class:`~stmpl.envelope.Envelope`): answered, flagged (``Deformation.info["envelope"]``) and
-    warned about once per call; with ``strict=True`` refused instead."""
+    warned about once per call; with ``strict=True`` refused instead.
+    """
 
 
 class PredictionFailed(RuntimeError):
     """A predictor could not answer a scene (e.g. a FEM solve that did not converge); the message
-    says why. Never returned as a result."""
+    says why. Never returned as a result.
+    """
 
 
 REGISTRY: dict[str, type] = {}
@@ -86,8 +90,14 @@ def get(name: str) -> type:
         declared = _declared()
         ep = declared.get(name)
         if ep is None:
-            hint = "" if declared else (" (no predictor is declared: install stmpl, e.g. "
-                                        "`pip install -e .`, so its entry points exist)")
+            hint = (
+                ""
+                if declared
+                else (
+                    " (no predictor is declared: install stmpl, e.g. "
+                    "`pip install -e .`, so its entry points exist)"
+                )
+            )
             raise ValueError(f"unknown predictor {name!r}; known: {names()}{hint}")
         cls = ep.load()
         REGISTRY.setdefault(name, cls)
@@ -102,8 +112,6 @@ def create(name: str, *args, **kwargs) -> "BasePredictor":
 
 def read(path, device: str = "cpu") -> "BasePredictor":
     """A trained predictor from its checkpoint file (the checkpoint names its kind)."""
-    from stmpl.checkpoint import read_sidecar
-
     kind = read_sidecar(path)["kind"]
     if kind not in names():
         raise ValueError(f"checkpoint {path} is of unknown kind {kind!r}; known: {names()}")
@@ -118,7 +126,8 @@ class BasePredictor:
     """Shared plumbing: single or batch input, validation, timing in ``Deformation.info``.
 
     Subclasses implement :meth:`predict_batch` on a non-empty list of scenes and return one
-    ``(N, 3)`` displacement (m) per scene."""
+    ``(N, 3)`` displacement (m) per scene.
+    """
 
     name = "base"
     envelope = None
@@ -135,15 +144,16 @@ class BasePredictor:
     the load moves; the GNN: the subgraph around it), where the predictor can (others ignore
     it). See :data:`FIDELITIES`."""
 
-    def predict(self, scenes: Scene | Sequence[Scene],
-                strict: bool | None = None) -> Deformation | list[Deformation]:
+    def predict(
+        self, scenes: Scene | Sequence[Scene], strict: bool | None = None
+    ) -> Deformation | list[Deformation]:
         """A Deformation per scene. Scenes outside the predictor's envelope are answered with
         ``info["envelope"]["inside"] = False`` and one :class:`OutsideEnvelope` warning per
         call; with ``strict`` (default: the predictor's ``strict``) they raise
-        ``PredictionFailed`` before anything is predicted."""
+        ``PredictionFailed`` before anything is predicted.
+        """
         if self.fidelity not in FIDELITIES:
-            raise ValueError(f"fidelity must be one of {list(FIDELITIES)}, got "
-                             f"{self.fidelity!r}")
+            raise ValueError(f"fidelity must be one of {list(FIDELITIES)}, got {self.fidelity!r}")
         single = isinstance(scenes, Scene)
         batch = [scenes] if single else list(scenes)
         if not batch:
@@ -157,10 +167,10 @@ class BasePredictor:
         bad = [i for i, why in enumerate(outside) if why]
         if bad:
             first = outside[bad[0]]
-            which = (f"{len(bad)} of {len(batch)} scenes lie" if len(batch) > 1 else
-                     "the scene lies")
-            msg = (f"{self.name}: {which} outside the data its answers are backed by: "
-                   + "; ".join(first))
+            which = f"{len(bad)} of {len(batch)} scenes lie" if len(batch) > 1 else "the scene lies"
+            msg = f"{self.name}: {which} outside the data its answers are backed by: " + "; ".join(
+                first
+            )
             if strict:
                 raise PredictionFailed(msg + " (strict: refused)")
             warnings.warn(msg, OutsideEnvelope, stacklevel=2)
@@ -175,17 +185,30 @@ class BasePredictor:
             compression = float((-np.einsum("ij,ij->i", u, s.part.normals) / s.thickness).max())
             physical = compression <= 1.0
             if not physical:
-                warnings.warn(f"{self.name}: the skin moves inward {compression:.2f} x the "
-                              "tissue's thickness (through the fixed surface beneath): a "
-                              "physically impossible answer; the scene lies outside what it "
-                              "can answer",
-                              ImpossibleAnswer, stacklevel=2)
-            result.append(Deformation(s, u, {"predictor": self.name, "seconds": dt,
-                                             "max_compression": compression,
-                                             "physical": physical,
-                                             "envelope": None if self.envelope is None else
-                                             {"inside": not why, "outside": why},
-                                             **self.info(s)}))
+                warnings.warn(
+                    f"{self.name}: the skin moves inward {compression:.2f} x the "
+                    "tissue's thickness (through the fixed surface beneath): a "
+                    "physically impossible answer; the scene lies outside what it "
+                    "can answer",
+                    ImpossibleAnswer,
+                    stacklevel=2,
+                )
+            result.append(
+                Deformation(
+                    s,
+                    u,
+                    {
+                        "predictor": self.name,
+                        "seconds": dt,
+                        "max_compression": compression,
+                        "physical": physical,
+                        "envelope": None
+                        if self.envelope is None
+                        else {"inside": not why, "outside": why},
+                        **self.info(s),
+                    },
+                )
+            )
         return result[0] if single else result
 
     def outside(self, scenes: list[Scene]) -> list[list[str]]:

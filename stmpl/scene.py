@@ -14,9 +14,9 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from stmpl import tissue
-from stmpl.body.part import BodyPart
 from stmpl.files import atomic_savez
 from stmpl.loads import FORCE_RANGE, Load
+from stmpl.part import BodyPart
 
 FORMAT = "stmpl-scene/1"
 
@@ -44,26 +44,32 @@ class Scene:
         f = np.asarray(self.force, dtype=float)
         n = self.part.n_vertices
         if f.shape != (n,):
-            raise ValueError(f"Scene.force must have shape ({n},) for part {self.part.name!r}, "
-                             f"got {f.shape}")
+            raise ValueError(
+                f"Scene.force must have shape ({n},) for part {self.part.name!r}, got {f.shape}"
+            )
         if not np.isfinite(f).all():
             i = int(np.argmax(~np.isfinite(f)))
             raise ValueError(f"Scene.force is not finite at vertex {i} (value {f[i]})")
         if (f < 0).any():
             i = int(np.argmin(f))
-            raise ValueError(f"Scene.force must be >= 0 N (it pushes inward); vertex {i} has "
-                             f"{f[i]:g} N")
+            raise ValueError(
+                f"Scene.force must be >= 0 N (it pushes inward); vertex {i} has {f[i]:g} N"
+            )
         if f.max(initial=0.0) > FORCE_RANGE[1]:
             i = int(np.argmax(f))
-            raise ValueError(f"Scene.force must be <= {FORCE_RANGE[1]:g} N per vertex (the "
-                             f"normalisation range); vertex {i} has {f[i]:g} N")
+            raise ValueError(
+                f"Scene.force must be <= {FORCE_RANGE[1]:g} N per vertex (the "
+                f"normalisation range); vertex {i} has {f[i]:g} N"
+            )
         if self.load is not None:
             if not isinstance(self.load, Load):
                 raise TypeError(f"Scene.load must be a Load, got {type(self.load).__name__}")
             if self.load.part_id and self.load.part_id != self.part.fingerprint:
-                raise ValueError(f"the {self.load.kind} load was built on another part than "
-                                 f"the scene's {self.part.name!r} ({n} vertices): build it on "
-                                 "the scene's part")
+                raise ValueError(
+                    f"the {self.load.kind} load was built on another part than "
+                    f"the scene's {self.part.name!r} ({n} vertices): build it on "
+                    "the scene's part"
+                )
         t.setflags(write=False)
         f = f.copy()
         f.setflags(write=False)
@@ -85,8 +91,13 @@ class Scene:
         return -self.force[:, None] * self.part.normals
 
     def header(self) -> dict:
-        return {"format": FORMAT, "part": self.part.name, "source": self.part.source,
-                "load": self.load.to_dict() if self.load else None, "meta": self.meta}
+        return {
+            "format": FORMAT,
+            "part": self.part.name,
+            "source": self.part.source,
+            "load": self.load.to_dict() if self.load else None,
+            "meta": self.meta,
+        }
 
     def save(self, path) -> pathlib.Path:
         """Write the scene to ``path`` (``.npz``); :meth:`read` reads it back."""
@@ -99,22 +110,22 @@ class Scene:
         """Read a scene written by :meth:`save` (``.npz``; its load's summary is not kept)."""
         arrays, header = _read_file(path, FORMAT)
         try:
-            part = BodyPart.from_arrays(header["part"], {k[5:]: v for k, v in arrays.items()
-                                                         if k.startswith("part/")},
-                                        header.get("source"))
+            part = BodyPart.from_arrays(
+                header["part"],
+                {k[5:]: v for k, v in arrays.items() if k.startswith("part/")},
+                header.get("source"),
+            )
             return cls(part, arrays["thickness"], arrays["force"], None, header.get("meta", {}))
         except KeyError as exc:
             raise ValueError(f"scene file {path} lacks {exc}") from exc
-
-
-
 
 
 @dataclass(frozen=True, eq=False)
 class Deformation:
     """The response of a scene: ``displacement`` ``(N, 3)`` m per vertex of ``scene.part``.
 
-    ``info`` carries diagnostics (predictor name, timings, solver residuals)."""
+    ``info`` carries diagnostics (predictor name, timings, solver residuals).
+    """
 
     scene: Scene
     displacement: np.ndarray
@@ -147,8 +158,9 @@ class Deformation:
 
     def save(self, path) -> pathlib.Path:
         arrays = {f"part/{k}": v for k, v in self.scene.part.arrays().items()}
-        arrays.update(thickness=self.scene.thickness, force=self.scene.force,
-                      displacement=self.displacement)
+        arrays.update(
+            thickness=self.scene.thickness, force=self.scene.force, displacement=self.displacement
+        )
         return _save(path, arrays, {**self.scene.header(), "info": self.info})
 
     @classmethod

@@ -19,7 +19,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.linalg import factorized
 
-from stmpl.body.part import BodyPart
+from stmpl.part import BodyPart
 
 
 @dataclass(frozen=True)
@@ -36,7 +36,8 @@ class SurfacePoint:
 
 def closest_point(part: BodyPart, point, tolerance: float = 0.01) -> SurfacePoint:
     """The surface point nearest ``point`` ``(3,)`` (m); an error if it is farther than
-    ``tolerance`` (m) from the part."""
+    ``tolerance`` (m) from the part.
+    """
     q = np.asarray(point, dtype=float)
     if q.shape != (3,) or not np.isfinite(q).all():
         raise ValueError(f"point must be 3 finite coordinates (m), got {np.asarray(point)}")
@@ -45,8 +46,10 @@ def closest_point(part: BodyPart, point, tolerance: float = 0.01) -> SurfacePoin
     d = np.linalg.norm(cand - q, axis=1)
     f = int(d.argmin())
     if d[f] > tolerance:
-        raise ValueError(f"point {q.round(4).tolist()} is {d[f] * 1e3:.1f} mm off part "
-                         f"{part.name!r} (tolerance {tolerance * 1e3:g} mm)")
+        raise ValueError(
+            f"point {q.round(4).tolist()} is {d[f] * 1e3:.1f} mm off part "
+            f"{part.name!r} (tolerance {tolerance * 1e3:g} mm)"
+        )
     return SurfacePoint(f, bary[f], cand[f])
 
 
@@ -69,8 +72,7 @@ def point_at_uv(part: BodyPart, uv) -> SurfacePoint:
 def vertex_point(part: BodyPart, vertex: int) -> SurfacePoint:
     """The surface point at a vertex."""
     if not 0 <= int(vertex) < part.n_vertices:
-        raise ValueError(f"vertex {vertex} is not in part {part.name!r} "
-                         f"(0..{part.n_vertices - 1})")
+        raise ValueError(f"vertex {vertex} is not in part {part.name!r} (0..{part.n_vertices - 1})")
     f = int(np.nonzero((part.faces == vertex).any(1))[0][0])
     bary = (part.faces[f] == vertex).astype(float)
     return SurfacePoint(f, bary, part.vertices[int(vertex)].copy())
@@ -128,9 +130,9 @@ def tangent_frame(part: BodyPart, point: SurfacePoint) -> np.ndarray:
     n = point.bary @ part.normals[f]
     n /= np.linalg.norm(n)
     x, t = part.vertices[f], part.uv[part.face_uv[point.face]]
-    jac = np.linalg.lstsq(np.stack([t[1] - t[0], t[2] - t[0]]), np.stack([x[1] - x[0],
-                                                                           x[2] - x[0]]),
-                          rcond=None)[0]  # rows: dX/du, dX/dv
+    jac = np.linalg.lstsq(
+        np.stack([t[1] - t[0], t[2] - t[0]]), np.stack([x[1] - x[0], x[2] - x[0]]), rcond=None
+    )[0]  # rows: dX/du, dX/dv
     t1 = jac[0] - (jac[0] @ n) * n
     t1 /= np.linalg.norm(t1)
     return np.stack([t1, np.cross(n, t1), n])
@@ -138,7 +140,8 @@ def tangent_frame(part: BodyPart, point: SurfacePoint) -> np.ndarray:
 
 def log_map(part: BodyPart, source: SurfacePoint, distance: np.ndarray) -> np.ndarray:
     """``(N, 2)`` approximate geodesic polar coordinates of every vertex in the tangent frame at
-    ``source``: geodesic distance along the direction of the offset projected on the plane."""
+    ``source``: geodesic distance along the direction of the offset projected on the plane.
+    """
     frame = tangent_frame(part, source)
     d = part.vertices - source.position
     xy = np.stack([d @ frame[0], d @ frame[1]], 1)
@@ -164,8 +167,7 @@ def _operators(part: BodyPart) -> _Operators:
         cot = np.zeros(f.shape)
         for k in range(3):
             a, b = v[f[:, (k + 1) % 3]] - v[f[:, k]], v[f[:, (k + 2) % 3]] - v[f[:, k]]
-            cot[:, k] = (a * b).sum(1) / np.maximum(np.linalg.norm(np.cross(a, b), axis=1),
-                                                    1e-300)
+            cot[:, k] = (a * b).sum(1) / np.maximum(np.linalg.norm(np.cross(a, b), axis=1), 1e-300)
         rows, cols, vals = [], [], []
         for k in range(3):  # the edge opposite corner k joins the other two corners
             i, j = f[:, (k + 1) % 3], f[:, (k + 2) % 3]
@@ -174,13 +176,15 @@ def _operators(part: BodyPart) -> _Operators:
             cols += [j, i, i, j]
             vals += [-w, -w, w, w]
         n = part.n_vertices
-        lap = sp.coo_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
-                            shape=(n, n)).tocsc()
+        lap = sp.coo_matrix(
+            (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)
+        ).tocsc()
         mass = sp.diags(part.vertex_areas)
         h = np.linalg.norm(v[part.edges[:, 0]] - v[part.edges[:, 1]], axis=1).mean()
         heat = factorized((mass + h**2 * lap).tocsc())
-        poisson = factorized((lap + 1e-10 * mass * lap.diagonal().mean() /
-                              part.vertex_areas.mean()).tocsc())
+        poisson = factorized(
+            (lap + 1e-10 * mass * lap.diagonal().mean() / part.vertex_areas.mean()).tocsc()
+        )
         op = _OPS[part] = _Operators(cot, heat, poisson)
     return op
 
@@ -194,7 +198,7 @@ def _closest_on_triangles(q: np.ndarray, tri: np.ndarray):
     lam = _bary3d(p, a, b, c)
     best = np.where((lam >= 0).all(1, keepdims=True), p, np.nan)
     best_lam = np.where((lam >= 0).all(1, keepdims=True), lam, np.nan)
-    for (i, j) in ((0, 1), (1, 2), (2, 0)):
+    for i, j in ((0, 1), (1, 2), (2, 0)):
         s, e = tri[:, i], tri[:, j]
         t = np.clip(((q - s) * (e - s)).sum(1) / np.maximum(((e - s) ** 2).sum(1), 1e-300), 0, 1)
         pt = s + t[:, None] * (e - s)

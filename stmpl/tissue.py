@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from stmpl.body.part import BodyPart
+from stmpl.part import BodyPart
 
 THICKNESS_RANGE = (0.0025, 0.0125)
 """Normalisation range of thickness, m (the paper's [2.5, 12.5] mm)."""
@@ -24,19 +24,24 @@ def check(part: BodyPart, thickness) -> np.ndarray:
     """Validate a thickness map: ``(N,)``, finite, inside :data:`THICKNESS_RANGE`."""
     t = np.asarray(thickness, dtype=float)
     if t.shape != (part.n_vertices,):
-        raise ValueError(f"thickness must have shape ({part.n_vertices},) for part "
-                         f"{part.name!r}, got {t.shape}")
+        raise ValueError(
+            f"thickness must have shape ({part.n_vertices},) for part {part.name!r}, got {t.shape}"
+        )
     bad = ~np.isfinite(t)
     if bad.any():
-        raise ValueError(f"thickness is not finite at {bad.sum()} vertices (first: vertex "
-                         f"{np.argmax(bad)}, value {t[np.argmax(bad)]})")
+        raise ValueError(
+            f"thickness is not finite at {bad.sum()} vertices (first: vertex "
+            f"{np.argmax(bad)}, value {t[np.argmax(bad)]})"
+        )
     lo, hi = THICKNESS_RANGE
     out = (t < lo) | (t > hi)
     if out.any():
         i = int(np.argmax(out))
-        raise ValueError(f"thickness must lie in [{lo * 1e3:g}, {hi * 1e3:g}] mm (the model's "
-                         f"normalisation range); vertex {i} has {t[i] * 1e3:g} mm "
-                         f"({out.sum()} vertices outside)")
+        raise ValueError(
+            f"thickness must lie in [{lo * 1e3:g}, {hi * 1e3:g}] mm (the model's "
+            f"normalisation range); vertex {i} has {t[i] * 1e3:g} mm "
+            f"({out.sum()} vertices outside)"
+        )
     return t
 
 
@@ -68,10 +73,17 @@ def ramp(part: BodyPart, start: float, end: float) -> np.ndarray:
     return check(part, start + (end - start) * f)
 
 
-def bumps(part: BodyPart, base: float, amplitude: float, length: float = 0.05,
-          count: int = 4, seed: int = 0) -> np.ndarray:
+def bumps(
+    part: BodyPart,
+    base: float,
+    amplitude: float,
+    length: float = 0.05,
+    count: int = 4,
+    seed: int = 0,
+) -> np.ndarray:
     """``base`` plus ``count`` Gaussian bumps of height up to ``amplitude`` (m) and width
-    ``length`` (m) at random vertices: a smooth, non-constant map (seeded)."""
+    ``length`` (m) at random vertices: a smooth, non-constant map (seeded).
+    """
     rng = np.random.default_rng(seed)
     centres = part.vertices[rng.choice(part.n_vertices, size=count, replace=False)]
     heights = amplitude * rng.uniform(-1.0, 1.0, size=count)
@@ -86,8 +98,9 @@ def smooth(part: BodyPart, values, iterations: int = 10, step: float = 0.5) -> n
         raise ValueError(f"values must be finite with shape ({part.n_vertices},), got {v.shape}")
     e = part.edges
     n = part.n_vertices
-    adj = sp.coo_matrix((np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])),
-                        shape=(n, n)).tocsr()
+    adj = sp.coo_matrix(
+        (np.ones(2 * len(e)), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), shape=(n, n)
+    ).tocsr()
     deg = np.asarray(adj.sum(1)).ravel()
     for _ in range(int(iterations)):
         v = v + step * (adj @ v / deg - v)
@@ -97,7 +110,8 @@ def smooth(part: BodyPart, values, iterations: int = 10, step: float = 0.5) -> n
 def normalise(thickness):
     """Map thickness (m) to [0, 1] over :data:`THICKNESS_RANGE`: NumPy arrays and torch tensors
     keep their type and dtype (the learned models' thickness input); other sequences become
-    float arrays."""
+    float arrays.
+    """
     lo, hi = THICKNESS_RANGE
     if not hasattr(thickness, "dtype"):
         thickness = np.asarray(thickness, float)

@@ -1,5 +1,6 @@
 """Shared fixtures: one Anny body per session (its assets build once into $ANNY_CACHE_DIR) and a
-fresh stmpl part cache, so part extraction really runs in the tests."""
+fresh stmpl part cache, so part extraction really runs in the tests.
+"""
 
 import os
 
@@ -38,19 +39,24 @@ def rng():
 TINY_DATA = {
     "name": "tiny",
     "body": {"model": "tube", "radius": 0.04, "length": 0.2, "n_around": 16, "n_along": 12},
-    "part": "tube", "thickness_mm": [5.0, 10.0],
+    "part": "tube",
+    "thickness_mm": [5.0, 10.0],
     "resolution": {"subdivisions": 1, "layers": 1, "refine_radius": 0.03, "order": 1},
     "forces": [0.05, 0.1, 0.2],
-    "placements": {"disk": {"centres": 8, "radii": [0.02]},
-                   "band": {"at": [0.3, 0.6], "widths": [0.03]}},
-    "shard_tasks": 4, "parallel": {"backend": "serial", "workers": 1},
+    "placements": {
+        "disk": {"centres": 8, "radii": [0.02]},
+        "band": {"at": [0.3, 0.6], "widths": [0.03]},
+    },
+    "shard_tasks": 4,
+    "parallel": {"backend": "serial", "workers": 1},
 }
 
 
 @pytest.fixture
 def tiny_config():
     """A factory of small dataset configs on the tube: ``tiny_config(forces=[0.05])`` is
-    :data:`TINY_DATA` with those keys replaced."""
+    :data:`TINY_DATA` with those keys replaced.
+    """
     import copy
 
     return lambda **over: {**copy.deepcopy(TINY_DATA), **over}
@@ -59,7 +65,8 @@ def tiny_config():
 @pytest.fixture(scope="session")
 def tiny_dataset(tmp_path_factory):
     """A real FEM dataset on an analytic tube (10 placements x 2 thicknesses x 3 forces), made
-    once per session in about a second."""
+    once per session in about a second.
+    """
     from fem.generate import generate
 
     out = tmp_path_factory.mktemp("data") / "tiny"
@@ -67,17 +74,24 @@ def tiny_dataset(tmp_path_factory):
     return out
 
 
-TINY_MODELS = {"naive": {}, "linear": {}, "uv_unet": {"size": 64, "width": 4, "depth": 3},
-               "gnn": {"latent": 16, "steps": 2}}
+TINY_MODELS = {
+    "naive": {},
+    "linear": {},
+    "uv_unet": {"size": 64, "width": 4, "depth": 3},
+    "gnn": {"latent": 16, "steps": 2},
+}
 """Options of tiny, fast versions of each learned model."""
-VARIANTS = {"": {}, "per_newton": {"per_newton": True},
-            "prior": {"per_newton": True, "prior": "linear", "loss": "relative"}}
+VARIANTS = {
+    "": {},
+    "per_newton": {"per_newton": True},
+    "prior": {"per_newton": True, "prior": "linear", "loss": "relative"},
+}
 
 
 @pytest.fixture(scope="session")
 def ds(tiny_dataset):
     """The tiny dataset, opened."""
-    from stmpl.dataset import Dataset
+    from stmpl.data.dataset import Dataset
 
     return Dataset(tiny_dataset)
 
@@ -85,7 +99,8 @@ def ds(tiny_dataset):
 @pytest.fixture
 def make():
     """A factory of seeded tiny predictors on a dataset's part: ``make("gnn/prior", ds)``
-    (``kind/variant``; ``fem`` is a coarse FEM). Models with a computed part are fitted."""
+    (``kind/variant``; ``fem`` is a coarse FEM). Models with a computed part are fitted.
+    """
 
     def _make(name, ds):
         from stmpl import predictor

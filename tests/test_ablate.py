@@ -1,32 +1,44 @@
 """`stmpl ablate`: the config's checks, the tables, the cache (a rerun does nothing new), a
-missing dataset made from its config."""
+missing dataset made from its config.
+"""
 
 import json
 
 import pytest
 
-from stmpl import ablate, ablation_sets
-from stmpl.cli import main
+import stmpl.analysis.ablation as ablate
+from stmpl.analysis import ablation_sets
+from stmpl.cli.main import main
 
 
 @pytest.fixture
 def config(tiny_dataset, tmp_path, tiny_config):
-    bands = tiny_config(name="tiny_bands", placements={"band": {"at": [0.3, 0.6],
-                                                                "widths": [0.03]}},
-                        splits=[0.0, 0.0, 1.0])
+    bands = tiny_config(
+        name="tiny_bands",
+        placements={"band": {"at": [0.3, 0.6], "widths": [0.03]}},
+        splits=[0.0, 0.0, 1.0],
+    )
     (tmp_path / "bands.yaml").write_text(json.dumps(bands))
     naive = {"model": "naive", "data": "unused", "epochs": 20, "batch": 16, "lr": 0.02}
     return {
         "name": "t",
-        "datasets": {"tiny": {"folder": str(tiny_dataset)},
-                     "bands": {"config": str(tmp_path / "bands.yaml"),
-                               "folder": str(tmp_path / "data" / "bands")}},
-        "in_distribution": "tiny", "out_of_distribution": ["bands"],
+        "datasets": {
+            "tiny": {"folder": str(tiny_dataset)},
+            "bands": {
+                "config": str(tmp_path / "bands.yaml"),
+                "folder": str(tmp_path / "data" / "bands"),
+            },
+        },
+        "in_distribution": "tiny",
+        "out_of_distribution": ["bands"],
         "seen_thickness_mm": [5.0],
-        "setups": [{"name": "Naive", "train": naive},
-                   {"name": "Naive: only 5 mm", "train": naive, "thickness_mm": [5.0]},
-                   {"name": "FEM", "predictor": "fem", "limit": 2}],
-        "out": str(tmp_path / "report"), "runs": str(tmp_path / "runs"),
+        "setups": [
+            {"name": "Naive", "train": naive},
+            {"name": "Naive: only 5 mm", "train": naive, "thickness_mm": [5.0]},
+            {"name": "FEM", "predictor": "fem", "limit": 2},
+        ],
+        "out": str(tmp_path / "report"),
+        "runs": str(tmp_path / "runs"),
     }
 
 
@@ -35,12 +47,15 @@ def test_tables_rows_and_the_cache(config, tmp_path, monkeypatch):
     t = res["tables"]
     assert list(t["table1"]) == ["Naive", "Naive: only 5 mm", "FEM"]
     assert set(t["table2"]) == {"Naive / bands", "Naive: only 5 mm / bands", "FEM / bands"}
-    assert set(t["table3"]) == {f"Naive: only 5 mm / {w}, {s} thickness"
-                                for w in ("in-distribution", "bands") for s in ("seen", "unseen")}
+    assert set(t["table3"]) == {
+        f"Naive: only 5 mm / {w}, {s} thickness"
+        for w in ("in-distribution", "bands")
+        for s in ("seen", "unseen")
+    }
     naive = t["table1"]["Naive"]
     assert 1.0 < naive["rel_mee"][0] < 100.0 and naive["samples"] > 0
     fem = t["table1"]["FEM"]
-    assert fem["samples"] == 2 and fem["rel_mee"][0] < 50       # another mesh than the data's
+    assert fem["samples"] == 2 and fem["rel_mee"][0] < 50  # another mesh than the data's
     assert fem["seconds_per_scene"][0] > 10 * naive["seconds_per_scene"][0]
     seen = t["table3"]["Naive: only 5 mm / in-distribution, seen thickness"]["samples"]
     unseen = t["table3"]["Naive: only 5 mm / in-distribution, unseen thickness"]["samples"]
@@ -59,8 +74,8 @@ def test_tables_rows_and_the_cache(config, tmp_path, monkeypatch):
     def boom(*a, **k):
         raise AssertionError("a cached job ran again")
 
-    monkeypatch.setattr("stmpl.evaluate.evaluate_dataset", boom)
-    monkeypatch.setattr("stmpl.train.train", boom)
+    monkeypatch.setattr("stmpl.analysis.ablation.evaluate_dataset", boom)
+    monkeypatch.setattr("stmpl.analysis.ablation.train", boom)
     again = ablate.run(config, progress=False)
     assert json.dumps(again["tables"], sort_keys=True) == json.dumps(t, sort_keys=True)
 
@@ -68,8 +83,10 @@ def test_tables_rows_and_the_cache(config, tmp_path, monkeypatch):
 def test_a_setup_off_the_chart_stays_in_the_tables(config, monkeypatch):
     """``chart: false``: measured and tabled (its latency too), but not drawn on the chart."""
     drawn = []
-    monkeypatch.setattr("stmpl.chart.speed_accuracy",
-                        lambda pts, *a, **k: drawn.append({p["label"] for p in pts}))
+    monkeypatch.setattr(
+        "stmpl.viz.chart.speed_accuracy",
+        lambda pts, *a, **k: drawn.append({p["label"] for p in pts}),
+    )
     config["setups"][1]["chart"] = False
     config["setups"] = config["setups"][:2]
     res = ablate.run(config, progress=False)
@@ -81,26 +98,28 @@ def test_a_setup_off_the_chart_stays_in_the_tables(config, monkeypatch):
 def test_a_changed_setup_reruns_only_itself(config, monkeypatch):
     ablate.run(config, progress=False)
     calls = []
-    from stmpl import evaluate
+    from stmpl.pipeline import evaluate
 
     real = evaluate.evaluate_dataset
 
     def counted(p, ds, *a, **k):
-        if "batch" in k:                        # the runner's (training measures val/test too)
+        if "batch" in k:  # the runner's (training measures val/test too)
             calls.append(ds.card["name"])
         return real(p, ds, *a, **k)
 
-    monkeypatch.setattr("stmpl.evaluate.evaluate_dataset", counted)
-    config["setups"][0]["epochs"] = 5                  # only the first set-up changes
+    monkeypatch.setattr("stmpl.analysis.ablation.evaluate_dataset", counted)
+    config["setups"][0]["epochs"] = 5  # only the first set-up changes
     ablate.run(config, progress=False)
     assert sorted(calls) == ["tiny", "tiny_bands"]
 
 
-def test_a_cached_run_needs_no_data_and_makes_it_again_only_for_new_jobs(config, tmp_path,
-                                                                         monkeypatch):
+def test_a_cached_run_needs_no_data_and_makes_it_again_only_for_new_jobs(
+    config, tmp_path, monkeypatch
+):
     """Datasets take hours to make and a machine may lose them: a rerun whose jobs are all
     cached reads the cards it recorded instead of making the data again; a new job makes the
-    missing dataset from its config, and it must come out the same."""
+    missing dataset from its config, and it must come out the same.
+    """
     import shutil
 
     first = ablate.run(config, progress=False)
@@ -109,26 +128,29 @@ def test_a_cached_run_needs_no_data_and_makes_it_again_only_for_new_jobs(config,
     def boom(*a, **k):
         raise AssertionError("a dataset was made again for cached jobs")
 
-    monkeypatch.setattr("stmpl.ablation_sets._make", boom)
+    monkeypatch.setattr("stmpl.analysis.ablation_sets._make", boom)
     again = ablate.run(config, progress=False)
-    assert json.dumps(again["tables"], sort_keys=True) == json.dumps(first["tables"],
-                                                                    sort_keys=True)
+    assert json.dumps(again["tables"], sort_keys=True) == json.dumps(
+        first["tables"], sort_keys=True
+    )
     assert not (tmp_path / "data" / "bands").exists()
     monkeypatch.undo()
     naive = next((tmp_path / "runs").glob("naive-*/*.safetensors"))
-    config["setups"].append({"name": "Naive (auto)", "predictor": str(naive),
-                             "fidelity": "auto"})
+    config["setups"].append({"name": "Naive (auto)", "predictor": str(naive), "fidelity": "auto"})
     third = ablate.run(config, progress=False)
-    assert (tmp_path / "data" / "bands" / "card.json").is_file()      # made for the new job
+    assert (tmp_path / "data" / "bands" / "card.json").is_file()  # made for the new job
     assert "Naive (auto) / bands" in third["tables"]["table2"]
     cache = json.loads((tmp_path / "report" / "cache.json").read_text())
-    assert cache["datasets"]["bands"]["card"]["hash"] == json.loads(
-        (tmp_path / "data" / "bands" / "card.json").read_text())["hash"]
+    assert (
+        cache["datasets"]["bands"]["card"]["hash"]
+        == json.loads((tmp_path / "data" / "bands" / "card.json").read_text())["hash"]
+    )
 
 
 def _remake(config, tmp_path, monkeypatch, scale: float) -> None:
     """Make the bands set again, every displacement scaled by ``scale`` (a remade set whose
-    solver rounded differently, or one that differs)."""
+    solver rounded differently, or one that differs).
+    """
     import shutil
 
     import numpy as np
@@ -139,8 +161,9 @@ def _remake(config, tmp_path, monkeypatch, scale: float) -> None:
 
     def solve(payload):
         out = real(payload)
-        out["records"]["displacement"] = [np.float32(scale) * u
-                                          for u in out["records"]["displacement"]]
+        out["records"]["displacement"] = [
+            np.float32(scale) * u for u in out["records"]["displacement"]
+        ]
         return out
 
     shutil.rmtree(tmp_path / "data" / "bands")
@@ -150,11 +173,13 @@ def _remake(config, tmp_path, monkeypatch, scale: float) -> None:
 
 
 def test_a_dataset_made_again_stands_for_the_recorded_one_only_if_it_measures_the_same(
-        config, tmp_path, monkeypatch):
+    config, tmp_path, monkeypatch
+):
     """A lost dataset made again may differ in its last bits (its content hash changes): it is
     refused by name; with ``accept_remade`` a cached set-up is measured on it, and only if it
     measures the same do the cached results stand (nothing else runs again); one that differs
-    more is refused."""
+    more is refused.
+    """
     import json as _json
 
     ablate.run(config, progress=False)
@@ -167,11 +192,12 @@ def test_a_dataset_made_again_stands_for_the_recorded_one_only_if_it_measures_th
     _remake(config, tmp_path, monkeypatch, 1.000001)
     new_hash = _json.loads((tmp_path / "data" / "bands" / "card.json").read_text())["hash"]
     assert new_hash != old_hash
-    with pytest.raises(ValueError, match=f"bands .* has hash {new_hash}, not the {old_hash}.*"
-                                         "--accept-remade"):
+    with pytest.raises(
+        ValueError, match=f"bands .* has hash {new_hash}, not the {old_hash}.*--accept-remade"
+    ):
         ablate.run(config, progress=False)
 
-    from stmpl import evaluate
+    from stmpl.pipeline import evaluate
 
     real, calls = evaluate.evaluate_dataset, []
 
@@ -179,12 +205,15 @@ def test_a_dataset_made_again_stands_for_the_recorded_one_only_if_it_measures_th
         calls.append(ds.card["hash"])
         return real(p, ds, *a, **k)
 
-    monkeypatch.setattr("stmpl.evaluate.evaluate_dataset", counted)
-    monkeypatch.setattr("stmpl.train.train", lambda *a, **k: pytest.fail("trained again"))
+    monkeypatch.setattr("stmpl.analysis.ablation.evaluate_dataset", counted)
+    monkeypatch.setattr(
+        "stmpl.analysis.ablation.train", lambda *a, **k: pytest.fail("trained again")
+    )
     again = ablate.run(config, progress=False, accept_remade=True)
-    assert calls == [new_hash]                          # the check alone, on the remade set
-    assert _json.dumps(again["tables"], sort_keys=True) == _json.dumps(first["tables"],
-                                                                      sort_keys=True)
+    assert calls == [new_hash]  # the check alone, on the remade set
+    assert _json.dumps(again["tables"], sort_keys=True) == _json.dumps(
+        first["tables"], sort_keys=True
+    )
     cache = _json.loads((tmp_path / "report" / "cache.json").read_text())
     verdict = cache["datasets"]["bands"]["remade"]
     assert verdict["hash"] == new_hash and verdict["checked_with"] == "Naive as it is"
@@ -192,26 +221,32 @@ def test_a_dataset_made_again_stands_for_the_recorded_one_only_if_it_measures_th
     assert cache["datasets"]["bands"]["card"]["hash"] == old_hash
     assert "bands was made again" in (tmp_path / "report" / "ablation.md").read_text()
     ablate.run(config, progress=False, accept_remade=True)
-    assert calls == [new_hash]                          # checked once
+    assert calls == [new_hash]  # checked once
 
-    _remake(config, tmp_path, monkeypatch, 1.1)         # 10 % deeper: not the same set
-    with pytest.raises(ValueError, match="bands made again measures differently: Naive as it "
-                                         "is on it"):
+    _remake(config, tmp_path, monkeypatch, 1.1)  # 10 % deeper: not the same set
+    with pytest.raises(
+        ValueError, match="bands made again measures differently: Naive as it is on it"
+    ):
         ablate.run(config, progress=False, accept_remade=True)
 
 
-@pytest.mark.parametrize("change,message", [
-    ({"in_distribution": "nope"}, "in_distribution must be one of"),
-    ({"out_of_distribution": ["nope"]}, "out_of_distribution must list"),
-    ({"setups": []}, "at least one set-up"),
-    ({"setups": [{"name": "x"}]}, "either train"),
-    ({"setups": [{"name": "x", "predictor": "fem"}, {"name": "x", "predictor": "fem"}]},
-     "used twice"),
-    ({"setups": [{"name": "x", "predictor": "fem", "colour": 1}]}, "takes keys"),
-    ({"setups": [{"name": "x", "predictor": "fem", "fidelity": "half"}]}, "full or auto"),
-    ({"setups": [{"name": "x", "predictor": "fem", "chart": "no"}]}, "chart must be true or"),
-    ({"datasets": {}}, "at least one dataset"),
-])
+@pytest.mark.parametrize(
+    "change,message",
+    [
+        ({"in_distribution": "nope"}, "in_distribution must be one of"),
+        ({"out_of_distribution": ["nope"]}, "out_of_distribution must list"),
+        ({"setups": []}, "at least one set-up"),
+        ({"setups": [{"name": "x"}]}, "either train"),
+        (
+            {"setups": [{"name": "x", "predictor": "fem"}, {"name": "x", "predictor": "fem"}]},
+            "used twice",
+        ),
+        ({"setups": [{"name": "x", "predictor": "fem", "colour": 1}]}, "takes keys"),
+        ({"setups": [{"name": "x", "predictor": "fem", "fidelity": "half"}]}, "full or auto"),
+        ({"setups": [{"name": "x", "predictor": "fem", "chart": "no"}]}, "chart must be true or"),
+        ({"datasets": {}}, "at least one dataset"),
+    ],
+)
 def test_bad_configs_are_named(config, change, message):
     with pytest.raises(ValueError, match=message):
         ablate.read_config({**config, **change})

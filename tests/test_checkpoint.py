@@ -1,5 +1,6 @@
 """Checkpoints: written and read back whole; an altered tensor file, an edited sidecar and a
-truncated file are each refused, by name."""
+truncated file are each refused, by name.
+"""
 
 import json
 
@@ -12,8 +13,9 @@ from stmpl import checkpoint
 @pytest.fixture
 def saved(tmp_path):
     tensors = {"w": torch.arange(6, dtype=torch.float32).reshape(2, 3)}
-    path = checkpoint.write(tmp_path / "m.safetensors", tensors,
-                            {"kind": "naive", "config": {"disp_scale_mm": 10.0}})
+    path = checkpoint.write(
+        tmp_path / "m.safetensors", tensors, {"kind": "naive", "config": {"disp_scale_mm": 10.0}}
+    )
     return path, tensors
 
 
@@ -31,7 +33,7 @@ def test_every_part_of_the_model_is_covered(saved):
     side = checkpoint.sidecar_path(path)
     original = side.read_text()
     meta = json.loads(original)
-    meta["config"]["disp_scale_mm"] = 20.0          # changes every prediction
+    meta["config"]["disp_scale_mm"] = 20.0  # changes every prediction
     side.write_text(json.dumps(meta))
     with pytest.raises(ValueError, match="m.json was edited"):
         checkpoint.read(path)

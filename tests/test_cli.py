@@ -1,13 +1,26 @@
 import numpy as np
 import pytest
 
-from stmpl.cli import main
+from stmpl.cli.main import main
 from stmpl.scene import Scene
 
 
 def test_scene_command_writes_picture_scene_and_mesh(tmp_path, capsys, arm):
-    rc = main(["scene", "--load", "disk", "--force", "5", "--out", str(tmp_path / "s.png"),
-               "--save", str(tmp_path / "s.npz"), "--export", str(tmp_path / "s.ply")])
+    rc = main(
+        [
+            "scene",
+            "--load",
+            "disk",
+            "--force",
+            "5",
+            "--out",
+            str(tmp_path / "s.png"),
+            "--save",
+            str(tmp_path / "s.npz"),
+            "--export",
+            str(tmp_path / "s.ply"),
+        ]
+    )
     assert rc == 0
     assert (tmp_path / "s.png").stat().st_size > 20_000
     s = Scene.read(tmp_path / "s.npz")
@@ -19,8 +32,26 @@ def test_scene_command_writes_picture_scene_and_mesh(tmp_path, capsys, arm):
 def test_scene_of_spots(tmp_path, capsys, arm):
     """``--load spots``: several fingertip-sized disks sharing the force."""
     s = tmp_path / "s.npz"
-    assert main(["scene", "--load", "spots", "--count", "4", "--radius", "8", "--force", "0.4",
-                 "--out", str(tmp_path / "s.png"), "--save", str(s)]) == 0
+    assert (
+        main(
+            [
+                "scene",
+                "--load",
+                "spots",
+                "--count",
+                "4",
+                "--radius",
+                "8",
+                "--force",
+                "0.4",
+                "--out",
+                str(tmp_path / "s.png"),
+                "--save",
+                str(s),
+            ]
+        )
+        == 0
+    )
     sc = Scene.read(s)
     from stmpl import loads
 
@@ -47,23 +78,39 @@ def test_parts_command(capsys, arm):
 def test_simulate_command_solves_draws_and_saves(tmp_path, capsys, arm):
     from stmpl.scene import Deformation
 
-    rc = main(["solve", "--force", "0.1", "--levels", "2", "--res", "medium",
-               "--out", str(tmp_path / "f.png"), "--save", str(tmp_path / "d.npz"),
-               "--vtu", str(tmp_path / "s.vtu")])
+    rc = main(
+        [
+            "solve",
+            "--force",
+            "0.1",
+            "--levels",
+            "2",
+            "--res",
+            "medium",
+            "--out",
+            str(tmp_path / "f.png"),
+            "--save",
+            str(tmp_path / "d.npz"),
+            "--vtu",
+            str(tmp_path / "s.vtu"),
+        ]
+    )
     assert rc == 0
     out = capsys.readouterr().out
     assert out.count(" ok ") == 2 and "wrote" in out
     d = Deformation.read(tmp_path / "d.npz")
-    assert 1e-4 < d.magnitude.max() < 7.5e-3          # pressed in, not through the layer
+    assert 1e-4 < d.magnitude.max() < 7.5e-3  # pressed in, not through the layer
     loaded = d.scene.force > 0
-    assert np.all(np.einsum("ni,ni->n", d.displacement[loaded],
-                            d.scene.part.normals[loaded]) < 0)     # inward
+    assert np.all(
+        np.einsum("ni,ni->n", d.displacement[loaded], d.scene.part.normals[loaded]) < 0
+    )  # inward
     assert (tmp_path / "f.png").stat().st_size > 20_000 and (tmp_path / "s.vtu").exists()
 
 
 def test_simulate_command_reports_a_failed_solve(capsys, arm):
-    assert main(["solve", "--force", "8", "--levels", "1", "--res", "coarse",
-                 "--radius", "10"]) == 2
+    assert (
+        main(["solve", "--force", "8", "--levels", "1", "--res", "coarse", "--radius", "10"]) == 2
+    )
     err = capsys.readouterr().err
     assert "FEM solve failed" in err and "Traceback" not in err and err.count("\n") == 1
 
@@ -77,13 +124,29 @@ def test_predict_command_runs_a_checkpoint_against_the_fem(tmp_path, capsys, arm
     torch.manual_seed(0)
     p = predictor.create("uv_unet", arm, {"size": 64, "width": 4, "depth": 3})
     ckpt = p.save(tmp_path / "tiny_unet.safetensors")
-    rc = main(["predict", "--model", str(ckpt), "--force", "0.1", "--compare", "--res", "coarse",
-               "--levels", "1", "--out", str(tmp_path / "p.png")])
+    rc = main(
+        [
+            "predict",
+            "--model",
+            str(ckpt),
+            "--force",
+            "0.1",
+            "--compare",
+            "--res",
+            "coarse",
+            "--levels",
+            "1",
+            "--out",
+            str(tmp_path / "p.png"),
+        ]
+    )
     out = capsys.readouterr().out
     assert rc == 0 and (tmp_path / "p.png").stat().st_size > 20_000
     assert "tiny_unet" in out and "fem (coarse)" in out and "MEE" in out
-    assert main(["predict", "--model", str(ckpt), "--force", "0.1",
-                 "--save", str(tmp_path / "d.npz")]) == 0
+    assert (
+        main(["predict", "--model", str(ckpt), "--force", "0.1", "--save", str(tmp_path / "d.npz")])
+        == 0
+    )
     d = Deformation.read(tmp_path / "d.npz")
     np.testing.assert_allclose(d.displacement, p.predict(d.scene).displacement, atol=1e-9)
     assert main(["predict", "--model", "zoo:nope", "--force", "0.1"]) == 2
@@ -92,7 +155,8 @@ def test_predict_command_runs_a_checkpoint_against_the_fem(tmp_path, capsys, arm
 
 def test_predict_says_when_a_scene_lies_outside_the_models_data(capsys, arm):
     """The outside evaluation's case: 5 N on a 2 cm disk. The shipped GNN answers (exit 0) with
-    one warning line naming the axes the scene leaves and one on the impossible answer."""
+    one warning line naming the axes the scene leaves and one on the impossible answer.
+    """
     assert main(["predict", "--force", "5", "--thickness", "7.5"]) == 0
     err = capsys.readouterr().err
     lines = [ln for ln in err.splitlines() if "warning" in ln]
@@ -106,10 +170,11 @@ def test_predict_says_when_a_scene_lies_outside_the_models_data(capsys, arm):
 
 def _fails(argv, capsys, message):
     """``stmpl argv`` ends with exit code 2 and one error line naming the problem (argparse
-    adds its usage line before it), no traceback."""
+    adds its usage line before it), no traceback.
+    """
     try:
         rc = main(argv)
-    except SystemExit as e:       # argparse's own refusals
+    except SystemExit as e:  # argparse's own refusals
         rc = e.code
     err = capsys.readouterr().err
     assert rc == 2, err
@@ -126,14 +191,19 @@ def test_expected_failures_end_in_one_line(tmp_path, capsys, arm):
     _fails(["scene", "--force", "0.3", "--out", str(blocker / "x.png")], capsys, str(blocker))
     _fails(["train", str(broken)], capsys, "broken.yaml is not valid YAML")
     _fails(["train", str(tmp_path / "missing.yaml")], capsys, "training config file not found")
-    _fails(["evaluate", "fem", "--data", str(tmp_path / "nothing")], capsys,
-           "dataset folder not found")
-    _fails(["evaluate", "fem", "--data", str(tmp_path), "--limit", "-1"], capsys,
-           "must be an integer >= 1, got '-1'")
+    _fails(
+        ["evaluate", "fem", "--data", str(tmp_path / "nothing")], capsys, "dataset folder not found"
+    )
+    _fails(
+        ["evaluate", "fem", "--data", str(tmp_path), "--limit", "-1"],
+        capsys,
+        "must be an integer >= 1, got '-1'",
+    )
     _fails(["predict", "--device", "tpu"], capsys, "unknown device 'tpu'")
     _fails(["predict", "--device", "cuda:7"], capsys, "device cuda:7 is not available")
-    _fails(["predict", "--model", str(tmp_path / "none.safetensors")], capsys,
-           "checkpoint not found")
+    _fails(
+        ["predict", "--model", str(tmp_path / "none.safetensors")], capsys, "checkpoint not found"
+    )
     _fails(["scene", "--load", "letter", "--char", "\u6f22"], capsys, "not in the letter font")
 
 
@@ -147,32 +217,63 @@ def test_verbose_shows_the_traceback(tmp_path, capsys):
 
 def test_a_permission_error_is_one_line(tmp_path, capsys, arm, monkeypatch):
     """An output the user may not write (simulated: the tests run as root, who may write
-    anywhere) ends in one line naming the file."""
-    import stmpl.viz
+    anywhere) ends in one line naming the file.
+    """
+    import stmpl.viz.figures
 
     target = tmp_path / "locked.png"
 
     def refuse(fig, path, dpi):
         raise PermissionError(13, "Permission denied", str(path))
 
-    monkeypatch.setattr(stmpl.viz, "_save_figure", refuse)
-    _fails(["scene", "--force", "0.3", "--out", str(target)], capsys,
-           f"Permission denied: {target}")
+    monkeypatch.setattr(stmpl.viz.figures, "_save_figure", refuse)
+    _fails(
+        ["scene", "--force", "0.3", "--out", str(target)], capsys, f"Permission denied: {target}"
+    )
 
 
 def test_any_anny_phenotype_makes_the_scene_and_a_learned_model_refuses_it(tmp_path, capsys, arm):
     """``--muscle``, ``--height``, ...: the scene is on that body (its arm differs from the
-    default one), and a model trained on the default body refuses it in one line."""
+    default one), and a model trained on the default body refuses it in one line.
+    """
     s = tmp_path / "s.npz"
-    assert main(["scene", "--muscle", "0.9", "--height", "0.8", "--force", "0.2",
-                 "--out", str(tmp_path / "s.png"), "--save", str(s)]) == 0
+    assert (
+        main(
+            [
+                "scene",
+                "--muscle",
+                "0.9",
+                "--height",
+                "0.8",
+                "--force",
+                "0.2",
+                "--out",
+                str(tmp_path / "s.png"),
+                "--save",
+                str(s),
+            ]
+        )
+        == 0
+    )
     part = Scene.read(s).part
     assert part.source["options"]["phenotype"]["muscle"] == 0.9
     assert part.n_vertices == arm.n_vertices
-    assert np.abs(part.vertices - arm.vertices).max() > 1e-3           # another arm
+    assert np.abs(part.vertices - arm.vertices).max() > 1e-3  # another arm
     capsys.readouterr()
-    assert main(["predict", "--muscle", "0.9", "--model", "zoo:linear_arm",
-                 "--out", str(tmp_path / "p.png")]) == 2
+    assert (
+        main(
+            [
+                "predict",
+                "--muscle",
+                "0.9",
+                "--model",
+                "zoo:linear_arm",
+                "--out",
+                str(tmp_path / "p.png"),
+            ]
+        )
+        == 2
+    )
     assert "another body part" in capsys.readouterr().err
     assert main(["scene", "--age", "1.5"]) == 2
     assert "age must be in [0, 1]" in capsys.readouterr().err

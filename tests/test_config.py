@@ -13,15 +13,18 @@ def test_defaults_merge_and_name(tmp_path):
     cfg = config.read(f, DEFAULTS, "test config", merge=("parallel",))
     assert cfg == {"name": "run_a", "epochs": 3, "parallel": {"backend": "serial", "workers": 2}}
     cfg = config.read({"parallel": {"workers": 2}}, DEFAULTS, "test config", name="x")
-    assert cfg["parallel"] == {"workers": 2} and cfg["name"] == "x"   # replaced, not merged
+    assert cfg["parallel"] == {"workers": 2} and cfg["name"] == "x"  # replaced, not merged
     assert DEFAULTS["parallel"] == {"backend": "serial", "workers": 1}  # defaults untouched
 
 
-@pytest.mark.parametrize("text,message", [
-    ("epochs: [1\n", "is not valid YAML"),
-    ("- 1\n- 2\n", "must be a mapping"),
-    ("epoch: 3\n", r"unknown test config keys \['epoch'\]"),
-])
+@pytest.mark.parametrize(
+    "text,message",
+    [
+        ("epochs: [1\n", "is not valid YAML"),
+        ("- 1\n- 2\n", "must be a mapping"),
+        ("epoch: 3\n", r"unknown test config keys \['epoch'\]"),
+    ],
+)
 def test_bad_files_are_named(tmp_path, text, message):
     f = tmp_path / "c.yaml"
     f.write_text(text)

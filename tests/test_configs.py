@@ -1,6 +1,7 @@
 """Every shipped config loads and passes its checks: data configs through the generator's
 loader, training configs through the trainer's and their model options through the model's; and
-every training config trains on a dataset a shipped data config makes."""
+every training config trains on a dataset a shipped data config makes.
+"""
 
 import pathlib
 
@@ -19,11 +20,11 @@ def test_data_configs_load(path):
 
 @pytest.mark.parametrize("path", sorted((CONFIGS / "train").glob("*.yaml")), ids=lambda p: p.name)
 def test_training_configs_load(path):
-    from stmpl.train import read_config
+    from stmpl.pipeline.train import read_config
 
     cfg = read_config(path)  # checks the model options too (unknown keys, loss, scale)
     for d in cfg["data"] if isinstance(cfg["data"], list) else [cfg["data"]]:
-        data = pathlib.Path(d)          # each set a config of ours makes (or one of its bodies)
+        data = pathlib.Path(d)  # each set a config of ours makes (or one of its bodies)
         if data.name.startswith("body-"):
             assert data.name[5:].isdigit()
             data = data.parent
@@ -32,7 +33,7 @@ def test_training_configs_load(path):
 
 
 def test_bad_model_options_fail_on_load():
-    from stmpl.train import read_config
+    from stmpl.pipeline.train import read_config
 
     with pytest.raises(ValueError, match="unknown gnn model options"):
         read_config({"model": "gnn", "data": "x", "options": {"width": 3}})
@@ -40,24 +41,26 @@ def test_bad_model_options_fail_on_load():
         read_config({"model": "gnn", "data": "x", "options": {"loss": "l1"}})
 
 
-@pytest.mark.parametrize("path", sorted((CONFIGS / "ablation").glob("*.yaml")),
-                         ids=lambda p: p.name)
+@pytest.mark.parametrize(
+    "path", sorted((CONFIGS / "ablation").glob("*.yaml")), ids=lambda p: p.name
+)
 def test_ablation_configs_load(path):
     """Every dataset an ablation names has a shipped config writing where the ablation reads,
-    and every set-up's training config loads."""
-    from fem.config import read_config as read_data
-    from stmpl.ablate import read_config
-    from stmpl.train import read_config as read_train
-
+    and every set-up's training config loads.
+    """
     import yaml
 
+    from fem.config import read_config as read_data
+    from stmpl.analysis.ablation import read_config
+    from stmpl.pipeline.train import read_config as read_train
+
     if yaml.safe_load(path.read_text()).get("kind") == "stability":
-        from stmpl import stability
+        from stmpl.analysis import stability
 
         cfg = stability.read_config(path)
         assert cfg["out"] == f"reports/{cfg['name']}"
-        for spec in cfg["predictors"]:                  # every model it sweeps is shipped
-            from stmpl import zoo
+        for spec in cfg["predictors"]:  # every model it sweeps is shipped
+            from stmpl.pipeline import zoo
 
             assert not spec.startswith("zoo:") or spec[4:] in zoo.names(), spec
         return

@@ -1,12 +1,12 @@
-"""Contact from object meshes (stmpl/contact.py), against closed forms on a flat sheet."""
+"""Contact from object meshes (stmpl/contact/pressing.py), against closed forms on a flat sheet."""
 
 import numpy as np
 import pytest
 import trimesh
 
-from stmpl import contact as C
-from stmpl import objects
+import stmpl.contact.pressing as C
 from stmpl.body import sheet
+from stmpl.contact import objects
 from stmpl.scene import Scene
 
 
@@ -22,11 +22,12 @@ def _tip(plate, depth=0.002, radius=0.01, at=(0.0, 0.0, 0.0), total=0.3):
 
 def test_a_sphere_touches_its_cap(plate):
     """A sphere of radius r pressed d deep touches the disk of radius sqrt(2 r d - d^2) and its
-    deepest vertex lies d inside it."""
+    deepest vertex lies d inside it.
+    """
     c = C.contact(plate, _tip(plate), tolerance=0.0)
-    cap = np.sqrt(2 * 0.01 * 0.002 - 0.002 ** 2)
+    cap = np.sqrt(2 * 0.01 * 0.002 - 0.002**2)
     r = np.linalg.norm(plate.vertices[:, :2], axis=1)
-    expect = np.flatnonzero(r < cap - 1e-4)           # the icosphere is a little inside r
+    expect = np.flatnonzero(r < cap - 1e-4)  # the icosphere is a little inside r
     assert set(expect) <= set(c.vertices) and r[c.vertices].max() < cap + 1e-4
     assert c.penetration.max() == pytest.approx(0.002, abs=5e-5)
     np.testing.assert_allclose(c.force[c.vertices], 0.3 / len(c.vertices))
@@ -35,20 +36,22 @@ def test_a_sphere_touches_its_cap(plate):
 
 
 def test_tolerance_widens_the_contact(plate):
-    near = C.contact(plate, _tip(plate, depth=-0.001), tolerance=0.0015)   # 1 mm above
+    near = C.contact(plate, _tip(plate, depth=-0.001), tolerance=0.0015)  # 1 mm above
     assert near.penetration.max() == 0 and len(near.vertices) >= 1
     with pytest.raises(ValueError, match="no contact: object 'tip' is 1.0 mm from the skin"):
         C.contact(plate, _tip(plate, depth=-0.001), tolerance=0.0005)
 
 
 def test_splits(plate):
-    eq, ar, dp = (C.contact(plate, _tip(plate), tolerance=0.0005, split=s)
-                  for s in ("equal", "area", "depth"))
+    eq, ar, dp = (
+        C.contact(plate, _tip(plate), tolerance=0.0005, split=s) for s in ("equal", "area", "depth")
+    )
     for c in (eq, ar, dp):
         assert c.force.sum() == pytest.approx(0.3)
     v = ar.vertices
-    np.testing.assert_allclose(ar.force[v] / ar.force[v].sum(),
-                               plate.vertex_areas[v] / plate.vertex_areas[v].sum())
+    np.testing.assert_allclose(
+        ar.force[v] / ar.force[v].sum(), plate.vertex_areas[v] / plate.vertex_areas[v].sum()
+    )
     deepest = dp.vertices[np.argmax(dp.penetration[dp.vertices])]
     assert dp.force[deepest] == dp.force.max() > eq.force[deepest]
     w = dp.penetration[v] + 0.0005
@@ -70,13 +73,13 @@ def test_objects_add_up_and_the_scene_knows_its_source(plate):
 def test_an_open_mesh_is_used_and_named(plate):
     tip = objects.sphere(0.01)
     cut = tip.copy()
-    cut.update_faces(cut.face_normals[:, 2] < 0.9)            # a hole on top
+    cut.update_faces(cut.face_normals[:, 2] < 0.9)  # a hole on top
     assert not cut.is_watertight
     pose = objects.press(plate, tip, [0.0, 0.0, 0.0], depth=0.002)
     closed = C.contact(plate, C.Pressing(tip, pose, 0.3, "tip"), tolerance=0.0)
     opened = C.contact(plate, C.Pressing(cut, pose, 0.3, "cut"), tolerance=0.0)
     assert opened.open_objects == ("cut",)
-    np.testing.assert_array_equal(opened.vertices, closed.vertices)   # a small hole is harmless
+    np.testing.assert_array_equal(opened.vertices, closed.vertices)  # a small hole is harmless
 
 
 def test_winding_number_of_a_closed_mesh():
@@ -85,16 +88,21 @@ def test_winding_number_of_a_closed_mesh():
     np.testing.assert_allclose(w, [1, 1, 0, 0], atol=1e-9)
 
 
-@pytest.mark.parametrize("make,message", [
-    (lambda m: C.Pressing(m, np.full((4, 4), np.nan)), "pose is not finite"),
-    (lambda m: C.Pressing(m, np.diag([2.0, 1, 1, 1])), "not a rigid transform"),
-    (lambda m: C.Pressing(m, np.eye(3)), r"\(4, 4\) matrix"),
-    (lambda m: C.Pressing(m, total=-1), "total force must be finite and > 0"),
-    (lambda m: C.Pressing(trimesh.Trimesh(np.zeros((3, 3)), [[0, 1, 2]])), "degenerate"),
-    (lambda m: C.Pressing(trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), int))),
-     "no faces"),
-    (lambda m: C.pose_matrix([0, 0, np.inf]), "position must be 3 finite numbers"),
-])
+@pytest.mark.parametrize(
+    "make,message",
+    [
+        (lambda m: C.Pressing(m, np.full((4, 4), np.nan)), "pose is not finite"),
+        (lambda m: C.Pressing(m, np.diag([2.0, 1, 1, 1])), "not a rigid transform"),
+        (lambda m: C.Pressing(m, np.eye(3)), r"\(4, 4\) matrix"),
+        (lambda m: C.Pressing(m, total=-1), "total force must be finite and > 0"),
+        (lambda m: C.Pressing(trimesh.Trimesh(np.zeros((3, 3)), [[0, 1, 2]])), "degenerate"),
+        (
+            lambda m: C.Pressing(trimesh.Trimesh(np.zeros((0, 3)), np.zeros((0, 3), int))),
+            "no faces",
+        ),
+        (lambda m: C.pose_matrix([0, 0, np.inf]), "position must be 3 finite numbers"),
+    ],
+)
 def test_bad_objects_are_named(make, message):
     with pytest.raises(ValueError, match=message):
         make(objects.sphere(0.01))

@@ -1,5 +1,6 @@
-"""The dataset format (stmpl/dataset.py): its hash is its content, and every read checks the
-shards against the card."""
+"""The dataset format (stmpl/data/dataset.py): its hash is its content, and every read checks the
+shards against the card.
+"""
 
 import json
 
@@ -7,7 +8,8 @@ import numpy as np
 import pytest
 
 from fem.generate import generate
-from stmpl.dataset import Dataset, content_hash, part_hash
+from stmpl.data.dataset import Dataset
+from stmpl.data.format import content_hash, part_hash
 
 
 def test_dataset_errors_name_the_problem(tmp_path, tiny_config):
@@ -21,7 +23,7 @@ def test_dataset_errors_name_the_problem(tmp_path, tiny_config):
         Dataset(tmp_path / "d").arrays("training")
     first, second = sorted((tmp_path / "d").glob("shard-*.h5"))[:2]
     original = first.read_bytes()
-    with h5py.File(first, "r+") as h:           # an edited sample: its file still reads
+    with h5py.File(first, "r+") as h:  # an edited sample: its file still reads
         h["displacement"][0, 0, 0] = 2 * h["displacement"][0, 0, 0] + 1e-6
     with pytest.raises(ValueError, match=f"{first.name} does not match card.json"):
         Dataset(tmp_path / "d").arrays("train")
@@ -33,11 +35,15 @@ def test_dataset_errors_name_the_problem(tmp_path, tiny_config):
 
 def test_the_hash_is_of_the_content(tmp_path, tiny_config):
     """The same samples give the same hash (timings differ between runs); an edited card or part
-    does not pass."""
+    does not pass.
+    """
     cfg = tiny_config(thickness_mm=[7.5], forces=[0.05, 0.1])
     a = generate(cfg, tmp_path / "a", progress=False)
-    b = generate({**cfg, "parallel": {"backend": "serial", "workers": 1}, "name": "other"},
-                 tmp_path / "b", progress=False)
+    b = generate(
+        {**cfg, "parallel": {"backend": "serial", "workers": 1}, "name": "other"},
+        tmp_path / "b",
+        progress=False,
+    )
     assert a["timing"]["solve_seconds_total"] != b["timing"]["solve_seconds_total"]
     assert a["hash"] == b["hash"] and len(a["hash"]) == 16
     card = json.loads((tmp_path / "b" / "card.json").read_text())
@@ -49,7 +55,8 @@ def test_the_hash_is_of_the_content(tmp_path, tiny_config):
 
 def test_the_card_hash_is_the_part_and_the_shards(ds):
     """The card's hash is recomputed from what is on disk: the part's and each shard's content
-    hashes (those are in the card too, one per shard)."""
+    hashes (those are in the card too, one per shard).
+    """
     ds.verify()
     shards = [s["content"] for s in ds.card["shards"]]
     assert len(shards) == len(ds.shards) and len(set(shards)) == len(shards)
@@ -79,34 +86,60 @@ def test_splits_select_by_the_split_column(ds):
 
 def test_datasets_of_one_part_read_as_one(tmp_path, tiny_config, tiny_dataset):
     """Two sets of one part and FEM set-up: their samples one after the other, placements and
-    tasks kept distinct, a hash of both; another part or material is refused by name."""
-    from stmpl.dataset import Datasets, open_data
+    tasks kept distinct, a hash of both; another part or material is refused by name.
+    """
+    from stmpl.data.dataset import Datasets, open_data
 
-    generate(tiny_config(name="few", thickness_mm=[7.5], forces=[0.05, 0.1],
-                         placements={"disk": {"centres": 3, "radii": [0.015]}}),
-             tmp_path / "few", progress=False)
+    generate(
+        tiny_config(
+            name="few",
+            thickness_mm=[7.5],
+            forces=[0.05, 0.1],
+            placements={"disk": {"centres": 3, "radii": [0.015]}},
+        ),
+        tmp_path / "few",
+        progress=False,
+    )
     a, b = Dataset(tiny_dataset), Dataset(tmp_path / "few")
     both = open_data([str(tiny_dataset), str(tmp_path / "few")])
     assert isinstance(both, Datasets) and len(both) == len(a) + len(b)
-    assert both.card["name"] == "tiny+few" and both.card["hash"] not in (a.card["hash"],
-                                                                         b.card["hash"])
+    assert both.card["name"] == "tiny+few" and both.card["hash"] not in (
+        a.card["hash"],
+        b.card["hash"],
+    )
     assert both.card["config"]["thickness_mm"] == [5.0, 7.5, 10.0]
     x, y, xy = a.arrays("train"), b.arrays("train"), both.arrays("train")
-    np.testing.assert_array_equal(xy["displacement"], np.concatenate([x["displacement"],
-                                                                      y["displacement"]]))
+    np.testing.assert_array_equal(
+        xy["displacement"], np.concatenate([x["displacement"], y["displacement"]])
+    )
     assert xy["params"] == x["params"] + y["params"]
     n = int(a.arrays()["placement"].max()) + 1
-    np.testing.assert_array_equal(xy["placement"], np.concatenate([x["placement"],
-                                                                   y["placement"] + n]))
+    np.testing.assert_array_equal(
+        xy["placement"], np.concatenate([x["placement"], y["placement"] + n])
+    )
     assert sum(both.card["samples_per_split"].values()) == len(both)
-    generate(tiny_config(name="soft", thickness_mm=[7.5], forces=[0.05],
-                         material={"name": "neo_hookean", "E": 500.0, "nu": 0.4}),
-             tmp_path / "soft", progress=False)
+    generate(
+        tiny_config(
+            name="soft",
+            thickness_mm=[7.5],
+            forces=[0.05],
+            material={"name": "neo_hookean", "E": 500.0, "nu": 0.4},
+        ),
+        tmp_path / "soft",
+        progress=False,
+    )
     with pytest.raises(ValueError, match=r"differ in their FEM set-up \(material\)"):
         Datasets([tiny_dataset, tmp_path / "soft"])
-    generate(tiny_config(name="coarse", body={**tiny_config()["body"], "n_around": 12},
-                         thickness_mm=[7.5], forces=[0.05]), tmp_path / "coarse",
-             progress=False)
+    generate(
+        tiny_config(
+            name="coarse",
+            body={**tiny_config()["body"], "n_around": 12},
+            thickness_mm=[7.5],
+            forces=[0.05],
+        ),
+        tmp_path / "coarse",
+        progress=False,
+    )
     with pytest.raises(ValueError, match="live on different meshes"):
         Datasets([tiny_dataset, tmp_path / "coarse"])
     with pytest.raises(ValueError, match="empty list"):
@@ -116,11 +149,20 @@ def test_datasets_of_one_part_read_as_one(tmp_path, tiny_config, tiny_dataset):
 
 def test_datasets_on_several_bodies_of_one_mesh(tmp_path, tiny_config, tiny_dataset):
     """The same tube mesh at another radius is another body: its samples say which (``body``
-    indexes ``parts``), the card lists the bodies; the first body's samples come first."""
-    from stmpl.dataset import open_data
+    indexes ``parts``), the card lists the bodies; the first body's samples come first.
+    """
+    from stmpl.data.dataset import open_data
 
-    generate(tiny_config(name="thin", body={**tiny_config()["body"], "radius": 0.03},
-                         thickness_mm=[7.5], forces=[0.05]), tmp_path / "thin", progress=False)
+    generate(
+        tiny_config(
+            name="thin",
+            body={**tiny_config()["body"], "radius": 0.03},
+            thickness_mm=[7.5],
+            forces=[0.05],
+        ),
+        tmp_path / "thin",
+        progress=False,
+    )
     both = open_data([tiny_dataset, tmp_path / "thin"])
     a, b = Dataset(tiny_dataset), Dataset(tmp_path / "thin")
     assert len(both.parts) == 2 and np.array_equal(both.parts[1].vertices, b.part.vertices)
@@ -133,24 +175,31 @@ def test_datasets_on_several_bodies_of_one_mesh(tmp_path, tiny_config, tiny_data
 def test_a_linear_answer_is_kept_and_hashed(tmp_path, tiny_config):
     """With ``linear: true`` every sample carries the linear FEM's answer to its load, the
     operator's columns times the forces (a light press: within 3 % of the FEM's peak); an
-    edited answer fails the content check."""
+    edited answer fails the content check.
+    """
     import h5py
 
     from fem.compliance import local_compliance
     from fem.material import material
 
-    cfg = tiny_config(thickness_mm=[7.5], forces=[0.01, 0.02], linear=True,
-                      placements={"disk": {"centres": 2, "radii": [0.02]}})
+    cfg = tiny_config(
+        thickness_mm=[7.5],
+        forces=[0.01, 0.02],
+        linear=True,
+        placements={"disk": {"centres": 2, "radii": [0.02]}},
+    )
     generate(cfg, tmp_path / "d", progress=False)
     ds = Dataset(tmp_path / "d")
     a = ds.arrays()
     assert a["linear"].shape == a["displacement"].shape
     i = 0
     loaded = np.flatnonzero(a["force"][i] > 0)
-    G, _ = local_compliance(ds.part, 7.5e-3, loaded, cfg["resolution"],
-                            material(**ds.card["config"]["material"]))
-    np.testing.assert_allclose(a["linear"][i], np.einsum("nkc,k->nc", G, a["force"][i][loaded]),
-                               rtol=1e-4, atol=1e-9)
+    G, _ = local_compliance(
+        ds.part, 7.5e-3, loaded, cfg["resolution"], material(**ds.card["config"]["material"])
+    )
+    np.testing.assert_allclose(
+        a["linear"][i], np.einsum("nkc,k->nc", G, a["force"][i][loaded]), rtol=1e-4, atol=1e-9
+    )
     np.testing.assert_allclose(a["linear"][1], 2 * a["linear"][0], rtol=1e-5)  # 0.02 N, 0.01 N
     peak = np.linalg.norm(a["displacement"], axis=-1).max(1)
     lin = np.linalg.norm(a["linear"], axis=-1).max(1)
@@ -164,8 +213,9 @@ def test_a_linear_answer_is_kept_and_hashed(tmp_path, tiny_config):
 
 def test_a_broken_set_of_bodies_is_named(tmp_path):
     """bodies.json that is unreadable, of another format, or lists a member that is missing:
-    one line naming the file."""
-    from stmpl.dataset import BODIES_FORMAT, open_data
+    one line naming the file.
+    """
+    from stmpl.data.dataset import BODIES_FORMAT, open_data
 
     (tmp_path / "bodies.json").write_text("{not json")
     with pytest.raises(ValueError, match="bodies.json is corrupt"):
@@ -173,7 +223,8 @@ def test_a_broken_set_of_bodies_is_named(tmp_path):
     (tmp_path / "bodies.json").write_text(json.dumps({"format": "x", "members": []}))
     with pytest.raises(ValueError, match="has format 'x'"):
         open_data(tmp_path)
-    (tmp_path / "bodies.json").write_text(json.dumps(
-        {"format": BODIES_FORMAT, "name": "b", "members": [{"folder": "body-00"}]}))
+    (tmp_path / "bodies.json").write_text(
+        json.dumps({"format": BODIES_FORMAT, "name": "b", "members": [{"folder": "body-00"}]})
+    )
     with pytest.raises(FileNotFoundError, match="missing"):
         open_data(tmp_path)

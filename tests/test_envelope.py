@@ -1,5 +1,6 @@
 """The envelope: contacts, a scene's features (closed forms), the check, widening by a test set,
-and what predictors do outside it."""
+and what predictors do outside it.
+"""
 
 import warnings
 
@@ -29,7 +30,7 @@ def test_contacts_are_the_connected_loaded_patches(ds):
     assert sorted(map(len, two)) == sorted([a.count, b.count])
     from scipy.sparse.csgraph import connected_components
 
-    rng = np.random.default_rng(0)                    # any pattern: scipy's components
+    rng = np.random.default_rng(0)  # any pattern: scipy's components
     for share in (0.05, 0.3, 0.6, 0.95):
         f = (rng.random(part.n_vertices) < share).astype(float)
         on = np.flatnonzero(f)
@@ -52,13 +53,13 @@ def test_features_are_force_over_area(ds):
     assert f["peak_pressure"] == pytest.approx((both.force / part.vertex_areas).max())
     from stmpl.envelope import _around
 
-    t2 = np.full(part.n_vertices, 0.012)                   # reach 24 mm: past the next ring
-    near = _around(part, a.vertices, 2 * 0.012)             # the tissue a's contact moves
+    t2 = np.full(part.n_vertices, 0.012)  # reach 24 mm: past the next ring
+    near = _around(part, a.vertices, 2 * 0.012)  # the tissue a's contact moves
     assert set(a.vertices) < set(near)
     far = np.setdiff1d(np.arange(part.n_vertices), near)
-    t2[far] = 0.006                                          # thinner only beyond it: no matter
+    t2[far] = 0.006  # thinner only beyond it: no matter
     assert features(part, t2, a.force)["thickness_variation"] == 0
-    t2[near[~np.isin(near, a.vertices)][0]] = 0.009          # thinner beside the contact: counts
+    t2[near[~np.isin(near, a.vertices)][0]] = 0.009  # thinner beside the contact: counts
     mean = t2[near].mean()
     assert features(part, t2, a.force)["thickness_variation"] == pytest.approx(0.003 / mean)
 
@@ -78,20 +79,21 @@ def test_training_scenes_are_inside_and_each_axis_is_named_when_left(ds, env_ds)
     box = env.boxes["training"]
     assert box["thickness"] == pytest.approx([0.005, 0.010])
     assert box["contacts"] == [1, 1]
-    k = int(np.argmax(a["total"]))                       # the heaviest training scene
+    k = int(np.argmax(a["total"]))  # the heaviest training scene
     t, f = a["thickness"][k], a["force"][k]
 
     def why(**kw):
         return " | ".join(env.reasons(part=part, **{"thickness": t, "force": f, **kw}))
 
     assert "mean pressure of a contact" in why(force=f * 20) and "force of a contact" in why(
-        force=f * 20)
+        force=f * 20
+    )
     assert "tissue thickness 2.5 mm < 5 mm" in why(thickness=np.full_like(t, 0.0025))
     assert "tissue thickness 12 mm > 10 mm" in why(thickness=np.full_like(t, 0.012))
     _, _, both = _two_disks(part, total=0.1)
     assert "number of contacts 2 > 1" in why(force=both.force)
-    assert why(force=f * (1 + 0.5 * 0.02)) == ""               # within the slack
-    assert why(force=f * 0.5) == ""                            # lighter is never outside
+    assert why(force=f * (1 + 0.5 * 0.02)) == ""  # within the slack
+    assert why(force=f * 0.5) == ""  # lighter is never outside
 
 
 def test_round_trip_and_corrupt_envelopes(env_ds):
@@ -150,14 +152,19 @@ def test_predictors_flag_warn_once_and_refuse_when_strict(ds, make, env_ds):
 
 
 def test_training_records_the_envelope_and_the_checkpoint_keeps_it(tiny_dataset, tmp_path):
-    from stmpl.evaluate import evaluate_dataset
-    from stmpl.train import train
+    from stmpl.pipeline.evaluate import evaluate_dataset
+    from stmpl.pipeline.train import train
 
-    cfg = {"name": "n", "model": "naive", "data": str(tiny_dataset), "out": str(tmp_path),
-           "epochs": 1}
+    cfg = {
+        "name": "n",
+        "model": "naive",
+        "data": str(tiny_dataset),
+        "out": str(tmp_path),
+        "epochs": 1,
+    }
     p = predictor.read(train(cfg, progress=False))
     assert p.envelope.boxes["training"]["thickness"] == pytest.approx([0.005, 0.010])
-    from stmpl.dataset import Dataset
+    from stmpl.data.dataset import Dataset
 
     ds = Dataset(tiny_dataset)
     assert p.envelope.info["training"]["scenes"] == ds.card["samples_per_split"]["train"]
@@ -167,7 +174,8 @@ def test_training_records_the_envelope_and_the_checkpoint_keeps_it(tiny_dataset,
 
 def test_a_contact_nearer_the_rims_than_any_in_training_is_outside(ds):
     """The rim distance is checked at its low end only: a training box built from loads in the
-    middle of the tube refuses a load on its rim."""
+    middle of the tube refuses a load on its rim.
+    """
     part = ds.part
     t = np.full(part.n_vertices, 0.006)
     mid = loads.disk(part, uv=(0.5, 0.5), radius=0.02, total=0.1)
@@ -176,6 +184,7 @@ def test_a_contact_nearer_the_rims_than_any_in_training_is_outside(ds):
     rim = np.zeros(part.n_vertices)
     rim[part.rims[0][:3]] = 0.1 / 3
     why = env.reasons(part=part, thickness=t, force=rim)
-    assert any(w.startswith("distance of a contact from the part's open rims 0 mm <")
-               for w in why), why
+    assert any(
+        w.startswith("distance of a contact from the part's open rims 0 mm <") for w in why
+    ), why
     assert env.reasons(part=part, thickness=t, force=mid.force * 0.5) == []

@@ -4,11 +4,9 @@ import numpy as np
 import pytest
 
 
-
-
 def test_evaluate_reports_seam_measures(ds, make):
-    from stmpl.evaluate import evaluate_dataset
     from stmpl.metrics import sample_metrics
+    from stmpl.pipeline.evaluate import evaluate_dataset
 
     unet = evaluate_dataset(make("uv_unet", ds), ds, "test", limit=4)
     gnn = evaluate_dataset(make("gnn", ds), ds, "test", limit=4)
@@ -24,7 +22,7 @@ def test_evaluate_reports_seam_measures(ds, make):
 
 
 def test_limits_and_tables(ds, make, tmp_path):
-    from stmpl.evaluate import evaluate, scenes_of
+    from stmpl.pipeline.evaluate import evaluate, scenes_of
 
     for bad in (0, -1, 2.5, True):
         with pytest.raises(ValueError, match="limit must be a number of samples >= 1"):
@@ -39,8 +37,9 @@ def test_limits_and_tables(ds, make, tmp_path):
 
 def test_a_scene_the_fem_fails_on_is_counted_and_left_out(ds, make):
     """The FEM answers scene by scene; one that fails is counted with its reason, not averaged
-    in and not the end of the evaluation; failing on every scene is an error."""
-    from stmpl.evaluate import evaluate_dataset
+    in and not the end of the evaluation; failing on every scene is an error.
+    """
+    from stmpl.pipeline.evaluate import evaluate_dataset
     from stmpl.predictor import PredictionFailed
 
     fem = make("fem", ds)

@@ -20,5 +20,5 @@ def test_atomic_writes_replace_whole_files_with_ordinary_permissions(tmp_path):
         with atomic_path(tmp_path / "a.json") as tmp:
             tmp.write_text("half")
             raise RuntimeError("killed")
-    assert (tmp_path / "a.json").read_text() == "{}"           # the old file stays
+    assert (tmp_path / "a.json").read_text() == "{}"  # the old file stays
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.json", "a.npz"]  # no debris

@@ -1,12 +1,13 @@
-"""Hand grasps with anny's own hand (stmpl/hand.py): the hand's fingers move one by one, a grasp
-presses each finger of its grip the asked depth into the skin, and bad requests are named."""
+"""Hand grasps with anny's own hand (stmpl/contact/hand.py): the hand's fingers move one by one,
+a grasp presses each finger of its grip the asked depth into the skin, and bad requests are named.
+"""
 
 import numpy as np
 import pytest
 
-from stmpl import contact as C
+import stmpl.contact.pressing as C
 from stmpl.body import sheet, tube
-from stmpl.hand import FINGERS, Hand, SkinDistance, grasp
+from stmpl.contact.hand import FINGERS, Hand, SkinDistance, grasp
 
 
 @pytest.fixture(scope="module")
@@ -27,8 +28,8 @@ def test_each_curl_moves_its_own_finger(hand):
     np.testing.assert_allclose(rest, hand.rest, atol=1e-12)
     bent = hand.vertices({"index": 0.8})
     moved = np.linalg.norm(bent - rest, axis=1)
-    assert np.mean(moved[hand.finger_of["index"]] > 0.005) > 0.8      # the index bends
-    for f in ("thumb", "middle", "ring", "little"):      # the others stay (but the skin between)
+    assert np.mean(moved[hand.finger_of["index"]] > 0.005) > 0.8  # the index bends
+    for f in ("thumb", "middle", "ring", "little"):  # the others stay (but the skin between)
         assert np.median(moved[hand.finger_of[f]]) < 1e-4 and moved[hand.finger_of[f]].max() < 0.01
     c, R = hand.frame()
     tip = hand.finger_of["middle"][np.argmax((rest[hand.finger_of["middle"]] - c) @ R[:, 0])]
@@ -37,17 +38,21 @@ def test_each_curl_moves_its_own_finger(hand):
     assert np.linalg.norm(fist[tip] - c) < np.linalg.norm(rest[tip] - c) - 0.03
     assert (fist[tip] - c) @ R[:, 1] > -0.01
     assert sum(len(v) for v in hand.finger_of.values()) == len(
-        np.unique(np.concatenate(list(hand.finger_of.values()))))       # fingers are disjoint
+        np.unique(np.concatenate(list(hand.finger_of.values())))
+    )  # fingers are disjoint
 
 
-@pytest.mark.parametrize("call,message", [
-    (lambda h, a: h.vertices({"pinky": 0.3}), "unknown finger 'pinky'"),
-    (lambda h, a: h.vertices({"index": 2.0}), "curl of index must lie in"),
-    (lambda h, a: grasp(a, h, grip="fist"), "grip must be one of"),
-    (lambda h, a: grasp(a, h, depth=0.02), "depth must lie in"),
-    (lambda h, a: grasp(a, h, along=1.5), "along must lie in"),
-    (lambda h, a: grasp(sheet(), h), "no limb axis"),
-])
+@pytest.mark.parametrize(
+    "call,message",
+    [
+        (lambda h, a: h.vertices({"pinky": 0.3}), "unknown finger 'pinky'"),
+        (lambda h, a: h.vertices({"index": 2.0}), "curl of index must lie in"),
+        (lambda h, a: grasp(a, h, grip="fist"), "grip must be one of"),
+        (lambda h, a: grasp(a, h, depth=0.02), "depth must lie in"),
+        (lambda h, a: grasp(a, h, along=1.5), "along must lie in"),
+        (lambda h, a: grasp(sheet(), h), "no limb axis"),
+    ],
+)
 def test_bad_requests_are_named(hand, arm, call, message):
     with pytest.raises(ValueError, match=message):
         call(hand, arm)
@@ -63,7 +68,7 @@ def test_a_whole_hand_grasp_presses_every_finger_and_the_palm(hand, arm):
     assert -d[hand.palm].min() == pytest.approx(0.002, abs=2e-4)
     touch = C.contact(arm, g.pressing(0.4))
     assert len(touch.vertices) >= 3 and touch.force.sum() == pytest.approx(0.4)
-    assert touch.open_objects == ("hand",)                 # cut off at the wrist
+    assert touch.open_objects == ("hand",)  # cut off at the wrist
 
 
 def test_a_pinch_touches_with_thumb_and_index_only(hand, arm):
@@ -71,7 +76,7 @@ def test_a_pinch_touches_with_thumb_and_index_only(hand, arm):
     skin = SkinDistance(arm)
     d = skin(g.vertices)
     assert set(g.reached) <= {"thumb", "index"} and "index" in g.reached
-    assert d[hand.palm].min() > 0.01                       # the palm stays off the skin
+    assert d[hand.palm].min() > 0.01  # the palm stays off the skin
     for f in ("middle", "ring", "little"):
         assert g.curls[f] == 1.0 and d[hand.finger_of[f]].min() > 0
 
@@ -79,8 +84,9 @@ def test_a_pinch_touches_with_thumb_and_index_only(hand, arm):
 def test_an_open_hand_lies_on_a_belly(hand, anny_body):
     """On a part with no limb axis the open hand is laid on the skin: its deepest point over the
     skin lies the asked depth deep, the palm and the fingers touch, and fingers hanging past the
-    part's rim do not hold it up."""
-    from stmpl.hand import palm_press
+    part's rim do not hold it up.
+    """
+    from stmpl.contact.hand import palm_press
 
     belly = anny_body.part("belly")
     p = palm_press(belly, hand, (0.45, 0.5), 0.004, np.pi / 2, 0.4)
@@ -89,7 +95,7 @@ def test_an_open_hand_lies_on_a_belly(hand, anny_body):
     assert -s[over].min() == pytest.approx(0.004, abs=1e-4)
     touch = C.contact(belly, p)
     assert len(touch.vertices) >= 8 and touch.force.sum() == pytest.approx(0.4)
-    deep = np.flatnonzero(over & (s < -0.001))                 # the hand's points in the skin
+    deep = np.flatnonzero(over & (s < -0.001))  # the hand's points in the skin
     assert len(set(hand.palm) & set(deep)) > 0 and len(set(hand.finger_of["middle"]) & set(deep))
     with pytest.raises(ValueError, match="depth must lie in"):
         palm_press(belly, hand, depth=0.02)

@@ -60,9 +60,12 @@ def test_letters_on_the_arm(arm):
 
 
 def test_arm_primitives_report_sensible_contact(arm):
-    for ld in (loads.disk(arm, uv=(0.5, 0.5), radius=0.025, total=5),
-               loads.ellipse(arm, uv=(0.3, 0.5), semi_axes=(0.04, 0.02), total=3),
-               loads.seam_disk(arm, 0.5, 0.025, 2), loads.band(arm, 0.3, 0.03, 4)):
+    for ld in (
+        loads.disk(arm, uv=(0.5, 0.5), radius=0.025, total=5),
+        loads.ellipse(arm, uv=(0.3, 0.5), semi_axes=(0.04, 0.02), total=3),
+        loads.seam_disk(arm, 0.5, 0.025, 2),
+        loads.band(arm, 0.3, 0.03, 4),
+    ):
         assert ld.count >= 3
         assert 0.3 < ld.area / (ld.count * arm.vertex_areas.mean()) < 3
     band = loads.band(arm, 0.5, 0.03, 4)
@@ -78,23 +81,26 @@ def test_combine_adds_forces(plate):
     np.testing.assert_allclose(c.force, a.force + b.force)
 
 
-@pytest.mark.parametrize("call,message", [
-    (lambda p: loads.disk(p, [0, 0, 0], 0.02, -1.0), "total force must be finite and > 0"),
-    (lambda p: loads.disk(p, [0, 0, 0], 0.02, np.nan), "total force must be finite"),
-    (lambda p: loads.disk(p, [0, 0, 0], 0.0, 1.0), "radius must be finite and > 0"),
-    (lambda p: loads.disk(p, [0, 0, 0.1], 0.02, 1.0), "mm off part"),
-    (lambda p: loads.disk(p, [0.00125, 0.00125, 0], 0.0001, 1.0), "touches no vertex"),
-    (lambda p: loads.disk(p, [0, 0, 0], 0.003, 200.0), "per-vertex force must be <= 20"),
-    (lambda p: loads.disk(p, 0, 0.01, 1.0, uv=(0.5, 0.5)), "exactly one"),
-    (lambda p: loads.ellipse(p, [0, 0, 0], (0.02, -1), 0, 1.0), "semi-axis b"),
-    (lambda p: loads.seam_disk(p), "no UV seam"),
-    (lambda p: loads.band(p), "no limb axis"),
-    (lambda p: loads.letter(p, "AB"), "one visible character"),
-    (lambda p: loads.letter(p, "A", uv=(2, 2)), "off the chart"),
-    (lambda p: loads.letter(p, "\u6f22"), "not in the letter font"),   # a glyph it lacks
-    (lambda p: loads.disk(p, [0, 0, 0], 1.0, 1.0), "covers the whole part"),
-    (lambda p: loads.ellipse(p, [0, 0, 0], (1.0, 0.9), 0, 1.0), "covers the whole part"),
-])
+@pytest.mark.parametrize(
+    "call,message",
+    [
+        (lambda p: loads.disk(p, [0, 0, 0], 0.02, -1.0), "total force must be finite and > 0"),
+        (lambda p: loads.disk(p, [0, 0, 0], 0.02, np.nan), "total force must be finite"),
+        (lambda p: loads.disk(p, [0, 0, 0], 0.0, 1.0), "radius must be finite and > 0"),
+        (lambda p: loads.disk(p, [0, 0, 0.1], 0.02, 1.0), "mm off part"),
+        (lambda p: loads.disk(p, [0.00125, 0.00125, 0], 0.0001, 1.0), "touches no vertex"),
+        (lambda p: loads.disk(p, [0, 0, 0], 0.003, 200.0), "per-vertex force must be <= 20"),
+        (lambda p: loads.disk(p, 0, 0.01, 1.0, uv=(0.5, 0.5)), "exactly one"),
+        (lambda p: loads.ellipse(p, [0, 0, 0], (0.02, -1), 0, 1.0), "semi-axis b"),
+        (lambda p: loads.seam_disk(p), "no UV seam"),
+        (lambda p: loads.band(p), "no limb axis"),
+        (lambda p: loads.letter(p, "AB"), "one visible character"),
+        (lambda p: loads.letter(p, "A", uv=(2, 2)), "off the chart"),
+        (lambda p: loads.letter(p, "\u6f22"), "not in the letter font"),  # a glyph it lacks
+        (lambda p: loads.disk(p, [0, 0, 0], 1.0, 1.0), "covers the whole part"),
+        (lambda p: loads.ellipse(p, [0, 0, 0], (1.0, 0.9), 0, 1.0), "covers the whole part"),
+    ],
+)
 def test_bad_loads_are_named(plate, call, message):
     with pytest.raises(ValueError, match=message):
         call(plate)
@@ -102,7 +108,8 @@ def test_bad_loads_are_named(plate, call, message):
 
 def test_a_load_stays_on_its_part(plate):
     """A load remembers the mesh it was built on: a scene or a sum on another mesh of the same
-    size refuses it instead of pressing the wrong vertices."""
+    size refuses it instead of pressing the wrong vertices.
+    """
     from stmpl.scene import Scene
 
     other = sheet(0.2, 0.2, 81, 81).with_vertices(plate.vertices * 1.5)
@@ -117,7 +124,8 @@ def test_a_load_stays_on_its_part(plate):
 
 def test_spots_are_small_disks_spread_around_a_centre(plate):
     """Each spot is the disk of its centre; the centres lie within the spread, evenly apart;
-    the total is split equally over every touched vertex."""
+    the total is split equally over every touched vertex.
+    """
     r, spread, h = 0.005, 0.03, 0.0025
     ld = loads.spots(plate, [0.0, 0.0, 0.0], count=3, radius=r, spread=spread, total=3.0)
     c = np.array(ld.params["centres"])
@@ -130,9 +138,11 @@ def test_spots_are_small_disks_spread_around_a_centre(plate):
     assert ld.area == pytest.approx(3 * np.pi * r**2, rel=0.15)
     one = loads.spots(plate, [0.0, 0.0, 0.0], count=1, radius=r, total=1.0)
     np.testing.assert_array_equal(one.vertices, loads.disk(plate, [0, 0, 0], r).vertices)
-    for bad, msg in (({"count": 0}, "count must be an integer >= 1"),
-                     ({"count": 2.5}, "count must be an integer"),
-                     ({"spread": 0.0}, "spread must be finite and > 0"),
-                     ({"count": 6, "spread": 0.003}, "widen the spread")):
+    for bad, msg in (
+        ({"count": 0}, "count must be an integer >= 1"),
+        ({"count": 2.5}, "count must be an integer"),
+        ({"spread": 0.0}, "spread must be finite and > 0"),
+        ({"count": 6, "spread": 0.003}, "widen the spread"),
+    ):
         with pytest.raises(ValueError, match=msg):
             loads.spots(plate, [0.0, 0.0, 0.0], **{"radius": r, **bad})

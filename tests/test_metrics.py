@@ -7,13 +7,13 @@ from stmpl.body.primitives import tube
 
 def test_sample_metrics_by_hand():
     true = np.zeros((4, 3))
-    true[0] = [1e-3, 0, 0]          # 1 mm
-    true[1] = [0, 2e-3, 0]          # 2 mm
-    true[2] = [0, 0, 0.5e-6]        # 0.0005 mm: below the 0.001 mm threshold, ignored
+    true[0] = [1e-3, 0, 0]  # 1 mm
+    true[1] = [0, 2e-3, 0]  # 2 mm
+    true[2] = [0, 0, 0.5e-6]  # 0.0005 mm: below the 0.001 mm threshold, ignored
     pred = true.copy()
-    pred[0] += [0, 0, 0.3e-3]       # 0.3 mm error
-    pred[1] += [0.05e-3, 0, 0]      # 0.05 mm error
-    pred[3] += [9e-3, 0, 0]         # an inactive vertex: ignored
+    pred[0] += [0, 0, 0.3e-3]  # 0.3 mm error
+    pred[1] += [0.05e-3, 0, 0]  # 0.05 mm error
+    pred[3] += [9e-3, 0, 0]  # an inactive vertex: ignored
     m = metrics.sample_metrics(true, pred)
     assert m["active"] == 2 and m["max_disp"] == pytest.approx(2.0)
     assert m["mee"] == pytest.approx(0.175)
@@ -25,7 +25,8 @@ def test_sample_metrics_by_hand():
     assert m["peak_err"] == pytest.approx(100 * (9.0 / 2.0 - 1))
     pred[3] = 0.0
     assert metrics.sample_metrics(true, pred)["peak_err"] == pytest.approx(
-        100 * (np.linalg.norm([0.05, 2.0]) / 2.0 - 1))
+        100 * (np.linalg.norm([0.05, 2.0]) / 2.0 - 1)
+    )
     with pytest.raises(ValueError, match="shape|both"):
         metrics.sample_metrics(true, pred[:3])
     with pytest.raises(ValueError, match="finite"):
@@ -49,5 +50,5 @@ def test_seam_gap():
     corners = np.zeros((len(part.uv), 3))
     assert metrics.seam_gap(part, corners) == 0.0
     g = part.seam_groups[0]
-    corners[g[1]] = [0.0, 0.0, 2e-3]      # one copy of one seam vertex 2 mm off
+    corners[g[1]] = [0.0, 0.0, 2e-3]  # one copy of one seam vertex 2 mm off
     assert metrics.seam_gap(part, corners) == pytest.approx(2.0 / len(part.seam_groups))

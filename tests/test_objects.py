@@ -1,18 +1,18 @@
-"""Ready-made objects (stmpl/objects.py) and where they go."""
+"""Ready-made objects (stmpl/contact/objects.py) and where they go."""
 
 import numpy as np
 import pytest
 
-from stmpl import contact as C
-from stmpl import objects
+import stmpl.contact.pressing as C
 from stmpl.body import tube
+from stmpl.contact import objects
 
 
 def test_shapes_are_closed_and_rest_on_z0():
     for m in (objects.sphere(0.008), objects.rod(0.005, 0.1), objects.letters("ECCV", 0.03)):
         assert m.is_watertight and m.volume > 0
         assert m.vertices[:, 2].min() == pytest.approx(0.0, abs=1e-9)
-    assert objects.sphere(0.008).volume == pytest.approx(4 / 3 * np.pi * 0.008 ** 3, rel=0.02)
+    assert objects.sphere(0.008).volume == pytest.approx(4 / 3 * np.pi * 0.008**3, rel=0.02)
     rod = objects.rod(0.005, 0.1)
     np.testing.assert_allclose(rod.bounds[1] - rod.bounds[0], [0.1, 0.01, 0.01], atol=1e-4)
 
@@ -24,8 +24,7 @@ def test_letters_have_their_holes():
 
     from stmpl.loads import glyph_contours
 
-    outer, inner = sorted((geo.Polygon(c * 0.03).area for c in glyph_contours("O")),
-                          reverse=True)
+    outer, inner = sorted((geo.Polygon(c * 0.03).area for c in glyph_contours("O")), reverse=True)
     assert o.volume == pytest.approx((outer - inner) * 0.01, rel=1e-6)
     eccv = objects.letters("ECCV", 0.03)
     assert len(eccv.split(only_watertight=False)) == 4
@@ -36,7 +35,7 @@ def test_letters_have_their_holes():
 def test_press_sets_the_lowest_point_depth_into_the_skin():
     t = tube(0.04, 0.2, 48, 40)
     tip = objects.sphere(0.01)
-    k = 20 * 48 + 12                                   # a vertex half way along the tube
+    k = 20 * 48 + 12  # a vertex half way along the tube
     pose = objects.press(t, tip, k, depth=0.003)
     c = C.contact(t, C.Pressing(tip, pose, 0.2), tolerance=0.0)
     assert c.penetration[k] == c.penetration.max() == pytest.approx(0.003, abs=1e-4)
@@ -48,8 +47,8 @@ def test_a_strap_squeezes_a_ring_of_the_limb():
     t = tube(0.04, 0.2, 24, 20)
     c = C.contact(t, objects.strap(t, at=0.5, width=0.03, squeeze=0.003))
     s = t.axial[c.vertices]
-    assert abs(s.mean() - 0.1) < 0.006 and np.ptp(s) <= 0.03 + 2 * 0.002   # tolerance
-    assert len(c.vertices) % 24 == 0                           # whole rings around the tube
+    assert abs(s.mean() - 0.1) < 0.006 and np.ptp(s) <= 0.03 + 2 * 0.002  # tolerance
+    assert len(c.vertices) % 24 == 0  # whole rings around the tube
     assert c.penetration.max() == pytest.approx(0.003, abs=2e-4)
     with pytest.raises(ValueError, match="no limb axis"):
         from stmpl.body import sheet

@@ -5,12 +5,19 @@ import pytest
 
 from stmpl import predictor
 from stmpl.body.primitives import tube
-from stmpl.evaluate import scenes_of
+from stmpl.pipeline.evaluate import scenes_of
 from stmpl.scene import Deformation, Scene
 
-
-LEARNED = ["naive", "linear", "uv_unet", "gnn", "uv_unet/per_newton", "gnn/per_newton",
-           "uv_unet/prior", "gnn/prior"]
+LEARNED = [
+    "naive",
+    "linear",
+    "uv_unet",
+    "gnn",
+    "uv_unet/per_newton",
+    "gnn/per_newton",
+    "uv_unet/prior",
+    "gnn/prior",
+]
 
 
 @pytest.mark.parametrize("name", ["fem"] + LEARNED)
@@ -36,19 +43,28 @@ def test_learned_predictor_refuses_another_part_and_says_what_differs(ds):
     p = predictor.create("gnn", ds.part, {"latent": 8, "steps": 1})
     other = tube(n_around=8, n_along=4)
     s = Scene(other, np.full(other.n_vertices, 0.005), np.zeros(other.n_vertices))
-    with pytest.raises(ValueError, match=f"another body part.*has {other.n_vertices} vertices, "
-                                         f"the model's {ds.part.n_vertices}"):
+    with pytest.raises(
+        ValueError,
+        match=f"another body part.*has {other.n_vertices} vertices, "
+        f"the model's {ds.part.n_vertices}",
+    ):
         p.predict(s)
-    wider = ds.part.with_vertices(ds.part.vertices * 1.1)       # same mesh, another shape
+    wider = ds.part.with_vertices(ds.part.vertices * 1.1)  # same mesh, another shape
     s = Scene(wider, np.full(wider.n_vertices, 0.005), np.zeros(wider.n_vertices))
-    with pytest.raises(ValueError, match=r"same \d+-vertex tube mesh, but its vertices lie up "
-                                         r"to [\d.]+ mm from the model's"):
+    with pytest.raises(
+        ValueError,
+        match=r"same \d+-vertex tube mesh, but its vertices lie up "
+        r"to [\d.]+ mm from the model's",
+    ):
         p.predict(s)
-    naive = predictor.create("naive", ds.part)        # knows no geometry: any body of the mesh
+    naive = predictor.create("naive", ds.part)  # knows no geometry: any body of the mesh
     assert naive.general and naive.predict(s).displacement.shape == (wider.n_vertices, 3)
     s = Scene(other, np.full(other.n_vertices, 0.005), np.zeros(other.n_vertices))
-    with pytest.raises(ValueError, match=r"another mesh.*tube \(32 vertices\) and tube "
-                                         r"\(192 vertices\)"):
+    with pytest.raises(
+        ValueError,
+        match=r"another mesh.*tube \(32 vertices\) and tube "
+        r"\(192 vertices\)",
+    ):
         naive.predict(s)
 
 
@@ -60,20 +76,23 @@ def test_registry():
         predictor.create("naive", tube(), {"depth": 3})
 
 
-@pytest.mark.parametrize("name", ["uv_unet", "gnn", "uv_unet/per_newton", "gnn/per_newton",
-                                  "uv_unet/prior", "gnn/prior"])
+@pytest.mark.parametrize(
+    "name", ["uv_unet", "gnn", "uv_unet/per_newton", "gnn/per_newton", "uv_unet/prior", "gnn/prior"]
+)
 def test_learned_models_fit_a_few_samples(name, ds, make):
     """Each network can learn: on four training samples the loss falls at least tenfold. On top
     of the linear prior, which starts within a few per cent of the FEM, the correction must
     still beat it by 15 % (these tiny networks: the GNN has 2 steps of width 16). (The
     three-parameter Naive model cannot learn: on a tube its best fixed direction is almost
-    zero.)"""
+    zero.)
+    """
     import torch
 
     p = make(name, ds)
     a = ds.arrays("train")
-    t, f, u = (torch.tensor(a[k][:4], dtype=torch.float32)
-               for k in ("thickness", "force", "displacement"))
+    t, f, u = (
+        torch.tensor(a[k][:4], dtype=torch.float32) for k in ("thickness", "force", "displacement")
+    )
     prior = "prior" in name
     opt = torch.optim.Adam(p.model.parameters(), lr=1e-3 if prior else 3e-3)
     p.model.train()
@@ -90,7 +109,8 @@ def test_learned_models_fit_a_few_samples(name, ds, make):
 def test_reference_outputs(name):
     """Seeded tiny models on a fixed tube scene give the outputs recorded in
     ``tests/data/reference_outputs.json``: a change to an architecture, its initialisation or its
-    features shows here (regenerate the file only for an intended change)."""
+    features shows here (regenerate the file only for an intended change).
+    """
     import json
     import pathlib
 
@@ -98,22 +118,25 @@ def test_reference_outputs(name):
 
     from stmpl import loads
 
-    ref = json.loads((pathlib.Path(__file__).parent / "data" / "reference_outputs.json")
-                     .read_text())["models"][name]
+    ref = json.loads(
+        (pathlib.Path(__file__).parent / "data" / "reference_outputs.json").read_text()
+    )["models"][name]
     part = tube(radius=0.04, length=0.2, n_around=16, n_along=12)
-    scene = Scene.from_load(part, np.full(part.n_vertices, 0.0075),
-                            loads.disk(part, uv=(0.5, 0.5), radius=0.02, total=0.2))
+    scene = Scene.from_load(
+        part,
+        np.full(part.n_vertices, 0.0075),
+        loads.disk(part, uv=(0.5, 0.5), radius=0.02, total=0.2),
+    )
     torch.manual_seed(0)
     u = predictor.create(name.split("/")[0], part, ref["options"]).predict(scene).displacement
     np.testing.assert_allclose(u[ref["vertices"]], ref["displacement_m"], rtol=1e-4, atol=1e-9)
     assert np.linalg.norm(u) == pytest.approx(ref["norm_m"], rel=1e-5)
 
 
-
-
 def test_an_impossible_answer_is_flagged(ds, make):
     """A prediction that pushes the skin through the fixed surface beneath is flagged and
-    warned about (here a Naive model with an absurd alpha pushing along the inward normals)."""
+    warned about (here a Naive model with an absurd alpha pushing along the inward normals).
+    """
     import torch
 
     p = make("naive", ds)

@@ -1,14 +1,14 @@
-"""Shaded 3D pictures (stmpl/render.py)."""
+"""Shaded 3D pictures (stmpl/viz/render.py)."""
 
 import numpy as np
 import pytest
 
-from stmpl.render import contact_figure, refine
+from stmpl.viz.render import contact_figure, refine
 
 
 def test_refine_keeps_area_and_interpolates_linearly():
     tri = np.array([[[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]])
-    vals = tri[..., 0] + 2 * tri[..., 1]                  # a linear field
+    vals = tri[..., 0] + 2 * tri[..., 1]  # a linear field
     t, v = refine(tri, vals, levels=2)
     assert t.shape == (16, 3, 3) and v.shape == (16, 3)
     area = 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
@@ -17,11 +17,15 @@ def test_refine_keeps_area_and_interpolates_linearly():
 
 
 def test_contact_figure(tmp_path, arm):
-    from stmpl import Scene, contact, objects, tissue, zoo
+    import stmpl.contact.pressing as contact
+    from stmpl import Scene, tissue
+    from stmpl.contact import objects
+    from stmpl.pipeline import zoo
 
     bar = objects.rod(0.01, 0.08)
-    touch = contact.contact(arm, contact.Pressing(
-        bar, objects.press(arm, bar, uv=(0.45, 0.5), depth=0.004), 0.3, "bar"))
+    touch = contact.contact(
+        arm, contact.Pressing(bar, objects.press(arm, bar, uv=(0.45, 0.5), depth=0.004), 0.3, "bar")
+    )
     scene = Scene.from_load(arm, tissue.constant(arm, 0.0075), touch.load())
     d = zoo.read("linear_arm").predict(scene)
     fig = contact_figure({"linear": d}, None, [touch.objects[0].posed()], tmp_path / "c.png")
@@ -30,12 +34,15 @@ def test_contact_figure(tmp_path, arm):
     title = fig.axes[0].get_title()
     assert "outside its envelope" not in title
     # an answer outside the model's envelope says so in its panel, in red
-    d.info["envelope"] = {"inside": False, "outside": ["mean pressure of a contact 0.48 kPa > "
-                                                       "0.4 kPa (where it was measured)"]}
+    d.info["envelope"] = {
+        "inside": False,
+        "outside": ["mean pressure of a contact 0.48 kPa > 0.4 kPa (where it was measured)"],
+    }
     fig = contact_figure({"linear": d}, None, [touch.objects[0].posed()], tmp_path / "c.png")
     ax = fig.axes[0]
-    assert ax.get_title().endswith("outside its envelope: mean pressure of a contact 0.48 kPa "
-                                   "> 0.4 kPa")
+    assert ax.get_title().endswith(
+        "outside its envelope: mean pressure of a contact 0.48 kPa > 0.4 kPa"
+    )
     assert ax.title.get_color() == "#a00000"
     d.info["physical"] = False
     fig = contact_figure({"linear": d}, None, [], tmp_path / "c.png")

@@ -13,8 +13,9 @@ def part():
 
 @pytest.fixture
 def scene(part):
-    return Scene.from_load(part, tissue.constant(part, 0.0075),
-                           loads.band(part, 0.5, 0.05, 2.0), id=7)
+    return Scene.from_load(
+        part, tissue.constant(part, 0.0075), loads.band(part, 0.5, 0.05, 2.0), id=7
+    )
 
 
 def test_scene_is_frozen_and_read_only(scene):
@@ -29,7 +30,7 @@ def test_scene_is_frozen_and_read_only(scene):
 
 def test_scene_and_deformation_save_load_round_trip(scene, tmp_path):
     back = Scene.read(scene.save(tmp_path / "s.npz"))
-    assert back.load is None          # a scene read back (or made from arrays) has no Load
+    assert back.load is None  # a scene read back (or made from arrays) has no Load
     assert Scene(back.part, back.thickness, back.force).load is None
     np.testing.assert_array_equal(back.force, scene.force)
     np.testing.assert_array_equal(back.thickness, scene.thickness)
@@ -47,15 +48,18 @@ def test_scene_and_deformation_save_load_round_trip(scene, tmp_path):
         Deformation.read(tmp_path / "s.npz")
 
 
-@pytest.mark.parametrize("field,value,message", [
-    ("force", lambda n: np.full(n, -0.1), "force must be >= 0"),
-    ("force", lambda n: np.full(n, np.inf), "not finite at vertex 0"),
-    ("force", lambda n: np.zeros(n + 1), "force must have shape"),
-    ("force", lambda n: np.full(n, 25.0), "<= 20 N per vertex"),
-    ("thickness", lambda n: np.zeros(n), "thickness must lie in"),
-    ("thickness", lambda n: np.full(n, 0.013), "thickness must lie in"),
-    ("thickness", lambda n: np.full((n, 2), 0.005), "thickness must have shape"),
-])
+@pytest.mark.parametrize(
+    "field,value,message",
+    [
+        ("force", lambda n: np.full(n, -0.1), "force must be >= 0"),
+        ("force", lambda n: np.full(n, np.inf), "not finite at vertex 0"),
+        ("force", lambda n: np.zeros(n + 1), "force must have shape"),
+        ("force", lambda n: np.full(n, 25.0), "<= 20 N per vertex"),
+        ("thickness", lambda n: np.zeros(n), "thickness must lie in"),
+        ("thickness", lambda n: np.full(n, 0.013), "thickness must lie in"),
+        ("thickness", lambda n: np.full((n, 2), 0.005), "thickness must have shape"),
+    ],
+)
 def test_bad_scenes_are_named(part, field, value, message):
     kw = {"thickness": np.full(part.n_vertices, 0.005), "force": np.zeros(part.n_vertices)}
     kw[field] = value(part.n_vertices)

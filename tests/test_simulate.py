@@ -4,12 +4,13 @@ import numpy as np
 import pytest
 import trimesh
 
-from stmpl.cli import main
+from stmpl.cli.main import main
 
 
 def test_the_default_grasp(tmp_path, capsys, arm):
     """With no arguments: the shipped GNN on the surface it was trained on (the once-subdivided
-    arm), anny's right hand grasping the forearm."""
+    arm), anny's right hand grasping the forearm.
+    """
     assert main(["simulate", "--out-dir", str(tmp_path)]) == 0
     out = capsys.readouterr().out
     arm = arm.subdivided(1)
@@ -17,27 +18,49 @@ def test_the_default_grasp(tmp_path, capsys, arm):
     assert "right hand (whole)" in out and "gnn_arm_bodies" in out and " ms" in out
     body = trimesh.load(tmp_path / "pressed.ply", process=False)
     moved = np.linalg.norm(body.vertices - arm.vertices, axis=1)
-    assert 1e-4 < moved.max() < 3e-3                       # a dent of under a millimetre or so
+    assert 1e-4 < moved.max() < 3e-3  # a dent of under a millimetre or so
     world = trimesh.load(tmp_path / "pressed.glb")
     assert arm.n_vertices in [len(g.vertices) for g in world.geometry.values()]
-    assert len(world.geometry) == 2                         # the arm and the hand
+    assert len(world.geometry) == 2  # the arm and the hand
     assert (tmp_path / "simulate.png").stat().st_size > 30_000
 
 
 def test_letters_against_the_fem(tmp_path, capsys, arm):
-    assert main(["simulate", "--letters", "ECCV", "--force", "0.3", "--depth", "3", "--compare",
-                 "--res", "coarse", "--levels", "1", "--out-dir", str(tmp_path)]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--letters",
+                "ECCV",
+                "--force",
+                "0.3",
+                "--depth",
+                "3",
+                "--compare",
+                "--res",
+                "coarse",
+                "--levels",
+                "1",
+                "--out-dir",
+                str(tmp_path),
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert "letters ECCV" in out and "FEM (coarse)" in out
     line = [ln for ln in out.splitlines() if ln.strip().startswith("gnn_arm_bodies: error")][0]
-    assert float(line.split("error ")[1].split(" %")[0]) < 10   # a coarse FEM, a fine model
+    assert float(line.split("error ")[1].split(" %")[0]) < 10  # a coarse FEM, a fine model
 
 
-@pytest.mark.parametrize("argv,message", [
-    (["--sphere", "8", "--letters", "A"], "choose one object"),
-    (["--object", "missing.stl"], "mesh file not found"),
-    (["--sphere", "8", "--depth", "-5"], "no contact"),
-])
+@pytest.mark.parametrize(
+    "argv,message",
+    [
+        (["--sphere", "8", "--letters", "A"], "choose one object"),
+        (["--object", "missing.stl"], "mesh file not found"),
+        (["--sphere", "8", "--depth", "-5"], "no contact"),
+    ],
+)
 def test_bad_requests_end_in_one_line(tmp_path, capsys, arm, argv, message):
     assert main(["simulate", *argv, "--out-dir", str(tmp_path)]) == 2
     err = capsys.readouterr().err
@@ -46,26 +69,66 @@ def test_bad_requests_end_in_one_line(tmp_path, capsys, arm, argv, message):
 
 def test_an_object_file_at_a_pose(tmp_path, capsys, arm):
     """A user's mesh file placed by --pose in body coordinates: a 1 cm sphere whose centre is
-    8 mm inside the skin at a vertex touches that vertex."""
-    from stmpl import objects
+    8 mm inside the skin at a vertex touches that vertex.
+    """
+    from stmpl.contact import objects
 
     objects.sphere(0.01).apply_translation([0, 0, -0.01]).export(tmp_path / "ball.stl")
     k = 200
-    centre = (arm.vertices[k] - 0.008 * arm.normals[k]) * 1e3         # mm
-    assert main(["simulate", "--object", str(tmp_path / "ball.stl"), "--pose", *map(str, centre),
-                 "0", "0", "0", "--force", "0.2", "--out-dir", str(tmp_path / "o")]) == 0
+    centre = (arm.vertices[k] - 0.008 * arm.normals[k]) * 1e3  # mm
+    assert (
+        main(
+            [
+                "simulate",
+                "--object",
+                str(tmp_path / "ball.stl"),
+                "--pose",
+                *map(str, centre),
+                "0",
+                "0",
+                "0",
+                "--force",
+                "0.2",
+                "--out-dir",
+                str(tmp_path / "o"),
+            ]
+        )
+        == 0
+    )
     assert "ball 0.2 N on" in capsys.readouterr().out
-    assert main(["simulate", "--pose", "0", "0", "0", "0", "0", "0",
-                 "--out-dir", str(tmp_path / "o")]) == 2
+    assert (
+        main(["simulate", "--pose", "0", "0", "0", "0", "0", "0", "--out-dir", str(tmp_path / "o")])
+        == 2
+    )
     assert "--pose places an --object" in capsys.readouterr().err
 
 
 def test_a_press_past_the_envelope_is_said_and_a_failed_fem_is_one_line(tmp_path, capsys, arm):
     """5 N on a fingertip-sized patch: the GNN answers with a note that the scene lies outside
     its data and a warning that the answer is impossible; the FEM fails and says why in one
-    line; the command still writes the models' answers."""
-    assert main(["simulate", "--sphere", "20", "--depth", "4", "--force", "5", "--compare",
-                 "--res", "coarse", "--levels", "1", "--out-dir", str(tmp_path)]) == 0
+    line; the command still writes the models' answers.
+    """
+    assert (
+        main(
+            [
+                "simulate",
+                "--sphere",
+                "20",
+                "--depth",
+                "4",
+                "--force",
+                "5",
+                "--compare",
+                "--res",
+                "coarse",
+                "--levels",
+                "1",
+                "--out-dir",
+                str(tmp_path),
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert "NOTE: gnn_arm_bodies answers outside the data" in out
     assert "mean pressure of a contact" in out and "WARNING: gnn_arm_bodies pushes the skin" in out
@@ -75,9 +138,24 @@ def test_a_press_past_the_envelope_is_said_and_a_failed_fem_is_one_line(tmp_path
 
 def test_any_body_and_its_right_arm(tmp_path, capsys):
     """The default model serves another anny body (heavy, little muscle), its tissue from its
-    weight by the paper's heuristic (0.9 -> 9.5 mm), and its right arm in the mirror."""
-    assert main(["simulate", "--weight", "0.9", "--muscle", "0.2", "--part", "right_arm",
-                 "--out-dir", str(tmp_path)]) == 0
+    weight by the paper's heuristic (0.9 -> 9.5 mm), and its right arm in the mirror.
+    """
+    assert (
+        main(
+            [
+                "simulate",
+                "--weight",
+                "0.9",
+                "--muscle",
+                "0.2",
+                "--part",
+                "right_arm",
+                "--out-dir",
+                str(tmp_path),
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert "right_arm (2109 vertices), 9.5 mm of tissue" in out
     line = [ln for ln in out.splitlines() if ln.startswith("gnn_arm_bodies")][0]
@@ -87,9 +165,24 @@ def test_any_body_and_its_right_arm(tmp_path, capsys):
 
 def test_the_belly_under_an_open_hand(tmp_path, capsys):
     """On the belly, a part with no limb to grasp, the default is anny's open hand laid on it,
-    answered by the belly's own model of every body."""
-    assert main(["simulate", "--part", "belly", "--force", "0.2", "--depth", "4",
-                 "--out-dir", str(tmp_path)]) == 0
+    answered by the belly's own model of every body.
+    """
+    assert (
+        main(
+            [
+                "simulate",
+                "--part",
+                "belly",
+                "--force",
+                "0.2",
+                "--depth",
+                "4",
+                "--out-dir",
+                str(tmp_path),
+            ]
+        )
+        == 0
+    )
     out = capsys.readouterr().out
     assert "belly (977 vertices), 7.5 mm of tissue" in out and "right hand (palm)" in out
     line = [ln for ln in out.splitlines() if ln.startswith("gnn_belly_bodies")][0]

@@ -1,8 +1,8 @@
-"""Predictors named on the command line (stmpl/spec.py)."""
+"""Predictors named on the command line (stmpl/pipeline/spec.py)."""
 
 import pytest
 
-from stmpl.spec import label, predictor_from_spec
+from stmpl.pipeline.spec import label, predictor_from_spec
 
 
 def test_fem_specs():
@@ -17,11 +17,14 @@ def test_labels():
     assert label("fem:coarse") == "fem:coarse"
 
 
-@pytest.mark.parametrize("spec,error,message", [
-    ("oracle", ValueError, "unknown predictor 'oracle'"),
-    ("fem:ultra", ValueError, "unknown resolution 'ultra'"),
-    ("missing.safetensors", FileNotFoundError, "checkpoint not found"),
-])
+@pytest.mark.parametrize(
+    "spec,error,message",
+    [
+        ("oracle", ValueError, "unknown predictor 'oracle'"),
+        ("fem:ultra", ValueError, "unknown resolution 'ultra'"),
+        ("missing.safetensors", FileNotFoundError, "checkpoint not found"),
+    ],
+)
 def test_bad_specs_are_named(spec, error, message):
     with pytest.raises(error, match=message):
         predictor_from_spec(spec)

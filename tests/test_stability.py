@@ -1,10 +1,11 @@
 """The stability sweep on the tube: scenes along each axis, the FEM's failures said with their
-time, every predictor's errors and flags, the pictures and the report."""
+time, every predictor's errors and flags, the pictures and the report.
+"""
 
 import numpy as np
 import pytest
 
-from stmpl import stability
+from stmpl.analysis import stability
 from stmpl.body.spec import part_from_spec
 
 TUBE = {"model": "tube", "radius": 0.04, "length": 0.2, "n_around": 16, "n_along": 12}
@@ -31,19 +32,37 @@ def test_scenes_along_each_axis_change_only_that_axis():
 
 
 def test_the_sweep_flags_what_lies_outside(tiny_dataset, tmp_path, monkeypatch):
-    from stmpl.train import train
+    from stmpl.pipeline.train import train
 
-    ckpt = train({"model": "naive", "data": str(tiny_dataset), "out": str(tmp_path / "n"),
-                  "epochs": 5, "batch": 16, "lr": 0.02}, progress=False)
-    cfg = {"name": "s", "kind": "stability", "body": TUBE, "part": "tube",
-           "predictors": [str(ckpt)],                # named by its file: ckpt.stem
-           "fem": {"res": {"subdivisions": 1, "layers": 1, "order": 1}, "levels": 1},
-           "base": BASE, "axes": {"force": [0.05, 0.15, 3.0], "thickness": [3.0],
-                                         "size": [1.0]},       # 1 mm: between vertices
-           "out": str(tmp_path / "report")}
-    from stmpl.ablate import run
+    ckpt = train(
+        {
+            "model": "naive",
+            "data": str(tiny_dataset),
+            "out": str(tmp_path / "n"),
+            "epochs": 5,
+            "batch": 16,
+            "lr": 0.02,
+        },
+        progress=False,
+    )
+    cfg = {
+        "name": "s",
+        "kind": "stability",
+        "body": TUBE,
+        "part": "tube",
+        "predictors": [str(ckpt)],  # named by its file: ckpt.stem
+        "fem": {"res": {"subdivisions": 1, "layers": 1, "order": 1}, "levels": 1},
+        "base": BASE,
+        "axes": {
+            "force": [0.05, 0.15, 3.0],
+            "thickness": [3.0],
+            "size": [1.0],
+        },  # 1 mm: between vertices
+        "out": str(tmp_path / "report"),
+    }
+    from stmpl.analysis.ablation import run
 
-    res = run(cfg, progress=False)                   # through stmpl ablate's entry
+    res = run(cfg, progress=False)  # through stmpl ablate's entry
     pts = {(p["axis"], p["value"]): p for p in res["points"]}
     light = pts[("force", 0.05)]
     assert light["fem"]["ok"] and light["predictors"][ckpt.stem]["inside"]
@@ -64,23 +83,34 @@ def test_the_sweep_flags_what_lies_outside(tiny_dataset, tmp_path, monkeypatch):
     assert stability.verdict({"physical": True, "rel_mee": 0.5, "peak_err": -7.0}) == "<=1 %"
     assert stability.peak_off({"physical": True, "rel_mee": 0.5, "peak_err": -7.0})
     # another model: measured afresh, the FEM's answers come from the cache, not a new solve
-    other = train({"model": "naive", "data": str(tiny_dataset), "out": str(tmp_path / "m"),
-                   "epochs": 2, "batch": 16, "lr": 0.02}, progress=False)
+    other = train(
+        {
+            "model": "naive",
+            "data": str(tiny_dataset),
+            "out": str(tmp_path / "m"),
+            "epochs": 2,
+            "batch": 16,
+            "lr": 0.02,
+        },
+        progress=False,
+    )
     from stmpl import predictor
 
     fem_class = type(predictor.create("fem", res=cfg["fem"]["res"]))
     calls, solve = [], fem_class.predict
-    monkeypatch.setattr(fem_class, "predict", lambda self, *a, **k: calls.append(1)
-                        or solve(self, *a, **k))
+    monkeypatch.setattr(
+        fem_class, "predict", lambda self, *a, **k: calls.append(1) or solve(self, *a, **k)
+    )
     again = run({**cfg, "predictors": [str(other)]}, progress=False)
     assert not calls and len(again["points"]) == len(res["points"])
     import json
 
-    kept = json.loads((tmp_path / "report" / "points.json").read_text())   # no stale records
+    kept = json.loads((tmp_path / "report" / "points.json").read_text())  # no stale records
     assert {n for r in kept.values() for n in r.get("predictors", {})} == {other.stem}
     np.testing.assert_allclose(
         [p["fem"].get("deepest_mm", 0) for p in again["points"] if "skipped" not in p],
-        [p["fem"].get("deepest_mm", 0) for p in res["points"] if "skipped" not in p])
+        [p["fem"].get("deepest_mm", 0) for p in res["points"] if "skipped" not in p],
+    )
 
 
 def test_bad_sweeps_are_named():
@@ -92,16 +122,18 @@ def test_bad_sweeps_are_named():
         stability.read_config({"axes": {"force": [1.0]}})
 
 
-@pytest.mark.parametrize("config", ["configs/ablation/stability.yaml",
-                                    "configs/ablation/stability_fine.yaml"])
-def test_the_shipped_envelopes_flag_every_sweep_point_where_a_model_breaks_its_promise(arm,
-                                                                                      config):
+@pytest.mark.parametrize(
+    "config", ["configs/ablation/stability.yaml", "configs/ablation/stability_fine.yaml"]
+)
+def test_the_shipped_envelopes_flag_every_sweep_point_where_a_model_breaks_its_promise(arm, config):
     """The committed sweeps of the shipped models, driven through today's envelopes (with the
     caps `stmpl zoo limit` set from them): at every point where the FEM failed, or where a
     learned model's answer broke the per-scene promise (zoo.SCENE_PROMISE) or was physically
     impossible, in any record of that point, the model flags the scene as outside (or refuses
-    it)."""
-    from stmpl import limits, zoo
+    it).
+    """
+    from stmpl.analysis import limits
+    from stmpl.pipeline import zoo
 
     cfg = stability.read_config(config)
     part = arm.subdivided(int(cfg["body"].get("subdivisions", 0)))
@@ -110,7 +142,7 @@ def test_the_shipped_envelopes_flag_every_sweep_point_where_a_model_breaks_its_p
     assert learned
     checked = broken = 0
     for scene, recs in limits.measured(cfg, part):
-        assert scene.total_force == pytest.approx(recs[0]["total"], rel=1e-6)   # the same scene
+        assert scene.total_force == pytest.approx(recs[0]["total"], rel=1e-6)  # the same scene
         for name, p in learned.items():
             if all("refused" in r["predictors"][name] for r in recs):
                 continue
@@ -119,17 +151,19 @@ def test_the_shipped_envelopes_flag_every_sweep_point_where_a_model_breaks_its_p
                 broken += 1
                 assert p.envelope.reasons(scene), (
                     f"{name} at {recs[0]['axis']}={recs[0]['value']}: broke its promise inside "
-                    "its envelope")
+                    "its envelope"
+                )
     assert checked >= 80 and broken >= 20, (checked, broken)
 
 
 def test_a_limit_caps_every_box_and_survives_a_round_trip(ds):
     from stmpl.envelope import Envelope
-    from stmpl.evaluate import scenes_of
+    from stmpl.pipeline.evaluate import scenes_of
 
     scenes, _ = scenes_of(ds, "train")
-    env = Envelope.of(ds.part, np.stack([s.thickness for s in scenes]),
-                      np.stack([s.force for s in scenes]))
+    env = Envelope.of(
+        ds.part, np.stack([s.thickness for s in scenes]), np.stack([s.force for s in scenes])
+    )
     inside = [s for s in scenes if not env.reasons(s)]
     from stmpl.envelope import features
 
@@ -139,7 +173,9 @@ def test_a_limit_caps_every_box_and_survives_a_round_trip(ds):
     for e in (env, again):
         out = [s for s in inside if e.reasons(s)]
         assert 0 < len(out) < len(inside)
-        assert all("where it was measured to stop keeping its promise: a test" in e.reasons(s)[0]
-                   for s in out)
+        assert all(
+            "where it was measured to stop keeping its promise: a test" in e.reasons(s)[0]
+            for s in out
+        )
     with pytest.raises(ValueError, match="max or range axis"):
         env.limit("rim_distance", 0.01)

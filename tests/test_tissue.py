@@ -15,8 +15,9 @@ def test_paper_heuristics(part):
     assert tissue.from_weight(part, 1.0)[0] == pytest.approx(0.010)
     levels = [tissue.from_weight(part, w)[0] for w in (0, 0.25, 0.5, 0.75, 1)]
     np.testing.assert_allclose(levels, tissue.LEVELS)
-    np.testing.assert_allclose([tissue.from_beta2(part, b)[0] for b in (-2, -1, 0, 1, 2)],
-                               tissue.LEVELS)
+    np.testing.assert_allclose(
+        [tissue.from_beta2(part, b)[0] for b in (-2, -1, 0, 1, 2)], tissue.LEVELS
+    )
 
 
 def test_smooth_maps(part):
@@ -36,10 +37,15 @@ def test_normalisation_round_trip():
     np.testing.assert_allclose(tissue.denormalise(tissue.normalise(t)), t)
 
 
-@pytest.mark.parametrize("value,message", [
-    (0.0, "must lie in"), (-0.001, "must lie in"), (0.02, "must lie in"),
-    (np.nan, "not finite"),
-])
+@pytest.mark.parametrize(
+    "value,message",
+    [
+        (0.0, "must lie in"),
+        (-0.001, "must lie in"),
+        (0.02, "must lie in"),
+        (np.nan, "not finite"),
+    ],
+)
 def test_out_of_range_thickness_is_refused(part, value, message):
     with pytest.raises(ValueError, match=message):
         tissue.constant(part, value)

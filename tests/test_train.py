@@ -4,14 +4,23 @@ import numpy as np
 import pytest
 
 from stmpl import checkpoint, predictor
-from stmpl.dataset import Dataset
-from stmpl.evaluate import evaluate, scenes_of
-from stmpl.train import read_config, train
+from stmpl.data.dataset import Dataset
+from stmpl.pipeline.evaluate import evaluate, scenes_of
+from stmpl.pipeline.train import read_config, train
 
 
 def _cfg(data, out, **kw):
-    return {"name": "naive_tiny", "model": "naive", "data": str(data), "epochs": 30,
-            "batch": 16, "lr": 0.02, "patience": 30, "out": str(out), **kw}
+    return {
+        "name": "naive_tiny",
+        "model": "naive",
+        "data": str(data),
+        "epochs": 30,
+        "batch": 16,
+        "lr": 0.02,
+        "patience": 30,
+        "out": str(out),
+        **kw,
+    }
 
 
 def test_naive_trains_checkpoints_and_reloads(tiny_dataset, tmp_path):
@@ -53,7 +62,8 @@ def test_training_resumes_where_it_stopped(tiny_dataset, tmp_path):
 
 def test_an_edited_sidecar_is_refused(tiny_dataset, tmp_path):
     """The sidecar holds what the predictor reads (its config, the displacement scale): an edit
-    there changes every prediction, so it is refused like an edited tensor file."""
+    there changes every prediction, so it is refused like an edited tensor file.
+    """
     path = train(_cfg(tiny_dataset, tmp_path / "run", epochs=2), progress=False)
     side = path.with_suffix(".json")
     meta = json.loads(side.read_text())
@@ -61,13 +71,13 @@ def test_an_edited_sidecar_is_refused(tiny_dataset, tmp_path):
     side.write_text(json.dumps(meta, indent=1))
     with pytest.raises(ValueError, match="sidecar .* was edited"):
         predictor.read(path)
-    meta["digest"] = checkpoint.digest(meta)     # a consistent forgery passes the file alone...
+    meta["digest"] = checkpoint.digest(meta)  # a consistent forgery passes the file alone...
     side.write_text(json.dumps(meta))
     assert predictor.read(path).scale == pytest.approx(0.02)
 
 
 def test_a_truncated_training_state_is_named(tiny_dataset, tmp_path, capsys):
-    from stmpl.cli import main
+    from stmpl.cli.main import main
 
     train(_cfg(tiny_dataset, tmp_path / "run", epochs=2), progress=False)
     state = tmp_path / "run" / "state.pt"
@@ -97,7 +107,7 @@ def test_training_config_is_checked(tiny_dataset):
 def test_cosine_schedule_and_placement_share(tiny_dataset):
     import torch
 
-    from stmpl.train import _split_tensors, learning_rate
+    from stmpl.pipeline.train import _split_tensors, learning_rate
 
     cfg = read_config({"model": "naive", "data": "x", "lr": 0.1, "schedule": "cosine"})
     assert learning_rate(cfg, 0, 100) == pytest.approx(0.1)
@@ -108,18 +118,25 @@ def test_cosine_schedule_and_placement_share(tiny_dataset):
     places = np.unique(a["placement"])
     half = read_config({"model": "naive", "data": "x", "train_fraction": 0.5})
     t, f, u, body, base = _split_tensors(ds, "train", half, torch.device("cpu"))
-    assert body is None and base is None          # one body, no prior
+    assert body is None and base is None  # one body, no prior
     # whole placements are kept, with all their samples, and about half of them
-    kept = {int(p) for p in places if any(np.allclose(f[i].numpy(), a["force"][j])
-                                          for i in range(len(f))
-                                          for j in np.flatnonzero(a["placement"] == p)[:1])}
+    kept = {
+        int(p)
+        for p in places
+        if any(
+            np.allclose(f[i].numpy(), a["force"][j])
+            for i in range(len(f))
+            for j in np.flatnonzero(a["placement"] == p)[:1]
+        )
+    }
     n_kept = sum(int((a["placement"] == p).sum()) for p in kept)
     assert len(kept) == round(0.5 * len(places)) and n_kept == len(f)
 
 
 def test_linear_fem_is_fitted_not_trained(tiny_dataset, tmp_path, monkeypatch):
     """``model: linear`` computes its operator from the dataset and skips the optimiser; the
-    checkpoint says so and beats Naive on the test split; a second fit reads the cache."""
+    checkpoint says so and beats Naive on the test split; a second fit reads the cache.
+    """
     cfg = _cfg(tiny_dataset, tmp_path / "lin", name="lin_tiny", model="linear")
     path = train(cfg, progress=False)
     meta = checkpoint.read_sidecar(path)
@@ -156,13 +173,15 @@ def test_an_edited_dataset_is_refused_before_training(tiny_dataset, tmp_path):
 
 def test_a_thickness_subset_trains_and_evaluates_on_those_levels_only(tiny_dataset, tmp_path):
     """The paper's "only 3 beta_2" set-up: thickness levels stored as float32 match the
-    config's millimetres (they once never did, and the subset was empty)."""
+    config's millimetres (they once never did, and the subset was empty).
+    """
     ds = Dataset(tiny_dataset)
     a = ds.arrays("train")
     at5 = int(np.sum(np.isclose(a["thickness"][:, 0], 0.005)))
     assert 0 < at5 < len(a["total"])
-    p = predictor.read(train(_cfg(tiny_dataset, tmp_path / "r", epochs=2, thickness_mm=[5.0]),
-                             progress=False))
+    p = predictor.read(
+        train(_cfg(tiny_dataset, tmp_path / "r", epochs=2, thickness_mm=[5.0]), progress=False)
+    )
     assert p.envelope.info["training"]["scenes"] == at5
     assert p.envelope.boxes["training"]["thickness"] == pytest.approx([0.005, 0.005])
     scenes, _ = scenes_of(ds, "test", thickness_mm=[10.0])
@@ -173,8 +192,11 @@ def test_a_model_trains_on_two_datasets_at_once(tiny_dataset, tmp_path, tiny_con
     """``data`` may list folders: the envelope and the checkpoint's dataset card cover both."""
     from fem.generate import generate
 
-    generate(tiny_config(name="few", thickness_mm=[7.5], forces=[0.05, 0.1, 0.3]),
-             tmp_path / "few", progress=False)
+    generate(
+        tiny_config(name="few", thickness_mm=[7.5], forces=[0.05, 0.1, 0.3]),
+        tmp_path / "few",
+        progress=False,
+    )
     data = [str(tiny_dataset), str(tmp_path / "few")]
     path = train({**_cfg(None, tmp_path / "run", epochs=3), "data": data}, progress=False)
     meta = checkpoint.read_sidecar(path)

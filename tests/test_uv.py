@@ -8,8 +8,12 @@ from stmpl.uv import UVMap, uv_map
 
 def _smooth_field(part):
     x = part.vertices
-    return torch.tensor(np.stack([np.sin(20 * x[:, 0]) + np.cos(15 * x[:, 2]), 10 * x[:, 1],
-                                  x[:, 0] * x[:, 2] * 40], 1), dtype=torch.float64)
+    return torch.tensor(
+        np.stack(
+            [np.sin(20 * x[:, 0]) + np.cos(15 * x[:, 2]), 10 * x[:, 1], x[:, 0] * x[:, 2] * 40], 1
+        ),
+        dtype=torch.float64,
+    )
 
 
 def test_round_trip_of_a_smooth_field_within_one_percent(arm):
@@ -22,8 +26,10 @@ def test_round_trip_of_a_smooth_field_within_one_percent(arm):
 
 def test_round_trip_error_falls_with_resolution(arm):
     f = _smooth_field(arm)
-    errs = [(UVMap(arm, s).sample(UVMap(arm, s).rasterise(f)) - f).abs().mean().item()
-            for s in (64, 128, 256)]
+    errs = [
+        (UVMap(arm, s).sample(UVMap(arm, s).rasterise(f)) - f).abs().mean().item()
+        for s in (64, 128, 256)
+    ]
     assert errs[0] > errs[1] > errs[2]
     assert errs[0] / errs[2] > 3  # about first order in the pixel size
 
@@ -50,7 +56,7 @@ def test_seam_copies_are_averaged(arm):
     c0 = arm.uv[g[0]]
     # paint only the neighbourhood of the first copy: the vertex reads the mean of its copies
     i, j = int((1 - c0[1]) * 128), int(c0[0] * 128)
-    img[0, i - 3:i + 4, j - 3:j + 4] = 1.0
+    img[0, i - 3 : i + 4, j - 3 : j + 4] = 1.0
     v = arm.uv_vertex[g[0]]
     assert m.sample(img)[v, 0].item() == pytest.approx(1.0 / len(g), abs=1e-6)
 
@@ -93,11 +99,12 @@ def test_support_covers_every_pixel_sampling_reads(arm):
 def test_window_holds_every_pixel_a_vertex_set_samples(arm):
     """``window``: the pixels bilinear sampling reads at a set of vertices, grown by a margin,
     aligned and clipped: an image that is zero outside the window samples those vertices as
-    the whole image does; a margin or alignment only grows it; an empty set is refused."""
+    the whole image does; a margin or alignment only grows it; an empty set is refused.
+    """
     m = UVMap(arm, 128)
     near = np.linalg.norm(arm.vertices - arm.vertices[0], axis=1) < 0.03
     y0, y1, x0, x1 = m.window(near)
-    assert 0 < (y1 - y0) * (x1 - x0) < 0.25 * 128 ** 2           # a small part of the chart
+    assert 0 < (y1 - y0) * (x1 - x0) < 0.25 * 128**2  # a small part of the chart
     field = _smooth_field(arm).float()
     image = m.rasterise(field)
     cut = torch.zeros_like(image)

@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from stmpl import loads, tissue, viz
+import stmpl.viz.figures as viz
+from stmpl import loads, tissue
 from stmpl.scene import Scene
 
 
@@ -45,11 +46,18 @@ def test_section_of_a_flat_layer_has_the_layer_area():
 
     part = sheet(0.1, 0.1, 8, 8)
     mesh = shell_mesh(part, np.full(part.n_vertices, 0.006), layers=2)
-    polys, vals = viz.section(mesh.nodes, mesh.tets, np.array([0.013, 0.0, 0.0]),
-                              np.array([1.0, 0.0, 0.0]), values=mesh.nodes[:, 1])
+    polys, vals = viz.section(
+        mesh.nodes,
+        mesh.tets,
+        np.array([0.013, 0.0, 0.0]),
+        np.array([1.0, 0.0, 0.0]),
+        values=mesh.nodes[:, 1],
+    )
+
     def area(p):
         c = p - p.mean(0)
         return 0.5 * abs(sum(np.cross(c[i], c[(i + 1) % len(c)])[0] for i in range(len(c))))
+
     assert sum(area(p) for p in polys) == pytest.approx(0.1 * 0.006, rel=1e-9)
     assert np.all(np.abs(vals) <= 0.05 + 1e-12)
 
@@ -57,17 +65,20 @@ def test_section_of_a_flat_layer_has_the_layer_area():
 @pytest.mark.parametrize("shared", [False, True])
 def test_prediction_figure_error_scales(arm, shared):
     """Each error panel has its own colour scale (up to that row's largest error, mm), or with
-    ``shared_error_scale`` one scale for all rows."""
+    ``shared_error_scale`` one scale for all rows.
+    """
     from stmpl.scene import Deformation
 
-    s = Scene.from_load(arm, tissue.constant(arm, 0.0075),
-                        loads.disk(arm, uv=(0.5, 0.5), radius=0.02, total=0.3))
+    s = Scene.from_load(
+        arm, tissue.constant(arm, 0.0075), loads.disk(arm, uv=(0.5, 0.5), radius=0.02, total=0.3)
+    )
     u = np.zeros((arm.n_vertices, 3))
     u[s.force > 0] = [0.0, 0.0, 1e-3]
     truth = Deformation(s, u)
     good, poor = Deformation(s, 1.01 * u), Deformation(s, 1.5 * u)
-    fig = viz.prediction_figure({"good": good, "poor": poor}, truth, shared_error_scale=shared,
-                                size=64)
+    fig = viz.prediction_figure(
+        {"good": good, "poor": poor}, truth, shared_error_scale=shared, size=64
+    )
     axes = np.asarray(fig.axes).reshape(-1)
     tops = [a.images[0].get_clim()[1] for a in axes if a.images and "error" in a.get_title()]
     assert tops == pytest.approx([0.5, 0.5] if shared else [0.01, 0.5], rel=1e-6)

@@ -1,5 +1,6 @@
 """Precomputed linear FEM (the compliance operator) as a predictor; :mod:`models.prior` uses it
-as the prior of the learned models."""
+as the prior of the learned models.
+"""
 
 from models.linear.model import LinearPredictor
 from models.linear.operator import ComplianceOperator, operator_arrays

@@ -14,8 +14,15 @@ from __future__ import annotations
 from torch import nn
 
 from models.learned import LearnedPredictor
-from models.linear.operator import (ComplianceOperator, check_operator, fit_on_demand,
-                                    fit_operator, install, reattach)
+from models.linear.operator import (
+    ComplianceOperator,
+    check_operator,
+    fit_on_demand,
+    fit_operator,
+    install,
+    reattach,
+)
+from models.prior import on_bodies
 
 
 class LinearPredictor(LearnedPredictor):
@@ -24,7 +31,8 @@ class LinearPredictor(LearnedPredictor):
     (``stored``: every column computed at fit time and carried by the checkpoint;
     ``on_demand``: the columns a scene loads, solved when first needed on the patch they move and
     cached on disk). :meth:`fit` computes the operator from a dataset; it has no trained
-    parameters."""
+    parameters.
+    """
 
     name = "linear"
     defaults = {"levels_mm": None, "tol": 1e-3, "operator": "stored"}
@@ -33,8 +41,11 @@ class LinearPredictor(LearnedPredictor):
     def options(cls, config: dict | None = None) -> dict:
         out = super().options(config)
         lv = out["levels_mm"]
-        if lv is not None and not (isinstance(lv, (list, tuple)) and len(lv) > 0 and all(
-                isinstance(x, (int, float)) and x > 0 for x in lv)):
+        if lv is not None and not (
+            isinstance(lv, (list, tuple))
+            and len(lv) > 0
+            and all(isinstance(x, (int, float)) and x > 0 for x in lv)
+        ):
             raise ValueError(f"levels_mm must be a non-empty list of thicknesses in mm, got {lv!r}")
         if not (isinstance(out["tol"], (int, float)) and 0 <= out["tol"] < 1):
             raise ValueError(f"tol must be in [0, 1), got {out['tol']!r}")
@@ -43,7 +54,7 @@ class LinearPredictor(LearnedPredictor):
 
     def build_model(self) -> nn.Module:
         op = ComplianceOperator()
-        op.extend = self.config["operator"] == "on_demand"   # a new thickness: a new level
+        op.extend = self.config["operator"] == "on_demand"  # a new thickness: a new level
         return op
 
     @property
@@ -52,13 +63,13 @@ class LinearPredictor(LearnedPredictor):
         return self.config["operator"] == "on_demand"
 
     def raw(self, thickness, force, body=None, base=None):
-        from models.prior import on_bodies
 
         return on_bodies(self, self.model, thickness, force, body) / self.scale
 
     def fit(self, dataset, progress: bool = True) -> None:
         """Compute the operator for ``dataset``'s part and FEM set-up (on demand: the columns
-        the dataset's samples load)."""
+        the dataset's samples load).
+        """
         if self.config["operator"] == "on_demand":
             fit_on_demand(self, self.model, dataset, self.config, progress)
         else:

@@ -16,6 +16,15 @@ import warnings
 import numpy as np
 import torch
 from torch import nn
+from tqdm import tqdm
+
+from fem.compliance import ColumnStore, compliance, sparsify
+from fem.config import read_config
+from fem.material import material
+from fem.placements import make_load, plan
+from fem.solver import SolverOptions
+from stmpl.body.model import default_cache_dir
+from stmpl.files import atomic_savez
 
 CACHE_VERSION = 1
 
@@ -27,7 +36,8 @@ class ComplianceOperator(nn.Module):
     Buffers: ``levels`` ``(L,)`` thickness levels, m (rising); ``index`` ``(2, nnz)`` pairs
     ``[i; j]`` (response vertex, loaded vertex); ``values`` ``(L, nnz, 3)`` m/N. Column ``j``
     takes the thickness at the loaded vertex ``j``, interpolated linearly between levels (exact
-    for a uniform layer)."""
+    for a uniform layer).
+    """
 
     def __init__(self):
         super().__init__()
@@ -37,16 +47,22 @@ class ComplianceOperator(nn.Module):
 
     def set(self, levels, index, values) -> None:
         """Install an operator: ``levels`` ``(L,)`` m, ``index`` ``(2, nnz)``, ``values``
-        ``(L, nnz, 3)`` m/N."""
+        ``(L, nnz, 3)`` m/N.
+        """
         levels = torch.as_tensor(levels, dtype=torch.float32).cpu()
         index = torch.as_tensor(index, dtype=torch.long).cpu()
         values = torch.as_tensor(values, dtype=torch.float32).cpu()
         if levels.ndim != 1 or len(levels) == 0 or torch.any(levels[1:] <= levels[:-1]):
             raise ValueError("levels must be a non-empty rising 1-D array")
-        if index.ndim != 2 or index.shape[0] != 2 or values.shape != (len(levels),
-                                                                     index.shape[1], 3):
-            raise ValueError(f"index (2, nnz) and values (L, nnz, 3) do not fit: "
-                             f"{tuple(index.shape)}, {tuple(values.shape)}")
+        if (
+            index.ndim != 2
+            or index.shape[0] != 2
+            or values.shape != (len(levels), index.shape[1], 3)
+        ):
+            raise ValueError(
+                f"index (2, nnz) and values (L, nnz, 3) do not fit: "
+                f"{tuple(index.shape)}, {tuple(values.shape)}"
+            )
         dev = self.levels.device
         self.levels, self.index, self.values = levels.to(dev), index.to(dev), values.to(dev)
         self._csr_key = None
@@ -97,29 +113,32 @@ class ComplianceOperator(nn.Module):
         if self.on_demand and self.exact and thickness.numel():
             lo_row, hi_row = thickness.amin(-1), thickness.amax(-1)
             uniform = torch.unique(lo_row[(hi_row - lo_row) <= 1e-9 * hi_row.clamp_min(1e-3)])
-            new = [t for t in uniform.tolist()
-                   if not bool((torch.abs(lv - t) <= 1e-9).any())]
+            new = [t for t in uniform.tolist() if not bool((torch.abs(lv - t) <= 1e-9).any())]
             if new:
-                self.levels = torch.sort(torch.cat([lv, torch.tensor(new, dtype=lv.dtype,
-                                                                     device=lv.device)]))[0]
+                self.levels = torch.sort(
+                    torch.cat([lv, torch.tensor(new, dtype=lv.dtype, device=lv.device)])
+                )[0]
                 lv = self.levels
         lo, hi = float(lv[0]), float(lv[-1])
         tmin, tmax = float(thickness.min()), float(thickness.max())
         tol = 1e-6 * hi
         if self.on_demand and self.extend and (tmin < lo - tol or tmax > hi + tol):
             new = [t for t in (tmin, tmax) if t < lo - tol or t > hi + tol]
-            self.levels = torch.sort(torch.cat([lv, torch.tensor(new, dtype=lv.dtype,
-                                                                 device=lv.device)]))[0]
+            self.levels = torch.sort(
+                torch.cat([lv, torch.tensor(new, dtype=lv.dtype, device=lv.device)])
+            )[0]
             return self.weights(thickness)
         if tmin < lo - tol or tmax > hi + tol:
-            raise ValueError(f"thickness {tmin * 1e3:.3g}..{tmax * 1e3:.3g} mm lies outside the "
-                             f"operator's levels {lo * 1e3:g}..{hi * 1e3:g} mm (the linear FEM "
-                             "was computed there; a linear model with wider levels_mm covers "
-                             "more)")
+            raise ValueError(
+                f"thickness {tmin * 1e3:.3g}..{tmax * 1e3:.3g} mm lies outside the "
+                f"operator's levels {lo * 1e3:g}..{hi * 1e3:g} mm (the linear FEM "
+                "was computed there; a linear model with wider levels_mm covers "
+                "more)"
+            )
         L = len(lv)
         if L == 1:
             return torch.ones(*thickness.shape, 1, device=thickness.device)
-        t = thickness.clamp(lo, hi)                  # only rounding (checked above)
+        t = thickness.clamp(lo, hi)  # only rounding (checked above)
         k = torch.searchsorted(lv, t.contiguous()).clamp(1, L - 1)
         a = ((t - lv[k - 1]) / (lv[k] - lv[k - 1]))[..., None]
         w = torch.zeros(*thickness.shape, L, device=thickness.device)
@@ -130,13 +149,15 @@ class ComplianceOperator(nn.Module):
     def _matrices(self, n: int) -> list:
         """Per level, the operator as a sparse CSR matrix ``(3 n, n)`` (rows ``3 i + c``), built
         once per installed operator (:meth:`set` and loading reset them), device and vertex
-        count."""
+        count.
+        """
         key = (self.values.device, n)
         if getattr(self, "_csr_key", None) != key:
             i, j = self.index
             if self.index.numel() and int(self.index.max()) >= n:
-                raise ValueError(f"the operator covers {int(self.index.max()) + 1} vertices, "
-                                 f"the input {n}")
+                raise ValueError(
+                    f"the operator covers {int(self.index.max()) + 1} vertices, the input {n}"
+                )
             rows = (3 * i[:, None] + torch.arange(3, device=i.device)).reshape(-1)
             cols = j[:, None].expand(-1, 3).reshape(-1)
             order = torch.argsort(rows * max(n, 1) + cols)
@@ -145,58 +166,57 @@ class ComplianceOperator(nn.Module):
             crow[1:] = torch.cumsum(torch.bincount(rows, minlength=3 * n), 0)
             with warnings.catch_warnings():  # "sparse CSR support is in beta"
                 warnings.simplefilter("ignore", UserWarning)
-                self._csr = [torch.sparse_csr_tensor(crow, cols, v.reshape(-1)[order],
-                                                     (3 * n, n), check_invariants=False)
-                             for v in self.values]
+                self._csr = [
+                    torch.sparse_csr_tensor(
+                        crow, cols, v.reshape(-1)[order], (3 * n, n), check_invariants=False
+                    )
+                    for v in self.values
+                ]
             self._csr_key = key
         return self._csr
 
     def forward(self, thickness: torch.Tensor, force: torch.Tensor) -> torch.Tensor:
         B, N = force.shape
-        fw = force[..., None] * self.weights(thickness)                 # (B, N, L)
-        used = torch.nonzero(fw.abs().sum((0, 1))).flatten().tolist()   # levels that carry load
+        fw = force[..., None] * self.weights(thickness)  # (B, N, L)
+        used = torch.nonzero(fw.abs().sum((0, 1))).flatten().tolist()  # levels that carry load
         if self.on_demand:
             if N != self.store.part.n_vertices:
-                raise ValueError(f"the operator covers {self.store.part.n_vertices} vertices, "
-                                 f"the input {N}")
+                raise ValueError(
+                    f"the operator covers {self.store.part.n_vertices} vertices, the input {N}"
+                )
             u = torch.zeros(B, N, 3, device=force.device)
             for lv in used:
                 at = self.store.level(float(self.levels[lv]))
                 cols = torch.nonzero(fw[..., lv].abs().sum(0)).flatten()
-                self.store.ensure(at, cols.cpu().numpy())           # one patch for the batch
-                for b in range(B):                                   # each scene its own columns
+                self.store.ensure(at, cols.cpu().numpy())  # one patch for the batch
+                for b in range(B):  # each scene its own columns
                     cb = torch.nonzero(fw[b, :, lv]).flatten()
                     if len(cb) == 0:
                         continue
-                    G = torch.from_numpy(self.store.columns(at, cb.cpu().numpy(),
-                                                            ensure=False))
-                    u[b] = u[b] + torch.einsum("nkc,k->nc", G.to(force.device),
-                                               fw[b, cb, lv].float())
+                    G = torch.from_numpy(self.store.columns(at, cb.cpu().numpy(), ensure=False))
+                    u[b] = u[b] + torch.einsum(
+                        "nkc,k->nc", G.to(force.device), fw[b, cb, lv].float()
+                    )
             return u
         u = torch.zeros(3 * N, B, device=force.device, dtype=self.values.dtype)
         mats = self._matrices(N)
         for lv in used:
-            u = u + mats[lv] @ fw[..., lv].T.to(self.values.dtype)      # (3N, N) @ (N, B)
+            u = u + mats[lv] @ fw[..., lv].T.to(self.values.dtype)  # (3N, N) @ (N, B)
         return u.T.reshape(B, N, 3)
 
 
 def cache_dir() -> pathlib.Path:
     """Where computed operators are kept: ``compliance/`` in stmpl's cache directory."""
-    from stmpl.body.model import default_cache_dir
-
     return default_cache_dir() / "compliance"
 
 
-def operator_arrays(part, fem_config: dict, levels_m, tol: float = 1e-3,
-                    progress: bool = True, cache: bool = True) -> dict:
+def operator_arrays(
+    part, fem_config: dict, levels_m, tol: float = 1e-3, progress: bool = True, cache: bool = True
+) -> dict:
     """The sparse operator of ``part`` at ``levels_m`` for a dataset's FEM set-up
     (``fem_config``: its ``material``, ``resolution`` and ``solver`` entries), computed once and
-    cached by content. Returns ``levels``, ``index``, ``values``, ``dropped``, ``seconds``."""
-    from fem.compliance import compliance, sparsify
-    from fem.material import material
-    from fem.solver import SolverOptions
-    from stmpl.files import atomic_savez
-
+    cached by content. Returns ``levels``, ``index``, ``values``, ``dropped``, ``seconds``.
+    """
     levels = [float(x) for x in levels_m]
     setup = {k: fem_config.get(k) for k in ("material", "resolution", "solver")}
     h = hashlib.sha256(json.dumps([CACHE_VERSION, setup, levels, tol], sort_keys=True).encode())
@@ -208,26 +228,33 @@ def operator_arrays(part, fem_config: dict, levels_m, tol: float = 1e-3,
             with np.load(path) as z:
                 return {k: z[k] for k in z.files}
         except (OSError, ValueError, KeyError):
-            pass                                      # a broken cache entry is recomputed
+            pass  # a broken cache entry is recomputed
     mat = material(**(setup["material"] or {}))
     opts = SolverOptions(**(setup["solver"] or {}))
     res = setup["resolution"] or "reference"
     n = part.n_vertices
     bar = None
     if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=n * len(levels), unit="col", desc="compliance operator",
-                   dynamic_ncols=True)
+        bar = tqdm(
+            total=n * len(levels), unit="col", desc="compliance operator", dynamic_ncols=True
+        )
     t0 = time.perf_counter()
-    G = np.stack([compliance(part, t, res, mat, opts,
-                             progress=bar.update if bar is not None else None)
-                  for t in levels])
+    G = np.stack(
+        [
+            compliance(part, t, res, mat, opts, progress=bar.update if bar is not None else None)
+            for t in levels
+        ]
+    )
     if bar is not None:
         bar.close()
     index, values, dropped = sparsify(G, tol)
-    out = {"levels": np.asarray(levels), "index": index, "values": values.astype(np.float32),
-           "dropped": np.asarray(dropped), "seconds": np.asarray(time.perf_counter() - t0)}
+    out = {
+        "levels": np.asarray(levels),
+        "index": index,
+        "values": values.astype(np.float32),
+        "dropped": np.asarray(dropped),
+        "seconds": np.asarray(time.perf_counter() - t0),
+    }
     if cache:
         atomic_savez(path, out)
     return out
@@ -235,11 +262,13 @@ def operator_arrays(part, fem_config: dict, levels_m, tol: float = 1e-3,
 
 def fit_operator(part, dataset, config: dict, progress: bool = True) -> dict:
     """:func:`operator_arrays` for ``dataset``'s part and FEM set-up at the config's
-    ``levels_mm`` (default the dataset's thickness levels) and ``tol``."""
+    ``levels_mm`` (default the dataset's thickness levels) and ``tol``.
+    """
     cfg = dataset.card["config"]
     levels = config.get("levels_mm") or cfg["thickness_mm"]
-    return operator_arrays(part, cfg, sorted(float(x) * 1e-3 for x in levels),
-                           float(config.get("tol", 1e-3)), progress)
+    return operator_arrays(
+        part, cfg, sorted(float(x) * 1e-3 for x in levels), float(config.get("tol", 1e-3)), progress
+    )
 
 
 OPERATORS = ("stored", "on_demand")
@@ -256,24 +285,26 @@ def check_operator(value) -> str:
 
 def _needed(op: ComplianceOperator, thickness: np.ndarray, force: np.ndarray) -> list[np.ndarray]:
     """Per level, the vertices whose column the samples ``thickness``, ``force`` ``(S, N)``
-    need (loaded, with a non-zero interpolation weight on that level)."""
-    w = op.weights(torch.as_tensor(thickness, dtype=torch.float32)).numpy()     # (S, N, L)
+    need (loaded, with a non-zero interpolation weight on that level).
+    """
+    w = op.weights(torch.as_tensor(thickness, dtype=torch.float32)).numpy()  # (S, N, L)
     need = (np.asarray(force)[..., None] > 0) & (w > 0)
     return [np.flatnonzero(need[..., lv].any(0)) for lv in range(w.shape[-1])]
 
 
-def solve_needed(store, op: ComplianceOperator, thickness: np.ndarray, force: np.ndarray,
-                 progress: bool = True) -> None:
+def solve_needed(
+    store, op: ComplianceOperator, thickness: np.ndarray, force: np.ndarray, progress: bool = True
+) -> None:
     """Compute (and save) every column the samples ``thickness``, ``force`` ``(S, N)`` need:
     one solve per level over all of them (the union of many loads is most of the part, where
-    one factorisation beats a patch per load)."""
+    one factorisation beats a patch per load).
+    """
     need = _needed(op, thickness, force)
     bar = None
     if progress:
-        from tqdm import tqdm
-
-        total = sum(len(store.missing(store.level(float(op.levels[lv])), c))
-                    for lv, c in enumerate(need))
+        total = sum(
+            len(store.missing(store.level(float(op.levels[lv])), c)) for lv, c in enumerate(need)
+        )
         bar = tqdm(total=total, unit="col", desc="linear FEM columns", dynamic_ncols=True)
     for lv, cols in enumerate(need):
         done = store.ensure(store.level(float(op.levels[lv])), cols, save=True)
@@ -283,21 +314,21 @@ def solve_needed(store, op: ComplianceOperator, thickness: np.ndarray, force: np
         bar.close()
 
 
-def fit_on_demand(predictor, op: ComplianceOperator, dataset, config: dict,
-                  progress: bool = True) -> None:
+def fit_on_demand(
+    predictor, op: ComplianceOperator, dataset, config: dict, progress: bool = True
+) -> None:
     """Attach a :class:`~fem.compliance.ColumnStore` for ``dataset``'s part and FEM set-up at
     the config's ``levels_mm`` (default the dataset's levels) to ``op`` and compute the columns
     the samples of ``dataset`` load (all splits; cached on disk, so a second model on the same
-    data, or :func:`precompute` run beforehand, finds them there)."""
-    from fem.compliance import ColumnStore
-
+    data, or :func:`precompute` run beforehand, finds them there).
+    """
     cfg = dataset.card["config"]
     levels = sorted(float(x) * 1e-3 for x in (config.get("levels_mm") or cfg["thickness_mm"]))
     store = ColumnStore(predictor.part, cfg, levels)
     op.attach(store)
     a = dataset.arrays()
-    own = a.get("body", np.zeros(len(a["total"]), int)) == 0      # the samples on this part
-    if "linear" in a:                                   # ... that carry no linear answer
+    own = a.get("body", np.zeros(len(a["total"]), int)) == 0  # the samples on this part
+    if "linear" in a:  # ... that carry no linear answer
         own &= ~np.isfinite(a["linear"]).all((1, 2))
     t0 = time.perf_counter()
     if own.any():
@@ -308,11 +339,8 @@ def fit_on_demand(predictor, op: ComplianceOperator, dataset, config: dict,
 def precompute(config_path, progress: bool = True) -> ColumnStore:
     """The columns a dataset config's plan loads (every placement at every thickness level),
     solved into the disk cache before (or while) the dataset is made, so that training on it
-    with ``operator: on_demand`` finds them there."""
-    from fem.compliance import ColumnStore
-    from fem.config import read_config
-    from fem.placements import make_load, plan
-
+    with ``operator: on_demand`` finds them there.
+    """
     pl = plan(read_config(config_path))
     cfg, part = pl.cfg, pl.part
     levels = sorted(float(x) * 1e-3 for x in cfg["thickness_mm"])
@@ -327,31 +355,39 @@ def precompute(config_path, progress: bool = True) -> ColumnStore:
 
 def record_on_demand(predictor, store, seconds: float | None = None) -> None:
     """The on-demand operator's summary in ``predictor.meta["operator"]``: mode, levels, the
-    FEM set-up it is solved with, the columns computed at fit time and their cost."""
+    FEM set-up it is solved with, the columns computed at fit time and their cost.
+    """
     predictor.meta["operator"] = {
-        "mode": "on_demand", "levels_mm": [round(x * 1e3, 6) for x in store.levels],
-        "setup": store.setup, "columns_at_fit": store.computed,
-        **({} if seconds is None else {"compute_seconds": round(float(seconds), 3)})}
+        "mode": "on_demand",
+        "levels_mm": [round(x * 1e3, 6) for x in store.levels],
+        "setup": store.setup,
+        "columns_at_fit": store.computed,
+        **({} if seconds is None else {"compute_seconds": round(float(seconds), 3)}),
+    }
 
 
 def reattach(predictor, op: ComplianceOperator) -> None:
     """After loading a checkpoint whose operator is ``on_demand``: attach a column store for the
-    predictor's part and the recorded set-up (columns come from the disk cache or are solved)."""
-    from fem.compliance import ColumnStore
-
+    predictor's part and the recorded set-up (columns come from the disk cache or are solved).
+    """
     meta = predictor.meta.get("operator") or {}
     if meta.get("mode") != "on_demand":
         return
-    op.attach(ColumnStore(predictor.part, meta["setup"],
-                          [float(x) * 1e-3 for x in meta["levels_mm"]]))
+    op.attach(
+        ColumnStore(predictor.part, meta["setup"], [float(x) * 1e-3 for x in meta["levels_mm"]])
+    )
 
 
 def install(predictor, op: ComplianceOperator, arrays: dict) -> None:
     """Put :func:`operator_arrays` into ``op`` and record a summary in ``predictor.meta``
-    (levels, pairs kept, their density, the largest dropped entry, the compute time)."""
+    (levels, pairs kept, their density, the largest dropped entry, the compute time).
+    """
     op.set(arrays["levels"], arrays["index"], arrays["values"])
     n = predictor.part.n_vertices
     predictor.meta["operator"] = {
         "levels_mm": [round(float(x) * 1e3, 6) for x in op.levels],
-        "nnz": int(op.index.shape[1]), "density": op.index.shape[1] / (n * n),
-        "dropped": float(arrays["dropped"]), "compute_seconds": float(arrays["seconds"])}
+        "nnz": int(op.index.shape[1]),
+        "density": op.index.shape[1] / (n * n),
+        "dropped": float(arrays["dropped"]),
+        "compute_seconds": float(arrays["seconds"]),
+    }

@@ -1,7 +1,8 @@
 """The Naive baseline of the paper (its eq. 4): each vertex moves by ``alpha * t_i * F_i`` with a
 learned ``alpha = (alpha_x, alpha_y, alpha_z)`` in global axes (1/N), ``t_i`` the thickness (m) and
 ``F_i`` the force magnitude (N). It knows nothing of where the load is nor of its direction: the
-floor every learned model must clear."""
+floor every learned model must clear.
+"""
 
 from __future__ import annotations
 

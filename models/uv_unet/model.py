@@ -27,14 +27,17 @@ from models.features import PRESSURE_SCALE, PRIOR_SCALE, load_channels, normalis
 from models.learned import LearnedPredictor
 from models.linear.operator import ComplianceOperator
 from models.prior import CORRECTION_SCALE, LinearPrior, moved
+from stmpl.uv import UVMap
 
 
 class UNet(nn.Module):
     """pix2pix UNet: ``(B, C_in, S, S) -> (B, C_out, S, S)`` in [-1, 1]; ``S`` divisible by
-    ``2 ** depth``."""
+    ``2 ** depth``.
+    """
 
-    def __init__(self, c_in: int, c_out: int = 3, width: int = 16, depth: int = 5,
-                 dropout: float = 0.5):
+    def __init__(
+        self, c_in: int, c_out: int = 3, width: int = 16, depth: int = 5, dropout: float = 0.5
+    ):
         super().__init__()
         ch = [width * 2 ** min(d, 3) for d in range(depth)]
         self.down = nn.ModuleList()
@@ -54,9 +57,8 @@ class UNet(nn.Module):
         self.depth = depth
 
     def forward(self, x: torch.Tensor) -> torch.Tensor:
-        if x.shape[-1] % (2 ** self.depth) or x.shape[-2] % (2 ** self.depth):
-            raise ValueError(f"image size {tuple(x.shape[-2:])} is not divisible by "
-                             f"2^{self.depth}")
+        if x.shape[-1] % (2**self.depth) or x.shape[-2] % (2**self.depth):
+            raise ValueError(f"image size {tuple(x.shape[-2:])} is not divisible by 2^{self.depth}")
         skips = []
         for layer in self.down:
             x = layer(x)
@@ -71,7 +73,8 @@ class UNet(nn.Module):
 
 class WithPrior(nn.Module):
     """A :class:`UNet` and the linear FEM operator its predictor adds (``prior: linear``), kept
-    together so the checkpoint carries both; calling it runs the UNet."""
+    together so the checkpoint carries both; calling it runs the UNet.
+    """
 
     def __init__(self, net: UNet, prior: nn.Module):
         super().__init__()
@@ -91,42 +94,57 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
     channels, the output images hold only the correction, added to the linear answer at the
     vertices, so the prior itself has no seam gap; :meth:`fit` computes the operator). With the
     prior, ``fidelity="auto"`` runs the network on the window of the chart the load needs
-    (:meth:`_sample_cropped`)."""
+    (:meth:`_sample_cropped`).
+    """
 
     name = "uv_unet"
-    defaults = {"size": 128, "width": 16, "depth": 5, "dropout": 0.5, "geometry": False,
-                "tv": 0.0, "per_newton": False, "loss": "mse", "prior": "none",
-                "operator": "stored"}
+    defaults = {
+        "size": 128,
+        "width": 16,
+        "depth": 5,
+        "dropout": 0.5,
+        "geometry": False,
+        "tv": 0.0,
+        "per_newton": False,
+        "loss": "mse",
+        "prior": "none",
+        "operator": "stored",
+    }
 
     def build_model(self) -> nn.Module:
-        from stmpl.uv import UVMap
 
         c = self.config
         if not 64 <= int(c["size"]) <= 512 or int(c["size"]) % (2 ** int(c["depth"])):
-            raise ValueError(f"size must be in [64, 512] and divisible by 2^depth, got "
-                             f"{c['size']} with depth {c['depth']}")
+            raise ValueError(
+                f"size must be in [64, 512] and divisible by 2^depth, got "
+                f"{c['size']} with depth {c['depth']}"
+            )
         self.uvmap = UVMap(self.part, int(c["size"])).to(self.device)
         part = self.part
         self._extent = float(np.ptp(part.vertices, axis=0).max())
         self._geometry = self.geometry_channels(part)
-        self._corner_vertex = torch.as_tensor(np.asarray(part.uv_vertex), dtype=torch.long,
-                                              device=self.device)
-        self._inv_area = torch.tensor(1.0 / part.vertex_areas / PRESSURE_SCALE,
-                                      dtype=torch.float32, device=self.device)
+        self._corner_vertex = torch.as_tensor(
+            np.asarray(part.uv_vertex), dtype=torch.long, device=self.device
+        )
+        self._inv_area = torch.tensor(
+            1.0 / part.vertex_areas / PRESSURE_SCALE, dtype=torch.float32, device=self.device
+        )
         c_in = 2 + (1 if c["per_newton"] else 0) + (6 if c["geometry"] else 0)
         if not self.prior:
             return UNet(c_in, 3, int(c["width"]), int(c["depth"]), float(c["dropout"]))
         net = UNet(c_in + 3, 3, int(c["width"]), int(c["depth"]), float(c["dropout"]))
-        last = net.up[-1][-1]                  # start from the linear FEM: a silent output
+        last = net.up[-1][-1]  # start from the linear FEM: a silent output
         nn.init.zeros_(last.weight)
         nn.init.zeros_(last.bias)
         return WithPrior(net, ComplianceOperator())
 
     def geometry_channels(self, part) -> torch.Tensor:
         """``(N, 6)`` geometry inputs of a body of the mesh: the rest position about the
-        part's centre over the model's own part's extent, and the normal."""
-        geo = np.concatenate([(part.vertices - part.vertices.mean(0)) / self._extent,
-                              part.normals], 1)
+        part's centre over the model's own part's extent, and the normal.
+        """
+        geo = np.concatenate(
+            [(part.vertices - part.vertices.mean(0)) / self._extent, part.normals], 1
+        )
         return torch.tensor(geo, dtype=torch.float32, device=self.device)
 
     def body_tensors(self, part) -> dict:
@@ -137,15 +155,19 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
     def inputs(self, thickness, force, base=None, body=None) -> torch.Tensor:
         """``(B, N, C)`` per-vertex input channels from ``(B, N)`` thickness (m) and force (N),
         with the prior its answer ``base`` (:meth:`base`, computed once by the caller), on the
-        bodies ``body`` ``(B,)`` (slots; None: the model's own)."""
-        inv_area = (self._inv_area if body is None else
-                    self.body_tensor("inv_area", body) / PRESSURE_SCALE)
-        chans = [*load_channels(force, inv_area, self.per_newton),
-                 normalised_thickness(thickness)]
+        bodies ``body`` ``(B,)`` (slots; None: the model's own).
+        """
+        inv_area = (
+            self._inv_area if body is None else self.body_tensor("inv_area", body) / PRESSURE_SCALE
+        )
+        chans = [*load_channels(force, inv_area, self.per_newton), normalised_thickness(thickness)]
         x = torch.stack(chans, -1)
         if self.config["geometry"]:
-            geo = (self._geometry.expand(x.shape[0], -1, -1) if body is None else
-                   self.body_tensor("geometry", body))
+            geo = (
+                self._geometry.expand(x.shape[0], -1, -1)
+                if body is None
+                else self.body_tensor("geometry", body)
+            )
             x = torch.cat([x, geo], -1)
         if base is not None:
             x = torch.cat([x, base / PRIOR_SCALE], -1)
@@ -158,16 +180,19 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
     def raw(self, thickness, force, body=None, base=None):
         base = self.base(thickness, force, body, base)
         if self.fidelity == "auto" and base is not None and not self.model.training:
-            return self.corrected(base, self._sample_cropped(
-                self.inputs(thickness, force, base, body), force, base))
-        return self.corrected(base, self.uvmap.sample(self.model(self.images(thickness, force,
-                                                                             base, body))))
+            return self.corrected(
+                base, self._sample_cropped(self.inputs(thickness, force, base, body), force, base)
+            )
+        return self.corrected(
+            base, self.uvmap.sample(self.model(self.images(thickness, force, base, body)))
+        )
 
     @property
     def crop_margin(self) -> int:
         """Pixels around a window that the network's receptive field reaches in from (4x4
         stride-2 layers, down and up: within 3 * 2^depth pixels), so that inside it a crop's
-        output is the whole image's exactly."""
+        output is the whole image's exactly.
+        """
         return 3 * 2 ** int(self.config["depth"])
 
     def _sample_cropped(self, x, force, base):
@@ -175,28 +200,32 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
         scene the network runs on a window of the chart (rasterised alone), the pixels that
         sampling reads at :func:`models.prior.moved`'s vertices plus :attr:`crop_margin`,
         aligned to the network's strides; those vertices get its correction (the whole image's,
-        exactly), every other vertex none (the prior's answer stands)."""
+        exactly), every other vertex none (the prior's answer stands).
+        """
         inner = moved(self.part, force.cpu().numpy(), base.detach().cpu().numpy())
         m = self.uvmap
         out = x.new_zeros(x.shape[0], x.shape[1], 3)
         for b in np.flatnonzero(inner.any(-1)):
             win = m.window(inner[b], self.crop_margin, 2 ** int(self.config["depth"]))
             v = torch.as_tensor(np.flatnonzero(inner[b]), device=x.device)
-            out[b, v] = m.sample(self.model(m.rasterise(x[b:b + 1], win)), win, v)[0]
+            out[b, v] = m.sample(self.model(m.rasterise(x[b : b + 1], win)), win, v)[0]
         return out
 
     def loss(self, thickness, force, target, body=None, base=None):
         """Masked L2 over the chart's pixels (``loss: mse``, the paper's), or with ``loss:
         relative`` (``pooled``) the relative (pooled) MEE at every UV corner (a seam vertex's
-        copies each count), plus the optional total variation."""
+        copies each count), plus the optional total variation.
+        """
         base = self.base(thickness, force, body, base)
         out = self.model(self.images(thickness, force, base, body))
         tgt = self.normalised(target, force)
         if self.config["loss"] != "mse":
-            pred = self.corrected(None if base is None else base[:, self._corner_vertex],
-                                  self.uvmap.sample_corners(out))
+            pred = self.corrected(
+                None if base is None else base[:, self._corner_vertex],
+                self.uvmap.sample_corners(out),
+            )
             return self.euclidean_loss(pred, tgt[:, self._corner_vertex], force) + self._tv(out)
-        if base is not None:                                  # the correction's image
+        if base is not None:  # the correction's image
             tgt = (tgt - base) / CORRECTION_SCALE
         tgt = self.uvmap.rasterise(tgt)
         m = self.uvmap.support.to(out.dtype)  # the chart and its padding: sampling reads both

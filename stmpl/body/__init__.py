@@ -5,14 +5,27 @@
 """
 
 from stmpl.body.anny_body import PHENOTYPES, AnnyBody
+from stmpl.body.extract import extract_part
 from stmpl.body.model import CACHE_VERSION, BodyMesh, BodyModel, PartSpec, default_cache_dir
-from stmpl.body.part import BodyPart, extract_part
 from stmpl.body.primitives import sheet, tube
 from stmpl.body.smpl_body import SMPLBody
+from stmpl.part import BodyPart
 
-__all__ = ["AnnyBody", "SMPLBody", "BodyModel", "BodyPart", "BodyMesh", "PartSpec",
-           "PHENOTYPES", "CACHE_VERSION", "default_cache_dir", "extract_part", "tube", "sheet",
-           "default_part"]
+__all__ = [
+    "AnnyBody",
+    "SMPLBody",
+    "BodyModel",
+    "BodyPart",
+    "BodyMesh",
+    "PartSpec",
+    "PHENOTYPES",
+    "CACHE_VERSION",
+    "default_cache_dir",
+    "extract_part",
+    "tube",
+    "sheet",
+    "default_part",
+]
 
 
 def default_part(name: str = "left_arm", weight: float = 0.5) -> BodyPart:

@@ -12,6 +12,7 @@ import math
 import os
 import sys
 import tempfile
+from importlib.metadata import version
 
 import numpy as np
 import torch
@@ -27,8 +28,10 @@ _ARM = ("upperarm01", "upperarm02", "lowerarm01", "lowerarm02")
 
 
 def _arm(side: str) -> PartSpec:
-    return PartSpec(bones=tuple(f"{b}.{side}" for b in _ARM),
-                    axis_bones=(f"upperarm01.{side}", f"lowerarm01.{side}", f"wrist.{side}"))
+    return PartSpec(
+        bones=tuple(f"{b}.{side}" for b in _ARM),
+        axis_bones=(f"upperarm01.{side}", f"lowerarm01.{side}", f"wrist.{side}"),
+    )
 
 
 WARP_NOISE = ("Warp CUDA warning", "Warp CUDA error: Failed to get driver entry point")
@@ -39,7 +42,8 @@ a CUDA driver: noise on a CPU machine, dropped (anything else it writes is kept)
 @contextlib.contextmanager
 def _without_native_lines(prefixes: tuple):
     """Run the block with file descriptor 2 (native code's stderr) captured, then write back
-    every captured line that does not start with one of ``prefixes``."""
+    every captured line that does not start with one of ``prefixes``.
+    """
     sys.stderr.flush()
     try:
         saved = os.dup(2)
@@ -55,8 +59,11 @@ def _without_native_lines(prefixes: tuple):
             os.dup2(saved, 2)
             os.close(saved)
             tmp.seek(0)
-            kept = [ln for ln in tmp.read().decode(errors="replace").splitlines(keepends=True)
-                    if not ln.startswith(prefixes)]
+            kept = [
+                ln
+                for ln in tmp.read().decode(errors="replace").splitlines(keepends=True)
+                if not ln.startswith(prefixes)
+            ]
             if kept:
                 sys.stderr.write("".join(kept))
                 sys.stderr.flush()
@@ -89,17 +96,18 @@ class AnnyBody(CachedBodyModel):
         return self.phenotype.get("weight", 0.5)
 
     def options(self) -> dict:
-        from importlib.metadata import version
 
-        return {"phenotype": {k: self.phenotype.get(k, 0.5) for k in PHENOTYPES},
-                "anny_version": version("anny")}
+        return {
+            "phenotype": {k: self.phenotype.get(k, 0.5) for k in PHENOTYPES},
+            "anny_version": version("anny"),
+        }
 
     @property
     def anny(self):
         """The underlying ``anny.Anny`` module (built on first use)."""
         if self._anny is None:
             try:  # anny's skinning initialises NVIDIA Warp, which prints a banner otherwise
-                import warp
+                import warp  # deferred: anny's kernels
 
                 warp.config.log_level = warp.LOG_ERROR
             except ImportError:  # pragma: no cover
@@ -108,7 +116,7 @@ class AnnyBody(CachedBodyModel):
             if not os.path.isdir(cache) or not os.listdir(cache):
                 log.warning("building anny's assets once into %s (about a minute)", cache)
             with _without_native_lines(WARP_NOISE):
-                import anny
+                import anny  # deferred: the body model's assets (torch, warp)
 
                 self._anny = anny.Anny()
         return self._anny
@@ -144,14 +152,27 @@ class AnnyBody(CachedBodyModel):
 
 def phenotype_options(parser) -> None:
     """Add ``--gender``, ``--age``, ``--muscle``, ``--weight``, ``--height``, ``--proportions``
-    (each in [0, 1]; unset ones 0.5) to an ``argparse`` parser."""
-    parser.add_argument("--weight", type=float, default=0.5,
-                        help="anny weight phenotype in [0, 1] (thin..heavy; default 0.5)")
-    for name, what in (("gender", "female..male"), ("age", "young..old"),
-                       ("muscle", "low..high"), ("height", "short..tall"),
-                       ("proportions", "anny's proportions")):
-        parser.add_argument(f"--{name}", type=float, default=None,
-                            help=f"anny {name} phenotype in [0, 1] ({what}; default 0.5)")
+    (each in [0, 1]; unset ones 0.5) to an ``argparse`` parser.
+    """
+    parser.add_argument(
+        "--weight",
+        type=float,
+        default=0.5,
+        help="anny weight phenotype in [0, 1] (thin..heavy; default 0.5)",
+    )
+    for name, what in (
+        ("gender", "female..male"),
+        ("age", "young..old"),
+        ("muscle", "low..high"),
+        ("height", "short..tall"),
+        ("proportions", "anny's proportions"),
+    ):
+        parser.add_argument(
+            f"--{name}",
+            type=float,
+            default=None,
+            help=f"anny {name} phenotype in [0, 1] ({what}; default 0.5)",
+        )
 
 
 def phenotype_of(args) -> dict[str, float]:

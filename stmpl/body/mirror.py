@@ -1,6 +1,7 @@
 """The body's mirror: a part of one side seen as its twin on the other (anny's right arm is its
 left arm in the mirror, vertex for vertex, on every body), so that a model of one side serves
-the other."""
+the other.
+"""
 
 from __future__ import annotations
 
@@ -8,7 +9,7 @@ import dataclasses
 
 import numpy as np
 
-from stmpl.body.part import BodyPart
+from stmpl.part import BodyPart
 
 MIRROR = np.array([-1.0, 1.0, 1.0])
 """The body's mirror: x (the body's left-right axis, for anny and SMPL alike) negated."""
@@ -19,7 +20,7 @@ _TWINS: dict = {}
 def _counterpart(name: str) -> str | None:
     for a, b in (("left_", "right_"), ("right_", "left_")):
         if name.startswith(a):
-            return b + name[len(a):]
+            return b + name[len(a) :]
     return None
 
 
@@ -29,7 +30,8 @@ def mirror_twin(part: BodyPart, template: BodyPart) -> BodyPart | None:
     same vertex count, vertex ``i`` the mirror image of the template's vertex ``i`` across the
     body's x = 0 plane on the same body, and the same triangles up to order and winding: anny's
     arms are), the template's mesh with ``part``'s vertices mirrored (its normals mirrored too);
-    else None. Which body it is does not matter: the correspondence is the mesh's."""
+    else None. Which body it is does not matter: the correspondence is the mesh's.
+    """
     if _counterpart(part.name) != template.name or part.n_vertices != template.n_vertices:
         return None
     key = (part.faces.tobytes(), template.faces.tobytes())
@@ -40,5 +42,6 @@ def mirror_twin(part: BodyPart, template: BodyPart) -> BodyPart | None:
         return None
     src = dict(part.source or {})
     src["mirrored_from"] = part.name
-    return dataclasses.replace(template, vertices=part.vertices * MIRROR,
-                               normals=part.normals * MIRROR, source=src)
+    return dataclasses.replace(
+        template, vertices=part.vertices * MIRROR, normals=part.normals * MIRROR, source=src
+    )

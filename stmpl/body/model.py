@@ -18,8 +18,9 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 import torch
 
-from stmpl.body.part import BodyPart, extract_part
+from stmpl.body.extract import extract_part
 from stmpl.files import atomic_savez
+from stmpl.part import BodyPart
 
 log = logging.getLogger(__name__)
 
@@ -58,7 +59,8 @@ class PartSpec:
     ``front_only``, only those in front of the bones' mean head (along the body's forward axis),
     judged on the model's template shape (:meth:`CachedBodyModel.template_mesh`) so that every
     shape of the body cuts the same vertices: one mesh, whatever the phenotype or betas.
-    ``axis_bones`` list the bone heads of the limb centre line, proximal to distal."""
+    ``axis_bones`` list the bone heads of the limb centre line, proximal to distal.
+    """
 
     bones: tuple[str, ...]
     axis_bones: tuple[str, ...] = ()
@@ -80,7 +82,8 @@ class BodyModel(Protocol):
 
 class CachedBodyModel(torch.nn.Module):
     """Shared machinery: part lookup, validation, the on-disk cache. Subclasses define
-    ``name``, ``PARTS`` (name -> PartSpec), :meth:`rest_mesh` and :meth:`options`."""
+    ``name``, ``PARTS`` (name -> PartSpec), :meth:`rest_mesh` and :meth:`options`.
+    """
 
     name = "body"
     PARTS: dict[str, PartSpec] = {}
@@ -98,7 +101,8 @@ class CachedBodyModel(torch.nn.Module):
 
     def template_mesh(self) -> BodyMesh:
         """The rest mesh of the model's template shape (anny's phenotype 0.5 everywhere, SMPL's
-        zero betas): where shape-dependent part boundaries are drawn. Default: the rest mesh."""
+        zero betas): where shape-dependent part boundaries are drawn. Default: the rest mesh.
+        """
         return self.rest_mesh()
 
     def part_names(self) -> list[str]:
@@ -107,10 +111,16 @@ class CachedBodyModel(torch.nn.Module):
     def part(self, name: str = "left_arm") -> BodyPart:
         """The named part in the rest pose, from the cache when it is there."""
         if name not in self.PARTS:
-            raise ValueError(f"unknown part {name!r} for body model {self.name!r}; "
-                             f"known parts: {', '.join(self.PARTS)}")
-        source = {"body": self.name, "options": self.options(), "part": name,
-                  "cache_version": CACHE_VERSION}
+            raise ValueError(
+                f"unknown part {name!r} for body model {self.name!r}; "
+                f"known parts: {', '.join(self.PARTS)}"
+            )
+        source = {
+            "body": self.name,
+            "options": self.options(),
+            "part": name,
+            "cache_version": CACHE_VERSION,
+        }
         key = hashlib.sha256(json.dumps(source, sort_keys=True).encode()).hexdigest()[:20]
         path = self.cache_dir / "parts" / f"{self.name}-{name}-{key}.npz"
         if path.exists():
@@ -131,12 +141,14 @@ class CachedBodyModel(torch.nn.Module):
             raise ValueError(f"part {name!r}: bones {missing} not in body model {self.name!r}")
         ids = [labels.index(b) for b in spec.bones]
         mask = np.isin(mesh.dominant_bone, ids)
-        if spec.front_only:                  # on the template: the same cut for every shape
+        if spec.front_only:  # on the template: the same cut for every shape
             t = self.template_mesh()
             centre = t.bone_heads[ids].mean(axis=0)
             mask &= (t.vertices - centre) @ t.forward > 0
-        axis = mesh.bone_heads[[labels.index(b) for b in spec.axis_bones]] if spec.axis_bones \
-            else None
+        axis = (
+            mesh.bone_heads[[labels.index(b) for b in spec.axis_bones]] if spec.axis_bones else None
+        )
         log.info("building part %s of %s", name, self.name)
-        return extract_part(name, mesh.vertices, mesh.faces, mesh.uv, mesh.face_uv, mask,
-                            axis=axis, source=source)
+        return extract_part(
+            name, mesh.vertices, mesh.faces, mesh.uv, mesh.face_uv, mask, axis=axis, source=source
+        )

@@ -28,10 +28,32 @@ import scipy.sparse as sp
 
 from stmpl.body.model import BodyMesh, CachedBodyModel, PartSpec
 
-JOINTS = ("pelvis", "left_hip", "right_hip", "spine1", "left_knee", "right_knee", "spine2",
-          "left_ankle", "right_ankle", "spine3", "left_foot", "right_foot", "neck",
-          "left_collar", "right_collar", "head", "left_shoulder", "right_shoulder", "left_elbow",
-          "right_elbow", "left_wrist", "right_wrist", "left_hand", "right_hand")
+JOINTS = (
+    "pelvis",
+    "left_hip",
+    "right_hip",
+    "spine1",
+    "left_knee",
+    "right_knee",
+    "spine2",
+    "left_ankle",
+    "right_ankle",
+    "spine3",
+    "left_foot",
+    "right_foot",
+    "neck",
+    "left_collar",
+    "right_collar",
+    "head",
+    "left_shoulder",
+    "right_shoulder",
+    "left_elbow",
+    "right_elbow",
+    "left_wrist",
+    "right_wrist",
+    "left_hand",
+    "right_hand",
+)
 
 REQUIRED = ("v_template", "shapedirs", "J_regressor", "weights", "kintree_table", "f")
 
@@ -47,10 +69,12 @@ class SMPLBody(CachedBodyModel):
 
     name = "smpl"
     PARTS = {
-        "left_arm": PartSpec(("left_shoulder", "left_elbow"),
-                             ("left_shoulder", "left_elbow", "left_wrist")),
-        "right_arm": PartSpec(("right_shoulder", "right_elbow"),
-                              ("right_shoulder", "right_elbow", "right_wrist")),
+        "left_arm": PartSpec(
+            ("left_shoulder", "left_elbow"), ("left_shoulder", "left_elbow", "left_wrist")
+        ),
+        "right_arm": PartSpec(
+            ("right_shoulder", "right_elbow"), ("right_shoulder", "right_elbow", "right_wrist")
+        ),
         "belly": PartSpec(("spine1", "spine2"), front_only=True),
     }
 
@@ -62,11 +86,14 @@ class SMPLBody(CachedBodyModel):
         k = self.data["shapedirs"].shape[2]
         b = np.zeros(k) if betas is None else np.asarray(betas, float).ravel()
         if len(b) > k or not np.isfinite(b).all():
-            raise ValueError(f"betas must be finite with at most {k} values (the model's "
-                             f"shapedirs), got {b.tolist()}")
+            raise ValueError(
+                f"betas must be finite with at most {k} values (the model's "
+                f"shapedirs), got {b.tolist()}"
+            )
         self.betas = np.pad(b, (0, k - len(b)))
-        self.uv, self.face_uv = read_obj_uv(self.uv_path, self.data["f"]) if self.uv_path \
-            else (None, None)
+        self.uv, self.face_uv = (
+            read_obj_uv(self.uv_path, self.data["f"]) if self.uv_path else (None, None)
+        )
 
     def options(self) -> dict:
         h = hashlib.sha256(self.model_path.read_bytes())
@@ -89,11 +116,16 @@ class SMPLBody(CachedBodyModel):
             raise ValueError("this SMPL body has no UVs: pass uv_path=<OBJ with vt/ft lines>")
         d = self.data
         v = self.shaped_vertices(betas)
-        return BodyMesh(vertices=v, faces=d["f"], uv=self.uv,
-                        face_uv=self.face_uv, dominant_bone=d["weights"].argmax(axis=1),
-                        bone_labels=JOINTS[:d["weights"].shape[1]],
-                        bone_heads=np.asarray(d["J_regressor"] @ v),
-                        forward=np.array([0.0, 0.0, 1.0]))
+        return BodyMesh(
+            vertices=v,
+            faces=d["f"],
+            uv=self.uv,
+            face_uv=self.face_uv,
+            dominant_bone=d["weights"].argmax(axis=1),
+            bone_labels=JOINTS[: d["weights"].shape[1]],
+            bone_heads=np.asarray(d["J_regressor"] @ v),
+            forward=np.array([0.0, 0.0, 1.0]),
+        )
 
     def template_mesh(self) -> BodyMesh:
         """The rest mesh at zero betas (the file's template shape)."""
@@ -191,8 +223,9 @@ def read_obj_uv(path, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
             vt.append([float(parts[1]), float(parts[2])])
         elif parts[0] == "f":
             if len(parts) != 4 or any("/" not in p for p in parts[1:]):
-                raise ValueError(f"UV OBJ {path.name}: faces must be triangles 'f v/vt ...', "
-                                 f"got {line!r}")
+                raise ValueError(
+                    f"UV OBJ {path.name}: faces must be triangles 'f v/vt ...', got {line!r}"
+                )
             idx = [p.split("/") for p in parts[1:]]
             fv.append([int(i[0]) - 1 for i in idx])
             ft.append([int(i[1]) - 1 for i in idx])
@@ -202,8 +235,10 @@ def read_obj_uv(path, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     lookup = {tuple(r): i for i, r in enumerate(fv)}
     order = [lookup.get(tuple(r), -1) for r in faces]
     if len(fv) != len(faces) or min(order) < 0:
-        raise ValueError(f"UV OBJ {path.name}: its faces do not match the model's f "
-                         f"({len(fv)} vs {len(faces)} faces)")
+        raise ValueError(
+            f"UV OBJ {path.name}: its faces do not match the model's f "
+            f"({len(fv)} vs {len(faces)} faces)"
+        )
     uv = np.array(vt, float)
     if ft.max() >= len(uv) or ft.min() < 0:
         raise ValueError(f"UV OBJ {path.name}: vt index out of range")
@@ -212,8 +247,8 @@ def read_obj_uv(path, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def smpl_options(parser) -> None:
     """Add ``--smpl`` (a user's SMPL-format model file), ``--smpl-uv`` and ``--beta2`` to an
-    ``argparse`` parser."""
+    ``argparse`` parser.
+    """
     parser.add_argument("--smpl", help="an SMPL-format model file (.npz/.pkl) instead of anny")
     parser.add_argument("--smpl-uv", help="OBJ with the SMPL UV layout (vt/ft)")
-    parser.add_argument("--beta2", type=float,
-                        help="SMPL beta_2 in [-2, 2] (thickness heuristic)")
+    parser.add_argument("--beta2", type=float, help="SMPL beta_2 in [-2, 2] (thickness heuristic)")

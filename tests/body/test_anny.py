@@ -18,7 +18,7 @@ def test_left_arm_is_the_papers_part(arm):
 
 
 def test_arm_normals_point_out_of_the_limb(arm):
-    from stmpl.body.part import project_on_polyline
+    from stmpl.geometry import project_on_polyline
 
     s = project_on_polyline(arm.vertices, arm.axis)
     seg = np.cumsum(np.r_[0, np.linalg.norm(np.diff(arm.axis, axis=0), axis=1)])
@@ -53,8 +53,9 @@ def test_parts_are_cached_and_a_corrupt_cache_is_rebuilt(tmp_path, anny_body):
 def test_other_parts(anny_body):
     right = anny_body.part("right_arm")
     assert right.n_vertices == 541
-    assert np.allclose(right.vertices[:, 0].mean(), -anny_body.part("left_arm").vertices[:,
-                                                                                        0].mean())
+    assert np.allclose(
+        right.vertices[:, 0].mean(), -anny_body.part("left_arm").vertices[:, 0].mean()
+    )
     belly = anny_body.part("belly")
     assert belly.axis is None and len(belly.rims) == 1 and belly.n_vertices > 200
     mean_normal = belly.normals.sum(0) / np.linalg.norm(belly.normals.sum(0))
@@ -63,14 +64,15 @@ def test_other_parts(anny_body):
 
 def test_every_shape_cuts_the_same_belly(tmp_path, anny_body):
     """A front-only part is cut on the template shape: a heavy, muscular body's belly is the
-    same mesh (vertices, faces, chart) as the default's, in its own shape."""
+    same mesh (vertices, faces, chart) as the default's, in its own shape.
+    """
     heavy = AnnyBody({"weight": 0.98, "muscle": 0.3, "proportions": 0.95}, cache_dir=tmp_path)
     heavy._anny = anny_body.anny
     a, b = anny_body.part("belly"), heavy.part("belly")
     np.testing.assert_array_equal(a.body_index, b.body_index)
     np.testing.assert_array_equal(a.faces, b.faces)
     np.testing.assert_allclose(a.uv, b.uv)
-    assert np.abs(a.vertices - b.vertices).max() > 0.01          # another shape
+    assert np.abs(a.vertices - b.vertices).max() > 0.01  # another shape
 
 
 def test_bad_input(anny_body):

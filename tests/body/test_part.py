@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from stmpl.body import BodyPart, extract_part, sheet, tube
-from stmpl.body.part import boundary_loops, project_on_polyline
+from stmpl.geometry import boundary_loops, project_on_polyline
 
 
 def test_tube_geometry_matches_closed_form():
@@ -58,16 +58,25 @@ def test_project_on_polyline():
     np.testing.assert_allclose(project_on_polyline(pts, line), [0.5, 1.5, 0.0])
 
 
-@pytest.mark.parametrize("field,value,message", [
-    ("vertices", np.zeros((4, 2)), "vertices must have shape"),
-    ("faces", np.array([[0, 1, 99]]), "out of range"),
-    ("normals", np.full((4, 3), np.nan), "non-finite"),
-])
+@pytest.mark.parametrize(
+    "field,value,message",
+    [
+        ("vertices", np.zeros((4, 2)), "vertices must have shape"),
+        ("faces", np.array([[0, 1, 99]]), "out of range"),
+        ("normals", np.full((4, 3), np.nan), "non-finite"),
+    ],
+)
 def test_bad_part_arrays_are_named(field, value, message):
-    base = dict(name="x", vertices=np.eye(4, 3), faces=np.array([[0, 1, 2]]),
-                normals=np.tile([0, 0, 1.0], (4, 1)), uv=np.eye(3, 2), face_uv=np.array([[0, 1,
-                                                                                      2]]),
-                uv_vertex=np.array([0, 1, 2]), uv_scale=1.0)
+    base = dict(
+        name="x",
+        vertices=np.eye(4, 3),
+        faces=np.array([[0, 1, 2]]),
+        normals=np.tile([0, 0, 1.0], (4, 1)),
+        uv=np.eye(3, 2),
+        face_uv=np.array([[0, 1, 2]]),
+        uv_vertex=np.array([0, 1, 2]),
+        uv_scale=1.0,
+    )
     base[field] = value
     if field == "faces":
         base["face_uv"] = np.array([[0, 1, 2]])
@@ -83,9 +92,9 @@ def test_subdivision_keeps_the_surface_and_carries_uvs_seams_and_rims():
     assert f.n_vertices == t.n_vertices + len(t.edges) and f.n_faces == 4 * t.n_faces
     assert f.face_areas.sum() == pytest.approx(t.face_areas.sum())
     np.testing.assert_array_equal(f.vertices[: t.n_vertices], t.vertices)
-    assert len(f.seam_vertices) == 2 * len(t.seam_vertices) - 1       # the seam's midpoints too
+    assert len(f.seam_vertices) == 2 * len(t.seam_vertices) - 1  # the seam's midpoints too
     assert [len(r) for r in f.rims] == [2 * len(r) for r in t.rims]
-    for r in f.rims:                                                  # a rim is still a loop
+    for r in f.rims:  # a rim is still a loop
         steps = np.linalg.norm(np.diff(f.vertices[np.r_[r, r[:1]]], axis=0), axis=1)
         assert steps.max() < 0.6 * 2 * np.pi * 0.04 / 16
     # a linear field in 3D is linear in the chart: UVs interpolate like positions
@@ -114,4 +123,3 @@ def test_rim_distance_is_zero_on_the_rims_and_half_the_length_midway():
     z = part.vertices[:, 2]
     mid = np.argmin(np.abs(z - z.mean()))
     assert d[mid] == pytest.approx(0.1, abs=0.01)
-

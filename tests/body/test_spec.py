@@ -1,5 +1,6 @@
 """Bodies and parts from a spec (stmpl/body/spec.py): the one place a description becomes a
-body."""
+body.
+"""
 
 import numpy as np
 import pytest
@@ -9,11 +10,14 @@ from stmpl.body.spec import body_from_spec, part_from_spec
 
 
 def test_primitives_from_their_spec():
-    part = part_from_spec({"model": "tube", "radius": 0.05, "length": 0.2, "n_around": 10,
-                           "n_along": 5}, "ignored")
+    part = part_from_spec(
+        {"model": "tube", "radius": 0.05, "length": 0.2, "n_around": 10, "n_along": 5}, "ignored"
+    )
     np.testing.assert_allclose(part.vertices, tube(0.05, 0.2, 10, 5).vertices)
-    assert part_from_spec({"model": "sheet", "nx": 4, "ny": 3}, "x").n_vertices == \
-        sheet(nx=4, ny=3).n_vertices
+    assert (
+        part_from_spec({"model": "sheet", "nx": 4, "ny": 3}, "x").n_vertices
+        == sheet(nx=4, ny=3).n_vertices
+    )
 
 
 def test_anny_from_its_spec(anny_body):
@@ -21,12 +25,15 @@ def test_anny_from_its_spec(anny_body):
     np.testing.assert_allclose(part.vertices, anny_body.part("left_arm").vertices)
 
 
-@pytest.mark.parametrize("spec,message", [
-    ({"model": "mannequin"}, "body.model must be one of"),
-    ("anny", "body.model must be one of"),
-    ({"model": "tube", "radius": 0.04, "colour": "red"}, r"unknown body keys \['colour'\]"),
-    ({"model": "smpl"}, "needs the model file's path"),
-])
+@pytest.mark.parametrize(
+    "spec,message",
+    [
+        ({"model": "mannequin"}, "body.model must be one of"),
+        ("anny", "body.model must be one of"),
+        ({"model": "tube", "radius": 0.04, "colour": "red"}, r"unknown body keys \['colour'\]"),
+        ({"model": "smpl"}, "needs the model file's path"),
+    ],
+)
 def test_bad_specs_are_named(spec, message):
     with pytest.raises(ValueError, match=message):
         part_from_spec(spec, "left_arm")

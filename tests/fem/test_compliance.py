@@ -1,5 +1,6 @@
 """The compliance operator is the linear FEM: superposition of its columns reproduces a direct
-solve, and it is the tangent of the Neo-Hookean solve at rest."""
+solve, and it is the tangent of the Neo-Hookean solve at rest.
+"""
 
 import numpy as np
 import pytest
@@ -35,12 +36,12 @@ def test_superposition_equals_a_direct_linear_solve(part, G, rng):
     sol = Solver(mesh, LinearElastic(), order=1).solve(f)
     assert sol.ok
     u = sol.part_displacement(mesh)
-    assert np.abs(u).max() > 1e-4                   # tenths of a mm: a real response
+    assert np.abs(u).max() > 1e-4  # tenths of a mm: a real response
     np.testing.assert_allclose(np.einsum("ijc,j->ic", G, f), u, atol=1e-6 * np.abs(u).max())
 
 
 def test_it_is_the_neo_hookean_tangent_at_rest(part, G, rng):
-    f = _load(part, rng) * 0.01                     # a light touch: within 0.1 % of linear
+    f = _load(part, rng) * 0.01  # a light touch: within 0.1 % of linear
     mesh = shell_mesh(part, np.full(part.n_vertices, 0.008), layers=1, subdivisions=1)
     sol = Solver(mesh, NeoHookean(), order=1).solve(f)
     u = sol.part_displacement(mesh)
@@ -51,7 +52,8 @@ def test_it_is_the_neo_hookean_tangent_at_rest(part, G, rng):
 def test_reciprocity_and_blocks(part, G):
     """Maxwell-Betti: the normal response at i to a normal push at j equals that at j to i
     (the traction spreading is symmetric on a uniform tube), the fixed rims do not move, and the
-    block size does not change the operator."""
+    block size does not change the operator.
+    """
     Gn = -np.einsum("ijc,ic->ij", G, part.normals)  # inward normal response, m/N
     z = part.vertices[:, 2]
     rim = np.isclose(z, z.min()) | np.isclose(z, z.max())
@@ -76,7 +78,8 @@ def test_sparsify_keeps_what_counts(G):
 
 def test_local_columns_match_the_whole_part():
     """A column solved on the patch it moves equals the whole part's within the ring
-    tolerance's reach; rows outside the patch are zero, columns come back in the asked order."""
+    tolerance's reach; rows outside the patch are zero, columns come back in the asked order.
+    """
     from fem.compliance import local_compliance
 
     long = tube(radius=0.05, length=0.4, n_around=24, n_along=24)
@@ -85,7 +88,7 @@ def test_local_columns_match_the_whole_part():
     whole = compliance(long, 0.004, RES, NeoHookean(), columns=cols)
     g, info = local_compliance(long, 0.004, cols, RES, NeoHookean(), tolerance=0.01)
     assert g.shape == (long.n_vertices, 2, 3)
-    assert info["vertices"] < long.n_vertices / 2      # a patch, not the whole tube
+    assert info["vertices"] < long.n_vertices / 2  # a patch, not the whole tube
     for k in range(2):
         err = np.linalg.norm(g[:, k] - whole[:, k], axis=1).max()
         assert err <= 0.01 * np.linalg.norm(whole[:, k], axis=1).max()
@@ -100,14 +103,14 @@ def test_column_store_computes_once_and_reads_its_cache(part, G, tmp_path, monke
     setup = {"material": {"name": "neo_hookean", "E": 1000.0, "nu": 0.4}, "resolution": RES}
     store = ColumnStore(part, setup, [0.008])
     a = store.columns(0, [50, 60])
-    assert store.ensure(0, [60, 50]) == 0 and store.computed == 2    # nothing solved again
+    assert store.ensure(0, [60, 50]) == 0 and store.computed == 2  # nothing solved again
     np.testing.assert_allclose(a[:, 0], G[:, 50], atol=0.01 * np.abs(G[:, 50]).max())
-    back = ColumnStore(part, setup, [0.008])                        # a new process: from disk
+    back = ColumnStore(part, setup, [0.008])  # a new process: from disk
     assert back.missing(0, [50, 60, 61]).tolist() == [61]
     np.testing.assert_array_equal(back.columns(0, [50, 60]), a)
     one, two = ColumnStore(part, setup, [0.008]), ColumnStore(part, setup, [0.008])
-    one.ensure(0, [70])                                             # two processes at once:
-    two.ensure(0, [80])                                             # neither loses the other's
+    one.ensure(0, [70])  # two processes at once:
+    two.ensure(0, [80])  # neither loses the other's
     assert ColumnStore(part, setup, [0.008]).missing(0, [50, 60, 70, 80]).size == 0
-    back.path(0).write_bytes(b"not an npz")                         # a broken file: recomputed
+    back.path(0).write_bytes(b"not an npz")  # a broken file: recomputed
     assert ColumnStore(part, setup, [0.008]).missing(0, [50]).tolist() == [50]

@@ -15,19 +15,24 @@ from fem.config import read_config
 from fem.generate import generate
 from fem.placements import plan, split_of
 from fem.simulate import simulate
-from stmpl.dataset import Dataset
+from stmpl.data.dataset import Dataset
 
 
 def _cfg(**over):
-    cfg = {"name": "tiny",
-           "body": {"model": "tube", "radius": 0.04, "length": 0.2, "n_around": 16,
-                    "n_along": 12},
-           "part": "tube", "thickness_mm": [5.0, 10.0],
-           "resolution": {"subdivisions": 1, "layers": 2, "refine_radius": 0.03},
-           "forces": [0.05, 0.1, 0.2],
-           "placements": {"disk": {"centres": 4, "radii": [0.02]},
-                          "band": {"at": [0.5], "widths": [0.03]}},
-           "shard_tasks": 2, "parallel": {"backend": "serial", "workers": 1}}
+    cfg = {
+        "name": "tiny",
+        "body": {"model": "tube", "radius": 0.04, "length": 0.2, "n_around": 16, "n_along": 12},
+        "part": "tube",
+        "thickness_mm": [5.0, 10.0],
+        "resolution": {"subdivisions": 1, "layers": 2, "refine_radius": 0.03},
+        "forces": [0.05, 0.1, 0.2],
+        "placements": {
+            "disk": {"centres": 4, "radii": [0.02]},
+            "band": {"at": [0.5], "widths": [0.03]},
+        },
+        "shard_tasks": 2,
+        "parallel": {"backend": "serial", "workers": 1},
+    }
     cfg.update(over)
     return cfg
 
@@ -94,15 +99,18 @@ def test_serial_run_card_and_samples(tmp_path):
     th = a["thickness"][i].astype(float)
     levels = [f for f in _cfg()["forces"] if f <= a["total"][i]]
     mesh, sols = simulate(ds.part, th, load.force, levels, _cfg()["resolution"])
-    np.testing.assert_allclose(a["displacement"][i], sols[-1].part_displacement(mesh),
-                               atol=1e-7)
+    np.testing.assert_allclose(a["displacement"][i], sols[-1].part_displacement(mesh), atol=1e-7)
     np.testing.assert_allclose(a["force"][i].sum(), a["total"][i], rtol=1e-5)
     assert json.loads((tmp_path / "d" / "card.json").read_text())["hash"] == card["hash"]
 
 
 def test_failures_are_counted_not_stored(tmp_path):
-    cfg = _cfg(thickness_mm=[5.0], forces=[0.1, 3.0, 4.0], max_pressure=3000.0,
-               placements={"disk": {"centres": 2, "radii": [0.02]}})
+    cfg = _cfg(
+        thickness_mm=[5.0],
+        forces=[0.1, 3.0, 4.0],
+        max_pressure=3000.0,
+        placements={"disk": {"centres": 2, "radii": [0.02]}},
+    )
     card = generate(cfg, tmp_path / "f", progress=False)
     assert card["failures"] > 0 and card["samples"] + card["failures"] == card["attempted"]
     assert card["failures_by_reason"]
@@ -112,14 +120,25 @@ def test_failures_are_counted_not_stored(tmp_path):
 
 
 def test_a_killed_run_resumes_without_loss_or_duplicates(tmp_path):
-    cfg = _cfg(shard_tasks=1, resolution={"subdivisions": 2, "layers": 2,
-                                          "refine_radius": 0.03})
+    cfg = _cfg(shard_tasks=1, resolution={"subdivisions": 2, "layers": 2, "refine_radius": 0.03})
     path = tmp_path / "cfg.yaml"
     path.write_text(yaml.safe_dump(cfg))
     out = tmp_path / "killed"
-    proc = subprocess.Popen([sys.executable, "-m", "stmpl.cli", "generate", str(path),
-                             "--out", str(out), "--quiet"], env={**os.environ},
-                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "stmpl.cli.main",
+            "generate",
+            str(path),
+            "--out",
+            str(out),
+            "--quiet",
+        ],
+        env={**os.environ},
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     deadline = time.time() + 120
     while time.time() < deadline and not list(out.glob("shard-*.h5")):
         time.sleep(0.05)
@@ -136,7 +155,7 @@ def test_a_killed_run_resumes_without_loss_or_duplicates(tmp_path):
     a, b = _samples(out), _samples(tmp_path / "whole")
     assert len(np.unique(np.stack([a["task"], a["total"]], 1), axis=0)) == len(a["task"])
     _same(a, b)
-    if all(np.array_equal(a[k], b[k]) for k in a):   # bit-identical samples: one hash
+    if all(np.array_equal(a[k], b[k]) for k in a):  # bit-identical samples: one hash
         assert resumed["hash"] == whole["hash"]
     # the same folder refuses a different config
     with pytest.raises(ValueError, match="different config"):
@@ -153,7 +172,7 @@ def test_dask_local_cluster_with_two_workers_matches_serial(tmp_path):
 
 
 def test_cli_generate_stops_early_and_finishes(tmp_path, capsys):
-    from stmpl.cli import main
+    from stmpl.cli.main import main
 
     path = tmp_path / "cfg.yaml"
     path.write_text(yaml.safe_dump(_cfg(thickness_mm=[7.5], forces=[0.05, 0.1])))
@@ -172,16 +191,31 @@ def test_cli_generate_stops_early_and_finishes(tmp_path, capsys):
 
 def test_workers_leave_when_the_generator_is_killed(tmp_path):
     psutil = pytest.importorskip("psutil")
-    cfg = _cfg(shard_tasks=1, parallel={"backend": "processes", "workers": 2},
-               resolution={"subdivisions": 2, "layers": 2, "refine_radius": 0.03})
+    cfg = _cfg(
+        shard_tasks=1,
+        parallel={"backend": "processes", "workers": 2},
+        resolution={"subdivisions": 2, "layers": 2, "refine_radius": 0.03},
+    )
     path = tmp_path / "cfg.yaml"
     path.write_text(yaml.safe_dump(cfg))
     out = tmp_path / "orphans"
-    proc = subprocess.Popen([sys.executable, "-m", "stmpl.cli", "generate", str(path),
-                             "--out", str(out), "--quiet"], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL)
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "stmpl.cli.main",
+            "generate",
+            str(path),
+            "--out",
+            str(out),
+            "--quiet",
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
     parent = psutil.Process(proc.pid)
     deadline = time.time() + 120
+
     def spawned():
         out_ = []
         for c in parent.children(recursive=True):
@@ -206,12 +240,14 @@ def test_workers_leave_when_the_generator_is_killed(tmp_path):
 def test_fidelity_auto_solves_patches_within_a_percent_of_the_whole(tmp_path):
     """The same plan solved whole and on patches (fem.local): the same samples, displacements
     within 1 % of each sample's largest; the config hash of the default (full) is the one
-    configs had before the key existed."""
+    configs had before the key existed.
+    """
     from fem.config import config_hash
 
     body = {"model": "tube", "radius": 0.04, "length": 0.4, "n_around": 24, "n_along": 30}
-    over = dict(body=body, placements={"disk": {"centres": 3, "radii": [0.015]}},
-                thickness_mm=[7.5])
+    over = dict(
+        body=body, placements={"disk": {"centres": 3, "radii": [0.015]}}, thickness_mm=[7.5]
+    )
     generate(_cfg(**over), tmp_path / "full", progress=False)
     generate(_cfg(**over, fidelity="auto"), tmp_path / "auto", progress=False)
     a, b = _samples(tmp_path / "full"), _samples(tmp_path / "auto")

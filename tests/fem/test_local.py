@@ -1,5 +1,6 @@
 """The local FEM: the patch a load moves, its cut, the growth rule, and its answer against the
-whole part's solve."""
+whole part's solve.
+"""
 
 import numpy as np
 import pytest
@@ -22,10 +23,11 @@ def test_a_patch_is_the_loaded_neighbourhood_with_its_cut_held(long_tube):
     ld = loads.disk(part, uv=(0.5, 0.5), radius=0.02, total=0.2)
     p = local.patch(part, ld.force, 0.05)
     assert not p.whole and set(ld.vertices) <= set(p.vertices)
-    dist = np.linalg.norm(part.vertices[p.vertices][:, None]
-                          - part.vertices[ld.vertices][None], axis=2).min(1)
+    dist = np.linalg.norm(
+        part.vertices[p.vertices][:, None] - part.vertices[ld.vertices][None], axis=2
+    ).min(1)
     assert dist.max() <= 0.05 + 1e-12
-    assert len(p.part.rims) == 1 and len(p.ring) > 0            # a disk's patch: one cut
+    assert len(p.part.rims) == 1 and len(p.ring) > 0  # a disk's patch: one cut
     assert not np.isin(p.ring, np.concatenate(p.part.rims)).any()
     np.testing.assert_array_equal(p.part.normals, part.normals[p.vertices])
     u = np.ones((p.part.n_vertices, 3))
@@ -37,7 +39,8 @@ def test_a_patch_is_the_loaded_neighbourhood_with_its_cut_held(long_tube):
 
 def test_a_patch_reaching_the_parts_own_rim_is_cut_only_where_it_was_cut(long_tube):
     """A band near the end of the tube: the patch meets the tube's own (held) rim; the ring
-    that is checked lies along the new cut only."""
+    that is checked lies along the new cut only.
+    """
     part = long_tube
     ld = loads.band(part, at=0.05, width=0.02, total=0.2)
     p = local.patch(part, ld.force, 0.04)
@@ -64,7 +67,8 @@ def test_local_matches_the_whole_solve_and_grows_when_too_tight(long_tube):
     m3, s3, tight = local.simulate_local(part, t, ld.force, [0.2], RES, margin=0.012)
     assert len(tight.attempts) > 1 and tight.attempts[0]["ring_moved"] > local.TOLERANCE
     assert [a["margin_m"] for a in tight.attempts] == pytest.approx(
-        [0.012 * local.GROW ** k for k in range(len(tight.attempts))])
+        [0.012 * local.GROW**k for k in range(len(tight.attempts))]
+    )
     u3 = tight.patch.lift(s3[-1].part_displacement(m3), part.n_vertices)
     assert np.linalg.norm(u3 - whole, axis=1).max() < 0.01 * peak
 
@@ -74,8 +78,11 @@ def test_the_fem_predictor_takes_fidelity(long_tube):
     from stmpl.scene import Scene
 
     part = long_tube
-    scene = Scene.from_load(part, np.full(part.n_vertices, 0.0075),
-                            loads.disk(part, uv=(0.5, 0.5), radius=0.02, total=0.2))
+    scene = Scene.from_load(
+        part,
+        np.full(part.n_vertices, 0.0075),
+        loads.disk(part, uv=(0.5, 0.5), radius=0.02, total=0.2),
+    )
     full = predictor.create("fem", res=RES).predict(scene)
     auto = predictor.create("fem", res=RES, fidelity="auto").predict(scene)
     assert full.info["local"] is None and auto.info["local"]["vertices"] < part.n_vertices
@@ -87,13 +94,14 @@ def test_the_fem_predictor_takes_fidelity(long_tube):
 
 def test_a_load_the_tissue_cannot_carry_fails_after_one_growth_not_the_whole_part(long_tube):
     """When nothing converges the patch grows once (the cut might be to blame); a second failure
-    is the load's own and is returned as failed, not solved again on ever larger patches."""
+    is the load's own and is returned as failed, not solved again on ever larger patches.
+    """
     part = long_tube
     t = np.full(part.n_vertices, 0.0075)
     ld = loads.disk(part, uv=(0.5, 0.5), radius=0.02, total=1.0)
     from fem.solver import SolverOptions
 
-    opts = SolverOptions(max_iter=1, max_substeps=0)   # no solve can converge
+    opts = SolverOptions(max_iter=1, max_substeps=0)  # no solve can converge
     mesh, sols, res = local.simulate_local(part, t, ld.force, [0.1, 0.2], RES, options=opts)
     assert not any(s.ok for s in sols)
     assert len(res.attempts) == local.FAILED_ATTEMPTS == 2 and not res.patch.whole

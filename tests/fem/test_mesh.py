@@ -32,9 +32,11 @@ def test_subdivision_keeps_surface_and_interpolates_linearly():
     x, f, P = midpoint_subdivide(part.vertices, part.faces)
     assert len(f) == 4 * part.n_faces
     check_surface(x, f)  # still manifold and consistently oriented
+
     def area(x, f):
         v = x[f]
         return 0.5 * np.linalg.norm(np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0]), axis=1).sum()
+
     assert area(x, f) == pytest.approx(area(part.vertices, part.faces), rel=1e-12)
     lin = part.vertices @ np.array([1.0, -2.0, 0.5])
     np.testing.assert_allclose(P @ lin, x @ np.array([1.0, -2.0, 0.5]), atol=1e-14)
@@ -45,24 +47,32 @@ def test_local_refinement_is_conforming_and_local():
     marked = np.linalg.norm(part.vertices[part.faces].mean(1), axis=1) < 0.03
     x, f, P = midpoint_subdivide(part.vertices, part.faces, marked)
     check_surface(x, f)  # no hanging nodes: every edge has at most two faces, orientation kept
+
     # boundary of the sheet is untouched: same boundary-edge length
     def boundary_len(x, f):
         e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), 1)
         u, c = np.unique(e, axis=0, return_counts=True)
         b = u[c == 1]
         return np.linalg.norm(x[b[:, 0]] - x[b[:, 1]], axis=1).sum(), len(b)
+
     assert boundary_len(x, f) == pytest.approx(boundary_len(part.vertices, part.faces))
     assert part.n_faces < len(f) < 2 * part.n_faces
     # a hanging node would leave a T-junction: every new node lies on >= 4 faces
     deg = np.bincount(f.ravel(), minlength=len(x))
-    assert deg[part.n_vertices:].min() >= 4
+    assert deg[part.n_vertices :].min() >= 4
 
 
 def test_refine_near_load_and_shell_quality():
     part = _closed_tube(24)
     near = part.vertices[:1]
-    m = shell_mesh(part, np.full(part.n_vertices, 0.008), layers=2, subdivisions=2,
-                   refine_near=near, refine_radius=0.02)
+    m = shell_mesh(
+        part,
+        np.full(part.n_vertices, 0.008),
+        layers=2,
+        subdivisions=2,
+        refine_near=near,
+        refine_radius=0.02,
+    )
     full = shell_mesh(part, np.full(part.n_vertices, 0.008), layers=2, subdivisions=2)
     assert m.n_nodes < full.n_nodes / 2
     coarse = shell_mesh(part, np.full(part.n_vertices, 0.008), layers=2)
@@ -78,13 +88,17 @@ def test_nodal_forces_keep_the_total(mode):
     force = np.zeros(part.n_vertices)
     force[[30, 31, 55]] = [0.5, 0.25, 1.0]
     for s in (0, 1, 2):
-        m = shell_mesh(part, np.full(part.n_vertices, 0.008), layers=1,
-                       subdivisions=s if mode == "traction" else 0)
+        m = shell_mesh(
+            part,
+            np.full(part.n_vertices, 0.008),
+            layers=1,
+            subdivisions=s if mode == "traction" else 0,
+        )
         f = m.nodal_forces(force, mode)
         assert np.linalg.norm(f, axis=1).sum() == pytest.approx(1.75, rel=1e-12)
         # all along the inward normal (radial on a tube), so nothing on fixed nodes
         assert np.all(np.einsum("si,si->s", f[: m.n_skin], m.skin_normals) <= 1e-15)
-        assert np.abs(f[m.n_skin:]).max() == 0
+        assert np.abs(f[m.n_skin :]).max() == 0
 
 
 def test_constant_pressure_on_a_sheet_gives_p_times_area():

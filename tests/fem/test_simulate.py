@@ -21,9 +21,9 @@ def test_simulate_refines_around_the_load_and_continues():
     th = np.full(part.n_vertices, 0.008)
     mesh, sols = simulate(part, th, force, totals=[0.05, 0.1], res="medium")
     assert [s.ok for s in sols] == [True, True]
-    assert mesh.n_skin < 2 * part.n_vertices        # refined only near the load
+    assert mesh.n_skin < 2 * part.n_vertices  # refined only near the load
     u1, u2 = (np.linalg.norm(s.part_displacement(mesh)[90]) for s in sols)
-    assert 1.5 < u2 / u1 < 2.5                        # nearly linear at these loads
+    assert 1.5 < u2 / u1 < 2.5  # nearly linear at these loads
     with pytest.raises(ValueError, match="rise"):
         simulate(part, th, force, totals=[0.1, 0.05])
     with pytest.raises(ValueError, match="no loaded vertex"):

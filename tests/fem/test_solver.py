@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
+from fem.linear_solvers import available_linear_solvers
 from fem.material import LinearElastic, NeoHookean, lame
 from fem.mesh import shell_mesh
-from fem.linear_solvers import available_linear_solvers
 from fem.solver import Solver, SolverOptions
 from stmpl.body.primitives import sheet, tube
 
@@ -13,7 +13,8 @@ from stmpl.body.primitives import sheet, tube
 def _lame(n_around, layers, p=1.0, b=0.05, t=0.01, material=None, order=1):
     """A thick cylinder (radii b - t, b in m) under outer pressure ``p`` (Pa), inner face fixed,
     ends held axially (plane strain), with ``n_around`` vertices per ring and axial spacing tied
-    to it. Returns (FEM mean outer radial displacement, closed form, max nodal error / max |u|)."""
+    to it. Returns (FEM mean outer radial displacement, closed form, max nodal error / max |u|).
+    """
     part = tube(radius=b, length=0.24 / n_around, n_around=n_around, n_along=3)
     mesh = shell_mesh(part, np.full(part.n_vertices, t), layers=layers, normal_smoothing=0)
     fixed = np.zeros((mesh.n_nodes, 3), bool)
@@ -21,12 +22,13 @@ def _lame(n_around, layers, p=1.0, b=0.05, t=0.01, material=None, order=1):
     for k in range(layers + 1):
         fixed[rim + k * mesh.n_skin, 2] = True
     material = material or LinearElastic(1000.0, 0.4)
-    sol = Solver(mesh, material, fixed=fixed, options=SolverOptions(rims="free"),
-                 order=order).solve(p * part.vertex_areas)
+    sol = Solver(
+        mesh, material, fixed=fixed, options=SolverOptions(rims="free"), order=order
+    ).solve(p * part.vertex_areas)
     assert sol.ok, sol.reason
     mu, lam = lame(material.E, material.nu)
     a = b - t
-    A = -p / (2 * (lam + mu) + 2 * mu * a**2 / b**2)   # u(r) = A r + B / r, u(a) = 0
+    A = -p / (2 * (lam + mu) + 2 * mu * a**2 / b**2)  # u(r) = A r + B / r, u(a) = 0
     r = np.linalg.norm(mesh.nodes[:, :2], axis=1)
     ur = np.einsum("si,si->s", sol.displacement[:, :2], mesh.nodes[:, :2] / r[:, None])
     exact = A * (r - a**2 / r)
@@ -48,8 +50,7 @@ def test_lame_error_falls_at_second_order():
     # quadratic elements: smaller errors at the same mesh (the polygon's facets then dominate)
     errs2 = np.array([_lame(n, L, order=2)[2] for n, L in [(24, 1), (48, 2), (96, 4)]])
     rates2 = np.log2(errs2[:-1] / errs2[1:])
-    assert np.all(errs2 < 0.4 * np.array([_lame(n, L)[2] for n, L in [(24, 1), (48, 2),
-                                                                        (96, 4)]]))
+    assert np.all(errs2 < 0.4 * np.array([_lame(n, L)[2] for n, L in [(24, 1), (48, 2), (96, 4)]]))
     assert np.all(rates2 > 1.7), (errs2, rates2)
 
 
@@ -68,8 +69,9 @@ def _small_shell(layers=2):
     return part, shell_mesh(part, np.full(part.n_vertices, 0.008), layers=layers)
 
 
-@pytest.mark.parametrize("material,order", [(NeoHookean(), 1), (LinearElastic(), 1),
-                                            (NeoHookean(), 2)])
+@pytest.mark.parametrize(
+    "material,order", [(NeoHookean(), 1), (LinearElastic(), 1), (NeoHookean(), 2)]
+)
 def test_tangent_matches_finite_differences_of_the_residual(material, order):
     part, mesh = _small_shell(layers=2 if order == 1 else 1)
     S = Solver(mesh, material, options=SolverOptions(linear_solver="superlu"), order=order)
@@ -129,14 +131,13 @@ def test_quadratic_assembly_matches_scikit_fem():
     part, mesh = _small_shell(layers=1)
     E, nu = 1000.0, 0.4
     mu, lam = lame(E, nu)
-    S = Solver(mesh, LinearElastic(E, nu), options=SolverOptions(linear_solver="superlu"),
-               order=2)
+    S = Solver(mesh, LinearElastic(E, nu), options=SolverOptions(linear_solver="superlu"), order=2)
     m = skfem.MeshTet(mesh.nodes.T, mesh.tets.T)
     basis = skfem.Basis(m, skfem.ElementVector(skfem.ElementTetP2()))
     K_sk = skfem.asm(linear_elasticity(lam, mu), basis).tocsr()
     # match scikit-fem's DOFs to ours by position and component
     ours = np.concatenate([mesh.nodes, mesh.nodes[S.edges].mean(1)])
-    locs = basis.doflocs.T                                             # (3 * nodes, 3)
+    locs = basis.doflocs.T  # (3 * nodes, 3)
     node = cKDTree(ours).query(locs)[1]
     comp = np.zeros(len(locs), dtype=int)
     for c in range(3):
@@ -184,8 +185,9 @@ def test_continuation_warm_start_matches_a_cold_solve(order):
     assert all(s.ok for s in sols)
     assert [s.total_force for s in sols] == pytest.approx([0.05, 0.1, 0.15])
     cold = S.solve(force * 0.15)
-    np.testing.assert_allclose(sols[-1].displacement, cold.displacement,
-                               atol=1e-6 * np.abs(cold.displacement).max())
+    np.testing.assert_allclose(
+        sols[-1].displacement, cold.displacement, atol=1e-6 * np.abs(cold.displacement).max()
+    )
     assert sols[-1].iterations < cold.iterations
     # deeper press, more displacement, the centre moves down
     d = [-s.part_displacement(mesh)[40, 2] for s in sols]
@@ -197,8 +199,9 @@ def test_a_failed_solve_reports_why_and_returns_no_displacement():
     mesh = shell_mesh(part, np.full(part.n_vertices, 0.005), layers=2)
     force = np.zeros(part.n_vertices)
     force[40] = 1.0
-    sols = Solver(mesh, options=SolverOptions(max_substeps=1)).continuation(force, [0.05, 50.0,
-                                                                                    60.0])
+    sols = Solver(mesh, options=SolverOptions(max_substeps=1)).continuation(
+        force, [0.05, 50.0, 60.0]
+    )
     assert sols[0].ok
     assert not sols[1].ok and sols[1].displacement is None and sols[1].reason
     assert not sols[2].ok and sols[2].reason.startswith("skipped")
@@ -237,7 +240,8 @@ def test_bad_input_is_named():
 
 def test_compiled_and_numpy_assembly_agree(monkeypatch):
     """The Numba kernel against the NumPy path (numba is a dependency: without it this test
-    would compare NumPy with NumPy, so it fails instead)."""
+    would compare NumPy with NumPy, so it fails instead).
+    """
     import fem.solver as fs
 
     assert fs.kernel is not None, "numba is missing: the compiled kernel cannot be checked"

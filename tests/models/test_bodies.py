@@ -1,18 +1,24 @@
 """Models of every body of one mesh (option ``geometry``): trained on several bodies at once
 (tubes of one mesh at other radii here), they serve a body no dataset holds, with the linear
-prior solved on that body; models of one body refuse it by name."""
+prior solved on that body; models of one body refuse it by name.
+"""
 
 import numpy as np
 import pytest
 
 from fem.generate import generate
 from stmpl import predictor
-from stmpl.train import train
+from stmpl.pipeline.train import train
 
 RADII = (0.035, 0.05)
 OPTIONS = {"gnn": {"latent": 16, "steps": 2}, "uv_unet": {"size": 64, "width": 4, "depth": 3}}
-GENERAL = {"geometry": True, "prior": "linear", "operator": "on_demand", "per_newton": True,
-           "loss": "relative"}
+GENERAL = {
+    "geometry": True,
+    "prior": "linear",
+    "operator": "on_demand",
+    "per_newton": True,
+    "loss": "relative",
+}
 
 
 @pytest.fixture(scope="module")
@@ -23,8 +29,14 @@ def bodies(tmp_path_factory):
     root = tmp_path_factory.mktemp("bodies")
     out = []
     for r in RADII:
-        cfg = {**TINY_DATA, "name": f"tube{int(r * 1e3)}", "thickness_mm": [7.5],
-               "forces": [0.05, 0.1], "linear": True, "body": {**TINY_DATA["body"], "radius": r}}
+        cfg = {
+            **TINY_DATA,
+            "name": f"tube{int(r * 1e3)}",
+            "thickness_mm": [7.5],
+            "forces": [0.05, 0.1],
+            "linear": True,
+            "body": {**TINY_DATA["body"], "radius": r},
+        }
         generate(cfg, root / cfg["name"], progress=False)
         out.append(str(root / cfg["name"]))
     return out
@@ -48,34 +60,66 @@ def _scene(part, force=0.1):
 def test_a_model_of_every_body_serves_an_unseen_one(bodies, tmp_path, kind):
     """Trained on the 35 and 50 mm tubes, it answers on a 42 mm tube within a few per cent of
     the FEM there (its own linear FEM, solved for that body, carries the answer), and not as it
-    would on the 35 mm tube."""
+    would on the 35 mm tube.
+    """
     from fem.predictor import FEMPredictor
     from stmpl.metrics import sample_metrics
 
-    path = train({"name": kind, "model": kind, "data": bodies, "epochs": 2, "batch": 8,
-                  "options": {**OPTIONS[kind], **GENERAL}, "out": str(tmp_path / kind)},
-                 progress=False)
+    path = train(
+        {
+            "name": kind,
+            "model": kind,
+            "data": bodies,
+            "epochs": 2,
+            "batch": 8,
+            "options": {**OPTIONS[kind], **GENERAL},
+            "out": str(tmp_path / kind),
+        },
+        progress=False,
+    )
     p = predictor.read(path)
-    assert p.general and len(p.body_parts) == 1            # a checkpoint knows its own only
+    assert p.general and len(p.body_parts) == 1  # a checkpoint knows its own only
     unseen = _scene(_tube(0.042))
     d = p.predict(unseen)
     fem = FEMPredictor(res={"subdivisions": 1, "layers": 1, "order": 1}).predict(unseen)
     m = sample_metrics(fem.displacement, d.displacement)
     assert m["rel_mee"] < 5.0 and abs(m["peak_err"]) < 8.0
-    assert len(p.body_parts) == 2                           # the unseen body: slot 1
+    assert len(p.body_parts) == 2  # the unseen body: slot 1
     on_template = p.predict(_scene(p.part)).displacement
-    assert np.abs(np.linalg.norm(d.displacement, axis=1).max()
-                  - np.linalg.norm(on_template, axis=1).max()) > 1e-6
+    assert (
+        np.abs(
+            np.linalg.norm(d.displacement, axis=1).max() - np.linalg.norm(on_template, axis=1).max()
+        )
+        > 1e-6
+    )
     with pytest.raises(ValueError, match="another mesh"):
         p.predict(_scene(_tube(0.042, n_around=12)))
 
 
 def test_models_of_one_body_refuse_others(bodies, tmp_path):
     with pytest.raises(ValueError, match="spans 2 bodies"):
-        train({"name": "g", "model": "gnn", "data": bodies, "epochs": 1,
-               "options": OPTIONS["gnn"], "out": str(tmp_path / "g")}, progress=False)
-    path = train({"name": "g", "model": "gnn", "data": bodies[0], "epochs": 1,
-                  "options": OPTIONS["gnn"], "out": str(tmp_path / "g1")}, progress=False)
+        train(
+            {
+                "name": "g",
+                "model": "gnn",
+                "data": bodies,
+                "epochs": 1,
+                "options": OPTIONS["gnn"],
+                "out": str(tmp_path / "g"),
+            },
+            progress=False,
+        )
+    path = train(
+        {
+            "name": "g",
+            "model": "gnn",
+            "data": bodies[0],
+            "epochs": 1,
+            "options": OPTIONS["gnn"],
+            "out": str(tmp_path / "g1"),
+        },
+        progress=False,
+    )
     with pytest.raises(ValueError, match="another body part"):
         predictor.read(path).predict(_scene(_tube(0.042)))
     with pytest.raises(ValueError, match="on_demand"):
@@ -84,10 +128,20 @@ def test_models_of_one_body_refuse_others(bodies, tmp_path):
 
 def test_the_envelope_knows_the_bodies_sizes(bodies, tmp_path):
     """The skin areas of the training bodies bound the bodies the model vouches for: a tube
-    between them is inside, one twice as wide is not (and says why)."""
-    path = train({"name": "g", "model": "gnn", "data": bodies, "epochs": 1, "batch": 8,
-                  "options": {**OPTIONS["gnn"], **GENERAL}, "out": str(tmp_path / "g")},
-                 progress=False)
+    between them is inside, one twice as wide is not (and says why).
+    """
+    path = train(
+        {
+            "name": "g",
+            "model": "gnn",
+            "data": bodies,
+            "epochs": 1,
+            "batch": 8,
+            "options": {**OPTIONS["gnn"], **GENERAL},
+            "out": str(tmp_path / "g"),
+        },
+        progress=False,
+    )
     p = predictor.read(path)
     lo, hi = p.envelope.boxes["training"]["skin_area"]
     assert lo == pytest.approx(_tube(RADII[0]).vertex_areas.sum(), rel=1e-6)

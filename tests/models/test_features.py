@@ -16,13 +16,12 @@ def test_load_channels():
     pattern, total = features.load_channels(force, inv_area, per_newton=True)
     np.testing.assert_allclose(pattern.numpy(), [[0, 0.8, 2.4], [0, 0, 0]], rtol=1e-6)
     np.testing.assert_allclose(total.numpy(), [[0.5] * 3, [0.0] * 3], rtol=1e-6)
-    assert torch.all(torch.isfinite(pattern))            # an unloaded scene: zeros, not NaN
+    assert torch.all(torch.isfinite(pattern))  # an unloaded scene: zeros, not NaN
 
 
 def test_thickness_over_its_range():
     lo, hi = tissue.THICKNESS_RANGE
     t = torch.tensor([[lo, (lo + hi) / 2, hi]], dtype=torch.float32)
-    np.testing.assert_allclose(features.normalised_thickness(t).numpy(), [[0, 0.5, 1]],
-                               atol=1e-6)
+    np.testing.assert_allclose(features.normalised_thickness(t).numpy(), [[0, 0.5, 1]], atol=1e-6)
     assert features.normalised_thickness(t).dtype == torch.float32
     assert features.THICKNESS_SHIFT == lo and features.THICKNESS_SCALE == pytest.approx(hi - lo)

@@ -6,7 +6,6 @@ import pytest
 from stmpl import predictor
 
 
-
 def test_gnn_normalisers_travel_in_the_checkpoint(ds, tmp_path, make):
     from stmpl import tissue
 
@@ -14,8 +13,9 @@ def test_gnn_normalisers_travel_in_the_checkpoint(ds, tmp_path, make):
     q = predictor.read(p.save(tmp_path / "g.safetensors"))
     lo, hi = tissue.THICKNESS_RANGE
     np.testing.assert_allclose(q.model.node_norm.shift.numpy(), [0, 0, lo, 0, 0, 0], atol=1e-9)
-    np.testing.assert_allclose(q.model.node_norm.scale.numpy(), [1000, 1, hi - lo, 1, 1, 1],
-                               rtol=1e-6)
+    np.testing.assert_allclose(
+        q.model.node_norm.scale.numpy(), [1000, 1, hi - lo, 1, 1, 1], rtol=1e-6
+    )
     edge_len = np.linalg.norm(np.diff(ds.part.vertices[ds.part.edges], axis=1)[:, 0], axis=1)
     np.testing.assert_allclose(q.model.edge_norm.scale.numpy(), edge_len.mean(), rtol=1e-5)
 
@@ -23,14 +23,15 @@ def test_gnn_normalisers_travel_in_the_checkpoint(ds, tmp_path, make):
 def test_auto_fidelity_answers_on_the_subgraph_the_load_needs(ds, make):
     """``fidelity="auto"``: the network runs on the region the load moves (where the prior moves
     the tissue) plus ``steps`` hops, so inside the region it answers exactly as on the whole
-    mesh, and outside it the answer is the prior's (the linear FEM)."""
+    mesh, and outside it the answer is the prior's (the linear FEM).
+    """
     import torch
 
-    from stmpl.evaluate import scenes_of
+    from stmpl.pipeline.evaluate import scenes_of
 
     p = make("gnn/prior", ds)
     torch.manual_seed(1)
-    torch.nn.init.normal_(p.model.net.decoder[-1].weight, std=0.5)     # a correction that shows
+    torch.nn.init.normal_(p.model.net.decoder[-1].weight, std=0.5)  # a correction that shows
     scenes = [s for s in scenes_of(ds, "test")[0] if s.thickness[0] < 0.006][:4]
     full = p.predict(scenes)
     p.fidelity = "auto"
@@ -40,17 +41,19 @@ def test_auto_fidelity_answers_on_the_subgraph_the_load_needs(ds, make):
     f = np.stack([s.force for s in scenes])
     with torch.no_grad():
         base = p.base(torch.tensor(t, dtype=torch.float32), torch.tensor(f, dtype=torch.float32))
-    inner, sub = p.region(t, f, base.numpy())          # where the prior moves the tissue
-    wide, _ = p.region(t, f)                           # within the FEM's first margin
+    inner, sub = p.region(t, f, base.numpy())  # where the prior moves the tissue
+    wide, _ = p.region(t, f)  # within the FEM's first margin
     assert inner.sum() < wide.sum()
     assert (~inner).any() and (inner & ~(np.stack([s.force for s in scenes]) > 0)).any()
     assert (sub >= inner).all()
     for b, (f, a, l) in enumerate(zip(full, auto, lin)):
-        np.testing.assert_allclose(a.displacement[inner[b]], f.displacement[inner[b]],
-                                   rtol=1e-4, atol=1e-9)
-        np.testing.assert_allclose(a.displacement[~inner[b]], l.displacement[~inner[b]],
-                                   rtol=1e-4, atol=1e-9)
-        assert not np.allclose(f.displacement, l.displacement, atol=1e-7)   # it does correct
+        np.testing.assert_allclose(
+            a.displacement[inner[b]], f.displacement[inner[b]], rtol=1e-4, atol=1e-9
+        )
+        np.testing.assert_allclose(
+            a.displacement[~inner[b]], l.displacement[~inner[b]], rtol=1e-4, atol=1e-9
+        )
+        assert not np.allclose(f.displacement, l.displacement, atol=1e-7)  # it does correct
     p.fidelity = "most"
     with pytest.raises(ValueError, match="fidelity must be one of"):
         p.predict(scenes[0])
@@ -58,22 +61,23 @@ def test_auto_fidelity_answers_on_the_subgraph_the_load_needs(ds, make):
 
 def test_auto_fidelity_cuts_the_graph_where_no_input_is_lost(arm):
     """On the arm a disk's subgraph is a small part of the mesh, and the network (here without a
-    prior: zero outside the region) still answers exactly as on the whole mesh inside it."""
+    prior: zero outside the region) still answers exactly as on the whole mesh inside it.
+    """
+    import warnings
+
     import torch
 
     from stmpl import loads, tissue
+    from stmpl.predictor import ImpossibleAnswer
     from stmpl.scene import Scene
 
-    import warnings
-
-    from stmpl.predictor import ImpossibleAnswer
-
-    warnings.simplefilter("ignore", ImpossibleAnswer)     # an untrained net: any answer will do
+    warnings.simplefilter("ignore", ImpossibleAnswer)  # an untrained net: any answer will do
     torch.manual_seed(0)
     p = predictor.create("gnn", arm, {"latent": 8, "steps": 2})
     torch.nn.init.normal_(p.model.net.decoder[-1].weight, std=0.5)
-    s = Scene.from_load(arm, tissue.constant(arm, 0.005),
-                        loads.disk(arm, uv=(0.3, 0.5), radius=0.02, total=0.2))
+    s = Scene.from_load(
+        arm, tissue.constant(arm, 0.005), loads.disk(arm, uv=(0.3, 0.5), radius=0.02, total=0.2)
+    )
     full = p.predict(s).displacement
     p.fidelity = "auto"
     auto = p.predict(s).displacement
@@ -85,10 +89,11 @@ def test_auto_fidelity_cuts_the_graph_where_no_input_is_lost(arm):
 
 def test_encoded_edges_are_kept_until_the_weights_change(ds, make):
     """At inference the mesh's encoded edges are computed once; a change to the weights (an
-    optimiser step, a loaded checkpoint) makes them computed again, never stale."""
+    optimiser step, a loaded checkpoint) makes them computed again, never stale.
+    """
     import torch
 
-    from stmpl.evaluate import scenes_of
+    from stmpl.pipeline.evaluate import scenes_of
 
     p = make("gnn/prior", ds)
     s = scenes_of(ds, "test", limit=1)[0][0]

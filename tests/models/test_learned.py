@@ -4,21 +4,27 @@ import numpy as np
 import pytest
 
 from stmpl import predictor
-from stmpl.evaluate import scenes_of
+from stmpl.pipeline.evaluate import scenes_of
 from stmpl.scene import Scene
 
-TINY_MODELS = {"naive": {}, "linear": {}, "uv_unet": {"size": 64, "width": 4, "depth": 3},
-               "gnn": {"latent": 16, "steps": 2}}
+TINY_MODELS = {
+    "naive": {},
+    "linear": {},
+    "uv_unet": {"size": 64, "width": 4, "depth": 3},
+    "gnn": {"latent": 16, "steps": 2},
+}
 
 
 def test_relative_loss_is_the_relative_mee(ds):
     """``loss: relative`` is each sample's mean Euclidean error over its peak: a prediction 10 %
     too large everywhere scores 0.1 * mean |u| / max |u|; ``pooled`` sums both over the batch
-    first; an unknown loss is refused."""
+    first; an unknown loss is refused.
+    """
     import torch
 
-    p = predictor.create("gnn", ds.part, {**TINY_MODELS["gnn"], "per_newton": True,
-                                          "loss": "relative"})
+    p = predictor.create(
+        "gnn", ds.part, {**TINY_MODELS["gnn"], "per_newton": True, "loss": "relative"}
+    )
     scenes, truth = scenes_of(ds, "test", limit=2)
     t = torch.tensor(np.stack([s.thickness for s in scenes]), dtype=torch.float32)
     f = torch.tensor(np.stack([s.force for s in scenes]), dtype=torch.float32)
@@ -48,7 +54,8 @@ def test_relative_loss_is_the_relative_mee(ds):
 @pytest.mark.parametrize("name", ["uv_unet/per_newton", "gnn/per_newton"])
 def test_per_newton_models_scale_with_the_total_force(name, ds, make):
     """A per-newton model predicts u / F_total from the force pattern and the total: an unloaded
-    scene gets exactly zero, and its target is the displacement per newton."""
+    scene gets exactly zero, and its target is the displacement per newton.
+    """
     import torch
 
     p = make(name, ds)
@@ -58,27 +65,35 @@ def test_per_newton_models_scale_with_the_total_force(name, ds, make):
     assert np.all(zero.displacement == 0.0)
     f = torch.tensor(s.force[None], dtype=torch.float32)
     u = torch.tensor(truth[:1], dtype=torch.float32)
-    np.testing.assert_allclose(p.normalised(u, f).numpy() * s.force.sum() * p.scale,
-                               truth[:1], rtol=1e-4, atol=1e-9)
+    np.testing.assert_allclose(
+        p.normalised(u, f).numpy() * s.force.sum() * p.scale, truth[:1], rtol=1e-4, atol=1e-9
+    )
     raw = p.raw(torch.tensor(s.thickness[None], dtype=torch.float32), f)
-    np.testing.assert_allclose(p.forward(torch.tensor(s.thickness[None], dtype=torch.float32), f)
-                               .detach().numpy(), raw.detach().numpy() * s.force.sum(), rtol=1e-5)
+    np.testing.assert_allclose(
+        p.forward(torch.tensor(s.thickness[None], dtype=torch.float32), f).detach().numpy(),
+        raw.detach().numpy() * s.force.sum(),
+        rtol=1e-5,
+    )
 
 
 def test_a_model_of_the_left_arm_answers_the_right_in_the_mirror(anny_body):
     """The zoo's plain-arm GNN on anny's right arm: the mirror image of its answer on the left
-    (exactly), and within 1 % of the FEM solved on the right arm itself."""
+    (exactly), and within 1 % of the FEM solved on the right arm itself.
+    """
     import warnings
 
     from fem.predictor import FEMPredictor
-    from stmpl import loads, tissue, zoo
+    from stmpl import loads, tissue
     from stmpl.metrics import sample_metrics
+    from stmpl.pipeline import zoo
     from stmpl.scene import Scene
 
     p = zoo.read("gnn_arm")
     left, right = anny_body.part("left_arm"), anny_body.part("right_arm")
-    s_r, s_l = (Scene(a, tissue.constant(a, 7.5e-3), loads.disk(a, 300, 0.02, 0.2).force)
-                for a in (right, left))
+    s_r, s_l = (
+        Scene(a, tissue.constant(a, 7.5e-3), loads.disk(a, 300, 0.02, 0.2).force)
+        for a in (right, left)
+    )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         d_r, d_l = p.predict(s_r), p.predict(s_l)

@@ -1,5 +1,6 @@
 """Precomputed linear FEM: the sparse operator applies the FEM's compliance, interpolates in
-thickness, refuses what it does not cover and travels in its checkpoint."""
+thickness, refuses what it does not cover and travels in its checkpoint.
+"""
 
 import numpy as np
 import pytest
@@ -7,14 +8,14 @@ import torch
 
 from models.linear import ComplianceOperator
 from stmpl import predictor
-from stmpl.evaluate import scenes_of
 from stmpl.metrics import sample_metrics
+from stmpl.pipeline.evaluate import scenes_of
 from stmpl.scene import Scene
 
 
 @pytest.fixture(scope="module")
 def ds(tiny_dataset):
-    from stmpl.dataset import Dataset
+    from stmpl.data.dataset import Dataset
 
     return Dataset(tiny_dataset)
 
@@ -40,36 +41,43 @@ def test_operator_is_the_dense_product_interpolated_in_thickness(rng):
     t = np.stack([np.full(6, 0.005), np.full(6, 0.0075)])
     u = op(torch.tensor(t, dtype=torch.float32), torch.tensor(f, dtype=torch.float32)).numpy()
     np.testing.assert_allclose(u[0], np.einsum("ijc,j->ic", G[0], f[0]), rtol=1e-5, atol=1e-5)
-    np.testing.assert_allclose(u[1], np.einsum("ijc,j->ic", (G[0] + G[1]) / 2, f[1]),
-                               rtol=1e-5, atol=1e-5)
+    np.testing.assert_allclose(
+        u[1], np.einsum("ijc,j->ic", (G[0] + G[1]) / 2, f[1]), rtol=1e-5, atol=1e-5
+    )
     # per-vertex thickness: each loaded vertex's column at its own thickness
     tv = np.where(np.arange(6) < 3, 0.005, 0.01)
     Gm = np.where((np.arange(6) < 3)[None, :, None], G[0], G[1])
-    u = op(torch.tensor(tv[None], dtype=torch.float32),
-           torch.tensor(f[:1], dtype=torch.float32)).numpy()[0]
+    u = op(
+        torch.tensor(tv[None], dtype=torch.float32), torch.tensor(f[:1], dtype=torch.float32)
+    ).numpy()[0]
     np.testing.assert_allclose(u, np.einsum("ijc,j->ic", Gm, f[0]), rtol=1e-5, atol=1e-5)
     with pytest.raises(ValueError, match=r"outside the operator's levels 5..10 mm"):
         op(torch.full((1, 6), 0.012), torch.ones(1, 6))
     # a new operator of the same shape replaces the cached sparse matrices
     op.set(op.levels, op.index, 2 * op.values)
-    u2 = op(torch.tensor(tv[None], dtype=torch.float32),
-            torch.tensor(f[:1], dtype=torch.float32)).numpy()[0]
+    u2 = op(
+        torch.tensor(tv[None], dtype=torch.float32), torch.tensor(f[:1], dtype=torch.float32)
+    ).numpy()[0]
     np.testing.assert_allclose(u2, 2 * u, rtol=1e-5, atol=1e-5)
 
 
 def test_linear_matches_light_fem_loads(ds, lin):
     """At the lightest level (0.05 N) the tissue is still linear: the operator (skin refined
-    everywhere) is within a few per cent of the ground truth (refined near the load)."""
+    everywhere) is within a few per cent of the ground truth (refined near the load).
+    """
     scenes, truth = scenes_of(ds, "train")
     light = [k for k, s in enumerate(scenes) if np.isclose(s.meta["total"], 0.05)]
     assert len(light) >= 8
     pred = lin.predict([scenes[k] for k in light])
     rel = [sample_metrics(truth[k], d.displacement)["rel_mee"] for d, k in zip(pred, light)]
-    assert np.mean(rel) < 5.0                       # per cent
+    assert np.mean(rel) < 5.0  # per cent
     # and it overshoots as the Neo-Hookean layer stiffens under heavier loads
     heavy = [k for k, s in enumerate(scenes) if np.isclose(s.meta["total"], 0.2)]
-    pk = [np.linalg.norm(lin.predict(scenes[k]).displacement, axis=1).max()
-          / np.linalg.norm(truth[k], axis=1).max() for k in heavy]
+    pk = [
+        np.linalg.norm(lin.predict(scenes[k]).displacement, axis=1).max()
+        / np.linalg.norm(truth[k], axis=1).max()
+        for k in heavy
+    ]
     assert np.median(pk) > 1.0
 
 
@@ -98,7 +106,8 @@ def test_options_are_checked(ds):
 
 def test_on_demand_operator_agrees_with_the_stored_one(ds, lin, tmp_path, monkeypatch):
     """``operator: on_demand`` solves only the columns the samples load, on patches, and gives
-    the stored operator's answers; its checkpoint carries no operator and rebuilds it."""
+    the stored operator's answers; its checkpoint carries no operator and rebuilds it.
+    """
     monkeypatch.setenv("STMPL_CACHE_DIR", str(tmp_path))
     lazy = predictor.create("linear", ds.part, {"operator": "on_demand"})
     lazy.fit(ds, progress=False)
@@ -111,8 +120,8 @@ def test_on_demand_operator_agrees_with_the_stored_one(ds, lin, tmp_path, monkey
     path = lazy.save(tmp_path / "lazy.safetensors")
     assert path.stat().st_size < lin.save(tmp_path / "lin.safetensors").stat().st_size
     back = predictor.read(path)
-    assert back.model.on_demand and back.model.store.computed == 0      # nothing solved yet
-    for a, b in zip(lazy.predict(scenes), back.predict(scenes)):          # from the disk cache
+    assert back.model.on_demand and back.model.store.computed == 0  # nothing solved yet
+    for a, b in zip(lazy.predict(scenes), back.predict(scenes)):  # from the disk cache
         np.testing.assert_allclose(a.displacement, b.displacement, rtol=1e-6, atol=1e-12)
     with pytest.raises(ValueError, match="operator must be one of"):
         predictor.create("linear", ds.part, {"operator": "lazy"})
@@ -120,7 +129,8 @@ def test_on_demand_operator_agrees_with_the_stored_one(ds, lin, tmp_path, monkey
 
 def test_on_demand_takes_a_new_thickness_as_a_new_level(ds, tmp_path, monkeypatch):
     """On demand, a thickness beyond the levels is solved there (a new level), not refused,
-    and agrees with an operator computed at that thickness from the start."""
+    and agrees with an operator computed at that thickness from the start.
+    """
     monkeypatch.setenv("STMPL_CACHE_DIR", str(tmp_path))
     lazy = predictor.create("linear", ds.part, {"operator": "on_demand"})
     lazy.fit(ds, progress=False)
@@ -133,4 +143,4 @@ def test_on_demand_takes_a_new_thickness_as_a_new_level(ds, tmp_path, monkeypatc
     G = ColumnStore(ds.part, ds.card["config"], [0.012]).columns(0, [40])[:, 0]
     np.testing.assert_allclose(u, 0.1 * G, rtol=1e-5, atol=1e-12)
     thicker = lazy.predict(Scene(ds.part, np.full(n, 0.011), s.force)).displacement
-    assert 0 < np.abs(thicker).max()                     # between 10 and 12 mm: interpolated
+    assert 0 < np.abs(thicker).max()  # between 10 and 12 mm: interpolated

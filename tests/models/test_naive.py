@@ -2,8 +2,7 @@
 
 import numpy as np
 
-from stmpl.evaluate import scenes_of
-
+from stmpl.pipeline.evaluate import scenes_of
 
 
 def test_naive_is_the_papers_formula(ds, make):
@@ -14,5 +13,6 @@ def test_naive_is_the_papers_formula(ds, make):
         p.model.alpha.copy_(torch.tensor([1.0, -2.0, 0.5]))
     s = scenes_of(ds, "train", limit=1)[0][0]
     u = p.predict(s).displacement
-    np.testing.assert_allclose(u, (s.thickness * s.force)[:, None] * [1.0, -2.0, 0.5],
-                               rtol=1e-5, atol=1e-12)
+    np.testing.assert_allclose(
+        u, (s.thickness * s.force)[:, None] * [1.0, -2.0, 0.5], rtol=1e-5, atol=1e-12
+    )

@@ -4,17 +4,22 @@ import numpy as np
 import pytest
 
 from stmpl import predictor
-from stmpl.evaluate import scenes_of
+from stmpl.pipeline.evaluate import scenes_of
 
-TINY_MODELS = {"naive": {}, "linear": {}, "uv_unet": {"size": 64, "width": 4, "depth": 3},
-               "gnn": {"latent": 16, "steps": 2}}
+TINY_MODELS = {
+    "naive": {},
+    "linear": {},
+    "uv_unet": {"size": 64, "width": 4, "depth": 3},
+    "gnn": {"latent": 16, "steps": 2},
+}
 
 
 @pytest.mark.parametrize("kind", ["gnn", "uv_unet"])
 def test_linear_prior_starts_at_the_linear_fem(kind, ds, tmp_path, make):
     """``prior: linear``: untrained, the network's output is silent and the predictor answers
     exactly the linear FEM (for the UNet without a seam gap); its checkpoint carries the
-    operator (it loads with nothing else), and an unknown prior is refused."""
+    operator (it loads with nothing else), and an unknown prior is refused.
+    """
     p = make(f"{kind}/prior", ds)
     lin = make("linear", ds)
     scenes, _ = scenes_of(ds, "test", limit=3)
@@ -29,9 +34,13 @@ def test_linear_prior_starts_at_the_linear_fem(kind, ds, tmp_path, make):
 
         t = torch.tensor(np.stack([s.thickness for s in scenes]), dtype=torch.float32)
         f = torch.tensor(np.stack([s.force for s in scenes]), dtype=torch.float32)
-        c = p.corner_displacement(t, f)                    # (B, corners, 3)
-        np.testing.assert_allclose(c, np.stack([d.displacement for d in lin.predict(scenes)])
-                                   [:, ds.part.uv_vertex], rtol=1e-5, atol=1e-9)
+        c = p.corner_displacement(t, f)  # (B, corners, 3)
+        np.testing.assert_allclose(
+            c,
+            np.stack([d.displacement for d in lin.predict(scenes)])[:, ds.part.uv_vertex],
+            rtol=1e-5,
+            atol=1e-9,
+        )
     with pytest.raises(ValueError, match="prior must be one of"):
         predictor.create(kind, ds.part, {**TINY_MODELS[kind], "prior": "fem"})
 
@@ -40,10 +49,12 @@ def test_linear_prior_starts_at_the_linear_fem(kind, ds, tmp_path, make):
 def test_on_demand_prior_travels_as_its_set_up(kind, ds, tmp_path, make, monkeypatch):
     """``operator: on_demand``: the prior is the same linear FEM, solved for the columns the
     scenes load; the checkpoint holds only its set-up and levels, and a loaded model rebuilds it
-    (from the disk cache) to the same answers."""
+    (from the disk cache) to the same answers.
+    """
     monkeypatch.setenv("STMPL_CACHE_DIR", str(tmp_path))
-    p = predictor.create(kind, ds.part, {**TINY_MODELS[kind], "prior": "linear",
-                                         "operator": "on_demand"})
+    p = predictor.create(
+        kind, ds.part, {**TINY_MODELS[kind], "prior": "linear", "operator": "on_demand"}
+    )
     p.fit(ds, progress=False)
     lin = make("linear", ds)
     scenes, _ = scenes_of(ds, "test", limit=3)

@@ -10,7 +10,7 @@ normal until the palm presses ``depth`` into the skin (``whole``) or clears it (
 and each finger of the grip is curled, by bisection, until it presses ``depth`` into the skin.
 Grips: ``whole`` (palm and five fingers), ``tripod`` (thumb and two fingers), ``pinch`` (thumb
 and index); fingers outside the grip close into a fist. The result is a mesh in the limb's body
-coordinates (:class:`Grasp`), pressed through :mod:`stmpl.contact` like any object.
+coordinates (:class:`Grasp`), pressed through :mod:`stmpl.contact.pressing` like any object.
 
 Depths are measured against the limb's skin by a signed distance to a dense sampling of its
 surface (a point's distance to the nearest sample along that sample's outward normal).
@@ -21,13 +21,19 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial import cKDTree
 
-from stmpl.body.part import BodyPart
-from stmpl.contact import Pressing
+from stmpl.body.anny_body import AnnyBody
+from stmpl.contact.objects import surface_frame
+from stmpl.contact.pressing import Pressing, rotation_matrix
+from stmpl.part import BodyPart
 
 FINGERS = {"thumb": 1, "index": 2, "middle": 3, "ring": 4, "little": 5}
-GRIPS = {"whole": ("thumb", "index", "middle", "ring", "little"),
-         "tripod": ("thumb", "index", "middle"), "pinch": ("thumb", "index")}
+GRIPS = {
+    "whole": ("thumb", "index", "middle", "ring", "little"),
+    "tripod": ("thumb", "index", "middle"),
+    "pinch": ("thumb", "index"),
+}
 JOINT_ANGLE = np.deg2rad(85.0)
 """rad: how far each finger joint flexes at curl 1 (three joints: a closed fist)."""
 CURL_RANGE = (-0.6, 1.1)
@@ -40,12 +46,11 @@ PALM_CLEARANCE = 0.015
 
 class Hand:
     """anny's right (``side="R"``) or left hand, of a body with the given ``phenotype`` (hand
-    size follows height, gender, proportions, ...), posed by one curl per finger."""
+    size follows height, gender, proportions, ...), posed by one curl per finger.
+    """
 
     def __init__(self, phenotype: dict | None = None, side: str = "R"):
-        import torch
-
-        from stmpl.body.anny_body import AnnyBody
+        import torch  # deferred: about a second to import; the core's types do not need it
 
         if side not in ("R", "L"):
             raise ValueError(f"side must be 'R' or 'L', got {side!r}")
@@ -58,18 +63,24 @@ class Hand:
         self._dtype = out["vertices"].dtype
         w, bi = m.vertex_bone_weights.numpy(), m.vertex_bone_indices.numpy()
         dominant = np.array(self._labels)[bi[np.arange(len(bi)), w.argmax(axis=1)]]
-        hand_bones = [b for b in self._labels if b.endswith("." + side) and (
-            b.startswith(("finger", "metacarpal")) or b.startswith("wrist"))]
+        hand_bones = [
+            b
+            for b in self._labels
+            if b.endswith("." + side)
+            and (b.startswith(("finger", "metacarpal")) or b.startswith("wrist"))
+        ]
         keep = np.isin(dominant, hand_bones)
         faces = m.faces.numpy().astype(np.int64)
         faces = faces[keep[faces].all(1)]
-        self.vertex_ids = np.unique(faces)                        # body vertex indices
+        self.vertex_ids = np.unique(faces)  # body vertex indices
         remap = -np.ones(len(keep), dtype=np.int64)
         remap[self.vertex_ids] = np.arange(len(self.vertex_ids))
         self.faces = remap[faces]
         d = dominant[self.vertex_ids]
-        self.finger_of = {f: np.flatnonzero(np.char.startswith(d.astype(str), f"finger{k}-"))
-                          for f, k in FINGERS.items()}
+        self.finger_of = {
+            f: np.flatnonzero(np.char.startswith(d.astype(str), f"finger{k}-"))
+            for f, k in FINGERS.items()
+        }
         self.palm = np.flatnonzero(np.char.startswith(d.astype(str), "metacarpal"))
         self.rest = out["vertices"][0].numpy()[self.vertex_ids]
         poses = out["bone_poses"][0].numpy()
@@ -81,13 +92,17 @@ class Hand:
 
     def frame(self, vertices: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """``(centre (3,), R (3, 3))`` of the palm at rest: ``R``'s columns are the finger
-        direction, the palm normal (out of the palm) and their cross product."""
+        direction, the palm normal (out of the palm) and their cross product.
+        """
         # anny's metacarpal k carries finger k + 1 (the thumb hangs from the wrist)
-        c = np.mean([self._bone(f"finger{k}-1") for k in (2, 3, 4, 5)]
-                    + [self._bone(f"metacarpal{k}") for k in (1, 2, 3, 4)], axis=0)
+        c = np.mean(
+            [self._bone(f"finger{k}-1") for k in (2, 3, 4, 5)]
+            + [self._bone(f"metacarpal{k}") for k in (1, 2, 3, 4)],
+            axis=0,
+        )
         f = self._bone("finger3-1") - self._bone("metacarpal2")
         f /= np.linalg.norm(f)
-        across = self._bone("finger2-1") - self._bone("finger5-1")       # little -> index
+        across = self._bone("finger2-1") - self._bone("finger5-1")  # little -> index
         n = np.cross(across, f) if self.side == "R" else np.cross(f, across)
         n -= f * (n @ f)
         n /= np.linalg.norm(n)
@@ -106,10 +121,9 @@ class Hand:
 
     def vertices(self, curls: dict) -> np.ndarray:
         """``(V, 3)`` hand vertices (body coordinates, m) with each finger at its curl (0 as
-        at rest, 1 a closed fist); fingers not named stay at rest."""
-        import torch
-
-        from stmpl.contact import rotation_matrix
+        at rest, 1 a closed fist); fingers not named stay at rest.
+        """
+        import torch  # deferred: about a second to import; the core's types do not need it
 
         pose = {}
         for name, c in curls.items():
@@ -121,8 +135,9 @@ class Hand:
             M = np.eye(4)
             M[:3, :3] = rotation_matrix(self._axes[name], c * JOINT_ANGLE)
             for j in (1, 2, 3):
-                pose[f"finger{FINGERS[name]}-{j}.{self.side}"] = torch.tensor(
-                    M, dtype=self._dtype)[None]
+                pose[f"finger{FINGERS[name]}-{j}.{self.side}"] = torch.tensor(M, dtype=self._dtype)[
+                    None
+                ]
         with torch.no_grad():
             out = self.body.anny(pose_parameters=pose or None, phenotype_kwargs=self._phenotype)
         return out["vertices"][0].numpy()[self.vertex_ids]
@@ -132,7 +147,8 @@ class Hand:
 class Grasp:
     """A posed hand around a limb: ``vertices`` ``(V, 3)`` and ``faces`` in the limb's body
     coordinates, the ``curls`` found, the ``grip`` and where it holds; ``reached`` names the
-    fingers that press ``depth`` into the skin (a finger that could not reach is left out)."""
+    fingers that press ``depth`` into the skin (a finger that could not reach is left out).
+    """
 
     vertices: np.ndarray
     faces: np.ndarray
@@ -144,44 +160,51 @@ class Grasp:
     reached: tuple = field(default=())
 
     def mesh(self):
-        import trimesh
+        import trimesh  # deferred: object meshes and closest points only
 
         return trimesh.Trimesh(self.vertices, self.faces, process=False)
 
     def pressing(self, total: float, name: str = "hand") -> Pressing:
-        """The hand as a :class:`~stmpl.contact.Pressing` of ``total`` N (already posed)."""
+        """The hand, already posed, as a :class:`~stmpl.contact.pressing.Pressing` of ``total``
+        N.
+        """
         return Pressing(self.mesh(), np.eye(4), total, name)
 
 
-def palm_press(part: BodyPart, hand: Hand, uv=(0.5, 0.5), depth: float = 0.002,
-               spin: float = 0.0, total: float = 0.4, name: str = "right hand (palm)",
-               steps: int = 6) -> Pressing:
+def palm_press(
+    part: BodyPart,
+    hand: Hand,
+    uv=(0.5, 0.5),
+    depth: float = 0.002,
+    spin: float = 0.0,
+    total: float = 0.4,
+    name: str = "right hand (palm)",
+    steps: int = 6,
+) -> Pressing:
     """The open hand laid on the skin at chart point ``uv``, palm towards it, fingers stretched
-    (:data:`OPEN_CURL`) along the surface's ``x`` turned by ``spin`` rad (:func:`stmpl.objects.surface_frame`), and
-    lowered along the normal until its deepest point lies ``depth`` m inside the skin: a
-    :class:`~stmpl.contact.Pressing` of ``total`` N for a part that is not a limb (a belly),
-    where :func:`grasp` has nothing to close around."""
-    import trimesh
-
-    from stmpl.objects import surface_frame
+    (:data:`OPEN_CURL`) along the surface's ``x`` turned by ``spin`` rad
+    (:func:`stmpl.contact.objects.surface_frame`), and lowered along the normal until its deepest
+    point lies ``depth`` m inside the skin: a :class:`~stmpl.contact.pressing.Pressing` of ``total``
+    N for a part that is not a limb (a belly), where :func:`grasp` has nothing to close around.
+    """
+    import trimesh  # deferred: object meshes and closest points only
 
     if not (np.isfinite(depth) and 0 < depth < 0.01):
         raise ValueError(f"depth must lie in (0, 10) mm, got {depth * 1e3:g} mm")
     x = hand.vertices({f: OPEN_CURL for f in FINGERS})
     c, R = hand.frame()
-    f, n = R[:, 0], R[:, 1]                          # finger direction, out of the palm
-    z = -n                                           # the palm faces the object's -z
-    mesh = trimesh.Trimesh((x - c) @ np.stack([f, np.cross(z, f), z], 1), hand.faces,
-                           process=False)
+    f, n = R[:, 0], R[:, 1]  # finger direction, out of the palm
+    z = -n  # the palm faces the object's -z
+    mesh = trimesh.Trimesh((x - c) @ np.stack([f, np.cross(z, f), z], 1), hand.faces, process=False)
     pose = surface_frame(part, uv=uv, spin=spin)
     normal = pose[:3, 2].copy()
-    pose[:3, 3] -= float(mesh.vertices[:, 2].min()) * normal     # palm-most point on the skin
+    pose[:3, 3] -= float(mesh.vertices[:, 2].min()) * normal  # palm-most point on the skin
     skin = SkinDistance(part)
-    for _ in range(steps):            # a rigid shift along the normal: the deepest point to depth
+    for _ in range(steps):  # a rigid shift along the normal: the deepest point to depth
         s, over = skin.over(mesh.vertices @ pose[:3, :3].T + pose[:3, 3])
         if not over.any():
             raise ValueError(f"the hand at {tuple(uv)} lies past the rim of {part.name!r}")
-        gap = float(s[over].min()) + depth          # points past the part's rim do not count
+        gap = float(s[over].min()) + depth  # points past the part's rim do not count
         pose[:3, 3] -= gap * normal
         if abs(gap) < 0.02 * depth:
             break
@@ -190,15 +213,15 @@ def palm_press(part: BodyPart, hand: Hand, uv=(0.5, 0.5), depth: float = 0.002,
 
 class SkinDistance:
     """Signed distance (m, positive outside) to a part's skin, from a dense sampling of its
-    surface with normals (about ``spacing`` m apart)."""
+    surface with normals (about ``spacing`` m apart).
+    """
 
     def __init__(self, part: BodyPart, spacing: float = 0.0015):
-        from scipy.spatial import cKDTree
 
         v, f = part.vertices, part.faces
         tri = v[f]
         area = 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-        counts = np.maximum(1, np.ceil(area / spacing ** 2)).astype(int)
+        counts = np.maximum(1, np.ceil(area / spacing**2)).astype(int)
         rng = np.random.default_rng(0)
         face = np.repeat(np.arange(len(f)), counts)
         r1, r2 = rng.random(len(face)), rng.random(len(face))
@@ -215,22 +238,24 @@ class SkinDistance:
 
     def over(self, x: np.ndarray, reach: float = 0.003) -> tuple[np.ndarray, np.ndarray]:
         """``(signed distance (P,), over (P,) bool)``: whether each point lies over (or under)
-        the skin, within ``reach`` m of its nearest sample sideways, not past the part's rim."""
+        the skin, within ``reach`` m of its nearest sample sideways, not past the part's rim.
+        """
         d, i = self.tree.query(x)
         s = np.einsum("ij,ij->i", x - self.points[i], self.normals[i])
-        return s, np.sqrt(np.maximum(d ** 2 - s ** 2, 0.0)) < reach
+        return s, np.sqrt(np.maximum(d**2 - s**2, 0.0)) < reach
 
 
 def limb_point(part: BodyPart, along: float, around: float) -> tuple:
     """``(skin point, outward direction, limb axis direction)`` at fraction ``along`` the limb
-    and angle ``around`` (rad, from the body's front, right-handed about the axis)."""
+    and angle ``around`` (rad, from the body's front, right-handed about the axis).
+    """
     if part.axis is None:
         raise ValueError(f"part {part.name!r} has no limb axis: a hand grasps a limb")
     if not np.isfinite(around):
         raise ValueError(f"around must be finite, got {around}")
     centre, z, s0 = part.limb_frame(along)
     s = part.axial
-    front = np.array([0.0, -1.0, 0.0])                          # anny faces -y
+    front = np.array([0.0, -1.0, 0.0])  # anny faces -y
     ref = front - z * (front @ z)
     ref /= np.linalg.norm(ref)
     d = np.cos(around) * ref + np.sin(around) * np.cross(z, ref)
@@ -243,10 +268,18 @@ def limb_point(part: BodyPart, along: float, around: float) -> tuple:
     return centre + r * d, d, z
 
 
-def grasp(part: BodyPart, hand: Hand, along: float = 0.5, around: float = 0.0,
-          grip: str = "whole", depth: float = 0.002, steps: int = 8) -> Grasp:
+def grasp(
+    part: BodyPart,
+    hand: Hand,
+    along: float = 0.5,
+    around: float = 0.0,
+    grip: str = "whole",
+    depth: float = 0.002,
+    steps: int = 8,
+) -> Grasp:
     """Set ``hand`` around the limb ``part`` and curl the grip's fingers until each presses
-    ``depth`` m into the skin (see the module docstring)."""
+    ``depth`` m into the skin (see the module docstring).
+    """
     if grip not in GRIPS:
         raise ValueError(f"grip must be one of {sorted(GRIPS)}, got {grip!r}")
     if not (np.isfinite(depth) and 0 < depth < 0.01):
@@ -254,8 +287,8 @@ def grasp(part: BodyPart, hand: Hand, along: float = 0.5, around: float = 0.0,
     skin = SkinDistance(part)
     point, d, z = limb_point(part, along, around)
     c, R = hand.frame()
-    t = np.cross(z, d)                                          # fingers wrap around the limb
-    target = np.stack([t, -d, np.cross(t, -d)], 1)              # finger dir, palm normal, ...
+    t = np.cross(z, d)  # fingers wrap around the limb
+    target = np.stack([t, -d, np.cross(t, -d)], 1)  # finger dir, palm normal, ...
     rot = target @ R.T
     active = GRIPS[grip]
     closed = {f: (0.0 if f in active else 1.0) for f in FINGERS}
@@ -292,7 +325,7 @@ def grasp(part: BodyPart, hand: Hand, along: float = 0.5, around: float = 0.0,
             mid = {f: 0.5 * (lo[f] + hi[f]) for f in active}
             x = placed({**curls, **mid})
             for f in active:
-                if depth_of(x, f) < depth:                     # not deep enough: curl more
+                if depth_of(x, f) < depth:  # not deep enough: curl more
                     lo[f] = mid[f]
                 else:
                     hi[f] = mid[f]

@@ -23,8 +23,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from stmpl.body.part import BodyPart
 from stmpl.loads import Load, _check_force, _check_total
+from stmpl.part import BodyPart
 
 SPLITS = ("equal", "area", "depth")
 MESH_FILES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
@@ -32,7 +32,8 @@ MESH_FILES = (".obj", ".ply", ".stl", ".glb", ".gltf", ".off")
 
 def pose_matrix(position=(0.0, 0.0, 0.0), rotation=None) -> np.ndarray:
     """A ``(4, 4)`` pose from a ``position`` (m) and a ``rotation``: a ``(3, 3)`` matrix or a
-    rotation vector ``(3,)`` (axis times angle, rad); ``None`` for none."""
+    rotation vector ``(3,)`` (axis times angle, rad); ``None`` for none.
+    """
     t = np.asarray(position, dtype=float)
     if t.shape != (3,) or not np.all(np.isfinite(t)):
         raise ValueError(f"position must be 3 finite numbers (m), got {position!r}")
@@ -48,8 +49,9 @@ def pose_matrix(position=(0.0, 0.0, 0.0), rotation=None) -> np.ndarray:
         elif r.shape == (3, 3):
             R = r
         else:
-            raise ValueError(f"rotation must be a (3, 3) matrix or a rotation vector (3,), got "
-                             f"shape {r.shape}")
+            raise ValueError(
+                f"rotation must be a (3, 3) matrix or a rotation vector (3,), got shape {r.shape}"
+            )
     out = np.eye(4)
     out[:3, :3], out[:3, 3] = R, t
     return check_pose(out)
@@ -64,23 +66,28 @@ def rotation_matrix(axis, angle: float) -> np.ndarray:
 
 def check_pose(pose) -> np.ndarray:
     """``pose`` as a ``(4, 4)`` rigid transform (rotation and translation, last row 0 0 0 1);
-    ``ValueError`` naming what is wrong."""
+    ``ValueError`` naming what is wrong.
+    """
     P = np.asarray(pose, dtype=float)
     if P.shape != (4, 4):
         raise ValueError(f"a pose is a (4, 4) matrix, got shape {P.shape}")
     if not np.all(np.isfinite(P)):
         raise ValueError("the pose is not finite (NaN or inf)")
     R = P[:3, :3]
-    if not np.allclose(P[3], [0, 0, 0, 1]) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6) \
-            or np.linalg.det(R) < 0:
+    if (
+        not np.allclose(P[3], [0, 0, 0, 1])
+        or not np.allclose(R @ R.T, np.eye(3), atol=1e-6)
+        or np.linalg.det(R) < 0
+    ):
         raise ValueError("the pose is not a rigid transform (a rotation and a translation)")
     return P
 
 
 def read_mesh(path):
     """A ``trimesh.Trimesh`` from an OBJ, PLY, STL, GLB/glTF or OFF file (a scene's meshes are
-    joined); lengths as stored, which stmpl takes for metres."""
-    import trimesh
+    joined); lengths as stored, which stmpl takes for metres.
+    """
+    import trimesh  # deferred: object meshes and closest points only
 
     path = pathlib.Path(path)
     if not path.is_file():
@@ -99,7 +106,8 @@ def read_mesh(path):
 @dataclass(frozen=True, eq=False)
 class Pressing:
     """An object pressed on a part: ``mesh`` (a ``trimesh.Trimesh``, m, its own frame),
-    ``pose`` ``(4, 4)`` into body coordinates, ``total`` force (N) and a ``name``."""
+    ``pose`` ``(4, 4)`` into body coordinates, ``total`` force (N) and a ``name``.
+    """
 
     mesh: object
     pose: np.ndarray = field(default_factory=lambda: np.eye(4))
@@ -107,15 +115,16 @@ class Pressing:
     name: str = "object"
 
     def __post_init__(self) -> None:
-        import trimesh
+        import trimesh  # deferred: object meshes and closest points only
 
         if not isinstance(self.mesh, trimesh.Trimesh):
-            raise TypeError(f"object {self.name!r}: mesh must be a trimesh.Trimesh, got "
-                            f"{type(self.mesh).__name__}")
+            raise TypeError(
+                f"object {self.name!r}: mesh must be a trimesh.Trimesh, got "
+                f"{type(self.mesh).__name__}"
+            )
         m = self.mesh
         if len(m.faces) == 0 or not np.all(np.isfinite(m.vertices)):
-            raise ValueError(f"object {self.name!r}: the mesh has no faces or non-finite "
-                             "vertices")
+            raise ValueError(f"object {self.name!r}: the mesh has no faces or non-finite vertices")
         if not m.area > 0:
             raise ValueError(f"object {self.name!r}: the mesh is degenerate (no surface area)")
         object.__setattr__(self, "pose", check_pose(self.pose))
@@ -131,7 +140,8 @@ class Contact:
     """What :func:`contact` found. ``touched[k]``: vertex indices object ``k`` touches;
     ``penetration`` ``(N,)`` m, how deep each vertex lies inside an object (0 outside);
     ``force`` ``(N,)`` N per vertex along the inward normal; ``area`` m^2 of the touched
-    vertices; ``open_objects``: names of objects whose mesh is not watertight."""
+    vertices; ``open_objects``: names of objects whose mesh is not watertight.
+    """
 
     part: BodyPart
     objects: tuple
@@ -158,61 +168,85 @@ class Contact:
         return np.unique(np.concatenate(self.touched))
 
     def summary(self) -> str:
-        names = "; ".join(f"{o.name} {o.total:g} N on {len(t)} vertices" for o, t in
-                          zip(self.objects, self.touched))
+        names = "; ".join(
+            f"{o.name} {o.total:g} N on {len(t)} vertices"
+            for o, t in zip(self.objects, self.touched)
+        )
         total = f" ({self.total:g} N in all)" if len(self.objects) > 1 else ""
-        return (f"contact: {names}{total}; {self.area * 1e4:.2f} cm^2, mean pressure "
-                f"{self.pressure / 1e3:.2f} kPa, reaching {1e3 * self.penetration.max():.2f} mm "
-                "into the skin at rest")
+        return (
+            f"contact: {names}{total}; {self.area * 1e4:.2f} cm^2, mean pressure "
+            f"{self.pressure / 1e3:.2f} kPa, reaching {1e3 * self.penetration.max():.2f} mm "
+            "into the skin at rest"
+        )
 
     def load(self) -> Load:
         """The :class:`~stmpl.loads.Load` of this contact (kind ``contact``), for a scene."""
-        params = {"split": self.split, "tolerance": self.tolerance,
-                  "objects": [{"name": o.name, "total": o.total, "vertices": int(len(t)),
-                               "pose": o.pose.tolist()} for o, t in
-                              zip(self.objects, self.touched)]}
-        return Load("contact", params, self.vertices, self.total, self.force.copy(), self.area,
-                    part_id=self.part.fingerprint, source=self)
+        params = {
+            "split": self.split,
+            "tolerance": self.tolerance,
+            "objects": [
+                {"name": o.name, "total": o.total, "vertices": int(len(t)), "pose": o.pose.tolist()}
+                for o, t in zip(self.objects, self.touched)
+            ],
+        }
+        return Load(
+            "contact",
+            params,
+            self.vertices,
+            self.total,
+            self.force.copy(),
+            self.area,
+            part_id=self.part.fingerprint,
+            source=self,
+        )
 
 
 def winding_number(mesh, points: np.ndarray, chunk: int = 2_000_000) -> np.ndarray:
     """``(P,)`` generalized winding number of a triangle mesh at ``points`` ``(P, 3)``: the sum
     of the signed solid angles of its triangles over ``4 pi`` (1 inside a closed outward-facing
-    mesh, 0 outside)."""
-    tri = np.asarray(mesh.triangles)                                  # (M, 3, 3)
+    mesh, 0 outside).
+    """
+    tri = np.asarray(mesh.triangles)  # (M, 3, 3)
     out = np.zeros(len(points))
     step = max(1, chunk // max(len(tri), 1))
     for s in range(0, len(points), step):
-        d = tri[None] - points[s:s + step, None, None]                # (p, M, 3, 3)
+        d = tri[None] - points[s : s + step, None, None]  # (p, M, 3, 3)
         a, b, c = d[:, :, 0], d[:, :, 1], d[:, :, 2]
         la, lb, lc = (np.linalg.norm(x, axis=-1) for x in (a, b, c))
         det = np.einsum("pmi,pmi->pm", a, np.cross(b, c))
-        den = (la * lb * lc + np.einsum("pmi,pmi->pm", a, b) * lc
-               + np.einsum("pmi,pmi->pm", b, c) * la + np.einsum("pmi,pmi->pm", c, a) * lb)
-        out[s:s + step] = 2 * np.arctan2(det, den).sum(1) / (4 * np.pi)
+        den = (
+            la * lb * lc
+            + np.einsum("pmi,pmi->pm", a, b) * lc
+            + np.einsum("pmi,pmi->pm", b, c) * la
+            + np.einsum("pmi,pmi->pm", c, a) * lb
+        )
+        out[s : s + step] = 2 * np.arctan2(det, den).sum(1) / (4 * np.pi)
     return out
 
 
 def distance_to_surface(mesh, points: np.ndarray, chunk: int = 2_000_000) -> np.ndarray:
     """``(P,)`` distance (m) from each point to the mesh's surface (brute force over its
-    triangles, in chunks)."""
-    from trimesh.triangles import closest_point
+    triangles, in chunks).
+    """
+    from trimesh.triangles import closest_point  # deferred: object meshes and closest points only
 
     tri = np.asarray(mesh.triangles)
     out = np.empty(len(points))
     step = max(1, chunk // max(len(tri), 1))
     for s in range(0, len(points), step):
-        p = points[s:s + step]
+        p = points[s : s + step]
         q = closest_point(np.tile(tri, (len(p), 1, 1)), np.repeat(p, len(tri), 0))
-        out[s:s + step] = np.linalg.norm(q - np.repeat(p, len(tri), 0), axis=1).reshape(
-            len(p), len(tri)).min(1)
+        out[s : s + step] = (
+            np.linalg.norm(q - np.repeat(p, len(tri), 0), axis=1).reshape(len(p), len(tri)).min(1)
+        )
     return out
 
 
 def contact(part: BodyPart, objects, tolerance: float = 0.002, split: str = "equal") -> Contact:
     """The contact of ``objects`` (a :class:`Pressing` or several) with ``part``: touched
     vertices (inside an object or within ``tolerance`` m of its surface), penetration depths and
-    the per-vertex force (``split``: ``equal``, ``area`` or ``depth``)."""
+    the per-vertex force (``split``: ``equal``, ``area`` or ``depth``).
+    """
     objs = (objects,) if isinstance(objects, Pressing) else tuple(objects)
     if not objs:
         raise ValueError("contact needs at least one object")
@@ -232,26 +266,41 @@ def contact(part: BodyPart, objects, tolerance: float = 0.002, split: str = "equ
         mesh = o.posed()
         if not mesh.is_watertight:
             open_.append(o.name)
-        box = np.linalg.norm(np.maximum(0, np.maximum(mesh.bounds[0] - x, x - mesh.bounds[1])),
-                             axis=1)                  # 0 inside the object's bounding box
+        box = np.linalg.norm(
+            np.maximum(0, np.maximum(mesh.bounds[0] - x, x - mesh.bounds[1])), axis=1
+        )  # 0 inside the object's bounding box
         cand = np.flatnonzero(box <= tolerance)
         dist = distance_to_surface(mesh, x[cand])
         inside = winding_number(mesh, x[cand]) > 0.5
         hit = inside | (dist <= tolerance)
         if not hit.any():
-            near = np.argsort(box)[:64]               # the closest lie among the box's closest
+            near = np.argsort(box)[:64]  # the closest lie among the box's closest
             gap = float(distance_to_surface(mesh, x[near]).min())
-            raise ValueError(f"no contact: object {o.name!r} is {gap * 1e3:.1f} mm from the "
-                             f"skin of {part.name!r} at its closest (tolerance "
-                             f"{tolerance * 1e3:g} mm; move it or press deeper)")
+            raise ValueError(
+                f"no contact: object {o.name!r} is {gap * 1e3:.1f} mm from the "
+                f"skin of {part.name!r} at its closest (tolerance "
+                f"{tolerance * 1e3:g} mm; move it or press deeper)"
+            )
         idx = cand[hit]
         depth = np.where(inside, dist, 0.0)[hit]
         pen[idx] = np.maximum(pen[idx], depth)
-        w = {"equal": np.ones(len(idx)), "area": part.vertex_areas[idx],
-             "depth": depth + tolerance + 1e-12}[split]
+        w = {
+            "equal": np.ones(len(idx)),
+            "area": part.vertex_areas[idx],
+            "depth": depth + tolerance + 1e-12,
+        }[split]
         force[idx] += o.total * w / w.sum()
         touched.append(idx)
     _check_force(force)
     every = np.unique(np.concatenate(touched))
-    return Contact(part, objs, tuple(touched), pen, force, float(part.vertex_areas[every].sum()),
-                   split, float(tolerance), tuple(open_))
+    return Contact(
+        part,
+        objs,
+        tuple(touched),
+        pen,
+        force,
+        float(part.vertex_areas[every].sum()),
+        split,
+        float(tolerance),
+        tuple(open_),
+    )

@@ -10,21 +10,23 @@ import pathlib
 
 import numpy as np
 
-from stmpl.body.part import BodyPart
+from stmpl.part import BodyPart
+from stmpl.uv import uv_map
 
 
 def _matplotlib():
-    import matplotlib
+    import matplotlib  # deferred: pictures only
 
     matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # deferred: pictures only
 
     return plt
 
 
 def view_basis(part: BodyPart, focus: np.ndarray | None = None) -> np.ndarray:
     """``(3, 3)`` camera rows (right, up, towards the viewer): the part's long axis runs across,
-    the camera faces the outward normal at ``focus`` (vertex weights ``(N,)``) if given."""
+    the camera faces the outward normal at ``focus`` (vertex weights ``(N,)``) if given.
+    """
     x = part.vertices - part.vertices.mean(0)
     pcs = np.linalg.svd(x, full_matrices=False)[2]
     if focus is not None and np.asarray(focus).sum() > 0:
@@ -38,13 +40,21 @@ def view_basis(part: BodyPart, focus: np.ndarray | None = None) -> np.ndarray:
     return np.stack([right, np.cross(toward, right), toward])
 
 
-def draw_part(ax, part: BodyPart, values: np.ndarray, basis: np.ndarray, cmap="viridis",
-              vmin=None, vmax=None, vertices: np.ndarray | None = None):
+def draw_part(
+    ax,
+    part: BodyPart,
+    values: np.ndarray,
+    basis: np.ndarray,
+    cmap="viridis",
+    vmin=None,
+    vmax=None,
+    vertices: np.ndarray | None = None,
+):
     """Draw the part seen through ``basis`` coloured by per-vertex ``values`` ``(N,)``."""
-    from matplotlib.collections import PolyCollection
-    import matplotlib
-    import matplotlib.cm as cm
-    import matplotlib.colors as mcolors
+    import matplotlib  # deferred: pictures only
+    import matplotlib.cm as cm  # deferred: pictures only
+    import matplotlib.colors as mcolors  # deferred: pictures only
+    from matplotlib.collections import PolyCollection  # deferred: pictures only
 
     v = (part.vertices if vertices is None else vertices) @ basis.T
     tri = v[part.faces]
@@ -53,13 +63,15 @@ def draw_part(ax, part: BodyPart, values: np.ndarray, basis: np.ndarray, cmap="v
     front = n[:, 2] > 0
     order = np.argsort(tri[:, :, 2].mean(1))
     order = order[front[order]]
-    norm = mcolors.Normalize(vmin=np.min(values) if vmin is None else vmin,
-                             vmax=np.max(values) if vmax is None else vmax)
+    norm = mcolors.Normalize(
+        vmin=np.min(values) if vmin is None else vmin, vmax=np.max(values) if vmax is None else vmax
+    )
     rgba = matplotlib.colormaps[cmap](norm(np.asarray(values)[part.faces].mean(1)))
     shade = 0.45 + 0.55 * n[:, 2:3]
     rgba[:, :3] *= shade
-    pc = PolyCollection(tri[order, :, :2], facecolors=rgba[order], edgecolors=(0, 0, 0, 0.08),
-                        linewidths=0.2)
+    pc = PolyCollection(
+        tri[order, :, :2], facecolors=rgba[order], edgecolors=(0, 0, 0, 0.08), linewidths=0.2
+    )
     ax.add_collection(pc)
     ax.set_xlim(v[:, 0].min() - 0.01, v[:, 0].max() + 0.01)
     ax.set_ylim(v[:, 1].min() - 0.01, v[:, 1].max() + 0.01)
@@ -68,12 +80,11 @@ def draw_part(ax, part: BodyPart, values: np.ndarray, basis: np.ndarray, cmap="v
     return cm.ScalarMappable(norm=norm, cmap=cmap)
 
 
-def draw_uv(ax, part: BodyPart, values: np.ndarray, size: int = 256, cmap="viridis",
-            vmin=None, vmax=None):
+def draw_uv(
+    ax, part: BodyPart, values: np.ndarray, size: int = 256, cmap="viridis", vmin=None, vmax=None
+):
     """Show per-vertex ``values`` ``(N,)`` as the UV image a UV-UNet sees (chart only)."""
-    import torch
-
-    from stmpl.uv import uv_map
+    import torch  # deferred: about a second to import; the core's types do not need it
 
     m = uv_map(part, size)
     img = m.rasterise(torch.tensor(np.array(values, float)[:, None])).numpy()[0]
@@ -86,17 +97,21 @@ def draw_uv(ax, part: BodyPart, values: np.ndarray, size: int = 256, cmap="virid
 
 def scene_figure(scene, path=None, size: int = 256, dpi: int = 110):
     """A PNG of a scene: the part in 3D from two sides coloured by force (top) and thickness
-    (bottom), with the matching UV images on the right. Returns the figure (saved if ``path``)."""
+    (bottom), with the matching UV images on the right. Returns the figure (saved if ``path``).
+    """
     plt = _matplotlib()
     part = scene.part
     force, thick = np.asarray(scene.force), np.asarray(scene.thickness) * 1e3
     front = view_basis(part, scene.force if scene.force.sum() > 0 else None)
     back = front * np.array([[-1.0], [1.0], [-1.0]])
-    fig, axes = plt.subplots(2, 3, figsize=(13, 7.5),
-                             gridspec_kw={"width_ratios": [1.25, 1.25, 1.0]})
+    fig, axes = plt.subplots(
+        2, 3, figsize=(13, 7.5), gridspec_kw={"width_ratios": [1.25, 1.25, 1.0]}
+    )
     tmin, tmax = (thick.min() - 0.5, thick.max() + 0.5) if np.ptp(thick) < 1e-9 else (None, None)
-    rows = [("force per vertex (N)", force, "inferno", 0.0, max(force.max(), 1e-9)),
-            ("tissue thickness (mm)", thick, "viridis", tmin, tmax)]
+    rows = [
+        ("force per vertex (N)", force, "inferno", 0.0, max(force.max(), 1e-9)),
+        ("tissue thickness (mm)", thick, "viridis", tmin, tmax),
+    ]
     for r, (label, val, cmap, lo, hi) in enumerate(rows):
         draw_part(axes[r, 0], part, val, front, cmap, lo, hi)
         draw_part(axes[r, 1], part, val, back, cmap, lo, hi)
@@ -115,7 +130,7 @@ def scene_figure(scene, path=None, size: int = 256, dpi: int = 110):
 def _save_figure(fig, path, dpi: int):
     """Lay out ``fig``; save and close it when a ``path`` is given. Returns the figure."""
     top = 1.0 - 0.45 / fig.get_figheight() if fig._suptitle is not None else 1.0
-    fig.tight_layout(rect=(0.0, 0.0, 1.0, top))   # room for the suptitle
+    fig.tight_layout(rect=(0.0, 0.0, 1.0, top))  # room for the suptitle
     if path is not None:
         pathlib.Path(path).parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(path, dpi=dpi)
@@ -125,19 +140,26 @@ def _save_figure(fig, path, dpi: int):
 
 def vertex_colors(values: np.ndarray, cmap="inferno", vmin=None, vmax=None) -> np.ndarray:
     """``(N, 4)`` uint8 RGBA colours of per-vertex values."""
-    import matplotlib
-    import matplotlib.colors as mcolors
+    import matplotlib  # deferred: pictures only
+    import matplotlib.colors as mcolors  # deferred: pictures only
 
     values = np.asarray(values, float)
-    norm = mcolors.Normalize(vmin=values.min() if vmin is None else vmin,
-                             vmax=values.max() if vmax is None else vmax)
+    norm = mcolors.Normalize(
+        vmin=values.min() if vmin is None else vmin, vmax=values.max() if vmax is None else vmax
+    )
     return (matplotlib.colormaps[cmap](norm(values)) * 255).round().astype(np.uint8)
 
 
-def export_mesh(part: BodyPart, path, values: np.ndarray | None = None,
-                vertices: np.ndarray | None = None, cmap="inferno") -> pathlib.Path:
+def export_mesh(
+    part: BodyPart,
+    path,
+    values: np.ndarray | None = None,
+    vertices: np.ndarray | None = None,
+    cmap="inferno",
+) -> pathlib.Path:
     """Write the part (optionally moved to ``vertices`` ``(N, 3)``) with per-vertex colours of
-    ``values`` ``(N,)`` to ``.ply``, ``.obj`` or ``.glb``."""
+    ``values`` ``(N,)`` to ``.ply``, ``.obj`` or ``.glb``.
+    """
     path = pathlib.Path(path)
     if path.suffix.lower() not in (".ply", ".obj", ".glb"):
         raise ValueError(f"mesh export supports .ply, .obj, .glb; got {path.suffix!r}")
@@ -152,8 +174,14 @@ def export_mesh(part: BodyPart, path, values: np.ndarray | None = None,
     return path
 
 
-def section(nodes: np.ndarray, tets: np.ndarray, origin: np.ndarray, normal: np.ndarray,
-            values: np.ndarray | None = None, moved: np.ndarray | None = None):
+def section(
+    nodes: np.ndarray,
+    tets: np.ndarray,
+    origin: np.ndarray,
+    normal: np.ndarray,
+    values: np.ndarray | None = None,
+    moved: np.ndarray | None = None,
+):
     """Cut a tet mesh by the plane through ``origin`` with unit ``normal`` (m).
 
     Returns ``(polygons, cell_values)``: one ``(k, 3)`` array (k = 3 or 4) per cut element, at
@@ -188,16 +216,24 @@ def section(nodes: np.ndarray, tets: np.ndarray, origin: np.ndarray, normal: np.
     return polys, (np.array(vals) if values is not None else None)
 
 
-def deformation_figure(deformation, nodes: np.ndarray, tets: np.ndarray, node_u: np.ndarray,
-                       path=None, size: int = 256, dpi: int = 110):
+def deformation_figure(
+    deformation,
+    nodes: np.ndarray,
+    tets: np.ndarray,
+    node_u: np.ndarray,
+    path=None,
+    size: int = 256,
+    dpi: int = 110,
+):
     """A PNG of a FEM result: the deformed skin around the load coloured by |u| (mm), its UV
     image, and a section of the tissue shell through the load centre along the limb (rest
     outline in grey, deformed in colour, true scale).
 
     ``nodes`` ``(M, 3)``, ``tets`` ``(T, 4)``: the shell mesh; ``node_u`` ``(M, 3)``: its
-    displacement (m)."""
+    displacement (m).
+    """
     plt = _matplotlib()
-    from matplotlib.collections import PolyCollection
+    from matplotlib.collections import PolyCollection  # deferred: pictures only
 
     scene = deformation.scene
     part = scene.part
@@ -208,7 +244,7 @@ def deformation_figure(deformation, nodes: np.ndarray, tets: np.ndarray, node_u:
     n = (part.normals * w[:, None]).sum(0)
     n /= np.linalg.norm(n)
     area = scene.load.area if scene.load is not None else float(part.vertex_areas[w > 0].sum())
-    reach = max(3.0 * np.sqrt(area / np.pi), 0.03)                      # m around the load
+    reach = max(3.0 * np.sqrt(area / np.pi), 0.03)  # m around the load
     fig = plt.figure(figsize=(13, 9))
     gs = fig.add_gridspec(2, 2, height_ratios=[1.2, 1.0])
     ax3, axuv, axs = fig.add_subplot(gs[0, 0]), fig.add_subplot(gs[0, 1]), fig.add_subplot(gs[1, :])
@@ -236,21 +272,35 @@ def deformation_figure(deformation, nodes: np.ndarray, tets: np.ndarray, node_u:
     rest, _ = section(nodes, sub, c, plane)
     moved, vals = section(nodes, sub, c, plane, umag, nodes + node_u)
     to2d = lambda p: np.stack([(p - c) @ t, (p - c) @ n], -1) * 1e3  # noqa: E731
-    axs.add_collection(PolyCollection([to2d(p) for p in rest], facecolors="none",
-                                      edgecolors=(0.4, 0.4, 0.4, 0.6), linewidths=0.4))
-    pc = PolyCollection([to2d(p) for p in moved], array=vals, cmap="inferno",
-                        edgecolors=(0, 0, 0, 0.15), linewidths=0.2)
+    axs.add_collection(
+        PolyCollection(
+            [to2d(p) for p in rest],
+            facecolors="none",
+            edgecolors=(0.4, 0.4, 0.4, 0.6),
+            linewidths=0.4,
+        )
+    )
+    pc = PolyCollection(
+        [to2d(p) for p in moved],
+        array=vals,
+        cmap="inferno",
+        edgecolors=(0, 0, 0, 0.15),
+        linewidths=0.2,
+    )
     pc.set_clim(0.0, top)
     axs.add_collection(pc)
     pts = np.concatenate([to2d(p) for p in rest]) if rest else np.zeros((1, 2))
     axs.set_xlim(-1e3 * reach, 1e3 * reach)
     axs.set_ylim(pts[:, 1].min() - 1.0, pts[:, 1].max() + 1.0)
     axs.set_aspect("equal")
-    axs.set_xlabel("along the limb (mm)" if part.axis is not None else
-                   "across the part, horizontally (mm)")
+    axs.set_xlabel(
+        "along the limb (mm)" if part.axis is not None else "across the part, horizontally (mm)"
+    )
     axs.set_ylabel("outward (mm)")
-    axs.set_title("section through the load centre: tissue at rest (grey) and deformed "
-                  "(colour); the inner surface is fixed")
+    axs.set_title(
+        "section through the load centre: tissue at rest (grey) and deformed "
+        "(colour); the inner surface is fixed"
+    )
     fig.colorbar(pc, ax=axs, fraction=0.02, pad=0.01, label="|u| (mm)")
     title = f"{part.name}: FEM"
     if scene.load is not None:
@@ -260,15 +310,22 @@ def deformation_figure(deformation, nodes: np.ndarray, tets: np.ndarray, node_u:
     return _save_figure(fig, path, dpi)
 
 
-def prediction_figure(deformations: dict, truth=None, path=None, size: int = 256,
-                      dpi: int = 100, shared_error_scale: bool = False):
+def prediction_figure(
+    deformations: dict,
+    truth=None,
+    path=None,
+    size: int = 256,
+    dpi: int = 100,
+    shared_error_scale: bool = False,
+):
     """A PNG comparing predictions of one scene: per predictor (a row) the deformed skin around
     the load coloured by |u| (mm, true scale) and its UV image; with ``truth`` (a
     :class:`~stmpl.scene.Deformation`, e.g. the FEM's) also the UV image of the error |u - u*|
     (mm) with its mean over the moving vertices and its largest value in the title, each row on
     its own colour scale (one shared scale hides the errors of good models next to a poor one),
     or with ``shared_error_scale`` on one. ``deformations``: name -> Deformation, all of the same
-    scene."""
+    scene.
+    """
     plt = _matplotlib()
 
     items = list(deformations.items())
@@ -276,8 +333,11 @@ def prediction_figure(deformations: dict, truth=None, path=None, size: int = 256
         raise ValueError("no deformations to draw")
     scene = items[0][1].scene
     part = scene.part
-    if truth is not None and truth.scene is not scene and not np.allclose(
-            truth.scene.force, scene.force):
+    if (
+        truth is not None
+        and truth.scene is not scene
+        and not np.allclose(truth.scene.force, scene.force)
+    ):
         raise ValueError("truth is a deformation of another scene")
     rows = items if truth is None or "fem" in deformations else [("fem", truth)] + items
     top = max(max(d.magnitude.max() for _, d in rows) * 1e3, 1e-9)
@@ -288,20 +348,24 @@ def prediction_figure(deformations: dict, truth=None, path=None, size: int = 256
     front = view_basis(part, scene.force if w.sum() > 0 else None)
     cx, cy = (c @ front.T)[:2]
     ncol = 3 if truth is not None else 2
-    fig, axes = plt.subplots(len(rows), ncol, figsize=(4.6 * ncol, 3.9 * len(rows)),
-                             squeeze=False)
+    fig, axes = plt.subplots(len(rows), ncol, figsize=(4.6 * ncol, 3.9 * len(rows)), squeeze=False)
     err_top = None
     if truth is not None:
-        err_top = max(max(np.linalg.norm(d.displacement - truth.displacement, axis=1).max()
-                          for _, d in rows) * 1e3, 1e-9)
+        err_top = max(
+            max(np.linalg.norm(d.displacement - truth.displacement, axis=1).max() for _, d in rows)
+            * 1e3,
+            1e-9,
+        )
     for (name, d), ax in zip(rows, axes):
         mag = d.magnitude * 1e3
         sm = draw_part(ax[0], part, mag, front, "inferno", 0.0, top, vertices=d.vertices)
         ax[0].set_xlim(cx - reach, cx + reach)
         ax[0].set_ylim(cy - reach, cy + reach)
         ms = d.info.get("seconds")
-        ax[0].set_title(f"{name}: max |u| {mag.max():.2f} mm"
-                        + (f", {1e3 * ms:.1f} ms" if ms is not None else ""))
+        ax[0].set_title(
+            f"{name}: max |u| {mag.max():.2f} mm"
+            + (f", {1e3 * ms:.1f} ms" if ms is not None else "")
+        )
         fig.colorbar(sm, ax=ax[0], fraction=0.046, pad=0.04, label="|u| (mm)")
         im = draw_uv(ax[1], part, mag, size, "inferno", 0.0, top)
         ax[1].set_title("|u| in UV")
@@ -312,8 +376,15 @@ def prediction_figure(deformations: dict, truth=None, path=None, size: int = 256
         elif truth is not None:
             err = np.linalg.norm(d.displacement - truth.displacement, axis=1) * 1e3
             active = truth.magnitude * 1e3 > 0.001
-            im = draw_uv(ax[2], part, err, size, "magma", 0.0,
-                         err_top if shared_error_scale else max(err.max(), 1e-9))
+            im = draw_uv(
+                ax[2],
+                part,
+                err,
+                size,
+                "magma",
+                0.0,
+                err_top if shared_error_scale else max(err.max(), 1e-9),
+            )
             mee = err[active].mean() if active.any() else float("nan")
             ax[2].set_title(f"error |u - u_fem|: MEE {mee:.3f}, max {err.max():.3f} mm")
             fig.colorbar(im, ax=ax[2], fraction=0.046, pad=0.04, label="mm")

@@ -1,7 +1,7 @@
 """One training loop for every learned predictor (``stmpl train CONFIG``).
 
 A config (YAML, checked on load) names the model kind and its options, the dataset folder (or a
-list of folders of one part and FEM set-up, read as one: :class:`~stmpl.dataset.Datasets`), an
+list of folders of one part and FEM set-up, read as one: :class:`~stmpl.data.dataset.Datasets`), an
 optional thickness filter (the paper's "seen levels" ablation), an optional share of the training
 placements (``train_fraction``, for learning curves), and the optimiser settings. The loop: Adam
 (constant or cosine learning rate), shuffled mini-batches (seeded), validation loss every epoch,
@@ -21,6 +21,15 @@ import re
 import time
 
 import numpy as np
+from tqdm import tqdm
+
+from stmpl import config as checked
+from stmpl import predictor
+from stmpl.data.dataset import open_data
+from stmpl.data.format import at_levels
+from stmpl.envelope import Envelope
+from stmpl.files import atomic_path
+from stmpl.pipeline.evaluate import evaluate_dataset
 
 DEFAULTS = {
     "name": None,
@@ -58,9 +67,6 @@ DEVICE = re.compile(r"cpu|cuda(:[0-9]+)?|mps")
 
 def read_config(source) -> dict:
     """A checked, completed training config from a YAML path or a dict."""
-    from stmpl import config as checked
-    from stmpl import predictor
-
     cfg = checked.read(source, DEFAULTS, "training config", name="model")
     learned = [n for n in predictor.names() if n != "fem"]
     if cfg["model"] not in learned:
@@ -69,10 +75,14 @@ def read_config(source) -> dict:
         raise ValueError(f"options must be a mapping of model options, got {cfg['options']!r}")
     predictor.get(cfg["model"]).options(cfg["options"])  # checked; kept as written
     data = cfg["data"]
-    if not data or not (isinstance(data, str) or isinstance(data, list) and all(
-            isinstance(d, str) and d for d in data)):
-        raise ValueError(f"data: the dataset folder (or list of folders) to train on is missing, "
-                         f"got {data!r}")
+    if not data or not (
+        isinstance(data, str)
+        or isinstance(data, list)
+        and all(isinstance(d, str) and d for d in data)
+    ):
+        raise ValueError(
+            f"data: the dataset folder (or list of folders) to train on is missing, got {data!r}"
+        )
     if isinstance(data, list) and len(set(data)) < len(data):
         raise ValueError(f"data: a dataset folder is listed twice in {data}")
     for k in ("epochs", "batch", "patience"):
@@ -83,10 +93,13 @@ def read_config(source) -> dict:
     checked.number(cfg["lr"], "lr", 0, low_open=True)
     checked.number(cfg["train_fraction"], "train_fraction", 0, 1, low_open=True)
     checked.one_of(cfg["schedule"], "schedule", SCHEDULES)
-    if cfg["thickness_mm"] is not None and (not isinstance(cfg["thickness_mm"], list) or not all(
-            checked.number(t, "thickness_mm", 0, low_open=True) for t in cfg["thickness_mm"])):
-        raise ValueError(f"thickness_mm must be a list of thicknesses in mm, got "
-                         f"{cfg['thickness_mm']!r}")
+    if cfg["thickness_mm"] is not None and (
+        not isinstance(cfg["thickness_mm"], list)
+        or not all(checked.number(t, "thickness_mm", 0, low_open=True) for t in cfg["thickness_mm"])
+    ):
+        raise ValueError(
+            f"thickness_mm must be a list of thicknesses in mm, got {cfg['thickness_mm']!r}"
+        )
     if not isinstance(cfg["device"], str) or not DEVICE.fullmatch(cfg["device"]):
         raise ValueError(f"device must be cpu, cuda, cuda:N or mps, got {cfg['device']!r}")
     cfg["out"] = cfg["out"] or str(pathlib.Path("runs") / cfg["name"])
@@ -97,27 +110,31 @@ def _split_tensors(ds, split, cfg, device, p=None):
     """A split's ``thickness``, ``force``, ``displacement``, ``body`` (slot of each sample's
     body) and the prior's answers (m; None unless the model has a prior and the data carry
     ``linear`` answers or span several bodies: then every sample's is at hand, the missing ones
-    solved on its body once here)."""
-    import torch
+    solved on its body once here).
+    """
+    import torch  # deferred: about a second to import; the core's types do not need it
 
     a, keep = _selection(ds, split, cfg)
 
     def t(x):
         return torch.tensor(np.asarray(x)[keep], dtype=torch.float32, device=device)
 
-    body = (torch.tensor(a["body"][keep], dtype=torch.long, device=device)
-            if len(ds.parts) > 1 else None)                 # one body: the model's own
+    body = (
+        torch.tensor(a["body"][keep], dtype=torch.long, device=device)
+        if len(ds.parts) > 1
+        else None
+    )  # one body: the model's own
     base = None
     if getattr(p, "prior", False) and ("linear" in a or len(ds.parts) > 1):
-        base = _prior_answers(p, a, keep, torch.as_tensor(a["body"][keep], device=device),
-                              device)
+        base = _prior_answers(p, a, keep, torch.as_tensor(a["body"][keep], device=device), device)
     return t(a["thickness"]), t(a["force"]), t(a["displacement"]), body, base
 
 
 def _prior_answers(p, a, keep, body, device):
     """``(S, N, 3)`` m: the linear FEM's answer of every kept sample: the dataset's ``linear``
-    where it has one, else solved on the sample's body (:meth:`LinearPrior.body_prior`)."""
-    import torch
+    where it has one, else solved on the sample's body (:meth:`LinearPrior.body_prior`).
+    """
+    import torch  # deferred: about a second to import; the core's types do not need it
 
     n = len(keep)
     out = torch.zeros(n, *a["displacement"].shape[1:], dtype=torch.float32, device=device)
@@ -129,11 +146,13 @@ def _prior_answers(p, a, keep, body, device):
     todo = np.flatnonzero(~have)
     with torch.no_grad():
         for i in range(0, len(todo), 256):
-            at = torch.as_tensor(todo[i:i + 256], device=device)
-            th = torch.tensor(a["thickness"][keep][todo[i:i + 256]], dtype=torch.float32,
-                              device=device)
-            f = torch.tensor(a["force"][keep][todo[i:i + 256]], dtype=torch.float32,
-                             device=device)
+            at = torch.as_tensor(todo[i : i + 256], device=device)
+            th = torch.tensor(
+                a["thickness"][keep][todo[i : i + 256]], dtype=torch.float32, device=device
+            )
+            f = torch.tensor(
+                a["force"][keep][todo[i : i + 256]], dtype=torch.float32, device=device
+            )
             b = body.index_select(0, at)
             for k in torch.unique(b).tolist():
                 sel = torch.nonzero(b == k).flatten()
@@ -146,8 +165,6 @@ def _selection(ds, split, cfg):
     a = ds.arrays(split)
     keep = np.arange(len(a["total"]))
     if cfg["thickness_mm"] is not None:
-        from stmpl.dataset import at_levels
-
         keep = keep[at_levels(a, cfg["thickness_mm"])]
     if split == "train" and cfg["train_fraction"] < 1.0:  # a seeded share of the placements
         places = np.unique(a["placement"][keep])
@@ -162,24 +179,24 @@ def _selection(ds, split, cfg):
 
 def envelope(ds, cfg):
     """The :class:`~stmpl.envelope.Envelope` of the training scenes the config selects."""
-    from stmpl.envelope import Envelope
-
     a, keep = _selection(ds, "train", cfg)
     if len(keep) == 0:
-        raise ValueError(f"dataset {cfg['data']} has no training samples (after the "
-                         "thickness filter)")
-    return Envelope.of(ds.parts, a["thickness"][keep], a["force"][keep], name="training",
-                       source=f"{ds.card['name']} ({ds.card['hash']}), train split",
-                       body=a["body"][keep])
+        raise ValueError(
+            f"dataset {cfg['data']} has no training samples (after the thickness filter)"
+        )
+    return Envelope.of(
+        ds.parts,
+        a["thickness"][keep],
+        a["force"][keep],
+        name="training",
+        source=f"{ds.card['name']} ({ds.card['hash']}), train split",
+        body=a["body"][keep],
+    )
 
 
 def train(config, resume: bool = True, progress: bool = True):
     """Train the config's model; returns the path of the written checkpoint."""
-    import torch
-
-    from stmpl import predictor
-    from stmpl.dataset import open_data
-    from stmpl.files import atomic_path
+    import torch  # deferred: about a second to import; the core's types do not need it
 
     cfg = read_config(config)
     out = pathlib.Path(cfg["out"])
@@ -192,9 +209,11 @@ def train(config, resume: bool = True, progress: bool = True):
     np.random.seed(cfg["seed"])
     p = predictor.create(cfg["model"], ds.part, cfg["options"], device=cfg["device"])
     if len(ds.parts) > 1 and not p.general:
-        raise ValueError(f"dataset {cfg['data']} spans {len(ds.parts)} bodies; a {cfg['model']} "
-                         "model of one body cannot learn them (give it the option geometry: "
-                         "true)")
+        raise ValueError(
+            f"dataset {cfg['data']} spans {len(ds.parts)} bodies; a {cfg['model']} "
+            "model of one body cannot learn them (give it the option geometry: "
+            "true)"
+        )
     for k, part in enumerate(ds.parts):
         if p.slot(part) != k:
             raise RuntimeError(f"body {k} of the dataset took another slot")
@@ -204,43 +223,58 @@ def train(config, resume: bool = True, progress: bool = True):
         p.fit(ds, progress=progress)
     t_fit = time.perf_counter() - t_fit
     if p.n_parameters() == 0:
-        return _write_checkpoint(p, cfg, ds, out, [], float("nan"),
-                                 {"fit_seconds": round(t_fit, 3)})
+        return _write_checkpoint(
+            p, cfg, ds, out, [], float("nan"), {"fit_seconds": round(t_fit, 3)}
+        )
     opt = torch.optim.Adam(p.model.parameters(), lr=cfg["lr"])
     tr = _split_tensors(ds, "train", cfg, device, p)
     va = _split_tensors(ds, "val", cfg, device, p)
     if len(tr[0]) == 0 or len(va[0]) == 0:
-        raise ValueError(f"dataset {cfg['data']} has no training or no validation samples "
-                         "(after the thickness filter)")
+        raise ValueError(
+            f"dataset {cfg['data']} has no training or no validation samples "
+            "(after the thickness filter)"
+        )
     state_path = out / "state.pt"
     start, best, best_state, bad, history = 0, np.inf, None, 0, []
     if resume and state_path.exists():
         try:
             st = torch.load(state_path, map_location=device, weights_only=False)
         except Exception as e:  # noqa: BLE001 - torch raises many kinds for a broken file
-            raise ValueError(f"{state_path} is truncated or corrupt ({type(e).__name__}); "
-                             "delete it or use --restart to train from the start") from e
+            raise ValueError(
+                f"{state_path} is truncated or corrupt ({type(e).__name__}); "
+                "delete it or use --restart to train from the start"
+            ) from e
         free = ("epochs", "out")  # a run may be extended, and its folder moved
         same = {k: v for k, v in st["config"].items() if k not in free}
         if same != {k: v for k, v in cfg.items() if k not in free}:
-            raise ValueError(f"{state_path} belongs to another config (only epochs may change "
-                             "to extend a run); delete it, use --restart or another out folder")
+            raise ValueError(
+                f"{state_path} belongs to another config (only epochs may change "
+                "to extend a run); delete it, use --restart or another out folder"
+            )
         p.model.load_state_dict(st["model"])
         opt.load_state_dict(st["opt"])
-        start, best, best_state, bad, history = (st["epoch"], st["best"], st["best_state"],
-                                                 st["bad"], st["history"])
+        start, best, best_state, bad, history = (
+            st["epoch"],
+            st["best"],
+            st["best_state"],
+            st["bad"],
+            st["history"],
+        )
         torch.set_rng_state(st["rng"])
     gen = torch.Generator().manual_seed(cfg["seed"])
     for _ in range(start):  # the same shuffles as an uninterrupted run
         torch.randperm(len(tr[0]), generator=gen)
     bar = None
     if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=cfg["epochs"], initial=start, unit="epoch",
-                   desc=f"train {cfg['name']}", dynamic_ncols=True)
+        bar = tqdm(
+            total=cfg["epochs"],
+            initial=start,
+            unit="epoch",
+            desc=f"train {cfg['name']}",
+            dynamic_ncols=True,
+        )
     t0 = time.perf_counter()
-    before = history[-1].get("seconds", 0.0) if history else 0.0   # training time of earlier runs
+    before = history[-1].get("seconds", 0.0) if history else 0.0  # training time of earlier runs
     epoch = start
     for epoch in range(start, cfg["epochs"]):
         if bad >= cfg["patience"]:
@@ -250,7 +284,7 @@ def train(config, resume: bool = True, progress: bool = True):
         total = 0.0
         per_epoch = -(-len(perm) // cfg["batch"])
         for k, i in enumerate(range(0, len(perm), cfg["batch"])):
-            idx = perm[i:i + cfg["batch"]]
+            idx = perm[i : i + cfg["batch"]]
             for g in opt.param_groups:
                 g["lr"] = learning_rate(cfg, epoch * per_epoch + k, cfg["epochs"] * per_epoch)
             loss = p.loss(*(None if x is None else x[idx] for x in tr))
@@ -260,20 +294,42 @@ def train(config, resume: bool = True, progress: bool = True):
             total += float(loss.detach()) * len(idx)
         p.model.eval()
         with torch.no_grad():
-            vloss = float(np.mean([float(p.loss(*(None if x is None else x[i:i + 256]
-                                                  for x in va)))
-                                   for i in range(0, len(va[0]), 256)]))
-        history.append({"epoch": epoch + 1, "train": total / len(perm), "val": vloss,
-                        "seconds": round(before + time.perf_counter() - t0, 3)})
+            vloss = float(
+                np.mean(
+                    [
+                        float(p.loss(*(None if x is None else x[i : i + 256] for x in va)))
+                        for i in range(0, len(va[0]), 256)
+                    ]
+                )
+            )
+        history.append(
+            {
+                "epoch": epoch + 1,
+                "train": total / len(perm),
+                "val": vloss,
+                "seconds": round(before + time.perf_counter() - t0, 3),
+            }
+        )
         if vloss < best:
             best, bad = vloss, 0
             best_state = {k: v.detach().clone() for k, v in p.model.state_dict().items()}
         else:
             bad += 1
         with atomic_path(state_path) as tmp:
-            torch.save({"config": cfg, "model": p.model.state_dict(), "opt": opt.state_dict(),
-                        "epoch": epoch + 1, "best": best, "best_state": best_state, "bad": bad,
-                        "history": history, "rng": torch.get_rng_state()}, tmp)
+            torch.save(
+                {
+                    "config": cfg,
+                    "model": p.model.state_dict(),
+                    "opt": opt.state_dict(),
+                    "epoch": epoch + 1,
+                    "best": best,
+                    "best_state": best_state,
+                    "bad": bad,
+                    "history": history,
+                    "rng": torch.get_rng_state(),
+                },
+                tmp,
+            )
         if bar is not None:
             bar.update(1)
             bar.set_postfix(train=f"{total / len(perm):.3g}", val=f"{vloss:.3g}")
@@ -285,20 +341,31 @@ def train(config, resume: bool = True, progress: bool = True):
 
 def _write_checkpoint(p, cfg, ds, out, history, best, extra) -> pathlib.Path:
     """Evaluate the final model on val and test and write its checkpoint and history."""
-    from stmpl.evaluate import evaluate_dataset
-
-    metrics = {s: evaluate_dataset(p, ds, s, thickness_mm=None)
-               for s in ("val", "test") if ds.card["samples_per_split"][s]}
+    metrics = {
+        s: evaluate_dataset(p, ds, s, thickness_mm=None)
+        for s in ("val", "test")
+        if ds.card["samples_per_split"][s]
+    }
     folder = cfg["data"] if isinstance(cfg["data"], list) else str(cfg["data"])
-    meta = {"dataset": {"folder": folder, "hash": ds.card["hash"],
-                        "name": ds.card["name"], "samples": ds.card["samples_per_split"],
-                        **({"datasets": ds.card["datasets"]} if "datasets" in ds.card else {})},
-            "training": {"config": cfg, "epochs": len(history),
-                         "best_val": best if np.isfinite(best) else None,
-                         "seconds": history[-1].get("seconds", 0.0) if history else 0.0,
-                         "device": cfg["device"], **extra,
-                         "history": history[-5:]},
-            "metrics": metrics}
+    meta = {
+        "dataset": {
+            "folder": folder,
+            "hash": ds.card["hash"],
+            "name": ds.card["name"],
+            "samples": ds.card["samples_per_split"],
+            **({"datasets": ds.card["datasets"]} if "datasets" in ds.card else {}),
+        },
+        "training": {
+            "config": cfg,
+            "epochs": len(history),
+            "best_val": best if np.isfinite(best) else None,
+            "seconds": history[-1].get("seconds", 0.0) if history else 0.0,
+            "device": cfg["device"],
+            **extra,
+            "history": history[-5:],
+        },
+        "metrics": metrics,
+    }
     path = p.save(out / f"{cfg['name']}.safetensors", meta)
     (out / "history.json").write_text(json.dumps(history))
     return path

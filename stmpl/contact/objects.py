@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from stmpl.body.part import BodyPart
-from stmpl.contact import Pressing, rotation_matrix
+from stmpl.contact.pressing import Pressing, rotation_matrix
 from stmpl.loads import glyph_contours, place
+from stmpl.part import BodyPart
 
 
 def _length(name: str, value) -> float:
@@ -28,7 +28,7 @@ def _length(name: str, value) -> float:
 
 def sphere(radius: float = 0.008, subdivisions: int = 3):
     """A sphere of ``radius`` (m) resting on ``z = 0`` (a fingertip is about 8 mm)."""
-    import trimesh
+    import trimesh  # deferred: object meshes and closest points only
 
     m = trimesh.creation.icosphere(subdivisions, _length("radius", radius))
     return m.apply_translation([0, 0, radius])
@@ -36,27 +36,30 @@ def sphere(radius: float = 0.008, subdivisions: int = 3):
 
 def rod(radius: float = 0.005, length: float = 0.1, sections: int = 32):
     """A cylinder of ``radius`` and ``length`` (m) lying along the local ``x`` axis on ``z = 0``:
-    it presses with its side, a line contact (a tool's edge, a bar)."""
-    import trimesh
+    it presses with its side, a line contact (a tool's edge, a bar).
+    """
+    import trimesh  # deferred: object meshes and closest points only
 
-    m = trimesh.creation.cylinder(_length("radius", radius), _length("length", length),
-                                  sections=sections)
+    m = trimesh.creation.cylinder(
+        _length("radius", radius), _length("length", length), sections=sections
+    )
     turn = np.eye(4)
-    turn[:3, :3] = rotation_matrix([0.0, 1.0, 0.0], np.pi / 2)       # its axis from z to x
+    turn[:3, :3] = rotation_matrix([0.0, 1.0, 0.0], np.pi / 2)  # its axis from z to x
     m.apply_transform(turn)
     return m.apply_translation([0, 0, radius])
 
 
 def letters(text: str = "ECCV", height: float = 0.03, depth: float = 0.008):
     """Block letters ``height`` (m) tall extruded ``depth`` (m), the text along local ``x``,
-    pressing with their faces (``z = 0``) as the paper's teaser presses "ECCV" into an arm."""
-    import shapely.geometry as geo
-    import trimesh
+    pressing with their faces (``z = 0``) as the paper's teaser presses "ECCV" into an arm.
+    """
+    import shapely.geometry as geo  # deferred: block letters only
+    import trimesh  # deferred: object meshes and closest points only
 
     if not isinstance(text, str) or not text.strip():
         raise ValueError(f"letters need some visible text, got {text!r}")
     h, d = _length("height", height), _length("depth", depth)
-    shape = None                        # even-odd fill: a contour inside another is a hole
+    shape = None  # even-odd fill: a contour inside another is a hole
     for c in glyph_contours(text):
         poly = geo.Polygon(c * h).buffer(0)
         shape = poly if shape is None else shape.symmetric_difference(poly)
@@ -67,20 +70,24 @@ def letters(text: str = "ECCV", height: float = 0.03, depth: float = 0.008):
     return m
 
 
-def strap_ring(inner_radius: float, width: float = 0.03, thickness: float = 0.004,
-               sections: int = 64):
+def strap_ring(
+    inner_radius: float, width: float = 0.03, thickness: float = 0.004, sections: int = 64
+):
     """A flat ring (a strap closed on itself): ``inner_radius``, ``width`` along its axis (local
-    ``z``, centred on 0) and ``thickness``, m."""
-    import trimesh
+    ``z``, centred on 0) and ``thickness``, m.
+    """
+    import trimesh  # deferred: object meshes and closest points only
 
     r = _length("inner_radius", inner_radius)
-    return trimesh.creation.annulus(r, r + _length("thickness", thickness),
-                                    _length("width", width), sections=sections)
+    return trimesh.creation.annulus(
+        r, r + _length("thickness", thickness), _length("width", width), sections=sections
+    )
 
 
 def surface_frame(part: BodyPart, at=None, *, uv=None, spin: float = 0.0) -> np.ndarray:
     """``(4, 4)`` frame at a surface point: origin on the skin, ``z`` the outward normal, ``x``
-    along the limb (or the chart's ``u``) turned by ``spin`` rad about the normal."""
+    along the limb (or the chart's ``u``) turned by ``spin`` rad about the normal.
+    """
     sp = place(part, at, uv=uv)
     normal = sp.bary @ part.normals[part.faces[sp.face]]
     normal /= np.linalg.norm(normal)
@@ -98,10 +105,12 @@ def surface_frame(part: BodyPart, at=None, *, uv=None, spin: float = 0.0) -> np.
     return out
 
 
-def press(part: BodyPart, mesh, at=None, *, uv=None, depth: float = 0.002,
-          spin: float = 0.0) -> np.ndarray:
+def press(
+    part: BodyPart, mesh, at=None, *, uv=None, depth: float = 0.002, spin: float = 0.0
+) -> np.ndarray:
     """The pose that sets ``mesh`` (pressing along its local ``-z``) on the part's surface at
-    ``at`` / ``uv`` with its lowest point ``depth`` m into the skin (along the normal there)."""
+    ``at`` / ``uv`` with its lowest point ``depth`` m into the skin (along the normal there).
+    """
     if not np.isfinite(depth):
         raise ValueError(f"depth must be finite, got {depth!r}")
     frame = surface_frame(part, at, uv=uv, spin=spin)
@@ -110,12 +119,20 @@ def press(part: BodyPart, mesh, at=None, *, uv=None, depth: float = 0.002,
     return frame
 
 
-def strap(part: BodyPart, at: float = 0.5, width: float = 0.03, squeeze: float = 0.003,
-          thickness: float = 0.01, total: float = 0.5, name: str = "strap") -> Pressing:
+def strap(
+    part: BodyPart,
+    at: float = 0.5,
+    width: float = 0.03,
+    squeeze: float = 0.003,
+    thickness: float = 0.01,
+    total: float = 0.5,
+    name: str = "strap",
+) -> Pressing:
     """A strap closed around a limb at fraction ``at`` along its axis, ``squeeze`` m tighter
-    than the limb's median radius there: a :class:`~stmpl.contact.Pressing` ready for
-    :func:`~stmpl.contact.contact`. (Penetration is measured to the nearest surface of the
-    object, so the strap is thicker than it squeezes: ``thickness`` > 2 ``squeeze``.)"""
+    than the limb's median radius there: a :class:`~stmpl.contact.pressing.Pressing` ready for
+    :func:`~stmpl.contact.pressing.contact`. (Penetration is measured to the nearest surface of the
+    object, so the strap is thicker than it squeezes: ``thickness`` > 2 ``squeeze``.)
+    """
     if part.axis is None:
         raise ValueError(f"part {part.name!r} has no limb axis: a strap goes around a limb")
     centre, direction, s0 = part.limb_frame(at)
@@ -123,11 +140,15 @@ def strap(part: BodyPart, at: float = 0.5, width: float = 0.03, squeeze: float =
     off = part.vertices[ring] - centre
     radius = float(np.median(np.linalg.norm(off - np.outer(off @ direction, direction), axis=1)))
     if not 0 < 2 * squeeze < thickness:
-        raise ValueError(f"squeeze must be > 0 and under half the thickness "
-                         f"({thickness * 1e3:g} mm), got {squeeze * 1e3:g} mm")
+        raise ValueError(
+            f"squeeze must be > 0 and under half the thickness "
+            f"({thickness * 1e3:g} mm), got {squeeze * 1e3:g} mm"
+        )
     if radius - squeeze <= 0:
-        raise ValueError(f"squeeze {squeeze * 1e3:g} mm is more than the limb's radius "
-                         f"{radius * 1e3:.1f} mm there")
+        raise ValueError(
+            f"squeeze {squeeze * 1e3:g} mm is more than the limb's radius "
+            f"{radius * 1e3:.1f} mm there"
+        )
     pose = np.eye(4)
     z = direction
     x = np.cross(z, [1.0, 0.0, 0.0] if abs(z[0]) < 0.9 else [0.0, 1.0, 0.0])

@@ -20,10 +20,23 @@ import os
 import pathlib
 import re
 import shutil
+import warnings
+
+import numpy as np
+
+from stmpl import predictor
+from stmpl.checkpoint import read as read_checkpoint
+from stmpl.checkpoint import read_sidecar, sha256, sidecar_path
+from stmpl.data.dataset import open_data
+from stmpl.envelope import SHAPE_AXES, Envelope
+from stmpl.files import atomic_write_text
+from stmpl.metrics import sample_metrics
+from stmpl.pipeline.evaluate import evaluate_dataset, scenes_of
+from stmpl.predictor import OutsideEnvelope
 
 MANIFEST = "manifest.json"
 FORMAT = "stmpl-zoo/1"
-MAX_BYTES = 10 * 2 ** 20
+MAX_BYTES = 10 * 2**20
 """The largest checkpoint the zoo accepts (10 MiB): the repository ships its models."""
 NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
 """A model name: letters, digits, ``_``, ``.``, ``-``; no path (it names files in the zoo)."""
@@ -32,8 +45,10 @@ NAME = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]{0,63}")
 def check_name(name: str) -> str:
     """``name`` if it is a valid model name (:data:`NAME`, not ``..``-like); else ``ValueError``."""
     if not isinstance(name, str) or not NAME.fullmatch(name) or ".." in name:
-        raise ValueError(f"zoo model name {name!r} is not allowed: use letters, digits, _, . and "
-                         "- (it names files inside the zoo folder, so no paths)")
+        raise ValueError(
+            f"zoo model name {name!r} is not allowed: use letters, digits, _, . and "
+            "- (it names files inside the zoo folder, so no paths)"
+        )
     return name
 
 
@@ -43,7 +58,7 @@ def root(path=None) -> pathlib.Path:
         return pathlib.Path(path)
     if os.environ.get("STMPL_ZOO"):
         return pathlib.Path(os.environ["STMPL_ZOO"])
-    return pathlib.Path(__file__).resolve().parents[1] / "zoo"
+    return pathlib.Path(__file__).resolve().parents[2] / "zoo"
 
 
 def manifest(path=None) -> dict:
@@ -51,8 +66,9 @@ def manifest(path=None) -> dict:
     folder = root(path)
     f = folder / MANIFEST
     if not f.is_file():
-        raise FileNotFoundError(f"no model zoo at {folder} ({MANIFEST} is missing); set "
-                                "STMPL_ZOO or pass the folder")
+        raise FileNotFoundError(
+            f"no model zoo at {folder} ({MANIFEST} is missing); set STMPL_ZOO or pass the folder"
+        )
     try:
         m = json.loads(f.read_text())
     except json.JSONDecodeError as e:
@@ -71,35 +87,41 @@ def entry(name: str, path=None) -> dict:
     """The manifest entry of model ``name``."""
     models = manifest(path)["models"]
     if name not in models:
-        raise KeyError(f"no model {name!r} in the zoo at {root(path)}; it has "
-                       f"{sorted(models)}")
+        raise KeyError(f"no model {name!r} in the zoo at {root(path)}; it has {sorted(models)}")
     return models[name]
 
 
 def verify(name: str, path=None) -> pathlib.Path:
     """The checkpoint file of ``name`` after checking it as a whole against the manifest: the
     tensor file's size and SHA-256 and the sidecar's digest; raises ``ValueError`` naming the
-    file that differs."""
-    from stmpl.checkpoint import read_sidecar, sha256, sidecar_path
-
+    file that differs.
+    """
     e = entry(name, path)
     f = root(path) / e["file"]
     if not f.is_file():
         raise FileNotFoundError(f"zoo model {name!r}: file {f} is missing")
     size = f.stat().st_size
     if size != e["bytes"]:
-        raise ValueError(f"zoo model {name!r}: {f.name} is truncated or altered ({size} bytes, "
-                         f"the manifest says {e['bytes']})")
+        raise ValueError(
+            f"zoo model {name!r}: {f.name} is truncated or altered ({size} bytes, "
+            f"the manifest says {e['bytes']})"
+        )
     if sha256(f) != e["sha256"]:
-        raise ValueError(f"zoo model {name!r}: {f.name} does not match the manifest's SHA-256 "
-                         "(tampered or corrupt)")
+        raise ValueError(
+            f"zoo model {name!r}: {f.name} does not match the manifest's SHA-256 "
+            "(tampered or corrupt)"
+        )
     if "digest" not in e:
-        raise ValueError(f"zoo model {name!r}: the manifest has no digest of its sidecar; add "
-                         "it again with `stmpl zoo add`")
-    side = read_sidecar(f)                      # the sidecar against its own digest
+        raise ValueError(
+            f"zoo model {name!r}: the manifest has no digest of its sidecar; add "
+            "it again with `stmpl zoo add`"
+        )
+    side = read_sidecar(f)  # the sidecar against its own digest
     if side["digest"] != e["digest"] or side.get("sha256") != e["sha256"]:
-        raise ValueError(f"zoo model {name!r}: {sidecar_path(f).name} does not match the "
-                         "manifest (an edited or replaced sidecar)")
+        raise ValueError(
+            f"zoo model {name!r}: {sidecar_path(f).name} does not match the "
+            "manifest (an edited or replaced sidecar)"
+        )
     return f
 
 
@@ -117,9 +139,8 @@ every point where a model breaks it, or the FEM fails, lies outside that model's
 
 def read(name: str, device: str = "cpu", path=None):
     """The predictor of zoo model ``name``, verified, on ``device``; its envelope gains the
-    boxes of the test sets it kept its promise on (the manifest's ``envelope``)."""
-    from stmpl import predictor
-
+    boxes of the test sets it kept its promise on (the manifest's ``envelope``).
+    """
     p = predictor.read(verify(name, path), device=device)
     e = entry(name, path)
     kept = {k: v for k, v in (e.get("envelope") or {}).items() if v["kept"]}
@@ -132,66 +153,22 @@ def read(name: str, device: str = "cpu", path=None):
     return p
 
 
-def limit(names: list[str] | None, config, path=None, progress=print) -> dict:
-    """Cap the envelopes of zoo models (default: the learned ones a stability sweep measured)
-    where the sweep of ``config`` (its cached points; run it first) found them breaking
-    :data:`SCENE_PROMISE` inside their data's support (:func:`stmpl.limits.limit`: one cap, on
-    the axis that keeps the most of the points where they held); the caps are kept in the
-    manifest entries (``limits``) and applied by :func:`read`. Returns ``{name: cap or None}``."""
-    from stmpl import limits, stability
-    from stmpl.body.spec import part_from_spec
-    from stmpl.envelope import AXES
-    from stmpl.files import atomic_write_text
-
-    cfg = stability.read_config(config)
-    part = part_from_spec(cfg["body"], cfg["part"])
-    m = manifest(path)
-    swept = [s[4:] for s in cfg["predictors"] if s.startswith("zoo:")]
-    out = {}
-    for name in names or swept:
-        if name not in swept:
-            raise ValueError(f"{name} is not among the sweep's predictors {swept}")
-        e = m["models"][name]
-        if e.get("kind") not in ("gnn", "uv_unet"):
-            continue
-        e.pop("limits", None)
-        p = read(name, path=path)
-        p.envelope.limits = {}                      # its envelope without a cap
-        lim = limits.limit(cfg, part, name, p.envelope)
-        out[name] = lim
-        if lim is not None:
-            e["limits"] = {lim["axis"]: {
-                "max": lim["max"],
-                "source": f"the stability sweep {cfg['name']}: kept at {lim['kept']} points, "
-                          f"broke at {lim['broken']}"}}
-        if progress:
-            if lim is None:
-                progress(f"{name}: keeps its promise inside its envelope at every point")
-            else:
-                kind, unit, k, what = AXES[lim["axis"]]
-                progress(f"{name}: {what} limited to {lim['max'] * k:.3g} {unit} (broke its "
-                         f"promise at {lim['broken']} points inside; {lim['lost']} of the "
-                         f"{lim['kept']} where it held now lie outside)")
-    atomic_write_text(root(path) / MANIFEST, json.dumps(m, indent=1, sort_keys=True))
-    return out
-
-
-def add(checkpoint, name: str, trained: dict | None = None, path=None,
-        evaluate_on: list | None = None) -> dict:
+def add(
+    checkpoint, name: str, trained: dict | None = None, path=None, evaluate_on: list | None = None
+) -> dict:
     """Copy a checkpoint (and its sidecar) into the zoo as ``name`` and record it in the
     manifest with ``trained`` (how it was made: command, time, machine). ``evaluate_on``: more
     dataset folders (e.g. the out-of-distribution sets) whose test split is measured and kept in
-    the entry's metrics under the dataset's name. Returns the entry."""
-    from stmpl.checkpoint import read as read_checkpoint
-    from stmpl.checkpoint import sidecar_path
-    from stmpl.files import atomic_write_text
-
+    the entry's metrics under the dataset's name. Returns the entry.
+    """
     check_name(name)
     src = pathlib.Path(checkpoint)
     _, meta = read_checkpoint(src)  # checks the file against its sidecar
     if meta["bytes"] > MAX_BYTES:
-        raise ValueError(f"{src} is {meta['bytes'] / 2**20:.1f} MiB; the zoo takes at most "
-                         f"{MAX_BYTES / 2**20:.0f} MiB per model")
+        raise ValueError(
+            f"{src} is {meta['bytes'] / 2**20:.1f} MiB; the zoo takes at most "
+            f"{MAX_BYTES / 2**20:.0f} MiB per model"
+        )
     folder = root(path)
     folder.mkdir(parents=True, exist_ok=True)
     f = folder / MANIFEST
@@ -200,18 +177,24 @@ def add(checkpoint, name: str, trained: dict | None = None, path=None,
     if src.resolve() != dst.resolve():
         shutil.copyfile(src, dst)
         shutil.copyfile(sidecar_path(src), sidecar_path(dst))
-    e = {"file": dst.name, "sha256": meta["sha256"], "bytes": meta["bytes"],
-         "digest": meta["digest"],
-         "kind": meta["kind"], "part": meta.get("part"), "parameters": meta.get("parameters"),
-         "config": meta.get("config"), "dataset": meta.get("dataset"),
-         "metrics": meta.get("metrics"), "training": meta.get("training"),
-         "trained": trained or {}, "stmpl": meta.get("stmpl")}
+    e = {
+        "file": dst.name,
+        "sha256": meta["sha256"],
+        "bytes": meta["bytes"],
+        "digest": meta["digest"],
+        "kind": meta["kind"],
+        "part": meta.get("part"),
+        "parameters": meta.get("parameters"),
+        "config": meta.get("config"),
+        "dataset": meta.get("dataset"),
+        "metrics": meta.get("metrics"),
+        "training": meta.get("training"),
+        "trained": trained or {},
+        "stmpl": meta.get("stmpl"),
+    }
     if e["training"]:
         e["training"] = {k: v for k, v in e["training"].items() if k != "history"}
     if evaluate_on:
-        from stmpl import predictor
-        from stmpl.dataset import open_data
-
         _measure(predictor.read(dst), e, [open_data(d) for d in evaluate_on])
     m["models"][name] = e
     atomic_write_text(f, json.dumps(m, indent=1, sort_keys=True))
@@ -221,11 +204,8 @@ def add(checkpoint, name: str, trained: dict | None = None, path=None,
 def measure(names: list[str] | None, datasets: list, path=None, progress=print) -> dict:
     """Measure zoo models (default all) on more datasets' test splits and keep the results in
     their manifest entries under each dataset's name (the files and the rest of the entries are
-    untouched). Returns ``{name: {dataset: summary}}``."""
-    from stmpl import predictor
-    from stmpl.dataset import open_data
-    from stmpl.files import atomic_write_text
-
+    untouched). Returns ``{name: {dataset: summary}}``.
+    """
     if not datasets:
         raise ValueError("measure needs at least one dataset folder")
     sets = [open_data(d) for d in datasets]
@@ -235,23 +215,23 @@ def measure(names: list[str] | None, datasets: list, path=None, progress=print) 
         out[name] = _measure(predictor.read(verify(name, path)), m["models"][name], sets)
         for ds_name, res in out[name].items():
             if progress:
-                progress(f"{name} on {ds_name}: MEE {res['mee'][0]:.4f} mm, "
-                         f"rel. {res['rel_mee'][0]:.2f} %, peak {res['peak_err'][0]:+.1f} "
-                         f"+- {res['peak_err'][1]:.1f} %")
+                progress(
+                    f"{name} on {ds_name}: MEE {res['mee'][0]:.4f} mm, "
+                    f"rel. {res['rel_mee'][0]:.2f} %, peak {res['peak_err'][0]:+.1f} "
+                    f"+- {res['peak_err'][1]:.1f} %"
+                )
     atomic_write_text(root(path) / MANIFEST, json.dumps(m, indent=1, sort_keys=True))
     return out
 
 
 def _measure(p, entry: dict, sets: list) -> dict:
     """Evaluate predictor ``p`` on each dataset's test split into ``entry["metrics"]`` under
-    the dataset's name (with its hash); returns those results."""
-    from stmpl.evaluate import evaluate_dataset
-
+    the dataset's name (with its hash); returns those results.
+    """
     entry["metrics"] = dict(entry.get("metrics") or {})
     out = {}
     for ds in sets:
-        out[ds.card["name"]] = {**evaluate_dataset(p, ds, "test"),
-                                "dataset_hash": ds.card["hash"]}
+        out[ds.card["name"]] = {**evaluate_dataset(p, ds, "test"), "dataset_hash": ds.card["hash"]}
         box = _validate(p, ds)
         if box is not None:
             entry["envelope"] = {**(entry.get("envelope") or {}), ds.card["name"]: box}
@@ -264,49 +244,54 @@ def _validate(p, ds) -> dict | None:
     load's layout, :data:`~stmpl.envelope.SHAPE_AXES`, and for a set of several bodies along the
     body's size, ``skin_area``, from the scenes as intense as training ones), with the model's
     relative MEE and peak error on those scenes and whether they keep :data:`PROMISE`; ``None``
-    if ``p`` has no training envelope or no scene qualifies."""
-    import warnings
-
-    import numpy as np
-
-    from stmpl.envelope import SHAPE_AXES, Envelope
-    from stmpl.evaluate import scenes_of
-    from stmpl.metrics import sample_metrics
-    from stmpl.predictor import OutsideEnvelope
-
+    if ``p`` has no training envelope or no scene qualifies.
+    """
     if p.envelope is None or "training" not in p.envelope.boxes:
         return None
     scenes, truth = scenes_of(ds, "test")
     name = ds.card["name"]
     env = Envelope({"training": p.envelope.boxes["training"]})
-    mask = env.widen(name, [s.part for s in scenes], np.stack([s.thickness for s in scenes]),
-                     np.stack([s.force for s in scenes]),
-                     source=f"{name} ({ds.card['hash']}), test split",
-                     body=np.arange(len(scenes)),
-                     axes=SHAPE_AXES + (("skin_area",) if len(getattr(ds, "parts", ())) > 1
-                                        else ()))
+    mask = env.widen(
+        name,
+        [s.part for s in scenes],
+        np.stack([s.thickness for s in scenes]),
+        np.stack([s.force for s in scenes]),
+        source=f"{name} ({ds.card['hash']}), test split",
+        body=np.arange(len(scenes)),
+        axes=SHAPE_AXES + (("skin_area",) if len(getattr(ds, "parts", ())) > 1 else ()),
+    )
     idx = np.flatnonzero(mask)
     if len(idx) == 0:
         return None
     rows = []
     with warnings.catch_warnings():
-        warnings.simplefilter("ignore", OutsideEnvelope)   # these scenes are the question
+        warnings.simplefilter("ignore", OutsideEnvelope)  # these scenes are the question
         for i in range(0, len(idx), 64):
-            chunk = idx[i:i + 64]
+            chunk = idx[i : i + 64]
             for k, d in zip(chunk, p.predict([scenes[k] for k in chunk])):
                 rows.append(sample_metrics(truth[k], d.displacement))
     rel = float(np.nanmean([r["rel_mee"] for r in rows]))
     peak = np.array([r["peak_err"] for r in rows], dtype=float)
     peak = peak[np.isfinite(peak)]
     kept = rel <= PROMISE["rel_mee"] and abs(float(peak.mean())) <= PROMISE["peak_err"]
-    return {"box": env.boxes[name], "info": env.info[name], "rel_mee": rel,
-            "peak_err": [float(peak.mean()), float(peak.std())], "kept": bool(kept)}
+    return {
+        "box": env.boxes[name],
+        "info": env.info[name],
+        "rel_mee": rel,
+        "peak_err": [float(peak.mean()), float(peak.std())],
+        "kept": bool(kept),
+    }
 
 
-LABELS = {"test": "in-distribution test", "bodies": "seen bodies",
-          "bodies_test": "unseen bodies", "bodies_bands": "unseen bodies: bands",
-          "bodies_letters": "unseen bodies: letters", "bodies_grasps": "unseen bodies: grasps",
-          "bodies_palms": "unseen bodies: palms"}
+LABELS = {
+    "test": "in-distribution test",
+    "bodies": "seen bodies",
+    "bodies_test": "unseen bodies",
+    "bodies_bands": "unseen bodies: bands",
+    "bodies_letters": "unseen bodies: letters",
+    "bodies_grasps": "unseen bodies: grasps",
+    "bodies_palms": "unseen bodies: palms",
+}
 """Column titles of the sets whose names do not say it (the test splits of the training bodies,
 ``bodies_fine``, and of the held-out ones), in the table's order; other sets follow by name."""
 
@@ -314,7 +299,8 @@ LABELS = {"test": "in-distribution test", "bodies": "seen bodies",
 def _column(key: str) -> str:
     """The table column of a measured set: the same kind of set on another surface of the part
     (``ood_bands`` on the plain arm, ``ood_bands_fine`` on the subdivided one) or on another part
-    (``belly_test`` on the belly, ``bodies_test`` on the arm: held-out bodies) shares it."""
+    (``belly_test`` on the belly, ``bodies_test`` on the arm: held-out bodies) shares it.
+    """
     key = key[:-5] if key.endswith("_fine") else key
     return "bodies_" + key[6:] if key.startswith("belly_") else key
 
@@ -322,13 +308,23 @@ def _column(key: str) -> str:
 def table(path=None) -> str:
     """A markdown table of the zoo: name, kind, size, training dataset, and on the test split of
     every kind of dataset it was measured on the MEE (mm), the relative MEE (%) and the mean
-    error of the peak displacement (%); a set a model was not measured on is a dash."""
+    error of the peak displacement (%); a set a model was not measured on is a dash.
+    """
     models = manifest(path)["models"]
-    cols = sorted({_column(k) for e in models.values() for k in (e.get("metrics") or {})
-                   if k not in ("val",)},
-                  key=lambda k: (list(LABELS).index(k) if k in LABELS else len(LABELS), k))
-    head = "| model | kind | parameters | MB | trained on | " + " | ".join(
-        f"{LABELS.get(k, k)}: MEE mm / rel. % / peak %" for k in cols) + " |"
+    cols = sorted(
+        {
+            _column(k)
+            for e in models.values()
+            for k in (e.get("metrics") or {})
+            if k not in ("val",)
+        },
+        key=lambda k: (list(LABELS).index(k) if k in LABELS else len(LABELS), k),
+    )
+    head = (
+        "| model | kind | parameters | MB | trained on | "
+        + " | ".join(f"{LABELS.get(k, k)}: MEE mm / rel. % / peak %" for k in cols)
+        + " |"
+    )
     rows = [head, "|---|---|--:|--:|---|" + "--:|" * len(cols)]
     for n, e in sorted(models.items()):
         ds = e.get("dataset") or {}
@@ -340,9 +336,14 @@ def table(path=None) -> str:
                 cells.append("–")
                 continue
             peak = t.get("peak_err", [float("nan")])[0]
-            cells.append(f"{t['mee'][0]:.4f} / {t['rel_mee'][0]:.2f} / "
-                         + ("–" if peak != peak else f"{peak:+.1f}"))
-        rows.append(f"| {n} | {e['kind']} | {e.get('parameters') or 0:,} | "
-                    f"{e['bytes'] / 1e6:.2f} | {ds.get('name')} ({ds.get('hash')}) | "
-                    + " | ".join(cells) + " |")
+            cells.append(
+                f"{t['mee'][0]:.4f} / {t['rel_mee'][0]:.2f} / "
+                + ("–" if peak != peak else f"{peak:+.1f}")
+            )
+        rows.append(
+            f"| {n} | {e['kind']} | {e.get('parameters') or 0:,} | "
+            f"{e['bytes'] / 1e6:.2f} | {ds.get('name')} ({ds.get('hash')}) | "
+            + " | ".join(cells)
+            + " |"
+        )
     return "\n".join(rows) + "\n"

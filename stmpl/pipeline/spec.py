@@ -1,26 +1,34 @@
 """Predictors named on the command line: ``fem``, ``fem:<resolution>``, ``zoo:<name>`` or a
-``.safetensors`` checkpoint path."""
+``.safetensors`` checkpoint path.
+"""
 
 from __future__ import annotations
 
 import pathlib
 
+from stmpl import predictor
+from stmpl.checkpoint import read_sidecar
+from stmpl.pipeline import zoo
 
-def predictor_from_spec(spec: str, device: str = "cpu", res: str = "reference",
-                        levels: int = 1, fidelity: str = "full"):
+
+def predictor_from_spec(
+    spec: str, device: str = "cpu", res: str = "reference", levels: int = 1, fidelity: str = "full"
+):
     """The predictor ``spec`` names (see the module docstring); ``res`` and ``levels`` are the
     FEM's resolution (unless the spec names one) and continuation levels; ``fidelity``
-    (``full`` or ``auto``, :data:`stmpl.predictor.FIDELITIES`) how much of the part it models."""
-    from stmpl import predictor, zoo
-
+    (``full`` or ``auto``, :data:`stmpl.predictor.FIDELITIES`) how much of the part it models.
+    """
     if fidelity not in predictor.FIDELITIES:
-        raise ValueError(f"fidelity must be one of {list(predictor.FIDELITIES)}, got "
-                         f"{fidelity!r}")
+        raise ValueError(f"fidelity must be one of {list(predictor.FIDELITIES)}, got {fidelity!r}")
     if spec.startswith("zoo:"):
         p = zoo.read(spec[4:], device=device)
     elif spec == "fem" or spec.startswith("fem:"):
-        return predictor.create("fem", res=spec.split(":", 1)[1] if ":" in spec else res,
-                                levels=levels, fidelity=fidelity)
+        return predictor.create(
+            "fem",
+            res=spec.split(":", 1)[1] if ":" in spec else res,
+            levels=levels,
+            fidelity=fidelity,
+        )
     elif pathlib.Path(spec).suffix == ".safetensors" or pathlib.Path(spec).exists():
         p = predictor.read(spec, device=device)
     else:
@@ -28,16 +36,16 @@ def predictor_from_spec(spec: str, device: str = "cpu", res: str = "reference",
     if p is not None:
         p.fidelity = fidelity
         return p
-    raise ValueError(f"unknown predictor {spec!r}: give fem, fem:<resolution>, zoo:<name> or a "
-                     ".safetensors checkpoint")
+    raise ValueError(
+        f"unknown predictor {spec!r}: give fem, fem:<resolution>, zoo:<name> or a "
+        ".safetensors checkpoint"
+    )
 
 
 def key(spec: str) -> str:
     """What decides a spec's answers, for caches: a checkpoint's digest (a file's sidecar, or the
-    zoo manifest's entry), or the spec itself (``fem:<res>``)."""
-    from stmpl import zoo
-    from stmpl.checkpoint import read_sidecar
-
+    zoo manifest's entry), or the spec itself (``fem:<res>``).
+    """
     p = pathlib.Path(spec)
     if p.suffix == ".safetensors" and p.is_file():
         return read_sidecar(p)["digest"]
@@ -48,7 +56,8 @@ def key(spec: str) -> str:
 
 def label(spec: str) -> str:
     """A short name for a spec in tables and pictures: the zoo name, the checkpoint's stem or
-    the spec itself."""
+    the spec itself.
+    """
     if spec.startswith("zoo:"):
         return spec[4:]
     if spec.endswith(".safetensors"):

@@ -23,37 +23,59 @@ import hashlib
 import json
 import pathlib
 import time
+import warnings
 
 import numpy as np
+import yaml
+from tqdm import tqdm
 
-from stmpl.ablation_sets import Remade, datasets, ready
-from stmpl.spec import key as spec_key
-from stmpl.tables import PAPER, TITLES, table
+from stmpl import config as checked
+from stmpl.analysis import stability
+from stmpl.analysis.ablation_sets import Remade, datasets, ready
+from stmpl.analysis.tables import PAPER, TITLES, table
+from stmpl.files import atomic_write_text
+from stmpl.machine import describe
+from stmpl.pipeline.evaluate import evaluate_dataset, scenes_of
+from stmpl.pipeline.spec import key as spec_key
+from stmpl.pipeline.spec import predictor_from_spec
+from stmpl.pipeline.train import read_config as read_train
+from stmpl.pipeline.train import train
+from stmpl.predictor import ImpossibleAnswer, OutsideEnvelope
+from stmpl.viz.chart import speed_accuracy
 
 DEFAULTS = {
     "name": None,
-    "kind": "tables",          # or "stability": a sweep (stmpl/stability.py)
-    "datasets": {},            # name -> {config: dataset config path, folder: where it lives}
-    "in_distribution": None,   # the dataset whose test split is Table 1 (and trains set-ups)
+    "kind": "tables",  # or "stability": a sweep (stmpl/analysis/stability.py)
+    "datasets": {},  # name -> {config: dataset config path, folder: where it lives}
+    "in_distribution": None,  # the dataset whose test split is Table 1 (and trains set-ups)
     "out_of_distribution": [],  # datasets of Table 2 (test splits)
     "seen_thickness_mm": None,  # Table 3: the levels the subset set-ups trained on
     "setups": [],
-    "out": None,               # report folder (default reports/ablation-<name>)
-    "runs": None,              # training runs (default runs/ablation-<name>)
+    "out": None,  # report folder (default reports/ablation-<name>)
+    "runs": None,  # training runs (default runs/ablation-<name>)
     "batch": 64,
 }
-SETUP_KEYS = {"name", "train", "predictor", "thickness_mm", "options", "epochs", "max_train",
-              "limit", "fidelity", "chart"}
+SETUP_KEYS = {
+    "name",
+    "train",
+    "predictor",
+    "thickness_mm",
+    "options",
+    "epochs",
+    "max_train",
+    "limit",
+    "fidelity",
+    "chart",
+}
 """``limit``: evaluate on at most this many samples of each test split (the FEM takes seconds
 per scene); ``fidelity``: ``full`` (the default) or ``auto`` (model no more of the part than the
 scene needs, :data:`stmpl.predictor.FIDELITIES`); ``chart: false`` keeps a set-up that differs
 only in its training data (not in its speed) off the speed-vs-accuracy chart (it stays in the
 tables and in the chart's table)."""
 
+
 def read_config(source) -> dict:
     """A checked, complete ablation config; ``ValueError`` names what is wrong."""
-    from stmpl import config as checked
-
     cfg = checked.read(source, DEFAULTS, "ablation config")
     ds = cfg["datasets"]
     if not isinstance(ds, dict) or not ds:
@@ -62,28 +84,38 @@ def read_config(source) -> dict:
         if not isinstance(d, dict) or set(d) - {"config", "folder"} or "folder" not in d:
             raise ValueError(f"datasets.{name} needs folder (and config to make it), got {d!r}")
     if cfg["in_distribution"] not in ds:
-        raise ValueError(f"in_distribution must be one of the datasets {sorted(ds)}, got "
-                         f"{cfg['in_distribution']!r}")
+        raise ValueError(
+            f"in_distribution must be one of the datasets {sorted(ds)}, got "
+            f"{cfg['in_distribution']!r}"
+        )
     if not isinstance(cfg["out_of_distribution"], list) or any(
-            o not in ds for o in cfg["out_of_distribution"]):
-        raise ValueError(f"out_of_distribution must list datasets of {sorted(ds)}, got "
-                         f"{cfg['out_of_distribution']!r}")
+        o not in ds for o in cfg["out_of_distribution"]
+    ):
+        raise ValueError(
+            f"out_of_distribution must list datasets of {sorted(ds)}, got "
+            f"{cfg['out_of_distribution']!r}"
+        )
     if not isinstance(cfg["setups"], list) or not cfg["setups"]:
         raise ValueError("setups must list at least one set-up")
     names = set()
     for i, s in enumerate(cfg["setups"]):
         if not isinstance(s, dict) or set(s) - SETUP_KEYS or "name" not in s:
-            raise ValueError(f"setups[{i}] needs a name and takes keys {sorted(SETUP_KEYS)}, "
-                             f"got {s!r}")
+            raise ValueError(
+                f"setups[{i}] needs a name and takes keys {sorted(SETUP_KEYS)}, got {s!r}"
+            )
         if ("train" in s) == ("predictor" in s):
-            raise ValueError(f"setup {s['name']!r}: give either train (a training config) or "
-                             "predictor (fem:RES, zoo:NAME or a checkpoint)")
+            raise ValueError(
+                f"setup {s['name']!r}: give either train (a training config) or "
+                "predictor (fem:RES, zoo:NAME or a checkpoint)"
+            )
         if s.get("fidelity", "full") not in ("full", "auto"):
-            raise ValueError(f"setup {s['name']!r}: fidelity must be full or auto, got "
-                             f"{s['fidelity']!r}")
+            raise ValueError(
+                f"setup {s['name']!r}: fidelity must be full or auto, got {s['fidelity']!r}"
+            )
         if not isinstance(s.get("chart", True), bool):
-            raise ValueError(f"setup {s['name']!r}: chart must be true or false, got "
-                             f"{s['chart']!r}")
+            raise ValueError(
+                f"setup {s['name']!r}: chart must be true or false, got {s['chart']!r}"
+            )
         if s["name"] in names:
             raise ValueError(f"setup name {s['name']!r} is used twice")
         names.add(s["name"])
@@ -96,8 +128,6 @@ def read_config(source) -> dict:
 
 def _kind(source) -> str:
     """The ``kind`` a config (path or mapping) declares (``tables`` unless it says)."""
-    import yaml
-
     raw = source
     if not isinstance(source, dict):
         path = pathlib.Path(source)
@@ -106,7 +136,7 @@ def _kind(source) -> str:
         try:
             raw = yaml.safe_load(path.read_text())
         except yaml.YAMLError:
-            return "tables"                        # read_config names the YAML error
+            return "tables"  # read_config names the YAML error
     return raw.get("kind", "tables") if isinstance(raw, dict) else "tables"
 
 
@@ -119,7 +149,6 @@ def _slug(name: str) -> str:
 
 
 def _training_config(setup: dict, cfg: dict, ds) -> dict:
-    from stmpl.train import read_config as read_train
 
     t = read_train(setup["train"])
     t = copy.deepcopy(t)
@@ -153,7 +182,8 @@ def _check_remade(name: str, ds: Remade, cfg: dict, cache: dict, progress: bool)
     """Measure the first set-up taken as it is (``predictor:``) that the cache measured on the
     recorded dataset again on the remade one; its results stand for the recorded set's only if
     they agree within :data:`REMADE_TOLERANCE`. The verdict is kept in the cache (under the
-    dataset's entry, ``remade``) and returned; a failed check raises."""
+    dataset's entry, ``remade``) and returned; a failed check raises.
+    """
     rec = cache["datasets"][name]
     new = ds.card["remade_hash"]
     if rec.get("remade", {}).get("hash") == new:
@@ -166,30 +196,40 @@ def _check_remade(name: str, ds: Remade, cfg: dict, cache: dict, progress: bool)
         if key in cache:
             break
     else:
-        raise ValueError(f"dataset {name} was made again (hash {new}, recorded "
-                         f"{ds.card['hash']}) and no set-up taken as it is (predictor:) has a "
-                         "cached result on the recorded one to check it against; delete the "
-                         "cache entry 'datasets' to start over")
-    from stmpl.evaluate import evaluate_dataset
+        raise ValueError(
+            f"dataset {name} was made again (hash {new}, recorded "
+            f"{ds.card['hash']}) and no set-up taken as it is (predictor:) has a "
+            "cached result on the recorded one to check it against; delete the "
+            "cache entry 'datasets' to start over"
+        )
 
     if progress:
-        print(f"dataset {name} was made again (hash {new}, recorded {ds.card['hash']}): "
-              f"measuring {s['name']} on it against its cached result")
+        print(
+            f"dataset {name} was made again (hash {new}, recorded {ds.card['hash']}): "
+            f"measuring {s['name']} on it against its cached result"
+        )
     res = evaluate_dataset(_open(s["predictor"], fidelity), ds._ds, "test", batch=cfg["batch"])
     old = cache[key]
-    verdict = {"hash": new, "checked_with": s["name"],
-               "samples": [int(old["samples"]), int(res["samples"])],
-               **{k: [float(old[k][0]), float(res[k][0])] for k in REMADE_TOLERANCE}}
-    off = [k for k, tol in REMADE_TOLERANCE.items()
-           if not abs(verdict[k][1] - verdict[k][0]) <= tol
-           and not (np.isnan(verdict[k][0]) and np.isnan(verdict[k][1]))]
+    verdict = {
+        "hash": new,
+        "checked_with": s["name"],
+        "samples": [int(old["samples"]), int(res["samples"])],
+        **{k: [float(old[k][0]), float(res[k][0])] for k in REMADE_TOLERANCE},
+    }
+    off = [
+        k
+        for k, tol in REMADE_TOLERANCE.items()
+        if not abs(verdict[k][1] - verdict[k][0]) <= tol
+        and not (np.isnan(verdict[k][0]) and np.isnan(verdict[k][1]))
+    ]
     if verdict["samples"][0] != verdict["samples"][1] or off:
         raise ValueError(
             f"dataset {name} made again measures differently: {s['name']} on it "
             f"{res['samples']} samples, rel. MEE {verdict['rel_mee'][1]:.4f} %, peak "
             f"{verdict['peak_err'][1]:+.2f} %; on the recorded set {old['samples']}, "
             f"{verdict['rel_mee'][0]:.4f} %, {verdict['peak_err'][0]:+.2f} %: the cached "
-            "results cannot stand for it; delete the cache entry 'datasets' to start over")
+            "results cannot stand for it; delete the cache entry 'datasets' to start over"
+        )
     rec["remade"] = verdict
     return verdict
 
@@ -197,16 +237,12 @@ def _check_remade(name: str, ds: Remade, cfg: dict, cache: dict, progress: bool)
 def run(config, progress: bool = True, accept_remade: bool = False) -> dict:
     """Run (or complete) an ablation; writes the tables and ``ablation.md`` into the config's
     ``out`` and returns ``{"tables": {...}, "out": folder}``. A config of ``kind: stability``
-    runs the stability sweep instead (:func:`stmpl.stability.run`). ``accept_remade``: a
+    runs the stability sweep instead (:func:`stmpl.analysis.stability.run`). ``accept_remade``: a
     dataset made again from its recorded config whose content hash changed is checked against
     the cache (:func:`_check_remade`) and, if it measures the same, its cached results and
-    training runs keep; without it such a dataset is refused."""
-    from stmpl.files import atomic_write_text
-    from stmpl.train import train
-
+    training runs keep; without it such a dataset is refused.
+    """
     if _kind(config) == "stability":
-        from stmpl import stability
-
         return stability.run(config, progress)
     cfg = read_config(config)
     out = pathlib.Path(cfg["out"])
@@ -215,13 +251,16 @@ def run(config, progress: bool = True, accept_remade: bool = False) -> dict:
     cache = json.loads(cache_path.read_text()) if cache_path.is_file() else {}
     recorded = cache.setdefault("datasets", {})
     sets = datasets(cfg, progress, recorded, accept_remade)
-    remade = {n: _check_remade(n, ds, cfg, cache, progress)
-              for n, ds in sets.items() if isinstance(ds, Remade)}
+    remade = {
+        n: _check_remade(n, ds, cfg, cache, progress)
+        for n, ds in sets.items()
+        if isinstance(ds, Remade)
+    }
     atomic_write_text(cache_path, json.dumps(cache, indent=1, sort_keys=True))
     ind = sets[cfg["in_distribution"]]
     seen = cfg["seen_thickness_mm"]
 
-    jobs = []          # (setup, dataset name, thickness filter, table, row label)
+    jobs = []  # (setup, dataset name, thickness filter, table, row label)
     for s in cfg["setups"]:
         jobs.append((s, cfg["in_distribution"], None, "table1", s["name"]))
         for o in cfg["out_of_distribution"]:
@@ -233,23 +272,26 @@ def run(config, progress: bool = True, accept_remade: bool = False) -> dict:
                 where = "in-distribution" if d == cfg["in_distribution"] else d
                 jobs.append((s, d, list(seen), "table3", f"{s['name']} / {where}, seen thickness"))
                 if unseen:
-                    jobs.append((s, d, unseen, "table3",
-                                 f"{s['name']} / {where}, unseen thickness"))
+                    jobs.append(
+                        (s, d, unseen, "table3", f"{s['name']} / {where}, unseen thickness")
+                    )
     bar = None
     if progress:
-        from tqdm import tqdm
-
-        bar = tqdm(total=2 * len(cfg["setups"]) + len(jobs), unit="job", desc=f"ablate {cfg['name']}",
-                   dynamic_ncols=True)
+        bar = tqdm(
+            total=2 * len(cfg["setups"]) + len(jobs),
+            unit="job",
+            desc=f"ablate {cfg['name']}",
+            dynamic_ncols=True,
+        )
     tables: dict = {"table1": {}, "table2": {}, "table3": {}}
     points = []
-    cost = {"train": 0.0, "evaluate": 0.0, "wall": 0.0}     # seconds; what the report cost
+    cost = {"train": 0.0, "evaluate": 0.0, "wall": 0.0}  # seconds; what the report cost
     t_run = time.perf_counter()
 
     def save():
         atomic_write_text(cache_path, json.dumps(cache, indent=1, sort_keys=True))
 
-    for s in cfg["setups"]:           # one set-up at a time: trained, measured, its report out
+    for s in cfg["setups"]:  # one set-up at a time: trained, measured, its report out
         if "train" in s:
             t = _training_config(s, cfg, ind)
             ckpt = pathlib.Path(t["out"]) / f"{t['name']}.safetensors"
@@ -270,11 +312,15 @@ def run(config, progress: bool = True, accept_remade: bool = False) -> dict:
             ds = sets[d]
             key = _job_key(setup_key, ds, thick, cfg, s)
             if key not in cache:
-                from stmpl.evaluate import evaluate_dataset
-
                 t0 = time.perf_counter()
-                res = evaluate_dataset(p, ready(ds), "test", thickness_mm=thick,
-                                       batch=cfg["batch"], limit=s.get("limit"))
+                res = evaluate_dataset(
+                    p,
+                    ready(ds),
+                    "test",
+                    thickness_mm=thick,
+                    batch=cfg["batch"],
+                    limit=s.get("limit"),
+                )
                 cache[key] = {**res, "evaluated_seconds": time.perf_counter() - t0}
                 save()
             tables[tab][row] = cache[key]
@@ -285,15 +331,24 @@ def run(config, progress: bool = True, accept_remade: bool = False) -> dict:
         if key not in cache:
             cache[key] = _latency(p, ready(ind))
             save()
-        err = _pooled([tables["table2"].get(f"{s['name']} / {o}")
-                       for o in cfg["out_of_distribution"]] or [tables["table1"][s["name"]]])
+        err = _pooled(
+            [tables["table2"].get(f"{s['name']} / {o}") for o in cfg["out_of_distribution"]]
+            or [tables["table1"][s["name"]]]
+        )
         for batch, sec in cache[key].items():
-            points.append({"label": s["name"], "batch": int(batch), "seconds": sec,
-                           "chart": bool(s.get("chart", True)), **err})
+            points.append(
+                {
+                    "label": s["name"],
+                    "batch": int(batch),
+                    "seconds": sec,
+                    "chart": bool(s.get("chart", True)),
+                    **err,
+                }
+            )
         if bar is not None:
             bar.update(1)
         cost["wall"] = time.perf_counter() - t_run
-        _write(cfg, tables, out, points, remade, cost)     # the report so far
+        _write(cfg, tables, out, points, remade, cost)  # the report so far
     if bar is not None:
         bar.close()
     return {"tables": tables, "out": out, "points": points}
@@ -302,20 +357,16 @@ def run(config, progress: bool = True, accept_remade: bool = False) -> dict:
 def _latency(p, ds, repeats: int = 5) -> dict:
     """Seconds per scene at batch 1 and batch 64 (medians over ``repeats`` after a warm-up) on
     the first in-distribution test scenes; the FEM (seconds a scene, solved one at a time) at
-    batch 1 only, on 2 scenes."""
-    import warnings
-
-    from stmpl.evaluate import scenes_of
-    from stmpl.predictor import ImpossibleAnswer, OutsideEnvelope
-
+    batch 1 only, on 2 scenes.
+    """
     scenes, _ = scenes_of(ds, "test", limit=64)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", OutsideEnvelope)
         warnings.simplefilter("ignore", ImpossibleAnswer)
-        p.predict(scenes[0])                                    # warm-up
-        if not getattr(p, "batched", True):                     # the FEM: seconds a scene
+        p.predict(scenes[0])  # warm-up
+        if not getattr(p, "batched", True):  # the FEM: seconds a scene
             return {"1": float(np.median([_timed(p, [s]) for s in scenes[:2]]))}
-        one = float(np.median([_timed(p, [s]) for s in scenes[:repeats * 4]]))
+        one = float(np.median([_timed(p, [s]) for s in scenes[: repeats * 4]]))
         many = float(np.median([_timed(p, scenes) / len(scenes) for _ in range(repeats)]))
     return {"1": one, str(len(scenes)): many}
 
@@ -339,34 +390,44 @@ def _pooled(rows: list) -> dict:
 
 
 def _open(spec: str, fidelity: str = "full"):
-    from stmpl.spec import predictor_from_spec
 
     return predictor_from_spec(spec, fidelity=fidelity)
 
 
-def _write(cfg, tables, out: pathlib.Path, points: list, remade: dict | None = None,
-           cost: dict | None = None) -> None:
-    from stmpl.files import atomic_write_text
-    from stmpl.machine import describe
+def _write(
+    cfg,
+    tables,
+    out: pathlib.Path,
+    points: list,
+    remade: dict | None = None,
+    cost: dict | None = None,
+) -> None:
 
-    parts = [f"# Ablation: {cfg['name']}\n",
-             "Datasets: " + ", ".join(f"{n} ({d['folder']})" for n, d in cfg["datasets"].items())
-             + f". Machine: {describe()}. Errors in mm on the vertices that move more "
-             "than 0.001 mm, mean ± std over samples; rel. MEE against each sample's largest "
-             "displacement; peak err: predicted against true largest displacement, signed. "
-             "Rows in italics are the paper's as reported (its data, not ours).\n"]
+    parts = [
+        f"# Ablation: {cfg['name']}\n",
+        "Datasets: "
+        + ", ".join(f"{n} ({d['folder']})" for n, d in cfg["datasets"].items())
+        + f". Machine: {describe()}. Errors in mm on the vertices that move more "
+        "than 0.001 mm, mean ± std over samples; rel. MEE against each sample's largest "
+        "displacement; peak err: predicted against true largest displacement, signed. "
+        "Rows in italics are the paper's as reported (its data, not ours).\n",
+    ]
     if cost:
-        parts.append(f"Compute behind this report: training {cost['train'] / 60:.0f} min, "
-                     f"evaluation {cost['evaluate'] / 60:.0f} min (summed over the runs that "
-                     f"made the cached results); this run took {cost['wall'] / 60:.1f} min, "
-                     "the rest came from the cache.\n")
+        parts.append(
+            f"Compute behind this report: training {cost['train'] / 60:.0f} min, "
+            f"evaluation {cost['evaluate'] / 60:.0f} min (summed over the runs that "
+            f"made the cached results); this run took {cost['wall'] / 60:.1f} min, "
+            "the rest came from the cache.\n"
+        )
     for n, v in (remade or {}).items():
-        parts.append(f"Dataset {n} was made again (content hash {v['hash']}, not the recorded "
-                     f"one): {v['checked_with']} measures {v['rel_mee'][1]:.4f} % / "
-                     f"{v['peak_err'][1]:+.2f} % on it against {v['rel_mee'][0]:.4f} % / "
-                     f"{v['peak_err'][0]:+.2f} % on the recorded set ({v['samples'][1]} test "
-                     "samples), so the rows measured on the recorded set stand; rows measured "
-                     "since are on the remade one.\n")
+        parts.append(
+            f"Dataset {n} was made again (content hash {v['hash']}, not the recorded "
+            f"one): {v['checked_with']} measures {v['rel_mee'][1]:.4f} % / "
+            f"{v['peak_err'][1]:+.2f} % on it against {v['rel_mee'][0]:.4f} % / "
+            f"{v['peak_err'][0]:+.2f} % on the recorded set ({v['samples'][1]} test "
+            "samples), so the rows measured on the recorded set stand; rows measured "
+            "since are on the remade one.\n"
+        )
     for k, rows in tables.items():
         if not rows:
             continue
@@ -375,17 +436,26 @@ def _write(cfg, tables, out: pathlib.Path, points: list, remade: dict | None = N
         atomic_write_text(out / f"{k}.csv", table(rows, paper, "csv"))
         parts.append(f"## {TITLES[k]}\n\n" + table(rows, paper))
     if points:
-        from stmpl.chart import speed_accuracy
-
-        speed_accuracy([p for p in points if p.get("chart", True)], out / "speed_accuracy",
-                       f"Speed against accuracy ({cfg['name']}): lower left is better")
-        lines = ["| set-up | batch | ms/scene | OOD rel. MEE % | OOD peak err % |",
-                 "|---|--:|--:|--:|--:|"]
-        lines += [f"| {p['label']} | {p['batch']} | {1e3 * p['seconds']:.3g} | "
-                  f"{p['rel_mee']:.2f} | {p['peak_err']:+.1f} |" for p in points]
-        parts.insert(2 + bool(cost), "## Speed against accuracy\n\n![speed against accuracy]"
-                     "(speed_accuracy.png)\n\nTime per scene on this machine at batch 1 and "
-                     "64 (median of repeats); error pooled over the out-of-distribution test "
-                     "sets. The star is the paper's reported point (its GPU, its data), a "
-                     "reference, not our measurement.\n\n" + "\n".join(lines) + "\n")
+        speed_accuracy(
+            [p for p in points if p.get("chart", True)],
+            out / "speed_accuracy",
+            f"Speed against accuracy ({cfg['name']}): lower left is better",
+        )
+        lines = [
+            "| set-up | batch | ms/scene | OOD rel. MEE % | OOD peak err % |",
+            "|---|--:|--:|--:|--:|",
+        ]
+        lines += [
+            f"| {p['label']} | {p['batch']} | {1e3 * p['seconds']:.3g} | "
+            f"{p['rel_mee']:.2f} | {p['peak_err']:+.1f} |"
+            for p in points
+        ]
+        parts.insert(
+            2 + bool(cost),
+            "## Speed against accuracy\n\n![speed against accuracy]"
+            "(speed_accuracy.png)\n\nTime per scene on this machine at batch 1 and "
+            "64 (median of repeats); error pooled over the out-of-distribution test "
+            "sets. The star is the paper's reported point (its GPU, its data), a "
+            "reference, not our measurement.\n\n" + "\n".join(lines) + "\n",
+        )
     atomic_write_text(out / "ablation.md", "\n".join(parts))

@@ -8,25 +8,38 @@ headless machine). The camera looks at the contact along the skin's mean outward
 
 from __future__ import annotations
 
+import pathlib
+
 import numpy as np
 
-from stmpl.viz import _matplotlib, view_basis
+from stmpl.viz.figures import _matplotlib, view_basis
 
 
 def refine(triangles: np.ndarray, values: np.ndarray, levels: int = 2):
     """Split every triangle ``(T, 3, 3)`` with corner ``values`` ``(T, 3)`` into four at its
     edge midpoints, ``levels`` times (a triangle soup, for smooth colours): ``(T 4^L, 3, 3)``,
-    ``(T 4^L, 3)``."""
+    ``(T 4^L, 3)``.
+    """
     t, v = np.asarray(triangles, float), np.asarray(values, float)
     for _ in range(levels):
-        m = 0.5 * (t + t[:, [1, 2, 0]])                     # midpoints ab, bc, ca
+        m = 0.5 * (t + t[:, [1, 2, 0]])  # midpoints ab, bc, ca
         mv = 0.5 * (v + v[:, [1, 2, 0]])
-        t = np.concatenate([np.stack([t[:, 0], m[:, 0], m[:, 2]], 1),
-                            np.stack([m[:, 0], t[:, 1], m[:, 1]], 1),
-                            np.stack([m[:, 2], m[:, 1], t[:, 2]], 1), m])
-        v = np.concatenate([np.stack([v[:, 0], mv[:, 0], mv[:, 2]], 1),
-                            np.stack([mv[:, 0], v[:, 1], mv[:, 1]], 1),
-                            np.stack([mv[:, 2], mv[:, 1], v[:, 2]], 1), mv])
+        t = np.concatenate(
+            [
+                np.stack([t[:, 0], m[:, 0], m[:, 2]], 1),
+                np.stack([m[:, 0], t[:, 1], m[:, 1]], 1),
+                np.stack([m[:, 2], m[:, 1], t[:, 2]], 1),
+                m,
+            ]
+        )
+        v = np.concatenate(
+            [
+                np.stack([v[:, 0], mv[:, 0], mv[:, 2]], 1),
+                np.stack([mv[:, 0], v[:, 1], mv[:, 1]], 1),
+                np.stack([mv[:, 2], mv[:, 1], v[:, 2]], 1),
+                mv,
+            ]
+        )
     return t, v
 
 
@@ -43,7 +56,8 @@ never less than 1x); the factor is written on the picture."""
 
 def turned(basis: np.ndarray, yaw: float = TILT[0], pitch: float = TILT[1]) -> np.ndarray:
     """The camera ``basis`` turned by ``yaw`` about its up axis, then ``pitch`` about its right
-    axis (radians)."""
+    axis (radians).
+    """
     cy, sy, cp, sp = np.cos(yaw), np.sin(yaw), np.cos(pitch), np.sin(pitch)
     r = np.array([[cy, 0, -sy], [0, 1, 0], [sy, 0, cy]])
     r = np.array([[1, 0, 0], [0, cp, -sp], [0, sp, cp]]) @ r
@@ -53,8 +67,9 @@ def turned(basis: np.ndarray, yaw: float = TILT[0], pitch: float = TILT[1]) -> n
 def draw_meshes(ax, basis: np.ndarray, meshes: list) -> None:
     """Draw ``meshes`` seen through ``basis`` (camera rows: right, up, towards the viewer):
     each a tuple ``(triangles (T, 3, 3), rgba (T, 4) or (4,), cull)``; triangles turned away are
-    dropped where ``cull`` is true (closed, opaque meshes)."""
-    from matplotlib.collections import PolyCollection
+    dropped where ``cull`` is true (closed, opaque meshes).
+    """
+    from matplotlib.collections import PolyCollection  # deferred: pictures only
 
     polys, colours, depth = [], [], []
     for triangles, rgba, cull in meshes:
@@ -63,15 +78,19 @@ def draw_meshes(ax, basis: np.ndarray, meshes: list) -> None:
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
         keep = n[:, 2] > 0 if cull else np.ones(len(tri), bool)
         c = np.broadcast_to(np.asarray(rgba, float), (len(tri), 4)).copy()
-        n = n * np.where(n[:, 2] < 0, -1.0, 1.0)[:, None]       # the side the viewer sees
+        n = n * np.where(n[:, 2] < 0, -1.0, 1.0)[:, None]  # the side the viewer sees
         c[:, :3] *= (0.3 + 0.7 * np.clip(n @ LIGHT, 0.0, 1.0))[:, None]
         polys.append(tri[keep, :, :2])
         colours.append(c[keep])
         depth.append(tri[keep, :, 2].mean(1))
     order = np.argsort(np.concatenate(depth))
-    ax.add_collection(PolyCollection(np.concatenate(polys)[order],
-                                     facecolors=np.concatenate(colours)[order],
-                                     edgecolors="none"))
+    ax.add_collection(
+        PolyCollection(
+            np.concatenate(polys)[order],
+            facecolors=np.concatenate(colours)[order],
+            edgecolors="none",
+        )
+    )
     ax.set_aspect("equal")
     ax.axis("off")
 
@@ -98,14 +117,16 @@ def _warning(d) -> str | None:
     return None
 
 
-def contact_figure(deformations: dict, truth=None, objects=(), path=None, dpi: int = 110,
-                   title: str | None = None):
+def contact_figure(
+    deformations: dict, truth=None, objects=(), path=None, dpi: int = 110, title: str | None = None
+):
     """A PNG of one pressed scene: a panel per method (``deformations``: name ->
     :class:`~stmpl.scene.Deformation`; ``truth``, e.g. the FEM's, first) showing the deformed
     skin in 3D coloured by |u| (mm, one scale for all panels) with the ``objects``
     (``trimesh`` meshes in body coordinates) drawn see-through, the method's time and, against
-    ``truth``, its relative mean error and its peak."""
-    import matplotlib
+    ``truth``, its relative mean error and its peak.
+    """
+    import matplotlib  # deferred: pictures only
 
     plt = _matplotlib()
     rows = ([("FEM", truth)] if truth is not None else []) + list(deformations.items())
@@ -116,47 +137,63 @@ def contact_figure(deformations: dict, truth=None, objects=(), path=None, dpi: i
     basis = turned(basis)
     top = max(max(d.magnitude.max() for _, d in rows) * 1e3, 1e-6)
     scale = float(np.clip(DENT_MM / top, 1.0, 10.0))
-    cmap = matplotlib.colormaps["YlOrRd"]      # light where still: the shading shows shape
+    cmap = matplotlib.colormaps["YlOrRd"]  # light where still: the shading shows shape
     fig = plt.figure(figsize=(max(4.4 * len(rows) + 1.0, 10.0), 5.2))
-    warned = any(_warning(d) for _, d in rows)            # a fourth title line: lower panels
-    grid = fig.add_gridspec(1, len(rows) + 1, width_ratios=[1] * len(rows) + [0.05],
-                            left=0.01, right=0.94, bottom=0.03, top=0.72 if warned else 0.76,
-                            wspace=0.05)
+    warned = any(_warning(d) for _, d in rows)  # a fourth title line: lower panels
+    grid = fig.add_gridspec(
+        1,
+        len(rows) + 1,
+        width_ratios=[1] * len(rows) + [0.05],
+        left=0.01,
+        right=0.94,
+        bottom=0.03,
+        top=0.72 if warned else 0.76,
+        wspace=0.05,
+    )
     axes = [fig.add_subplot(grid[0, k]) for k in range(len(rows))]
     cx, cy = (centre @ basis.T)[:2]
     for (name, d), ax in zip(rows, axes):
         drawn = part.vertices + scale * d.displacement
         tri, val = refine(drawn[part.faces], d.magnitude[part.faces] * 1e3)
-        meshes = [(tri, cmap(val.mean(1) / top), True)]          # the far side hidden
+        meshes = [(tri, cmap(val.mean(1) / top), True)]  # the far side hidden
         for m in objects:
-            meshes.append((np.asarray(m.vertices)[np.asarray(m.faces)], (0.6, 0.8, 1.0, 0.3),
-                           True))
+            meshes.append((np.asarray(m.vertices)[np.asarray(m.faces)], (0.6, 0.8, 1.0, 0.3), True))
         draw_meshes(ax, basis, meshes)
         mag = d.magnitude * 1e3
         ax.set_xlim(cx - reach, cx + reach)
         ax.set_ylim(cy - reach, cy + reach)
         ms = d.info.get("seconds")
-        head = (f"{name}" + (" (in the mirror)" if d.info.get("mirrored") else "")
-                + (f", {duration(ms)}" if ms is not None else ""))
+        head = (
+            f"{name}"
+            + (" (in the mirror)" if d.info.get("mirrored") else "")
+            + (f", {duration(ms)}" if ms is not None else "")
+        )
         lines = [head, f"deepest {mag.max():.2f} mm"]
         if truth is not None and d is not truth:
             err = np.linalg.norm(d.displacement - truth.displacement, axis=1)
             active = truth.magnitude > 1e-6
             peak = truth.magnitude.max()
-            lines.append(f"error {100 * err[active].mean() / peak:.2f} % of the deepest, "
-                         f"peak {100 * (d.magnitude.max() - peak) / peak:+.1f} %")
+            lines.append(
+                f"error {100 * err[active].mean() / peak:.2f} % of the deepest, "
+                f"peak {100 * (d.magnitude.max() - peak) / peak:+.1f} %"
+            )
         warn = _warning(d)
         if warn:
             lines.append(warn)
         ax.set_title("\n".join(lines), fontsize=10, color="#a00000" if warn else "black")
     sm = matplotlib.cm.ScalarMappable(matplotlib.colors.Normalize(0, top), cmap)
     fig.colorbar(sm, cax=fig.add_subplot(grid[0, -1]), label="displacement |u| (mm)")
-    fig.suptitle((title or _title(rows[0][1].scene))
-                 + (f"\n(dents drawn {scale:.0f}x deeper than they are; colours true)"
-                    if scale > 1.05 else ""), y=0.985, fontsize=10)
+    fig.suptitle(
+        (title or _title(rows[0][1].scene))
+        + (
+            f"\n(dents drawn {scale:.0f}x deeper than they are; colours true)"
+            if scale > 1.05
+            else ""
+        ),
+        y=0.985,
+        fontsize=10,
+    )
     if path is not None:
-        import pathlib
-
         pathlib.Path(path).parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(path, dpi=dpi)
         plt.close(fig)
@@ -170,7 +207,12 @@ def duration(seconds: float) -> str:
 
 def _title(scene) -> str:
     load = scene.load
-    text = load.source.summary() if load is not None and load.source is not None else (
-        load.summary() if load is not None else f"{scene.total_force:g} N")
-    return (f"{scene.part.name} ({scene.part.n_vertices} vertices), "
-            f"{1e3 * float(np.median(scene.thickness)):.1f} mm tissue\n{text}")
+    text = (
+        load.source.summary()
+        if load is not None and load.source is not None
+        else (load.summary() if load is not None else f"{scene.total_force:g} N")
+    )
+    return (
+        f"{scene.part.name} ({scene.part.n_vertices} vertices), "
+        f"{1e3 * float(np.median(scene.thickness)):.1f} mm tissue\n{text}"
+    )

@@ -9,12 +9,15 @@ pixels that UV images carry past the chart's edge.
 from __future__ import annotations
 
 import dataclasses
+import hashlib
 from dataclasses import dataclass, field
 from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse import csgraph
+from scipy.spatial import cKDTree
+
+from stmpl.geometry import project_on_polyline, triangle_areas, vertex_normals
 
 CHART_MARGIN = 0.04
 """Share of the unit square left free around a part's chart (room for padded pixels)."""
@@ -61,8 +64,10 @@ class BodyPart:
         _check_shape("face_uv", self.face_uv, (len(self.faces), 3))
         _check_shape("uv_vertex", self.uv_vertex, (len(self.uv),))
         if self.faces.size and (self.faces.min() < 0 or self.faces.max() >= n):
-            raise ValueError(f"BodyPart.faces index out of range [0, {n}): "
-                             f"min {self.faces.min()}, max {self.faces.max()}")
+            raise ValueError(
+                f"BodyPart.faces index out of range [0, {n}): "
+                f"min {self.faces.min()}, max {self.faces.max()}"
+            )
         if not np.array_equal(self.uv_vertex[self.face_uv], self.faces):
             raise ValueError("BodyPart.face_uv does not match faces through uv_vertex")
         for name in ("vertices", "normals", "uv"):
@@ -91,16 +96,16 @@ class BodyPart:
     def adjacency(self) -> sp.csr_matrix:
         """``(N, N)`` symmetric boolean vertex adjacency over :attr:`edges`."""
         e, n = self.edges, self.n_vertices
-        a = sp.coo_matrix((np.ones(2 * len(e), bool), (np.r_[e[:, 0], e[:, 1]],
-                                                        np.r_[e[:, 1], e[:, 0]])), (n, n))
+        a = sp.coo_matrix(
+            (np.ones(2 * len(e), bool), (np.r_[e[:, 0], e[:, 1]], np.r_[e[:, 1], e[:, 0]])), (n, n)
+        )
         return a.tocsr()
 
     @cached_property
     def tree(self):
         """A k-d tree of the rest positions (``scipy.spatial.cKDTree``), for neighbourhoods in
-        metres."""
-        from scipy.spatial import cKDTree
-
+        metres.
+        """
         return cKDTree(self.vertices)
 
     @cached_property
@@ -118,21 +123,23 @@ class BodyPart:
     @cached_property
     def rim_distance(self) -> np.ndarray:
         """``(N,)`` straight-line distance (m) of each vertex from the nearest open-rim vertex
-        (``inf`` everywhere for a part without rims)."""
+        (``inf`` everywhere for a part without rims).
+        """
         if not self.rims:
             return np.full(self.n_vertices, np.inf)
-        from scipy.spatial import cKDTree
 
         return cKDTree(self.vertices[np.concatenate(self.rims)]).query(self.vertices)[0]
 
     @cached_property
     def seam_groups(self) -> tuple[np.ndarray, ...]:
         """The UV copies of each seam vertex: one ``(k,)`` array of ``uv`` indices per vertex with
-        ``k >= 2`` copies, ordered by vertex index."""
+        ``k >= 2`` copies, ordered by vertex index.
+        """
         order = np.argsort(self.uv_vertex, kind="stable")
-        verts, starts, counts = np.unique(self.uv_vertex[order], return_index=True,
-                                          return_counts=True)
-        return tuple(order[s:s + c] for s, c in zip(starts, counts) if c > 1)
+        verts, starts, counts = np.unique(
+            self.uv_vertex[order], return_index=True, return_counts=True
+        )
+        return tuple(order[s : s + c] for s, c in zip(starts, counts) if c > 1)
 
     @cached_property
     def seam_vertices(self) -> np.ndarray:
@@ -148,7 +155,7 @@ class BodyPart:
 
     def mesh(self, vertices: np.ndarray | None = None):
         """A ``trimesh.Trimesh`` of the part (optionally with other vertex positions)."""
-        import trimesh
+        import trimesh  # deferred: object meshes and closest points only
 
         v = self.vertices if vertices is None else vertices
         return trimesh.Trimesh(v, self.faces, process=False)
@@ -156,21 +163,23 @@ class BodyPart:
     @cached_property
     def fingerprint(self) -> str:
         """16 hex digits identifying the mesh: the SHA-256 of the name, vertices and faces."""
-        import hashlib
-
         h = hashlib.sha256(self.name.encode())
-        for a in (np.ascontiguousarray(self.vertices, np.float64),
-                  np.ascontiguousarray(self.faces, np.int64)):
+        for a in (
+            np.ascontiguousarray(self.vertices, np.float64),
+            np.ascontiguousarray(self.faces, np.int64),
+        ):
             h.update(a.tobytes())
         return h.hexdigest()[:16]
 
     def arrays(self) -> dict[str, np.ndarray]:
         """Arrays for saving (``np.savez``); inverse of :meth:`from_arrays`."""
-        out = {k: getattr(self, k) for k in ("vertices", "faces", "normals", "uv", "face_uv",
-                                             "uv_vertex")}
+        out = {
+            k: getattr(self, k)
+            for k in ("vertices", "faces", "normals", "uv", "face_uv", "uv_vertex")
+        }
         out["uv_scale"] = np.array(self.uv_scale)
         out["rim_lengths"] = np.array([len(r) for r in self.rims], dtype=np.int64)
-        out["rims"] = (np.concatenate(self.rims) if self.rims else np.zeros(0, np.int64))
+        out["rims"] = np.concatenate(self.rims) if self.rims else np.zeros(0, np.int64)
         if self.axis is not None:
             out["axis"] = self.axis
         if self.body_index is not None:
@@ -179,31 +188,39 @@ class BodyPart:
 
     @classmethod
     def from_arrays(cls, name: str, arrays, source: dict | None = None) -> "BodyPart":
-        rims = tuple(np.split(np.asarray(arrays["rims"]),
-                              np.cumsum(arrays["rim_lengths"])[:-1])) if len(
-            arrays["rim_lengths"]) else ()
-        return cls(name=name, vertices=np.asarray(arrays["vertices"], float),
-                   faces=np.asarray(arrays["faces"], np.int64),
-                   normals=np.asarray(arrays["normals"], float),
-                   uv=np.asarray(arrays["uv"], float),
-                   face_uv=np.asarray(arrays["face_uv"], np.int64),
-                   uv_vertex=np.asarray(arrays["uv_vertex"], np.int64),
-                   uv_scale=float(arrays["uv_scale"]), rims=rims,
-                   axis=np.asarray(arrays["axis"], float) if "axis" in arrays else None,
-                   body_index=np.asarray(arrays["body_index"], np.int64)
-                   if "body_index" in arrays else None,
-                   source=dict(source or {}))
+        rims = (
+            tuple(np.split(np.asarray(arrays["rims"]), np.cumsum(arrays["rim_lengths"])[:-1]))
+            if len(arrays["rim_lengths"])
+            else ()
+        )
+        return cls(
+            name=name,
+            vertices=np.asarray(arrays["vertices"], float),
+            faces=np.asarray(arrays["faces"], np.int64),
+            normals=np.asarray(arrays["normals"], float),
+            uv=np.asarray(arrays["uv"], float),
+            face_uv=np.asarray(arrays["face_uv"], np.int64),
+            uv_vertex=np.asarray(arrays["uv_vertex"], np.int64),
+            uv_scale=float(arrays["uv_scale"]),
+            rims=rims,
+            axis=np.asarray(arrays["axis"], float) if "axis" in arrays else None,
+            body_index=np.asarray(arrays["body_index"], np.int64)
+            if "body_index" in arrays
+            else None,
+            source=dict(source or {}),
+        )
 
     def limb_frame(self, along: float) -> tuple[np.ndarray, np.ndarray, float]:
         """``(centre (3,), direction (3,), arc length s0 m)``: the point of the limb axis at
-        fraction ``along`` of the part's extent along it, and the axis direction there."""
+        fraction ``along`` of the part's extent along it, and the axis direction there.
+        """
         if self.axis is None:
             raise ValueError(f"part {self.name!r} has no limb axis (not a limb)")
         if not 0.0 <= along <= 1.0:
             raise ValueError(f"along must lie in [0, 1] (fraction along the limb), got {along}")
         s = self.axial
         s0 = s.min() + along * (s.max() - s.min())
-        line = self.axis                                 # arc length runs from line[0]
+        line = self.axis  # arc length runs from line[0]
         seg_len = np.linalg.norm(np.diff(line, axis=0), axis=1)
         start = np.r_[0.0, np.cumsum(seg_len)[:-1]]
         k = int(np.clip(np.searchsorted(start, s0, "right") - 1, 0, len(seg_len) - 1))
@@ -212,7 +229,8 @@ class BodyPart:
 
     def subdivided(self, levels: int = 1) -> "BodyPart":
         """A finer copy: every triangle split into four at its edge midpoints, ``levels`` times
-        (:func:`subdivide`)."""
+        (:func:`subdivide`).
+        """
         part = self
         for _ in range(int(levels)):
             part = subdivide(part)
@@ -220,14 +238,16 @@ class BodyPart:
 
     def with_vertices(self, vertices: np.ndarray) -> "BodyPart":
         """A copy with other rest positions (normals recomputed)."""
-        return dataclasses.replace(self, vertices=vertices,
-                                   normals=vertex_normals(vertices, self.faces))
+        return dataclasses.replace(
+            self, vertices=vertices, normals=vertex_normals(vertices, self.faces)
+        )
 
 
 # --- construction ------------------------------------------------------------------------------
 def _midpoints(pairs: np.ndarray, offset: int):
     """Unique sorted ``pairs`` ``(K, 2)`` -> ``(unique (E, 2), index of each pair's midpoint
-    (K,) = offset + its unique row)``."""
+    (K,) = offset + its unique row)``.
+    """
     key, inv = np.unique(np.sort(pairs, axis=1), axis=0, return_inverse=True)
     return key, offset + inv.reshape(-1)
 
@@ -237,23 +257,26 @@ def subdivide(part: BodyPart) -> BodyPart:
     unchanged): new vertices at the midpoints of the edges, their normals the normalised mean of
     the ends', UV corners at the midpoints of the UV edges (a seam edge gets one on each side of
     the chart), rims with their midpoints in order. The old vertices keep their indices; a new
-    vertex has no body vertex (``body_index`` -1)."""
+    vertex has no body vertex (``body_index`` -1).
+    """
     n, t = part.n_vertices, len(part.uv)
     f, fu = part.faces, part.face_uv
     corner_pairs = [(0, 1), (1, 2), (2, 0)]
-    vpairs = np.concatenate([f[:, list(p)] for p in corner_pairs])             # (3M, 2)
+    vpairs = np.concatenate([f[:, list(p)] for p in corner_pairs])  # (3M, 2)
     edges, vmid = _midpoints(vpairs, n)
     upairs = np.concatenate([fu[:, list(p)] for p in corner_pairs])
     uedges, umid = _midpoints(upairs, t)
     m = len(f)
-    ab, bc, ca = vmid[:m], vmid[m:2 * m], vmid[2 * m:]
-    uab, ubc, uca = umid[:m], umid[m:2 * m], umid[2 * m:]
+    ab, bc, ca = vmid[:m], vmid[m : 2 * m], vmid[2 * m :]
+    uab, ubc, uca = umid[:m], umid[m : 2 * m], umid[2 * m :]
     a, b, c = f.T
     ua, ub, uc = fu.T
-    faces = np.concatenate([np.stack(x, 1) for x in
-                            ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))])
-    face_uv = np.concatenate([np.stack(x, 1) for x in
-                              ((ua, uab, uca), (uab, ub, ubc), (uca, ubc, uc), (uab, ubc, uca))])
+    faces = np.concatenate(
+        [np.stack(x, 1) for x in ((a, ab, ca), (ab, b, bc), (ca, bc, c), (ab, bc, ca))]
+    )
+    face_uv = np.concatenate(
+        [np.stack(x, 1) for x in ((ua, uab, uca), (uab, ub, ubc), (uca, ubc, uc), (uab, ubc, uca))]
+    )
     normals = part.normals[edges].sum(1)
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
     # each new UV corner belongs to the midpoint vertex of its two corners' vertices
@@ -261,140 +284,35 @@ def subdivide(part: BodyPart) -> BodyPart:
     uv_vertex[umid] = vmid
     edge_of = {tuple(e): n + i for i, e in enumerate(edges)}
 
-    def finer(rim):                      # each rim vertex, then the midpoint to the next one
+    def finer(rim):  # each rim vertex, then the midpoint to the next one
         out = []
         for p, q in zip(rim, np.roll(rim, -1)):
             out.append(p)
-            if tuple(sorted((p, q))) in edge_of:         # a closed loop wraps around
+            if tuple(sorted((p, q))) in edge_of:  # a closed loop wraps around
                 out.append(edge_of[tuple(sorted((p, q)))])
         return np.asarray(out, dtype=np.int64)
 
     rims = tuple(finer(r) for r in part.rims)
-    body_index = None if part.body_index is None else np.concatenate(
-        [part.body_index, -np.ones(len(edges), np.int64)])
+    body_index = (
+        None
+        if part.body_index is None
+        else np.concatenate([part.body_index, -np.ones(len(edges), np.int64)])
+    )
     source = {**part.source, "subdivisions": int(part.source.get("subdivisions", 0)) + 1}
-    return BodyPart(part.name, np.concatenate([part.vertices, part.vertices[edges].mean(1)]),
-                    faces, np.concatenate([part.normals, normals]),
-                    np.concatenate([part.uv, part.uv[uedges].mean(1)]), face_uv, uv_vertex,
-                    part.uv_scale, rims, part.axis, body_index, source)
-
-def extract_part(name: str, vertices: np.ndarray, faces: np.ndarray, uv: np.ndarray,
-                 face_uv: np.ndarray, vertex_mask: np.ndarray, axis: np.ndarray | None = None,
-                 source: dict | None = None) -> BodyPart:
-    """Cut a part out of a whole body mesh.
-
-    Args:
-        vertices: ``(V, 3)`` body rest positions, m. faces: ``(F, 3)``. uv: ``(T, 2)`` atlas UVs.
-        face_uv: ``(F, 3)`` UV corner indices. vertex_mask: ``(V,)`` bool, the part's vertices.
-        axis: ``(K, 3)`` limb centre line or ``None``.
-
-    Faces with all three corners selected are kept; of those, the faces of the largest UV
-    island (so the part has one chart), and of those the largest connected piece in 3D.
-    """
-    vertices = np.asarray(vertices, float)
-    faces = np.asarray(faces, np.int64)
-    body_normals = vertex_normals(vertices, faces)
-    fsel = np.asarray(vertex_mask, bool)[faces].all(axis=1)
-    if not fsel.any():
-        raise ValueError(f"part {name!r}: the selection contains no whole face")
-    face_uv = np.asarray(face_uv, np.int64)
-    # one UV chart: keep faces of the largest UV island (stray corners of a neighbouring
-    # island would stretch the chart), then the largest connected piece in 3D
-    fsel[fsel] = _largest_component(face_uv[fsel], len(uv))
-    fsel[fsel] = _largest_component(faces[fsel], len(vertices))
-    pf, puv = faces[fsel], face_uv[fsel]
-    used = np.unique(pf)
-    vmap = -np.ones(len(vertices), np.int64)
-    vmap[used] = np.arange(len(used))
-    used_uv = np.unique(puv)
-    uvmap = -np.ones(len(uv), np.int64)
-    uvmap[used_uv] = np.arange(len(used_uv))
-    lf, luv = vmap[pf], uvmap[puv]
-    uv_vertex = np.zeros(len(used_uv), np.int64)
-    uv_vertex[luv.ravel()] = lf.ravel()
-    v = vertices[used]
-    chart, scale = normalise_chart(np.asarray(uv, float)[used_uv], v, lf, luv)
-    return BodyPart(name=name, vertices=v, faces=lf, normals=body_normals[used], uv=chart,
-                    face_uv=luv, uv_vertex=uv_vertex, uv_scale=scale,
-                    rims=boundary_loops(lf), axis=axis, body_index=used,
-                    source=dict(source or {}))
-
-
-def normalise_chart(uv: np.ndarray, vertices: np.ndarray, faces: np.ndarray, face_uv: np.ndarray,
-                    margin: float = CHART_MARGIN) -> tuple[np.ndarray, float]:
-    """Fit UVs ``(T, 2)`` into ``[margin, 1 - margin]^2`` (aspect kept, centred).
-
-    Returns the new UVs and the metres per chart unit (sqrt of 3D area / UV area)."""
-    lo, hi = uv.min(axis=0), uv.max(axis=0)
-    span = float((hi - lo).max())
-    if span <= 0:
-        raise ValueError("degenerate UV chart (zero extent)")
-    s = (1.0 - 2 * margin) / span
-    out = (uv - lo) * s + (1.0 - (hi - lo) * s) / 2.0
-    a3 = _tri_areas(vertices[faces]).sum()
-    a2 = _tri_areas(np.concatenate([out[face_uv], np.zeros(face_uv.shape + (1,))], -1)).sum()
-    return out, float(np.sqrt(a3 / a2))
-
-
-def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """``(N, 3)`` area-weighted unit vertex normals of a triangle mesh."""
-    v = vertices[faces]
-    fn = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
-    n = np.zeros_like(vertices, dtype=float)
-    for k in range(3):
-        np.add.at(n, faces[:, k], fn)
-    length = np.linalg.norm(n, axis=1, keepdims=True)
-    return n / np.where(length > 0, length, 1.0)
-
-
-def boundary_loops(faces: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Ordered loops of boundary vertices (edges used by one face), longest first."""
-    directed = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    key = np.sort(directed, axis=1)
-    _, inv, counts = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    boundary = directed[counts[inv.ravel()] == 1]
-    nxt = {int(a): int(b) for a, b in boundary}
-    loops, seen = [], set()
-    for start in nxt:
-        if start in seen:
-            continue
-        loop, cur = [], start
-        while cur not in seen and cur in nxt:
-            seen.add(cur)
-            loop.append(cur)
-            cur = nxt[cur]
-        loops.append(np.array(loop, np.int64))
-    return tuple(sorted(loops, key=len, reverse=True))
-
-
-def project_on_polyline(points: np.ndarray, line: np.ndarray) -> np.ndarray:
-    """``(N,)`` arc length along a polyline ``(K, 3)`` of each point's nearest projection."""
-    a, b = line[:-1], line[1:]
-    d = b - a
-    seg_len = np.linalg.norm(d, axis=1)
-    t = np.einsum("nkj,kj->nk", points[:, None] - a[None], d) / seg_len**2
-    t = np.clip(t, 0.0, 1.0)
-    foot = a[None] + t[..., None] * d[None]
-    k = np.linalg.norm(points[:, None] - foot, axis=2).argmin(axis=1)
-    start = np.concatenate([[0.0], np.cumsum(seg_len)[:-1]])
-    return start[k] + t[np.arange(len(points)), k] * seg_len[k]
-
-
-def _largest_component(faces: np.ndarray, n: int) -> np.ndarray:
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]]])
-    adj = sp.coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n, n))
-    _, label = csgraph.connected_components(adj, directed=False)
-    face_label = label[faces[:, 0]]
-    return face_label == np.bincount(face_label).argmax()
-
-
-def _tri_areas(tri: np.ndarray) -> np.ndarray:
-    return 0.5 * np.linalg.norm(np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]), axis=1)
-
-
-def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """``(M,)`` areas of triangles ``faces`` ``(M, 3)`` over ``vertices`` ``(N, 3)``, m^2."""
-    return _tri_areas(np.asarray(vertices)[faces])
+    return BodyPart(
+        part.name,
+        np.concatenate([part.vertices, part.vertices[edges].mean(1)]),
+        faces,
+        np.concatenate([part.normals, normals]),
+        np.concatenate([part.uv, part.uv[uedges].mean(1)]),
+        face_uv,
+        uv_vertex,
+        part.uv_scale,
+        rims,
+        part.axis,
+        body_index,
+        source,
+    )
 
 
 def _check_shape(name: str, arr, shape: tuple) -> None:
@@ -408,7 +326,9 @@ def _check_shape(name: str, arr, shape: tuple) -> None:
 def difference(part: BodyPart, reference: BodyPart, atol: float = 1e-6) -> str:
     """What sets ``part`` apart from ``reference``, in words (``""`` when they are the same mesh,
     vertices equal as ``np.allclose`` with ``atol`` m has it): the name, the vertex count, the
-    faces, or how far the vertices lie apart and which body each came from."""
+    faces, or how far the vertices lie apart and which body each came from.
+    """
+
     def where(p):
         src = p.source or {}
         ph = (src.get("options") or {}).get("phenotype")
@@ -418,17 +338,20 @@ def difference(part: BodyPart, reference: BodyPart, atol: float = 1e-6) -> str:
     if part.name != reference.name:
         return f"the scene's part is {part.name!r}, the model's {reference.name!r}"
     if part.n_vertices != reference.n_vertices:
-        return (f"the scene's {part.name} has {part.n_vertices} vertices, the model's "
-                f"{reference.n_vertices} (another body model or resolution)")
-    if part.faces.shape != reference.faces.shape or not np.array_equal(part.faces,
-                                                                       reference.faces):
-        return (f"the scene's {part.name} has other faces (another mesh of {part.n_vertices} "
-                "vertices)")
+        return (
+            f"the scene's {part.name} has {part.n_vertices} vertices, the model's "
+            f"{reference.n_vertices} (another body model or resolution)"
+        )
+    if part.faces.shape != reference.faces.shape or not np.array_equal(part.faces, reference.faces):
+        return (
+            f"the scene's {part.name} has other faces (another mesh of {part.n_vertices} vertices)"
+        )
     if not np.allclose(part.vertices, reference.vertices, atol=atol):
         gap = float(np.abs(part.vertices - reference.vertices).max())
         a, b = where(part), where(reference)
         body = f" (the scene's from {a}, the model's from {b})" if a != b else ""
-        return (f"the same {part.n_vertices}-vertex {part.name} mesh, but its vertices lie up to "
-                f"{gap * 1e3:.3g} mm from the model's: another body shape{body}")
+        return (
+            f"the same {part.n_vertices}-vertex {part.name} mesh, but its vertices lie up to "
+            f"{gap * 1e3:.3g} mm from the model's: another body shape{body}"
+        )
     return ""
-

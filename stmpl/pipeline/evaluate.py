@@ -1,38 +1,48 @@
 """Evaluate predictors on a dataset split (``stmpl evaluate``): the paper's measures and ours
-(:mod:`stmpl.metrics`), as a markdown table and a CSV file."""
+(:mod:`stmpl.metrics`), as a markdown table and a CSV file.
+"""
 
 from __future__ import annotations
 
 import pathlib
+import warnings
 
 import numpy as np
+
+from stmpl.data.dataset import Dataset, Datasets, open_data
+from stmpl.data.format import at_levels
+from stmpl.metrics import sample_metrics, seam_gap, summarise, table
+from stmpl.predictor import OutsideEnvelope, PredictionFailed
+from stmpl.scene import Scene
 
 
 def scenes_of(ds, split: str, thickness_mm=None, limit: int | None = None):
     """``(scenes, true displacements (S, N, 3) m)`` of a dataset split."""
-    from stmpl.scene import Scene
-
-    if limit is not None and (isinstance(limit, bool) or not isinstance(limit, int)
-                              or limit < 1):
+    if limit is not None and (isinstance(limit, bool) or not isinstance(limit, int) or limit < 1):
         raise ValueError(f"limit must be a number of samples >= 1, got {limit!r}")
     a = ds.arrays(split)
     keep = np.arange(len(a["total"]))
     if thickness_mm is not None:
-        from stmpl.dataset import at_levels
-
         keep = keep[at_levels(a, thickness_mm)]
     if limit is not None:
         keep = keep[:limit]
     parts = getattr(ds, "parts", [ds.part])
     body = a.get("body", np.zeros(len(a["total"]), int))
-    scenes = [Scene(parts[body[i]], a["thickness"][i].astype(float), a["force"][i].astype(float),
-                    meta={"placement": int(a["placement"][i]), "total": float(a["total"][i])})
-              for i in keep]
+    scenes = [
+        Scene(
+            parts[body[i]],
+            a["thickness"][i].astype(float),
+            a["force"][i].astype(float),
+            meta={"placement": int(a["placement"][i]), "total": float(a["total"][i])},
+        )
+        for i in keep
+    ]
     return scenes, a["displacement"][keep].astype(float)
 
 
-def evaluate_dataset(predictor, ds, split: str = "test", thickness_mm=None,
-                     limit: int | None = None, batch: int = 64) -> dict:
+def evaluate_dataset(
+    predictor, ds, split: str = "test", thickness_mm=None, limit: int | None = None, batch: int = 64
+) -> dict:
     """Summary (mean, std per measure; JSON-ready) of ``predictor`` on a dataset split;
     ``inside_envelope``: the share (%) of scenes inside the predictor's envelope (NaN without
     one).
@@ -44,13 +54,9 @@ def evaluate_dataset(predictor, ds, split: str = "test", thickness_mm=None,
 
     A predictor that is not ``batched`` (the FEM) answers one scene at a time; a scene it fails
     on is left out of the measures and counted (``failed``, the first reason in
-    ``failed_first``)."""
-    import warnings
-
-    import torch
-
-    from stmpl.metrics import sample_metrics, seam_gap, summarise
-    from stmpl.predictor import OutsideEnvelope, PredictionFailed
+    ``failed_first``).
+    """
+    import torch  # deferred: about a second to import; the core's types do not need it
 
     scenes, truth = scenes_of(ds, split, thickness_mm, limit)
     if not scenes:
@@ -59,10 +65,10 @@ def evaluate_dataset(predictor, ds, split: str = "test", thickness_mm=None,
     seam = part.seam_vertices
     rows, seconds, failed = [], [], []
     if not getattr(predictor, "batched", True):
-        batch = 1                          # the FEM: seconds a scene, and a solve may fail alone
+        batch = 1  # the FEM: seconds a scene, and a solve may fail alone
     for i in range(0, len(scenes), batch):
-        chunk = scenes[i:i + batch]
-        with warnings.catch_warnings():    # measured, not warned: see inside_envelope
+        chunk = scenes[i : i + batch]
+        with warnings.catch_warnings():  # measured, not warned: see inside_envelope
             warnings.simplefilter("ignore", OutsideEnvelope)
             try:
                 out = predictor.predict(chunk)
@@ -72,21 +78,37 @@ def evaluate_dataset(predictor, ds, split: str = "test", thickness_mm=None,
                 failed.append(str(e))
                 continue
         if hasattr(predictor, "corner_displacement"):
-            t, f = (torch.tensor(np.stack([getattr(s, k) for s in chunk]), dtype=torch.float32,
-                                 device=predictor.device) for k in ("thickness", "force"))
-            body = (predictor.bodies_of([s.part for s in chunk])
-                    if getattr(predictor, "general", False) else None)
+            t, f = (
+                torch.tensor(
+                    np.stack([getattr(s, k) for s in chunk]),
+                    dtype=torch.float32,
+                    device=predictor.device,
+                )
+                for k in ("thickness", "force")
+            )
+            body = (
+                predictor.bodies_of([s.part for s in chunk])
+                if getattr(predictor, "general", False)
+                else None
+            )
             corners = predictor.corner_displacement(t, f, body)
         else:
             corners = [d.displacement[part.uv_vertex] for d in out]
-        for d, u, c in zip(out, truth[i:i + batch], corners):
+        for d, u, c in zip(out, truth[i : i + batch], corners):
             env = d.info.get("envelope")
-            rows.append({**sample_metrics(u, d.displacement, seam), "seam_gap": seam_gap(part, c),
-                         "inside_envelope": np.nan if env is None else 100.0 * env["inside"]})
+            rows.append(
+                {
+                    **sample_metrics(u, d.displacement, seam),
+                    "seam_gap": seam_gap(part, c),
+                    "inside_envelope": np.nan if env is None else 100.0 * env["inside"],
+                }
+            )
             seconds.append(d.info.get("seconds", np.nan))
     if not rows:
-        raise PredictionFailed(f"{getattr(predictor, 'name', 'the predictor')} failed on all "
-                               f"{len(scenes)} scenes of {ds.folder} ({split}): {failed[0]}")
+        raise PredictionFailed(
+            f"{getattr(predictor, 'name', 'the predictor')} failed on all "
+            f"{len(scenes)} scenes of {ds.folder} ({split}): {failed[0]}"
+        )
     s = summarise(rows)
     s["seconds_per_scene"] = (float(np.nanmean(seconds)), float(np.nanstd(seconds)))
     if failed:
@@ -95,14 +117,13 @@ def evaluate_dataset(predictor, ds, split: str = "test", thickness_mm=None,
     return {k: (list(v) if isinstance(v, tuple) else v) for k, v in s.items()}
 
 
-def evaluate(predictors: dict, data, split: str = "test", out=None,
-             limit: int | None = None) -> str:
+def evaluate(
+    predictors: dict, data, split: str = "test", out=None, limit: int | None = None
+) -> str:
     """Evaluate each predictor (``{label: predictor}``) on ``data``'s split (a dataset folder or
-    a :class:`~stmpl.dataset.Dataset`); returns the markdown table and, with ``out`` (a path
-    without suffix or ending in .md), writes ``.md`` and ``.csv`` beside it."""
-    from stmpl.dataset import Dataset, Datasets, open_data
-    from stmpl.metrics import table
-
+    a :class:`~stmpl.data.dataset.Dataset`); returns the markdown table and, with ``out`` (a path
+    without suffix or ending in .md), writes ``.md`` and ``.csv`` beside it.
+    """
     ds = data if isinstance(data, (Dataset, Datasets)) else open_data(data)
     results = {}
     for name, p in predictors.items():
@@ -115,6 +136,7 @@ def evaluate(predictors: dict, data, split: str = "test", out=None,
         base.parent.mkdir(parents=True, exist_ok=True)
         base.with_suffix(".md").write_text(
             f"Dataset {ds.folder} ({ds.card['name']}, hash {ds.card['hash']}), split {split}\n\n"
-            + md)
+            + md
+        )
         base.with_suffix(".csv").write_text(table(results, "csv"))
     return md

@@ -1,0 +1,1 @@
+"""The ``stmpl`` command line: the parser, the shared options and the commands."""

@@ -1,0 +1,312 @@
+"""The main job, ``stmpl simulate``: an object pressed on a body part (by default anny's right
+hand grasping the left forearm), predicted by the shipped GNN (and any other model), with
+``--compare`` the FEM beside it; it writes the deformed body (GLB with the object in place, and
+PLY) and a picture, and prints each method's time.
+
+>>> stmpl simulate                                     # the default grasp, GNN
+>>> stmpl simulate --grip pinch --along 0.5 --compare  # a pinch, checked by the FEM
+>>> stmpl simulate --letters ECCV --force 0.3 --model zoo:uv_unet_arm_bodies
+>>> stmpl simulate --weight 0.9 --muscle 0.2 --part right_arm  # another body, its right arm
+>>> stmpl simulate --object tool.stl --at 0.45 0.5 --depth 3
+"""
+
+from __future__ import annotations
+
+import pathlib
+import time
+import warnings
+
+import numpy as np
+
+import stmpl.contact.pressing as contact
+from stmpl import predictor, tissue
+from stmpl.body.anny_body import phenotype_of, phenotype_options
+from stmpl.body.spec import part_from_spec
+from stmpl.contact import objects
+from stmpl.contact.hand import GRIPS, Hand, grasp, palm_press
+from stmpl.pipeline.spec import label, predictor_from_spec
+from stmpl.predictor import ImpossibleAnswer, OutsideEnvelope, PredictionFailed
+from stmpl.scene import Scene
+from stmpl.viz.figures import export_mesh, vertex_colors
+from stmpl.viz.render import contact_figure, duration
+
+DEFAULT_MODEL = "zoo:gnn_arm_bodies"
+"""The shipped GNN of the left arm of every anny body (the right arm answered in the mirror)."""
+PART_MODELS = {"belly": "zoo:gnn_belly_bodies"}
+"""The default model of the parts that are not an arm."""
+
+
+def default_model(part: str) -> str:
+    """The zoo model ``stmpl simulate`` and ``predict`` use on ``part`` unless told."""
+    return PART_MODELS.get(part, DEFAULT_MODEL)
+
+
+def add_arguments(sp) -> None:
+    """The options of ``stmpl simulate`` on the argparse (sub)parser ``sp``."""
+    what = sp.add_argument_group(
+        "what presses (default: anny's right hand grasps the limb, or "
+        "lies open on a part that is not one)"
+    )
+    what.add_argument(
+        "--grip",
+        default="whole",
+        choices=sorted(GRIPS),
+        help="hand grip: whole hand, thumb and two fingers, or a pinch",
+    )
+    what.add_argument(
+        "--along",
+        type=float,
+        default=0.7,
+        help="grasp or strap position along the limb, 0..1 (default 0.7)",
+    )
+    what.add_argument(
+        "--around",
+        type=float,
+        default=0.0,
+        help="grasp angle around the limb from the body's front, rad",
+    )
+    what.add_argument(
+        "--hand-height",
+        type=float,
+        default=0.5,
+        help="the hand's body: anny height phenotype 0..1 (hand size)",
+    )
+    what.add_argument("--object", help="a mesh file (OBJ, PLY, STL, GLB; metres) pressed at --at")
+    what.add_argument(
+        "--sphere",
+        type=float,
+        metavar="R",
+        help="a sphere of radius R mm (a fingertip is about 8) pressed at --at",
+    )
+    what.add_argument("--letters", metavar="TEXT", help="extruded block letters pressed at --at")
+    what.add_argument(
+        "--strap", action="store_true", help="a strap closed around the limb at --along"
+    )
+    what.add_argument(
+        "--at",
+        type=float,
+        nargs=2,
+        metavar=("U", "V"),
+        default=(0.45, 0.5),
+        help="where an object is pressed, in chart coordinates",
+    )
+    what.add_argument("--spin", type=float, default=0.0, help="object turn about the normal, rad")
+    what.add_argument(
+        "--pose",
+        type=float,
+        nargs=6,
+        metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
+        help="the object's pose in body coordinates instead of --at/--depth: "
+        "position (mm) and rotation vector (rad)",
+    )
+    what.add_argument(
+        "--depth",
+        type=float,
+        default=2.0,
+        help="how deep the object reaches into the skin, mm (default 2)",
+    )
+    what.add_argument("--force", type=float, default=0.4, help="total force, N (default 0.4)")
+    sp.add_argument("--part", default="left_arm", help="body part (default left_arm)")
+
+    phenotype_options(sp)
+    sp.add_argument(
+        "--subdivide",
+        type=int,
+        default=None,
+        metavar="N",
+        help="the skin's resolution: every triangle of anny's part split into four "
+        "N times (default: the first model's own, 1 for the shipped models; 1 for "
+        "the FEM alone)",
+    )
+    sp.add_argument(
+        "--thickness",
+        type=float,
+        help="tissue thickness, mm (default: the "
+        "paper's heuristic from --weight, 5 mm thin .. 10 mm heavy; 7.5 at 0.5)",
+    )
+    sp.add_argument(
+        "--model",
+        action="append",
+        help=f"zoo:<name> or a checkpoint; repeat to "
+        f"compare (default {DEFAULT_MODEL}; on the belly {PART_MODELS['belly']})",
+    )
+    sp.add_argument("--compare", action="store_true", help="also solve the FEM, report errors")
+    sp.add_argument(
+        "--fidelity",
+        default="full",
+        choices=["full", "auto"],
+        help="full: model the whole part; auto: only what the scene needs (the GNN "
+        "on the subgraph around the contact, the FEM on the patch it moves)",
+    )
+    sp.add_argument("--res", default="reference", help="FEM resolution for --compare")
+    sp.add_argument("--levels", type=int, default=3, help="FEM continuation levels")
+    sp.add_argument("--out-dir", default="simulate_out", help="folder for the results")
+
+
+def pressings(args, part) -> list:
+    """The :class:`~stmpl.contact.pressing.Pressing` objects the options describe."""
+    mm = 1e-3
+    chosen = [k for k in ("object", "sphere", "letters") if getattr(args, k)] + (
+        ["strap"] if args.strap else []
+    )
+    if len(chosen) > 1:
+        raise ValueError(f"choose one object, got {', '.join('--' + k for k in chosen)}")
+    if args.pose is not None and chosen[:1] not in (["object"], ["sphere"], ["letters"]):
+        raise ValueError("--pose places an --object, --sphere or --letters")
+    if args.strap:
+        return [objects.strap(part, args.along, total=args.force, squeeze=args.depth * mm)]
+    if chosen:
+        k = chosen[0]
+        mesh = (
+            contact.read_mesh(args.object)
+            if k == "object"
+            else objects.sphere(args.sphere * mm)
+            if k == "sphere"
+            else objects.letters(args.letters)
+        )
+        name = (
+            pathlib.Path(args.object).stem
+            if k == "object"
+            else (f"sphere {args.sphere:g} mm" if k == "sphere" else f"letters {args.letters}")
+        )
+        if args.pose is not None:
+            pose = contact.pose_matrix(np.asarray(args.pose[:3]) * mm, args.pose[3:])
+        else:
+            pose = objects.press(
+                part, mesh, uv=tuple(args.at), depth=args.depth * mm, spin=args.spin
+            )
+        return [contact.Pressing(mesh, pose, args.force, name)]
+
+    hand = Hand(phenotype={"height": args.hand_height})
+    if part.axis is None:  # nothing to grasp around: the open hand laid on the skin
+        return [
+            palm_press(
+                part, hand, tuple(args.at), args.depth * mm, np.pi / 2 + args.spin, args.force
+            )
+        ]
+    g = grasp(part, hand, args.along, args.around, args.grip, args.depth * mm)
+    return [g.pressing(args.force, f"right hand ({args.grip})")]
+
+
+def run(args) -> int:
+    """``stmpl simulate``: build the scene, predict, compare, write and print."""
+    t0 = time.perf_counter()
+    specs = args.model or [default_model(args.part)]
+    preds = [
+        predictor_from_spec(spec, res=args.res, levels=args.levels, fidelity=args.fidelity)
+        for spec in specs
+    ]
+    sub = args.subdivide
+    if sub is None:  # the surface the first model was trained on, else the FEM's default
+        sub = next(
+            (
+                int(p.part.source.get("subdivisions", 0))
+                for p in preds
+                if getattr(p, "part", None) is not None
+            ),
+            1,
+        )
+    part = part_from_spec(
+        {"model": "anny", "subdivisions": sub, "phenotype": phenotype_of(args)}, args.part
+    )
+    objs = pressings(args, part)
+    touch = contact.contact(part, objs)
+    thick = (
+        tissue.from_weight(part, args.weight)
+        if args.thickness is None
+        else tissue.constant(part, args.thickness * 1e-3)
+    )
+    scene = Scene.from_load(part, thick, touch.load())
+    print(
+        f"{part.name} ({part.n_vertices} vertices), {1e3 * float(thick.mean()):.3g} mm of "
+        f"tissue; {touch.summary()}  [{time.perf_counter() - t0:.1f} s to set up]"
+    )
+    out: dict = {}
+    for spec, p in zip(specs, preds):
+        first = None
+        with warnings.catch_warnings():  # printed as lines instead
+            warnings.simplefilter("ignore", ImpossibleAnswer)
+            warnings.simplefilter("ignore", OutsideEnvelope)
+            if not spec.startswith("fem"):
+                t1 = time.perf_counter()
+                p.predict(scene)  # warm-up, timed apart
+                first = time.perf_counter() - t1
+            out[label(spec)] = d = p.predict(scene)
+        slow = first is not None and first > max(0.2, 20 * d.info["seconds"])
+        print(
+            f"{label(spec):<16} deepest {1e3 * d.magnitude.max():6.3f} mm  "
+            f"{duration(d.info['seconds']):>10}"
+            + (
+                f"  (a model of the {p.part.name}, answering in the mirror)"
+                if d.info.get("mirrored")
+                else ""
+            )
+            + (
+                f"  (first call {duration(first)}: what this body and contact need, e.g. "
+                "the linear FEM's columns, was computed and cached)"
+                if slow
+                else ""
+            )
+        )
+        env = d.info.get("envelope")
+        if env and not env["inside"]:
+            print(
+                f"  NOTE: {label(spec)} answers outside the data it was trained and checked "
+                f"on: {'; '.join(env['outside'])}. Check it with --compare"
+            )
+        if not d.info.get("physical", True):
+            print(
+                f"  WARNING: {label(spec)} pushes the skin {d.info['max_compression']:.1f} x "
+                "the tissue's thickness inward: impossible; do not use this answer"
+            )
+    truth = None
+    if args.compare:
+        try:
+            truth = predictor.create(
+                "fem", res=args.res, levels=args.levels, fidelity=args.fidelity
+            ).predict(scene)
+        except PredictionFailed as e:
+            print(f"{'FEM (' + args.res + ')':<16} failed: {e}; no errors to show")
+    if truth is not None:
+        print(
+            f"{'FEM (' + args.res + ')':<16} deepest {1e3 * truth.magnitude.max():6.3f} mm  "
+            f"{duration(truth.info['seconds']):>10}"
+        )
+        active = truth.magnitude > 1e-6
+        peak = truth.magnitude.max()
+        for name, d in out.items():
+            err = np.linalg.norm(d.displacement - truth.displacement, axis=1)
+            print(
+                f"  {name}: error {100 * err[active].mean() / peak:.2f} % of the deepest, "
+                f"peak {100 * (d.magnitude.max() - peak) / peak:+.1f} %, largest error "
+                f"{1e3 * err.max():.3f} mm"
+            )
+    folder = pathlib.Path(args.out_dir)
+    folder.mkdir(parents=True, exist_ok=True)
+    first = next(iter(out.values()))
+    write_meshes(first, [o.posed() for o in objs], folder / "pressed")
+    contact_figure(out, truth, [o.posed() for o in objs], folder / "simulate.png")
+    print(
+        f"wrote {folder / 'pressed.glb'} (body and object), {folder / 'pressed.ply'}, "
+        f"{folder / 'simulate.png'}"
+    )
+    return 0
+
+
+def write_meshes(deformation, objects, base) -> None:
+    """``base.glb``: the deformed part coloured by |u| with the objects in place; ``base.ply``:
+    the deformed part alone.
+    """
+    import trimesh  # deferred: object meshes and closest points only
+
+    part, mag = deformation.scene.part, deformation.magnitude
+    export_mesh(part, pathlib.Path(base).with_suffix(".ply"), mag, deformation.vertices)
+    body = part.mesh(deformation.vertices)
+    body.visual.vertex_colors = vertex_colors(mag, "inferno")
+    world = trimesh.Scene()
+    world.add_geometry(body, node_name="body")
+    for k, m in enumerate(objects):
+        m = m.copy()
+        m.visual.face_colors = [150, 190, 255, 120]
+        world.add_geometry(m, node_name=f"object{k}")
+    world.export(pathlib.Path(base).with_suffix(".glb"))

@@ -1,0 +1,164 @@
+"""The dataset format, in one place: a folder written by ``stmpl generate`` (:mod:`fem.generate`)
+and read here.
+
+A dataset is a folder: ``card.json`` (what it holds and how it was made), ``config.yaml``,
+``part.npz`` (the body part every sample lives on) and ``shard-NNNNN.h5`` files of per-vertex
+arrays: ``thickness`` ``(S, N)`` m, ``force`` ``(S, N)`` N, ``displacement`` ``(S, N, 3)`` m
+(float32), with per-sample ``total`` force (N), ``split`` (0 train, 1 val, 2 test),
+``placement``, ``thickness_level``, ``task``, ``kind``, ``params`` and solver diagnostics.
+
+The card's ``hash`` is of the content: the part and every sample's arrays (:data:`CONTENT`), not
+the files' bytes nor the timings, so the same samples give the same hash however and whenever
+they were computed (a killed and resumed run included). Each shard's own content hash is in the
+card too; reading a dataset checks every shard against it, so an edited shard is refused by
+name before anything trains or is measured on it.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import pathlib
+
+import numpy as np
+
+from stmpl.part import BodyPart
+from stmpl.files import atomic_path
+
+FORMAT = "stmpl-dataset/2"
+"""Written by this version. ``stmpl-dataset/1`` (hash of the shard files' bytes) is still read."""
+FORMATS = ("stmpl-dataset/1", FORMAT)
+SPLITS = ("train", "val", "test")
+ARRAYS = ("thickness", "force", "displacement", "total", "split", "placement",
+          "thickness_level", "task", "iterations", "solve_time", "max_compression")
+CONTENT = ("task", "placement", "thickness_level", "split", "total", "thickness", "force",
+           "displacement", "kind", "params")
+"""The per-sample arrays the content hash covers (solver diagnostics and timings are not)."""
+FLOATS = ("thickness", "force", "displacement")
+INTS = ("task", "placement", "thickness_level", "split", "iterations")
+DOUBLES = ("total", "residual", "solve_time", "min_det_F", "max_compression")
+STRINGS = ("kind", "params")
+OPTIONAL = ("linear",)
+"""Per-sample arrays a dataset may hold: ``linear`` ``(S, N, 3)`` m, the linear FEM's answer to
+the same load on the same body (config ``linear: true``; the columns are solved as the on-demand
+operator solves them, :func:`fem.compliance.local_compliance`). Hashed when present; in
+:class:`Datasets` whose members differ, NaN for the samples of the members without it."""
+
+
+def at_levels(arrays: dict, thickness_mm) -> np.ndarray:
+    """``(S,)`` mask of the samples whose (uniform) thickness is one of ``thickness_mm``; the
+    float32 thickness is widened before it is compared (a float32 5 mm is not a float64 5 mm)."""
+    level = np.round(np.asarray(arrays["thickness"][:, 0], dtype=float), 6)
+    return np.isin(level, np.round(np.asarray(thickness_mm, dtype=float) * 1e-3, 6))
+
+
+def shard_path(folder, k: int) -> pathlib.Path:
+    return pathlib.Path(folder) / f"shard-{k:05d}.h5"
+
+
+def _hash_arrays(h, arrays: dict) -> None:
+    for k in CONTENT + tuple(k for k in OPTIONAL if k in arrays):
+        v = arrays[k]
+        h.update(k.encode())
+        if k in STRINGS:
+            h.update(json.dumps([x.decode() if isinstance(x, bytes) else x for x in v]).encode())
+        else:
+            v = np.ascontiguousarray(v)
+            h.update(f"{v.dtype.str}{v.shape}".encode())
+            h.update(v.tobytes())
+
+
+def part_hash(part: BodyPart) -> str:
+    """SHA-256 (hex) of a part's arrays and name."""
+    h = hashlib.sha256(part.name.encode())
+    for k, v in sorted(part.arrays().items()):
+        v = np.ascontiguousarray(v)
+        h.update(f"{k}{v.dtype.str}{v.shape}".encode())
+        h.update(v.tobytes())
+    return h.hexdigest()
+
+
+def content_hash(part_digest: str, shard_digests: list[str]) -> str:
+    """The dataset's hash (16 hex digits) from its part's and its shards' content hashes."""
+    h = hashlib.sha256(part_digest.encode())
+    for d in shard_digests:
+        h.update(d.encode())
+    return h.hexdigest()[:16]
+
+
+def write_shard(folder, shard: int, records: dict, attrs: dict) -> pathlib.Path:
+    """Write one shard atomically: ``records`` maps every name of :data:`FLOATS`, :data:`INTS`,
+    :data:`DOUBLES` and :data:`STRINGS` to one value per sample; ``attrs`` (JSON-ready) go to
+    the file's attributes with the format, the shard number and the sample count."""
+    import h5py  # deferred: dataset shards only
+
+
+    n = len(records["task"])
+    path = shard_path(folder, shard)
+    with atomic_path(path) as tmp:
+        with h5py.File(tmp, "w") as h:
+            h.attrs["format"] = FORMAT
+            h.attrs["shard"] = shard
+            h.attrs["n_samples"] = n
+            for k, v in attrs.items():
+                h.attrs[k] = v if isinstance(v, (str, int, float)) else json.dumps(v)
+            for k in FLOATS + tuple(k for k in OPTIONAL if records.get(k) is not None):
+                shape = (0, 0, 3) if k in ("displacement", "linear") else (0, 0)
+                arr = np.stack(records[k]) if n else np.zeros(shape, np.float32)
+                h.create_dataset(k, data=arr, compression="gzip", compression_opts=4,
+                                 shuffle=True)
+            for k in INTS:
+                h.create_dataset(k, data=np.asarray(records[k], dtype=np.int32))
+            for k in DOUBLES:
+                h.create_dataset(k, data=np.asarray(records[k], dtype=np.float64))
+            for k in STRINGS:
+                h.create_dataset(k, data=np.asarray(records[k], dtype=object),
+                                 dtype=h5py.string_dtype())
+    return path
+
+
+def read_shard(path, keys=ARRAYS + STRINGS) -> tuple[dict, dict]:
+    """``(arrays, attrs)`` of a shard and its content hash as ``attrs["content"]``; raises
+    ``ValueError`` naming the file if it is unreadable."""
+    import h5py  # deferred: dataset shards only
+
+    try:
+        with h5py.File(path, "r") as h:
+            attrs = dict(h.attrs)
+            names = set(keys) | set(CONTENT) | {k for k in OPTIONAL if k in h}
+            arrays = {k: h[k][()] for k in names}
+    except (OSError, KeyError) as e:
+        raise ValueError(f"dataset shard {path} is corrupt: {e}") from e
+    for k in STRINGS:
+        arrays[k] = [x.decode() if isinstance(x, bytes) else x for x in arrays[k]]
+    h = hashlib.sha256()
+    _hash_arrays(h, arrays)
+    attrs["content"] = h.hexdigest()
+    return arrays, attrs
+
+
+def read_shard_meta(path, chash: str | None = None) -> dict | None:
+    """A finished shard's metadata and summary arrays, or ``None`` if it is unreadable, of
+    another format or (with ``chash``) from another config: such a shard is solved again."""
+    path = pathlib.Path(path)
+    if not path.is_file():
+        return None
+    try:
+        arrays, attrs = read_shard(path, ("split", "thickness_level", "iterations", "total",
+                                          "solve_time", "max_compression", "kind"))
+    except ValueError:
+        return None
+    if attrs.get("format") != FORMAT or (chash is not None and attrs.get("config_hash") != chash):
+        return None
+    try:
+        meta = {"shard": int(attrs["shard"]), "n_samples": int(attrs["n_samples"]),
+                "tasks": json.loads(attrs["tasks"]), "failures": json.loads(attrs["failures"]),
+                "wall": float(attrs["wall"]), "content": attrs["content"]}
+    except (KeyError, ValueError, TypeError):
+        return None
+    if len(arrays["split"]) != meta["n_samples"]:
+        return None
+    for k in ("split", "thickness_level", "iterations", "total", "solve_time", "max_compression",
+              "kind"):
+        meta[k] = arrays[k]
+    return meta

@@ -1,0 +1,219 @@
+"""The house's shape, read from every import statement with ``ast`` (a lazy import inside a
+function counts as much as one at the top of a file).
+
+The core types sit at the root of ``stmpl/``; the wings beside them are stacked in
+:data:`WINGS`, lowest first. A root module imports only root modules; a wing imports the root,
+itself and the wings below it. ``fem/`` builds on ``stmpl``; ``models/`` on both; ``stmpl``
+imports neither (they plug in through entry points). No import circle anywhere. Imports stand at
+the top of a module, except for the heavy libraries in :data:`HEAVY`, which a function may import
+when it needs them (with a comment on the line).
+"""
+
+import ast
+import pathlib
+import sys
+
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[1]
+PACKAGES = ("stmpl", "fem", "models")
+
+WINGS = ("body", "contact", "data", "viz", "pipeline", "analysis", "cli")
+"""The wings of ``stmpl``, lowest first: each imports only the root and the wings before it."""
+
+PACKAGE_ORDER = ("stmpl", "fem", "models")
+"""The packages, lowest first: each imports only itself and the packages before it."""
+
+HEAVY = {
+    "torch": "about a second to import; the core's types do not need it",
+    "torch_geometric": "imports torch._dynamo (1-2 s)",
+    "matplotlib": "pictures only",
+    "trimesh": "object meshes and closest points only",
+    "anny": "the body model's assets (torch, warp)",
+    "warp": "anny's kernels",
+    "shapely": "block letters only",
+    "h5py": "dataset shards only",
+    "safetensors": "checkpoints only (torch)",
+    "dask": "the distributed backend only",
+    "numba": "compiles the FEM's kernels",
+    "pyamg": "an optional linear solver",
+    "pypardiso": "an optional linear solver (MKL)",
+    "meshio": "the .vtu export only",
+    "skfem": "the reference assembly only",
+}
+"""Third-party libraries a function may import where it needs them, and why they wait."""
+
+MAX_LINES = 600
+"""A module past this many formatted lines holds more than one concept (a smell, not a target)."""
+
+
+def _modules() -> dict[str, pathlib.Path]:
+    out = {}
+    for package in PACKAGES:
+        for f in sorted((ROOT / package).rglob("*.py")):
+            name = ".".join(f.relative_to(ROOT).with_suffix("").parts)
+            out[name.removesuffix(".__init__")] = f
+    return out
+
+
+MODULES = _modules()
+
+
+def _imports(name: str, path: pathlib.Path) -> list[tuple[str, ast.stmt, bool]]:
+    """``(module named, statement, at module level?)`` for each import in ``path``; a name
+    imported from a package that is itself a module (``from stmpl import tissue``) counts as
+    that module, relative imports are resolved.
+    """
+    tree = ast.parse(path.read_text(), str(path))
+    top = {id(n) for n in tree.body}
+    out = []
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            targets = [a.name for a in node.names]
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                pkg = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+                pkg = pkg[: len(pkg) - node.level + 1]
+                base = ".".join(pkg + ([base] if base else []))
+            targets = [f"{base}.{a.name}" for a in node.names]
+            targets = [t if t in MODULES else base for t in targets]
+        else:
+            continue
+        out += [(t, node, id(node) in top) for t in targets]
+    return out
+
+
+def _internal(target: str) -> str | None:
+    """The module of ours ``target`` names (its longest prefix that is one), else ``None``."""
+    while target and target not in MODULES:
+        target = target.rpartition(".")[0]
+    return target or None
+
+
+def _place(module: str) -> tuple[int, int]:
+    """``(package rank, wing rank)``: the root of ``stmpl`` is wing 0, its wings 1, 2, ..."""
+    parts = module.split(".")
+    package = PACKAGE_ORDER.index(parts[0])
+    if parts[0] != "stmpl" or len(parts) < 2 or parts[1] not in WINGS:
+        return package, 0
+    return package, 1 + WINGS.index(parts[1])
+
+
+GRAPH = {
+    m: {t for t in map(_internal, (t for t, _, _ in _imports(m, f))) if t and t != m}
+    for m, f in MODULES.items()
+}
+
+
+@pytest.mark.parametrize("module", sorted(MODULES))
+def test_imports_run_downward_only(module):
+    """A module imports only its own package and wing, the root, and what lies below."""
+    package, wing = _place(module)
+    up = []
+    for target in GRAPH[module]:
+        if module == "stmpl" and target.startswith("stmpl."):
+            continue  # the package's front door
+        p, w = _place(target)
+        same_wing = target.split(".")[:2] == module.split(".")[:2]
+        if p > package or (p == package and w > 0 and w != wing and not same_wing and w > wing):
+            up.append(target)
+        elif p == package == 0 and wing == 0 and w > 0:
+            up.append(target)  # the root builds on nothing above it
+    assert not up, f"{module} imports {sorted(up)}, which lie above it ({WINGS} lowest first)"
+
+
+@pytest.mark.parametrize("module", sorted(MODULES))
+def test_imports_stand_at_the_top(module):
+    """Inside a function only the heavy libraries of :data:`HEAVY`, each with a comment."""
+    path = MODULES[module]
+    lines = path.read_text().splitlines()
+    late = []
+    for target, node, top in _imports(module, path):
+        if top:
+            continue
+        library = target.split(".")[0]
+        if library not in HEAVY or "#" not in lines[node.end_lineno - 1]:
+            late.append(f"line {node.lineno}: {target}")
+    assert not late, f"{module} imports inside a function: {late}"
+
+
+def _circles() -> list[list[str]]:
+    """Every import circle among our modules, each as a path back to its start."""
+    index, low, on, stack, found = {}, {}, set(), [], []
+    sys.setrecursionlimit(max(10_000, sys.getrecursionlimit()))
+
+    def visit(v):  # Tarjan's strongly connected components
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on.add(v)
+        for w in GRAPH[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for v in GRAPH:
+        if v not in index:
+            visit(v)
+    return found
+
+
+def test_no_import_circle():
+    assert not _circles(), f"import circles: {_circles()}"
+
+
+def test_the_core_knows_neither_the_fem_nor_the_models():
+    reach = {
+        m: sorted(t for t in GRAPH[m] if t.split(".")[0] in ("fem", "models"))
+        for m in MODULES
+        if m.split(".")[0] == "stmpl"
+    }
+    assert not {m: t for m, t in reach.items() if t}
+
+
+def test_the_checks_see_lazy_imports_and_circles(tmp_path, monkeypatch):
+    """The reader finds an import inside a function, and the search finds a circle."""
+    f = tmp_path / "m.py"
+    f.write_text("def g():\n    from fem.simulate import simulate\n    import models.gnn\n")
+    found = {(t, top) for t, _, top in _imports("stmpl.m", f)}
+    assert found == {("fem.simulate", False), ("models.gnn", False)}
+    monkeypatch.setitem(GRAPH, "stmpl.scene", GRAPH["stmpl.scene"] | {"stmpl.cli.main"})
+    assert any("stmpl.scene" in c for c in _circles())
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_no_module_past_the_line_budget(package):
+    long = {
+        str(p.relative_to(ROOT)): n
+        for m, p in MODULES.items()
+        if m.split(".")[0] == package and (n := len(p.read_text().splitlines())) > MAX_LINES
+    }
+    assert not long, f"modules over {MAX_LINES} lines: {long}"
+
+
+def test_every_predictor_plugs_in_by_entry_point(monkeypatch):
+    """The core finds every shipped predictor without a list of its own; without the entry
+    points the error says to install.
+    """
+    from stmpl import predictor
+
+    assert set(predictor.names()) >= {"fem", "naive", "linear", "uv_unet", "gnn"}
+    for name in ("fem", "naive", "linear", "uv_unet", "gnn"):
+        cls = predictor.get(name)
+        assert cls.name == name and cls.__module__.split(".")[0] in ("fem", "models")
+    monkeypatch.setattr(predictor, "_declared", lambda: {})
+    monkeypatch.setattr(predictor, "REGISTRY", {})
+    with pytest.raises(ValueError, match="unknown predictor 'gnn'.*install stmpl"):
+        predictor.get("gnn")
