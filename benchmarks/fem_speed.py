@@ -175,7 +175,8 @@ def main() -> None:
     print()
     print(
         "| resolution | order | subdiv | layers | DOFs | tets | Newton its from rest "
-        "| s/sim from rest | its/level | s/level (continuation) | peak MB | loaded-vertex error vs finest |"
+        "| s/sim from rest | its/level | s/level (continuation) | peak MB "
+        "| loaded-vertex error vs finest |"
     )
     print("|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|")
     errs = {}

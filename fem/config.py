@@ -92,18 +92,7 @@ def check(cfg: dict) -> None:
     if not np.all(np.isfinite(f)) or f.min() <= 0 or np.any(np.diff(f) <= 0):
         raise ValueError(f"forces must be a rising list of totals > 0 N, got {cfg['forces']}")
     checked.number(cfg["max_pressure"], "max_pressure", 0, low_open=True, unit="Pa")
-    pl = cfg["placements"]
-    if not isinstance(pl, dict) or not pl:
-        raise ValueError(f"placements must name at least one load kind: {sorted(PLACEMENT_KEYS)}")
-    for kind, spec in pl.items():
-        if kind not in PLACEMENT_KEYS:
-            raise ValueError(f"unknown placement kind {kind!r}; use {sorted(PLACEMENT_KEYS)}")
-        if not isinstance(spec, dict) or set(spec) - PLACEMENT_KEYS[kind]:
-            raise ValueError(
-                f"placements.{kind} takes keys {sorted(PLACEMENT_KEYS[kind])}, got {spec!r}"
-            )
-        if "centres" in spec:
-            checked.integer(spec["centres"], f"placements.{kind}.centres", 1)
+    _check_placements(cfg["placements"])
     s = _numbers(cfg["splits"], "splits")
     if s.shape != (3,) or s.min() < 0 or abs(s.sum() - 1) > 1e-9:
         raise ValueError(
@@ -116,20 +105,39 @@ def check(cfg: dict) -> None:
         raise ValueError(f"parallel takes keys {sorted(DEFAULTS['parallel'])}, got {par!r}")
     checked.one_of(par["backend"], "parallel.backend", BACKENDS)
     checked.integer(par["workers"], "parallel.workers", 1)
+    _check_setup(cfg)
+    checked.one_of(cfg["fidelity"], "fidelity", FIDELITIES)
+    if not isinstance(cfg["linear"], bool):
+        raise ValueError(f"linear must be true or false, got {cfg['linear']!r}")
+    if cfg["bodies"] is not None:
+        check_bodies(cfg)
+
+
+def _check_placements(pl) -> None:
+    """``placements``: a mapping of known load kinds to their known keys."""
+    if not isinstance(pl, dict) or not pl:
+        raise ValueError(f"placements must name at least one load kind: {sorted(PLACEMENT_KEYS)}")
+    for kind, spec in pl.items():
+        if kind not in PLACEMENT_KEYS:
+            raise ValueError(f"unknown placement kind {kind!r}; use {sorted(PLACEMENT_KEYS)}")
+        if not isinstance(spec, dict) or set(spec) - PLACEMENT_KEYS[kind]:
+            raise ValueError(
+                f"placements.{kind} takes keys {sorted(PLACEMENT_KEYS[kind])}, got {spec!r}"
+            )
+        if "centres" in spec:
+            checked.integer(spec["centres"], f"placements.{kind}.centres", 1)
+
+
+def _check_setup(cfg: dict) -> None:
+    """The FEM set-up: ``material`` and ``solver`` build, ``resolution`` is one."""
     if not isinstance(cfg["material"], dict) or not isinstance(cfg["solver"], dict):
         raise ValueError("material and solver must be mappings")
-
     for key, make in (("material", material), ("solver", SolverOptions)):
         try:
             make(**cfg[key])
         except TypeError as e:
             raise ValueError(f"{key}: {e}") from e
     resolution(cfg["resolution"])
-    checked.one_of(cfg["fidelity"], "fidelity", FIDELITIES)
-    if not isinstance(cfg["linear"], bool):
-        raise ValueError(f"linear must be true or false, got {cfg['linear']!r}")
-    if cfg["bodies"] is not None:
-        check_bodies(cfg)
 
 
 def config_hash(cfg: dict) -> str:

@@ -202,6 +202,29 @@ def generate(
             max_shards=max_shards,
             max_bodies=max_bodies,
         )
+    par = _parallel(cfg, workers, backend, scheduler)
+    if max_shards is not None and max_shards < 1:
+        raise ValueError(f"max_shards must be >= 1, got {max_shards}")
+    out = pathlib.Path(out if out is not None else pathlib.Path("data") / cfg["name"])
+    chash = config_hash(cfg)
+    p = plan(cfg, part)
+    _check_solvable(p)
+    _prepare(out, cfg, p, chash)
+    todo = [k for k in range(p.n_shards) if read_shard_meta(shard_path(out, k), chash) is None]
+    if max_shards is not None:
+        todo = todo[:max_shards]
+    runs_path = out / "runs.json"
+    runs = json.loads(runs_path.read_text()) if runs_path.exists() else []
+    _solve(out, cfg, p, chash, todo, par, runs, progress)
+    if max_shards is not None and any(
+        read_shard_meta(shard_path(out, k), chash) is None for k in range(p.n_shards)
+    ):
+        return {}
+    return write_card(out, p, chash, runs)
+
+
+def _parallel(cfg: dict, workers, backend, scheduler) -> dict:
+    """The config's ``parallel`` settings with the caller's overrides, checked."""
     par = dict(cfg["parallel"])
     if workers is not None:
         par["workers"] = workers
@@ -209,18 +232,16 @@ def generate(
         par["backend"] = backend
     if scheduler is not None:
         par["backend"], par["scheduler"] = "dask", scheduler
-    if (
-        isinstance(par["workers"], bool)
-        or not isinstance(par["workers"], int)
-        or par["workers"] < 1
-    ):
-        raise ValueError(f"workers must be an integer >= 1, got {par['workers']!r}")
-    if max_shards is not None and max_shards < 1:
-        raise ValueError(f"max_shards must be >= 1, got {max_shards}")
-    out = pathlib.Path(out if out is not None else pathlib.Path("data") / cfg["name"])
-    chash = config_hash(cfg)
-    p = plan(cfg, part)
-    _check_solvable(p)
+    w = par["workers"]
+    if isinstance(w, bool) or not isinstance(w, int) or w < 1:
+        raise ValueError(f"workers must be an integer >= 1, got {w!r}")
+    return par
+
+
+def _prepare(out: pathlib.Path, cfg: dict, p: Plan, chash: str) -> None:
+    """The dataset folder: refused if it holds another config's dataset, else its part and
+    config written once, and temporary files of shards a killed run left removed.
+    """
     out.mkdir(parents=True, exist_ok=True)
     saved = out / "config.yaml"
     if saved.exists():
@@ -230,7 +251,7 @@ def generate(
                 f"{out} holds a dataset from a different config; use another "
                 "output folder or delete it"
             )
-    if not saved.exists():
+    else:
         atomic_savez(
             out / "part.npz",
             {
@@ -242,12 +263,13 @@ def generate(
         atomic_write_text(saved, yaml.safe_dump(cfg, sort_keys=False))
     for stale in out.glob("shard-*.h5.*.tmp"):
         stale.unlink(missing_ok=True)
-    todo = [k for k in range(p.n_shards) if read_shard_meta(shard_path(out, k), chash) is None]
-    if max_shards is not None:
-        todo = todo[:max_shards]
+
+
+def _solve(out, cfg, p: Plan, chash: str, todo: list, par: dict, runs: list, progress) -> None:
+    """Solve the shards ``todo`` on the backend ``par`` names, writing each as it arrives, with
+    a progress bar of the running totals; the run is added to ``runs.json`` even if it stops.
+    """
     threads = max(1, (os.cpu_count() or 1) // par["workers"])
-    runs_path = out / "runs.json"
-    runs = json.loads(runs_path.read_text()) if runs_path.exists() else []
     t0 = time.perf_counter()
     started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     bar = None
@@ -293,12 +315,7 @@ def generate(
                     "workers": par["workers"],
                 }
             )
-            atomic_write_text(runs_path, json.dumps(runs, indent=1))
-    if max_shards is not None and any(
-        read_shard_meta(shard_path(out, k), chash) is None for k in range(p.n_shards)
-    ):
-        return {}
-    return write_card(out, p, chash, runs)
+            atomic_write_text(out / "runs.json", json.dumps(runs, indent=1))
 
 
 def generate_bodies(cfg: dict, out, max_bodies: int | None = None, **kwargs) -> dict:

@@ -368,6 +368,33 @@ class Solver:
         out[self.free] = r[self.free]
         return out.reshape(-1, 3)
 
+    def _factorise(self, u: np.ndarray, f: np.ndarray) -> tuple[str, int] | None:
+        """Assemble and factorise the tangent at ``u``; ``None``, or why it failed and whether
+        the iteration counts (``(reason, 1)`` when the tangent itself was built).
+        """
+        try:
+            _, K = self.assemble(u, f)
+            self.linear.factor(K)
+        except IndefiniteTangent:
+            return "indefinite tangent: the layer buckles", 1
+        except (RuntimeError, ValueError) as e:
+            return f"linear solve failed: {e}", 0
+        return None
+
+    def _line_search(self, u: np.ndarray, f: np.ndarray, step: np.ndarray, E: float, slope: float):
+        """Backtracking (Armijo, halving up to 12 times) along ``step`` from ``u`` of energy
+        ``E`` and directional derivative ``slope``: ``(alpha, u + alpha step, its energy)``, or
+        ``(alpha, None, None)`` when no step lowers the energy.
+        """
+        alpha = 1.0
+        for _ in range(12):
+            trial = u + alpha * step
+            Et = self.energy(trial, f)
+            if np.isfinite(Et) and (Et <= E + 1e-4 * alpha * slope or (Et - E) <= 1e-12 * abs(E)):
+                return alpha, trial, Et
+            alpha *= 0.5
+        return alpha, None, None
+
     def _newton(self, u: np.ndarray, f: np.ndarray) -> dict:
         """Newton iterations from ``u`` under nodal forces ``f``. The factorised tangent is kept
         while the residual still contracts by ``options.reuse`` per step (a solve with stored
@@ -406,21 +433,13 @@ class Solver:
             if len(history) > 1 and rel > opt.reuse * history[-2]:
                 refresh = True
             if refresh:
-                try:
-                    _, K = self.assemble(u, f)
-                    self.linear.factor(K)
-                except IndefiniteTangent:
+                failed = self._factorise(u, f)
+                if failed is not None:
+                    reason, spent = failed
                     return {
                         "ok": False,
-                        "reason": "indefinite tangent: the layer buckles",
-                        "iterations": it + 1,
-                        "residual": rel,
-                    }
-                except (RuntimeError, ValueError) as e:
-                    return {
-                        "ok": False,
-                        "reason": f"linear solve failed: {e}",
-                        "iterations": it,
+                        "reason": reason,
+                        "iterations": it + spent,
                         "residual": rel,
                     }
                 factorisations += 1
@@ -448,17 +467,8 @@ class Solver:
             step = np.zeros(u.size)
             step[free] = du
             step = step.reshape(-1, 3)
-            alpha, accepted = 1.0, False
-            for _ in range(12):
-                trial = u + alpha * step
-                Et = self.energy(trial, f)
-                if np.isfinite(Et) and (
-                    Et <= E + 1e-4 * alpha * slope or (Et - E) <= 1e-12 * abs(E)
-                ):
-                    accepted = True
-                    break
-                alpha *= 0.5
-            if not accepted:
+            alpha, trial, Et = self._line_search(u, f, step, E, slope)
+            if trial is None:
                 if not fresh:
                     refresh = True
                     continue

@@ -84,7 +84,7 @@ def test_a_setup_off_the_chart_stays_in_the_tables(config, monkeypatch):
     """``chart: false``: measured and tabled (its latency too), but not drawn on the chart."""
     drawn = []
     monkeypatch.setattr(
-        "stmpl.viz.chart.speed_accuracy",
+        "stmpl.analysis.ablation.speed_accuracy",
         lambda pts, *a, **k: drawn.append({p["label"] for p in pts}),
     )
     config["setups"][1]["chart"] = False

@@ -193,6 +193,23 @@ def test_the_checks_see_lazy_imports_and_circles(tmp_path, monkeypatch):
     assert any("stmpl.scene" in c for c in _circles())
 
 
+NETWORKS = sorted(m for m in MODULES if m.startswith("models.") and m.endswith(".network"))
+
+
+def test_every_learned_model_keeps_its_network_apart():
+    """``models/<kind>/network.py`` beside ``predictor.py`` for each learned model."""
+    kinds = {m.split(".")[1] for m in NETWORKS}
+    assert kinds >= {"gnn", "uv_unet", "naive"}
+    assert all(f"models.{k}.predictor" in MODULES for k in kinds)
+
+
+@pytest.mark.parametrize("module", NETWORKS)
+def test_a_network_knows_no_physics(module):
+    """A network imports torch and nothing of ours: no part, scene, envelope, FEM or feature."""
+    ours = sorted(t for t in GRAPH[module] if t.split(".")[0] in PACKAGES)
+    assert not ours, f"{module} imports {ours}"
+
+
 @pytest.mark.parametrize("package", PACKAGES)
 def test_no_module_past_the_line_budget(package):
     long = {

@@ -2,7 +2,7 @@
 as the prior of the learned models.
 """
 
-from models.linear.model import LinearPredictor
 from models.linear.operator import ComplianceOperator, operator_arrays
+from models.linear.predictor import LinearPredictor
 
 __all__ = ["ComplianceOperator", "LinearPredictor", "operator_arrays"]

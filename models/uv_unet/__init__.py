@@ -1,5 +1,9 @@
-"""The paper's UV-space UNet: rasterise force and thickness, UNet, sample back at the vertices."""
+"""The paper's UV-space UNet: rasterise force and thickness, UNet, sample back at the vertices.
+The network (:mod:`models.uv_unet.network`) knows no physics; the predictor
+(:mod:`models.uv_unet.predictor`) builds its images, its prior and its envelope.
+"""
 
-from models.uv_unet.model import UNet, UVUNetPredictor
+from models.uv_unet.network import UNet
+from models.uv_unet.predictor import UVUNetPredictor
 
 __all__ = ["UNet", "UVUNetPredictor"]

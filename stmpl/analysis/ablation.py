@@ -258,23 +258,7 @@ def run(config, progress: bool = True, accept_remade: bool = False) -> dict:
     }
     atomic_write_text(cache_path, json.dumps(cache, indent=1, sort_keys=True))
     ind = sets[cfg["in_distribution"]]
-    seen = cfg["seen_thickness_mm"]
-
-    jobs = []  # (setup, dataset name, thickness filter, table, row label)
-    for s in cfg["setups"]:
-        jobs.append((s, cfg["in_distribution"], None, "table1", s["name"]))
-        for o in cfg["out_of_distribution"]:
-            jobs.append((s, o, None, "table2", f"{s['name']} / {o}"))
-        if seen and "thickness_mm" in s:
-            for d in [cfg["in_distribution"], *cfg["out_of_distribution"]]:
-                levels = sorted({float(x) for x in sets[d].card["config"]["thickness_mm"]})
-                unseen = [x for x in levels if not any(abs(x - y) < 1e-9 for y in seen)]
-                where = "in-distribution" if d == cfg["in_distribution"] else d
-                jobs.append((s, d, list(seen), "table3", f"{s['name']} / {where}, seen thickness"))
-                if unseen:
-                    jobs.append(
-                        (s, d, unseen, "table3", f"{s['name']} / {where}, unseen thickness")
-                    )
+    jobs = _jobs(cfg, sets)
     bar = None
     if progress:
         bar = tqdm(
@@ -292,15 +276,7 @@ def run(config, progress: bool = True, accept_remade: bool = False) -> dict:
         atomic_write_text(cache_path, json.dumps(cache, indent=1, sort_keys=True))
 
     for s in cfg["setups"]:  # one set-up at a time: trained, measured, its report out
-        if "train" in s:
-            t = _training_config(s, cfg, ind)
-            ckpt = pathlib.Path(t["out"]) / f"{t['name']}.safetensors"
-            if not ckpt.is_file():
-                ready(ind)
-                ckpt = train(t, progress=False)
-            spec = str(ckpt)
-        else:
-            spec = s["predictor"]
+        spec = _trained(s, cfg, ind)
         fidelity = s.get("fidelity", "full")
         p = _open(spec, fidelity)
         setup_key = _setup_key(spec, fidelity)
@@ -331,20 +307,7 @@ def run(config, progress: bool = True, accept_remade: bool = False) -> dict:
         if key not in cache:
             cache[key] = _latency(p, ready(ind))
             save()
-        err = _pooled(
-            [tables["table2"].get(f"{s['name']} / {o}") for o in cfg["out_of_distribution"]]
-            or [tables["table1"][s["name"]]]
-        )
-        for batch, sec in cache[key].items():
-            points.append(
-                {
-                    "label": s["name"],
-                    "batch": int(batch),
-                    "seconds": sec,
-                    "chart": bool(s.get("chart", True)),
-                    **err,
-                }
-            )
+        points += _points(s, cfg, tables, cache[key])
         if bar is not None:
             bar.update(1)
         cost["wall"] = time.perf_counter() - t_run
@@ -352,6 +315,58 @@ def run(config, progress: bool = True, accept_remade: bool = False) -> dict:
     if bar is not None:
         bar.close()
     return {"tables": tables, "out": out, "points": points}
+
+
+def _jobs(cfg: dict, sets: dict) -> list[tuple]:
+    """What to measure: ``(setup, dataset name, thickness filter, table, row label)`` for every
+    set-up on the in-distribution set (Table 1), on each out-of-distribution set (Table 2) and,
+    for a set-up trained on some thicknesses only, on the seen and unseen ones (Table 3).
+    """
+    ind, seen = cfg["in_distribution"], cfg["seen_thickness_mm"]
+    jobs = []
+    for s in cfg["setups"]:
+        jobs.append((s, ind, None, "table1", s["name"]))
+        for o in cfg["out_of_distribution"]:
+            jobs.append((s, o, None, "table2", f"{s['name']} / {o}"))
+        if not (seen and "thickness_mm" in s):
+            continue
+        for d in [ind, *cfg["out_of_distribution"]]:
+            levels = sorted({float(x) for x in sets[d].card["config"]["thickness_mm"]})
+            unseen = [x for x in levels if not any(abs(x - y) < 1e-9 for y in seen)]
+            where = "in-distribution" if d == ind else d
+            jobs.append((s, d, list(seen), "table3", f"{s['name']} / {where}, seen thickness"))
+            if unseen:
+                jobs.append((s, d, unseen, "table3", f"{s['name']} / {where}, unseen thickness"))
+    return jobs
+
+
+def _trained(s: dict, cfg: dict, ind) -> str:
+    """The predictor spec of set-up ``s``: its own, or the checkpoint its training recipe writes
+    (trained on the in-distribution set ``ind`` unless it is there already).
+    """
+    if "train" not in s:
+        return s["predictor"]
+    t = _training_config(s, cfg, ind)
+    ckpt = pathlib.Path(t["out"]) / f"{t['name']}.safetensors"
+    if not ckpt.is_file():
+        ready(ind)
+        ckpt = train(t, progress=False)
+    return str(ckpt)
+
+
+def _points(s: dict, cfg: dict, tables: dict, latency: dict) -> list[dict]:
+    """The chart's points of set-up ``s``: its seconds per scene at each batch size against its
+    error pooled over the out-of-distribution rows (the in-distribution row if there are none).
+    """
+    err = _pooled(
+        [tables["table2"].get(f"{s['name']} / {o}") for o in cfg["out_of_distribution"]]
+        or [tables["table1"][s["name"]]]
+    )
+    chart = bool(s.get("chart", True))
+    return [
+        {"label": s["name"], "batch": int(b), "seconds": sec, "chart": chart, **err}
+        for b, sec in latency.items()
+    ]
 
 
 def _latency(p, ds, repeats: int = 5) -> dict:

@@ -202,9 +202,78 @@ def train(config, resume: bool = True, progress: bool = True):
     out = pathlib.Path(cfg["out"])
     out.mkdir(parents=True, exist_ok=True)
     ds = open_data(cfg["data"])
+    p = _model(cfg, ds)
+    device = torch.device(cfg["device"])
+    t_fit = time.perf_counter()
+    if hasattr(p, "fit"):  # a part computed from the dataset, not learned (a FEM operator)
+        p.fit(ds, progress=progress)
+    fitted = {"fit_seconds": round(time.perf_counter() - t_fit, 3)}
+    if p.n_parameters() == 0:
+        return _write_checkpoint(p, cfg, ds, out, [], float("nan"), fitted)
+    opt = torch.optim.Adam(p.model.parameters(), lr=cfg["lr"])
+    tr = _split_tensors(ds, "train", cfg, device, p)
+    va = _split_tensors(ds, "val", cfg, device, p)
+    if len(tr[0]) == 0 or len(va[0]) == 0:
+        raise ValueError(
+            f"dataset {cfg['data']} has no training or no validation samples "
+            "(after the thickness filter)"
+        )
+    state_path = out / "state.pt"
+    run = {"epoch": 0, "best": np.inf, "best_state": None, "bad": 0, "history": []}
+    if resume and state_path.exists():
+        run = _resume(state_path, cfg, p, opt, device)
+    gen = torch.Generator().manual_seed(cfg["seed"])
+    for _ in range(run["epoch"]):  # the same shuffles as an uninterrupted run
+        torch.randperm(len(tr[0]), generator=gen)
+    bar = None
+    if progress:
+        bar = tqdm(
+            total=cfg["epochs"],
+            initial=run["epoch"],
+            unit="epoch",
+            desc=f"train {cfg['name']}",
+            dynamic_ncols=True,
+        )
+    t0 = time.perf_counter()
+    history = run["history"]
+    before = history[-1].get("seconds", 0.0) if history else 0.0  # training time of earlier runs
+    for epoch in range(run["epoch"], cfg["epochs"]):
+        if run["bad"] >= cfg["patience"]:
+            break
+        loss = _epoch(p, opt, tr, cfg, epoch, gen, device)
+        vloss = _validation_loss(p, va)
+        history.append(
+            {
+                "epoch": epoch + 1,
+                "train": loss,
+                "val": vloss,
+                "seconds": round(before + time.perf_counter() - t0, 3),
+            }
+        )
+        if vloss < run["best"]:
+            run["best"], run["bad"] = vloss, 0
+            run["best_state"] = {k: v.detach().clone() for k, v in p.model.state_dict().items()}
+        else:
+            run["bad"] += 1
+        run["epoch"] = epoch + 1
+        _save_state(state_path, cfg, p, opt, run)
+        if bar is not None:
+            bar.update(1)
+            bar.set_postfix(train=f"{loss:.3g}", val=f"{vloss:.3g}")
+    if bar is not None:
+        bar.close()
+    p.model.load_state_dict(run["best_state"])
+    return _write_checkpoint(p, cfg, ds, out, history, run["best"], fitted)
+
+
+def _model(cfg: dict, ds):
+    """The config's predictor, untrained, seeded, on the dataset's part with one slot per body
+    and the envelope of its training scenes.
+    """
+    import torch  # deferred: about a second to import; the core's types do not need it
+
     if cfg["device"].startswith("cuda") and not torch.cuda.is_available():
         raise ValueError(f"device {cfg['device']} was asked for but CUDA is not available here")
-    device = torch.device(cfg["device"])
     torch.manual_seed(cfg["seed"])
     np.random.seed(cfg["seed"])
     p = predictor.create(cfg["model"], ds.part, cfg["options"], device=cfg["device"])
@@ -218,125 +287,89 @@ def train(config, resume: bool = True, progress: bool = True):
         if p.slot(part) != k:
             raise RuntimeError(f"body {k} of the dataset took another slot")
     p.envelope = envelope(ds, cfg)
-    t_fit = time.perf_counter()
-    if hasattr(p, "fit"):  # a part computed from the dataset, not learned (a FEM operator)
-        p.fit(ds, progress=progress)
-    t_fit = time.perf_counter() - t_fit
-    if p.n_parameters() == 0:
-        return _write_checkpoint(
-            p, cfg, ds, out, [], float("nan"), {"fit_seconds": round(t_fit, 3)}
-        )
-    opt = torch.optim.Adam(p.model.parameters(), lr=cfg["lr"])
-    tr = _split_tensors(ds, "train", cfg, device, p)
-    va = _split_tensors(ds, "val", cfg, device, p)
-    if len(tr[0]) == 0 or len(va[0]) == 0:
+    return p
+
+
+def _resume(state_path: pathlib.Path, cfg: dict, p, opt, device) -> dict:
+    """The run saved in ``state_path`` (epoch, best loss and weights, epochs without progress,
+    history), its model, optimiser and random state restored; refused when it belongs to
+    another config (only ``epochs`` may change, to extend a run) or the file is broken.
+    """
+    import torch  # deferred: about a second to import; the core's types do not need it
+
+    try:
+        st = torch.load(state_path, map_location=device, weights_only=False)
+    except Exception as e:  # noqa: BLE001 - torch raises many kinds for a broken file
         raise ValueError(
-            f"dataset {cfg['data']} has no training or no validation samples "
-            "(after the thickness filter)"
+            f"{state_path} is truncated or corrupt ({type(e).__name__}); "
+            "delete it or use --restart to train from the start"
+        ) from e
+    free = ("epochs", "out")  # a run may be extended, and its folder moved
+    same = {k: v for k, v in st["config"].items() if k not in free}
+    if same != {k: v for k, v in cfg.items() if k not in free}:
+        raise ValueError(
+            f"{state_path} belongs to another config (only epochs may change "
+            "to extend a run); delete it, use --restart or another out folder"
         )
-    state_path = out / "state.pt"
-    start, best, best_state, bad, history = 0, np.inf, None, 0, []
-    if resume and state_path.exists():
-        try:
-            st = torch.load(state_path, map_location=device, weights_only=False)
-        except Exception as e:  # noqa: BLE001 - torch raises many kinds for a broken file
-            raise ValueError(
-                f"{state_path} is truncated or corrupt ({type(e).__name__}); "
-                "delete it or use --restart to train from the start"
-            ) from e
-        free = ("epochs", "out")  # a run may be extended, and its folder moved
-        same = {k: v for k, v in st["config"].items() if k not in free}
-        if same != {k: v for k, v in cfg.items() if k not in free}:
-            raise ValueError(
-                f"{state_path} belongs to another config (only epochs may change "
-                "to extend a run); delete it, use --restart or another out folder"
-            )
-        p.model.load_state_dict(st["model"])
-        opt.load_state_dict(st["opt"])
-        start, best, best_state, bad, history = (
-            st["epoch"],
-            st["best"],
-            st["best_state"],
-            st["bad"],
-            st["history"],
-        )
-        torch.set_rng_state(st["rng"])
-    gen = torch.Generator().manual_seed(cfg["seed"])
-    for _ in range(start):  # the same shuffles as an uninterrupted run
-        torch.randperm(len(tr[0]), generator=gen)
-    bar = None
-    if progress:
-        bar = tqdm(
-            total=cfg["epochs"],
-            initial=start,
-            unit="epoch",
-            desc=f"train {cfg['name']}",
-            dynamic_ncols=True,
-        )
-    t0 = time.perf_counter()
-    before = history[-1].get("seconds", 0.0) if history else 0.0  # training time of earlier runs
-    epoch = start
-    for epoch in range(start, cfg["epochs"]):
-        if bad >= cfg["patience"]:
-            break
-        p.model.train()
-        perm = torch.randperm(len(tr[0]), generator=gen).to(device)
-        total = 0.0
-        per_epoch = -(-len(perm) // cfg["batch"])
-        for k, i in enumerate(range(0, len(perm), cfg["batch"])):
-            idx = perm[i : i + cfg["batch"]]
-            for g in opt.param_groups:
-                g["lr"] = learning_rate(cfg, epoch * per_epoch + k, cfg["epochs"] * per_epoch)
-            loss = p.loss(*(None if x is None else x[idx] for x in tr))
-            opt.zero_grad()
-            loss.backward()
-            opt.step()
-            total += float(loss.detach()) * len(idx)
-        p.model.eval()
-        with torch.no_grad():
-            vloss = float(
-                np.mean(
-                    [
-                        float(p.loss(*(None if x is None else x[i : i + 256] for x in va)))
-                        for i in range(0, len(va[0]), 256)
-                    ]
-                )
-            )
-        history.append(
+    p.model.load_state_dict(st["model"])
+    opt.load_state_dict(st["opt"])
+    torch.set_rng_state(st["rng"])
+    return {k: st[k] for k in ("epoch", "best", "best_state", "bad", "history")}
+
+
+def _save_state(state_path: pathlib.Path, cfg: dict, p, opt, run: dict) -> None:
+    """Write the run so far atomically (a killed run resumes from its last epoch)."""
+    import torch  # deferred: about a second to import; the core's types do not need it
+
+    with atomic_path(state_path) as tmp:
+        torch.save(
             {
-                "epoch": epoch + 1,
-                "train": total / len(perm),
-                "val": vloss,
-                "seconds": round(before + time.perf_counter() - t0, 3),
-            }
+                "config": cfg,
+                "model": p.model.state_dict(),
+                "opt": opt.state_dict(),
+                **run,
+                "rng": torch.get_rng_state(),
+            },
+            tmp,
         )
-        if vloss < best:
-            best, bad = vloss, 0
-            best_state = {k: v.detach().clone() for k, v in p.model.state_dict().items()}
-        else:
-            bad += 1
-        with atomic_path(state_path) as tmp:
-            torch.save(
-                {
-                    "config": cfg,
-                    "model": p.model.state_dict(),
-                    "opt": opt.state_dict(),
-                    "epoch": epoch + 1,
-                    "best": best,
-                    "best_state": best_state,
-                    "bad": bad,
-                    "history": history,
-                    "rng": torch.get_rng_state(),
-                },
-                tmp,
+
+
+def _epoch(p, opt, tr: tuple, cfg: dict, epoch: int, gen, device) -> float:
+    """One pass over the training split in shuffled batches, the learning rate set per step;
+    returns the mean training loss.
+    """
+    import torch  # deferred: about a second to import; the core's types do not need it
+
+    p.model.train()
+    perm = torch.randperm(len(tr[0]), generator=gen).to(device)
+    total = 0.0
+    per_epoch = -(-len(perm) // cfg["batch"])
+    for k, i in enumerate(range(0, len(perm), cfg["batch"])):
+        idx = perm[i : i + cfg["batch"]]
+        for g in opt.param_groups:
+            g["lr"] = learning_rate(cfg, epoch * per_epoch + k, cfg["epochs"] * per_epoch)
+        loss = p.loss(*(None if x is None else x[idx] for x in tr))
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        total += float(loss.detach()) * len(idx)
+    return total / len(perm)
+
+
+def _validation_loss(p, va: tuple, batch: int = 256) -> float:
+    """The mean loss over the validation split, in batches of ``batch``."""
+    import torch  # deferred: about a second to import; the core's types do not need it
+
+    p.model.eval()
+    with torch.no_grad():
+        return float(
+            np.mean(
+                [
+                    float(p.loss(*(None if x is None else x[i : i + batch] for x in va)))
+                    for i in range(0, len(va[0]), batch)
+                ]
             )
-        if bar is not None:
-            bar.update(1)
-            bar.set_postfix(train=f"{total / len(perm):.3g}", val=f"{vloss:.3g}")
-    if bar is not None:
-        bar.close()
-    p.model.load_state_dict(best_state)
-    return _write_checkpoint(p, cfg, ds, out, history, best, {"fit_seconds": round(t_fit, 3)})
+        )
 
 
 def _write_checkpoint(p, cfg, ds, out, history, best, extra) -> pathlib.Path:

@@ -1,20 +1,15 @@
-"""The paper's UV-space UNet (pix2pix-style) and its predictor.
+"""The UV-UNet predictor: the network of :mod:`models.uv_unet.network` on the part's UV chart.
 
-Network (:class:`UNet`): ``depth`` down-steps of 4x4 convolutions with stride 2 (LeakyReLU 0.2
-before each but the first, no normalisation), and as many 4x4 transposed convolutions up with
-skip connections (LeakyReLU 0.2 before each, dropout 0.5 on the three innermost), a tanh output.
-Channels double from ``width`` up to ``8 * width``. Images ``(B, C_in, S, S) -> (B, 3, S, S)``.
-
-Predictor (:class:`UVUNetPredictor`): per-vertex inputs become UV images (:mod:`stmpl.uv`):
-pressure ``F_i / A_i`` over 1 kPa (resolution-independent, unlike the raw per-vertex force) and
-thickness normalised over [2.5, 12.5] mm, optionally geometry (rest positions about the part's
-centre over its extent, normals). The output images hold the displacement over ``disp_scale_mm``
-(10 mm by default; the paper's 30 mm); they are
-sampled back at the vertices, a seam vertex's copies averaged. The loss is the mean squared error
-over the chart's pixels and the few padding pixels around it that bilinear sampling at edge
-vertices reads (the paper's L2, masked), plus an optional total-variation term. With
-``prior: linear`` the precomputed linear FEM's displacement is three more channels and the output
-images hold a correction to it, added at the vertices (:class:`~models.linear.LinearPrior`).
+Per-vertex inputs become UV images (:mod:`stmpl.uv`): pressure ``F_i / A_i`` over 1 kPa
+(resolution-independent, unlike the raw per-vertex force) and thickness normalised over
+[2.5, 12.5] mm, optionally geometry (rest positions about the part's centre over its extent,
+normals). The output images hold the displacement over ``disp_scale_mm`` (10 mm by default; the
+paper's 30 mm); they are sampled back at the vertices, a seam vertex's copies averaged. The loss
+is the mean squared error over the chart's pixels and the few padding pixels around it that
+bilinear sampling at edge vertices reads (the paper's L2, masked), plus an optional
+total-variation term. With ``prior: linear`` the precomputed linear FEM's displacement is three
+more channels and the output images hold a correction to it, added at the vertices
+(:class:`~models.prior.LinearPrior`).
 """
 
 from __future__ import annotations
@@ -27,61 +22,8 @@ from models.features import PRESSURE_SCALE, PRIOR_SCALE, load_channels, normalis
 from models.learned import LearnedPredictor
 from models.linear.operator import ComplianceOperator
 from models.prior import CORRECTION_SCALE, LinearPrior, moved
+from models.uv_unet.network import UNet, WithPrior
 from stmpl.uv import UVMap
-
-
-class UNet(nn.Module):
-    """pix2pix UNet: ``(B, C_in, S, S) -> (B, C_out, S, S)`` in [-1, 1]; ``S`` divisible by
-    ``2 ** depth``.
-    """
-
-    def __init__(
-        self, c_in: int, c_out: int = 3, width: int = 16, depth: int = 5, dropout: float = 0.5
-    ):
-        super().__init__()
-        ch = [width * 2 ** min(d, 3) for d in range(depth)]
-        self.down = nn.ModuleList()
-        prev = c_in
-        for d, c in enumerate(ch):
-            layers = [] if d == 0 else [nn.LeakyReLU(0.2)]
-            self.down.append(nn.Sequential(*layers, nn.Conv2d(prev, c, 4, 2, 1)))
-            prev = c
-        self.up = nn.ModuleList()
-        for d in reversed(range(depth)):
-            c_skip = 0 if d == depth - 1 else ch[d]
-            c_out_d = ch[d - 1] if d > 0 else c_out
-            layers = [nn.LeakyReLU(0.2), nn.ConvTranspose2d(ch[d] + c_skip, c_out_d, 4, 2, 1)]
-            if 0 < d and d >= depth - 3 and dropout > 0:
-                layers.append(nn.Dropout(dropout))
-            self.up.append(nn.Sequential(*layers))
-        self.depth = depth
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        if x.shape[-1] % (2**self.depth) or x.shape[-2] % (2**self.depth):
-            raise ValueError(f"image size {tuple(x.shape[-2:])} is not divisible by 2^{self.depth}")
-        skips = []
-        for layer in self.down:
-            x = layer(x)
-            skips.append(x)
-        x = skips.pop()
-        for i, layer in enumerate(self.up):
-            if i > 0:
-                x = torch.cat([x, skips.pop()], dim=1)
-            x = layer(x)
-        return torch.tanh(x)
-
-
-class WithPrior(nn.Module):
-    """A :class:`UNet` and the linear FEM operator its predictor adds (``prior: linear``), kept
-    together so the checkpoint carries both; calling it runs the UNet.
-    """
-
-    def __init__(self, net: UNet, prior: nn.Module):
-        super().__init__()
-        self.net, self.prior = net, prior
-
-    def forward(self, x: torch.Tensor) -> torch.Tensor:
-        return self.net(x)
 
 
 class UVUNetPredictor(LinearPrior, LearnedPredictor):

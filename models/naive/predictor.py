@@ -6,22 +6,10 @@ floor every learned model must clear.
 
 from __future__ import annotations
 
-import torch
 from torch import nn
 
 from models.learned import LearnedPredictor
-
-
-class NaiveModel(nn.Module):
-    """``(B, N) x (B, N) -> (B, N, 3)``: ``alpha * t * F`` (m), divided by ``scale`` (m)."""
-
-    def __init__(self, scale: float):
-        super().__init__()
-        self.alpha = nn.Parameter(torch.zeros(3))
-        self.scale = scale
-
-    def forward(self, thickness: torch.Tensor, force: torch.Tensor) -> torch.Tensor:
-        return (thickness * force)[..., None] * self.alpha / self.scale
+from models.naive.network import NaiveModel
 
 
 class NaivePredictor(LearnedPredictor):

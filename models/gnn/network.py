@@ -1,0 +1,156 @@
+"""A MeshGraphNets-style graph network (Pfaff et al. 2021): graphs in, graphs out; it knows no
+physics, scenes or envelopes (the predictor, :mod:`models.gnn.predictor`, builds its inputs).
+
+Encode - process - decode, on a graph's nodes and edges:
+
+    h_i = f_v(node inputs_i),        e_ij = f_e(edge inputs_ij)                 (encoder)
+    e_ij <- e_ij + g_e([e_ij, h_i, h_j]);  h_i <- h_i + g_v([h_i, sum_j e_ij])  (x steps)
+    u_i = d(h_i)                                                                 (decoder)
+
+Every MLP has two layers and (except the decoder) a LayerNorm. :class:`Normaliser` modules (a
+fixed shift and scale, kept as buffers, so a checkpoint carries them) bring the inputs to order
+one; :class:`NormalisedGraphNet` applies them and, given one, adds a prior module's output to
+the node inputs.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import torch
+from torch import nn
+
+with warnings.catch_warnings():  # torch_geometric's pooling layers use torch.jit.script on import
+    warnings.filterwarnings(
+        "ignore", message=r".*torch\.jit\.script.*deprecated", category=DeprecationWarning
+    )
+    from torch_geometric.nn import MessagePassing  # deferred: imports torch._dynamo (1-2 s)
+
+
+def mlp(c_in: int, hidden: int, c_out: int, norm: bool = True) -> nn.Sequential:
+    """Two linear layers with a ReLU between, optionally a LayerNorm on the output."""
+    layers = [nn.Linear(c_in, hidden), nn.ReLU(), nn.Linear(hidden, c_out)]
+    return nn.Sequential(*layers, nn.LayerNorm(c_out)) if norm else nn.Sequential(*layers)
+
+
+class GraphNetBlock(MessagePassing):
+    """One processor step: ``e_ij <- e_ij + g_e([e_ij, h_i, h_j])``, then
+    ``h_i <- h_i + g_v([h_i, sum_j e_ij])``. ``h``: ``(V, L)``, ``e``: ``(E, L)``,
+    ``edge_index``: ``(2, E)`` (source j, target i).
+
+    ``g_e``'s first layer is applied as ``A e_ij + B h_i + C h_j``: the same map as on the
+    concatenation, but ``B h`` and ``C h`` are computed once per node and gathered, which saves
+    two thirds of the edge work (there are about six times more edges than nodes). Gathers use
+    ``index_select``, six times faster than advanced indexing on the CPU at these sizes, and the
+    sum over incoming edges is one ``index_add_`` (the same sum as ``propagate`` with
+    ``aggr="add"``, without its per-call overhead: 10 % of a batch-1 prediction).
+    """
+
+    def __init__(self, latent: int):
+        super().__init__(aggr="add")
+        self.edge_in = nn.Linear(3 * latent, latent)
+        self.edge_out = nn.Sequential(nn.ReLU(), nn.Linear(latent, latent), nn.LayerNorm(latent))
+        self.node_mlp = mlp(2 * latent, latent, latent)
+
+    def forward(
+        self, h: torch.Tensor, edge_index: torch.Tensor, e: torch.Tensor, n: int | None = None
+    ):
+        """``n``: update only the first ``n`` nodes (every target of ``edge_index`` among
+        them; sources may be any node of ``h``): ``(n, L)`` out instead of ``(V, L)``.
+        """
+        j, i = edge_index
+        L = h.shape[1]
+        if n is not None:
+            h, h_all = h[:n], h
+        else:
+            h_all = h
+        W, b = self.edge_in.weight, self.edge_in.bias
+        hi, hj = h @ W[:, L : 2 * L].T, h_all @ W[:, 2 * L :].T  # per node, then gathered
+        nodes = torch.index_select(hi, 0, i) + torch.index_select(hj, 0, j) + b
+        e = e + self.edge_out(torch.addmm(nodes, e, W[:, :L].T))
+        agg = torch.zeros_like(h).index_add_(0, i, e)  # sum_j e_ij at node i
+        return h + self.node_mlp(torch.cat([h, agg], dim=-1)), e
+
+
+class Normaliser(nn.Module):
+    """Fixed feature normalisation ``(x - shift) / scale`` per channel, kept as buffers so that a
+    checkpoint carries it. ``x``: ``(..., C)``.
+    """
+
+    def __init__(self, shift, scale):
+        super().__init__()
+        self.register_buffer("shift", torch.as_tensor(shift, dtype=torch.float32))
+        self.register_buffer("scale", torch.as_tensor(scale, dtype=torch.float32))
+
+    def forward(self, x: torch.Tensor) -> torch.Tensor:
+        return (x - self.shift) / self.scale
+
+
+class NormalisedGraphNet(nn.Module):
+    """A :class:`MeshGraphNet` behind its input normalisers: raw node and edge features in SI
+    units in, the network's output out. ``prior``: an optional linear FEM operator
+    (:class:`~models.linear.ComplianceOperator`) the predictor adds to the output, kept here so
+    the checkpoint carries it.
+    """
+
+    def __init__(
+        self,
+        node_norm: Normaliser,
+        edge_norm: Normaliser,
+        net: "MeshGraphNet",
+        prior: nn.Module | None = None,
+    ):
+        super().__init__()
+        self.node_norm, self.edge_norm, self.net = node_norm, edge_norm, net
+        if prior is not None:
+            self.prior = prior
+
+    def forward(self, x, edge_attr, edge_index, edges=None, sizes=None):
+        """``edges``: the encoded ``edge_attr`` if known (:meth:`encode_edges`), else None;
+        ``sizes``: see :meth:`MeshGraphNet.forward`.
+        """
+        if edges is None:
+            edges = self.encode_edges(edge_attr)
+        return self.net(self.node_norm(x), edges, edge_index, sizes)
+
+    def encode_edges(self, edge_attr):
+        """``(E, edge_in)`` raw edge features -> ``(E, latent)`` encoded."""
+        return self.net.edge_encoder(self.edge_norm(edge_attr))
+
+
+class MeshGraphNet(nn.Module):
+    """``(V, node_in), (E, edge_in), (2, E) -> (V, out)``."""
+
+    def __init__(
+        self, node_in: int = 5, edge_in: int = 4, out: int = 3, latent: int = 128, steps: int = 15
+    ):
+        super().__init__()
+        self.node_encoder = mlp(node_in, latent, latent)
+        self.edge_encoder = mlp(edge_in, latent, latent)
+        self.processor = nn.ModuleList(GraphNetBlock(latent) for _ in range(steps))
+        self.decoder = mlp(latent, latent, out, norm=False)
+
+    def forward(
+        self,
+        x: torch.Tensor,
+        e: torch.Tensor,
+        edge_index: torch.Tensor,
+        sizes: list[tuple[int, int]] | None = None,
+    ):
+        """``x`` normalised node features, ``e`` encoded edges ``(E, latent)``.
+
+        ``sizes``: one ``(n, m)`` per step for a graph whose nodes are sorted by their distance
+        in hops from the nodes whose answer is wanted, and its edges by their target's: step
+        ``s`` updates only the first ``n`` nodes over the first ``m`` edges (the nodes within
+        ``steps - s`` hops, all that later steps read), and the output is the last step's
+        ``(n, out)``; the same answer on those nodes as the whole graph's, with a third less work
+        at three steps.
+        """
+        h = self.node_encoder(x)
+        for s, block in enumerate(self.processor):
+            if sizes is None:
+                h, e = block(h, edge_index, e)
+            else:
+                n, m = sizes[s]
+                h, e = block(h, edge_index[:, :m], e[:m], n)
+        return self.decoder(h)
