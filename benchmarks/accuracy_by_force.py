@@ -19,6 +19,7 @@ import torch
 from stmpl.data.dataset import Dataset
 from stmpl.metrics import sample_metrics
 from stmpl.pipeline import zoo
+from stmpl.table import markdown
 
 
 def by_force(p, a: dict, key: str = "force") -> dict:
@@ -65,21 +66,26 @@ def main() -> None:
         "peak"
     )
     print()
-    print("| model | " + " | ".join(f"{x:g} N" for x in forces) + " | all |")
-    print("|---|" + "--:|" * (len(forces) + 1))
-    for n, r in res.items():
-        print(
-            f"| {n} | "
-            + " | ".join(f"{r[k][0]:.2f} / {r[k][1]:.3f}" for k in forces + ["all"])
-            + " |"
+    print(
+        markdown(
+            ["model", *(f"{x:g} N" for x in forces), "all"],
+            [
+                [n, *(f"{r[k][0]:.2f} / {r[k][1]:.3f}" for k in forces + ["all"])]
+                for n, r in res.items()
+            ],
+            "l" + "r" * (len(forces) + 1),
         )
+    )
     thick = {n: by_force(zoo.read(n), a, "thickness") for n in res}
     levels = [k for k in next(iter(thick.values())) if k != "all"]
     print()
-    print("| model | " + " | ".join(f"{x:g} mm" for x in levels) + " |")
-    print("|---|" + "--:|" * len(levels))
-    for n, r in thick.items():
-        print(f"| {n} | " + " | ".join(f"{r[k][0]:.2f} / {r[k][1]:.3f}" for k in levels) + " |")
+    print(
+        markdown(
+            ["model", *(f"{x:g} mm" for x in levels)],
+            [[n, *(f"{r[k][0]:.2f} / {r[k][1]:.3f}" for k in levels)] for n, r in thick.items()],
+            "l" + "r" * len(levels),
+        )
+    )
     if args.out:
         import matplotlib
 

@@ -32,6 +32,8 @@ import warnings
 
 import numpy as np
 
+from stmpl.table import markdown
+
 
 def _read(spec: str, any_body: bool):
     from stmpl.pipeline.spec import predictor_from_spec
@@ -114,12 +116,7 @@ def curve(models: list, counts: list, data: list, pooled: dict, out) -> None:
 
     out = pathlib.Path(out)
     out.parent.mkdir(parents=True, exist_ok=True)
-    lines = [
-        "| training bodies | model | "
-        + " | ".join(f"{pathlib.Path(d).name}: rel. MEE % / peak %" for d in data)
-        + " |",
-        "|--:|---|" + "--:|" * len(data),
-    ]
+    lines = []
     for n, spec in sorted(zip(counts, models)):
         cells = [
             (
@@ -129,8 +126,10 @@ def curve(models: list, counts: list, data: list, pooled: dict, out) -> None:
             )
             for d in data
         ]
-        lines.append(f"| {n} | {spec} | " + " | ".join(cells) + " |")
-    out.with_suffix(".md").write_text("\n".join(lines) + "\n")
+        lines.append([n, spec, *cells])
+    columns = ["training bodies", "model"]
+    columns += [f"{pathlib.Path(d).name}: rel. MEE % / peak %" for d in data]
+    out.with_suffix(".md").write_text(markdown(columns, lines, "rl" + "r" * len(data)))
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
     for d in data:
         pts = sorted((n, pooled[spec, d]) for n, spec in zip(counts, models) if (spec, d) in pooled)

@@ -22,6 +22,8 @@ import resource
 
 import numpy as np
 
+from stmpl.table import header, row
+
 PLACEMENTS = (300, 200, 400)
 """Disk centres (vertex indices of the anny left arm) on the upper arm, elbow and forearm."""
 
@@ -124,8 +126,10 @@ def _assembly_vs_skfem() -> list[str]:
         tsk = time.perf_counter() - t0
         ours = float(np.median(t))
         out.append(
-            f"| {name} | P{res.order} | {len(mesh.tets)} | {1e3 * ours:.0f} | "
-            f"{1e3 * tsk:.0f} | {tsk / ours:.0f}x |"
+            row(
+                [name, f"P{res.order}", len(mesh.tets), f"{1e3 * ours:.0f}"]
+                + [f"{1e3 * tsk:.0f}", f"{tsk / ours:.0f}x"]
+            )
         )
     return out
 
@@ -173,12 +177,10 @@ def main() -> None:
             )
     finest = rows[-1]
     print()
-    print(
-        "| resolution | order | subdiv | layers | DOFs | tets | Newton its from rest "
-        "| s/sim from rest | its/level | s/level (continuation) | peak MB "
-        "| loaded-vertex error vs finest |"
-    )
-    print("|---|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|--:|")
+    columns = ["resolution", "order", "subdiv", "layers", "DOFs", "tets"]
+    columns += ["Newton its from rest", "s/sim from rest", "its/level"]
+    columns += ["s/level (continuation)", "peak MB", "loaded-vertex error vs finest"]
+    print(header(columns, "l" + "r" * 11))
     errs = {}
     for r in rows:
         e = []
@@ -187,12 +189,13 @@ def main() -> None:
             e.append(np.linalg.norm(u - uf) / np.linalg.norm(uf))
         errs[r["name"]] = max(e) if e else float("nan")
         print(
-            f"| {r['name']} | P{r['res']['order']} | {r['res']['subdivisions']} | "
-            f"{r['res']['layers']} | "
-            f"{int(np.median(r['dofs']))} | {int(np.median(r['tets']))} | "
-            f"{np.median(r['iters_rest']):.0f} | {np.median(r['rest']):.2f} | "
-            f"{np.median(r['iters_level']):.0f} | {np.median(r['level']):.2f} | "
-            f"{r['peak_mb']:.0f} | {100 * errs[r['name']]:.2f} % |"
+            row(
+                [r["name"], f"P{r['res']['order']}", r["res"]["subdivisions"], r["res"]["layers"]]
+                + [int(np.median(r["dofs"])), int(np.median(r["tets"]))]
+                + [f"{np.median(r['iters_rest']):.0f}", f"{np.median(r['rest']):.2f}"]
+                + [f"{np.median(r['iters_level']):.0f}", f"{np.median(r['level']):.2f}"]
+                + [f"{r['peak_mb']:.0f}", f"{100 * errs[r['name']]:.2f} %"]
+            )
         )
         for f in r["failed"]:
             print(f"  failed ({r['name']}): {f}")
@@ -205,8 +208,7 @@ def main() -> None:
     )
     print()
     print("one residual + tangent assembly (Neo-Hookean), ours against scikit-fem's forms:")
-    print("| mesh | order | tets | ours ms | scikit-fem ms | ratio |")
-    print("|---|--:|--:|--:|--:|--:|")
+    print(header(["mesh", "order", "tets", "ours ms", "scikit-fem ms", "ratio"], "lrrrrr"))
     with cf.ProcessPoolExecutor(1, mp_context=ctx) as ex:
         for line in ex.submit(_assembly_vs_skfem).result():
             print(line)

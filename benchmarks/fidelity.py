@@ -26,6 +26,8 @@ import time
 
 import numpy as np
 
+from stmpl.table import header, row
+
 
 def _samples(folder) -> dict:
     """``{(task, force): (displacement (N, 3), solve seconds)}`` of a dataset folder's shards
@@ -89,12 +91,13 @@ def live(folder: str, count: int, variants=({},), every: int = 1) -> None:
     making those samples costs).
     """
     from fem.config import read_config
-    from fem.local import TOLERANCE, first_margin, simulate_local
+    from fem.local import simulate_local
     from fem.material import material
     from fem.placements import make_load, plan
     from fem.simulate import resolution, simulate
     from fem.solver import SolverOptions
     from stmpl.data.dataset import Dataset
+    from stmpl.reach import RING_TOLERANCE, first_margin
 
     ds = Dataset(folder)
     cfg = read_config(ds.card["config"])
@@ -134,7 +137,7 @@ def live(folder: str, count: int, variants=({},), every: int = 1) -> None:
                 mat,
                 opts,
                 margin=margin,
-                tolerance=v.get("tolerance", TOLERANCE),
+                tolerance=v.get("tolerance", RING_TOLERANCE),
             )
             tl = time.perf_counter() - t0
             ok = [k for k, (x, y) in enumerate(zip(sols, s2)) if x.ok and y.ok]
@@ -176,38 +179,36 @@ def live(folder: str, count: int, variants=({},), every: int = 1) -> None:
 
 def models(specs, datasets, limit: int = 64, repeat: int = 5, tolerances=()) -> None:
     """``tolerances``: also run auto with these region tolerances (the share of the prior's
-    deepest displacement above which a vertex is in the region, :data:`models.prior.
-    REGION_TOLERANCE`), to show what a smaller region buys.
+    deepest displacement above which a vertex is in the region, :data:`stmpl.reach.
+    REGION_TOLERANCE`, given to each predictor at construction), to show what a smaller region
+    buys.
     """
     import warnings
 
     from _timing import median_time
 
-    import models.prior as prior
     from stmpl.data.dataset import Dataset
     from stmpl.metrics import sample_metrics, summarise
     from stmpl.pipeline.evaluate import scenes_of
     from stmpl.pipeline.spec import label, predictor_from_spec
+    from stmpl.reach import REGION_TOLERANCE
 
     warnings.simplefilter("ignore")  # envelope notes: not what is measured
-    print(
-        "| model | data | fidelity | ms/scene batch 1 | ms/scene batch 64 | rel. MEE % | "
-        "peak err % (mean, max abs) | largest diff. from full, % of deepest |"
-    )
-    print("|---|---|---|--:|--:|--:|--:|--:|")
+    columns = ["model", "data", "fidelity", "ms/scene batch 1", "ms/scene batch 64"]
+    columns += ["rel. MEE %", "peak err % (mean, max abs)", "largest diff. from full, % of deepest"]
+    print(header(columns, "lllrrrrr"))
     for folder in datasets:
         ds = Dataset(folder)
         scenes, truth = scenes_of(ds, "test", limit=limit)
         for spec in specs:
-            p = predictor_from_spec(spec)
             full = None
-            shipped = prior.REGION_TOLERANCE
+            shipped = REGION_TOLERANCE
             for fid, tol in [
                 ("full", shipped),
                 ("auto", shipped),
                 *[("auto", x) for x in tolerances if x != shipped],
             ]:
-                p.fidelity, prior.REGION_TOLERANCE = fid, tol
+                p = predictor_from_spec(spec, fidelity=fid, region_tolerance=tol)
                 pred = [d.displacement for d in p.predict(scenes)]  # warm (columns cached)
                 t1 = median_time(lambda: p.predict(scenes[0]), repeat)
                 t64 = median_time(lambda: p.predict(scenes), max(1, repeat // 2)) / len(scenes)
@@ -223,13 +224,10 @@ def models(specs, datasets, limit: int = 64, repeat: int = 5, tolerances=()) -> 
                     )
                     diff = f"{100 * d:.3f}"
                 name = fid if tol == shipped else f"auto, region {100 * tol:g} %"
-                print(
-                    f"| {label(spec)} | {ds.card['name']} | {name} | {1e3 * t1:.2f} | "
-                    f"{1e3 * t64:.3f} | {m['rel_mee'][0]:.3f} | {pk.mean():+.2f}, "
-                    f"{np.abs(pk).max():.1f} | {diff} |",
-                    flush=True,
-                )
-            prior.REGION_TOLERANCE = shipped
+                cells = [label(spec), ds.card["name"], name, f"{1e3 * t1:.2f}"]
+                cells += [f"{1e3 * t64:.3f}", f"{m['rel_mee'][0]:.3f}"]
+                cells += [f"{pk.mean():+.2f}, {np.abs(pk).max():.1f}", diff]
+                print(row(cells), flush=True)
 
 
 def main() -> None:

@@ -25,6 +25,7 @@ import math
 import pathlib
 
 from stmpl.machine import describe
+from stmpl.table import markdown
 
 
 def main() -> None:
@@ -112,18 +113,18 @@ def main() -> None:
         f"Learning curve of `{args.config}` on {base['data']} (hash {ds.card['hash']}), "
         f"{args.steps} steps of batch {base['batch']} per share; {describe()}.",
         "",
-        "| share | placements | samples | epochs | train s | val MEE mm | val rel. % | "
-        "test MEE mm | test rel. % |",
-        "|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
+    columns = ["share", "placements", "samples", "epochs", "train s", "val MEE mm"]
+    columns += ["val rel. %", "test MEE mm", "test rel. %"]
+    cells = []
     for r in rows:
         secs = f"{r['seconds']:.0f}" if r["seconds"] > 0 else "-"
-        lines.append(
-            f"| {r['fraction']:g} | {r['placements']} | {r['samples']} | {r['epochs']} "
-            f"| {secs} | {r['val_mee']:.4f} | {r['val_rel_mee']:.2f} | "
-            f"{r['test_mee']:.4f} | {r['test_rel_mee']:.2f} |"
+        cells.append(
+            [f"{r['fraction']:g}", r["placements"], r["samples"], r["epochs"], secs]
+            + [f"{r['val_mee']:.4f}", f"{r['val_rel_mee']:.2f}"]
+            + [f"{r['test_mee']:.4f}", f"{r['test_rel_mee']:.2f}"]
         )
-    table = "\n".join(lines) + "\n"
+    table = "\n".join(lines) + "\n" + markdown(columns, cells, "r" * 9)
     print(table)
     (out / "curve.md").write_text(table)
     (out / "curve.json").write_text(json.dumps(rows, indent=1))

@@ -21,6 +21,8 @@ import time
 
 import numpy as np
 
+from stmpl.table import header, row
+
 SETUP = {
     "material": {"name": "neo_hookean", "E": 1000.0, "nu": 0.4},
     "resolution": "reference",
@@ -61,11 +63,9 @@ def main(argv=None) -> None:
         f"left arm, {args.subdivisions} subdivision(s): {part.n_vertices} vertices; "
         f"layer {args.thickness_mm:g} mm; {describe()}"
     )
-    print(
-        "| load | loaded vertices | patch vertices | cold s | memory ms | disk cache ms |"
-        + (" whole-part s | max diff % |" if args.whole else "")
-    )
-    print("|---|--:|--:|--:|--:|--:|" + ("--:|--:|" if args.whole else ""))
+    columns = ["load", "loaded vertices", "patch vertices", "cold s", "memory ms", "disk cache ms"]
+    columns += ["whole-part s", "max diff %"] if args.whole else []
+    print(header(columns, "l" + "r" * (len(columns) - 1)))
     for name, f in loads(part).items():
         cols = np.flatnonzero(f > 0)
         store = ColumnStore(part, SETUP, [t])
@@ -79,18 +79,16 @@ def main(argv=None) -> None:
         ColumnStore(part, SETUP, [t]).columns(0, cols)
         disk = time.perf_counter() - t0
         u = np.einsum("nkc,k->nc", G, f[cols])
-        row = (
-            f"| {name} | {len(cols)} | {store.log[-1]['vertices']} | {cold:.1f} | "
-            f"{1e3 * mem:.1f} | {1e3 * disk:.0f} |"
-        )
+        cells = [name, len(cols), store.log[-1]["vertices"], f"{cold:.1f}"]
+        cells += [f"{1e3 * mem:.1f}", f"{1e3 * disk:.0f}"]
         if args.whole:
             t0 = time.perf_counter()
             W = compliance(part, t, "reference", material(**SETUP["material"]), columns=cols)
             tw = time.perf_counter() - t0
             uw = np.einsum("nkc,k->nc", W, f[cols])
             diff = np.linalg.norm(u - uw, axis=1).max() / np.linalg.norm(uw, axis=1).max()
-            row += f" {tw:.1f} | {100 * diff:.3f} |"
-        print(row, flush=True)
+            cells += [f"{tw:.1f}", f"{100 * diff:.3f}"]
+        print(row(cells), flush=True)
 
 
 if __name__ == "__main__":

@@ -19,6 +19,8 @@ import platform
 import torch
 from _timing import median_time
 
+from stmpl.table import header, row
+
 CONFIGS = {
     "naive": {},
     "uv_unet-paper": {},  # 128 px, width 16, depth 5, dropout 0.5
@@ -62,11 +64,8 @@ def main() -> None:
     )
     print(f"left arm, {arm.n_vertices} vertices; median of {args.repeat} runs")
     print()
-    print(
-        "| predictor | parameters | MB | predict() ms, batch 1 | forward ms, batch 1 | "
-        "scenes/s, batch 64 |"
-    )
-    print("|---|--:|--:|--:|--:|--:|")
+    columns = ["predictor", "parameters", "MB", "predict() ms, batch 1", "forward ms, batch 1"]
+    print(header(columns + ["scenes/s, batch 64"], "lrrrrr"))
     t1 = torch.tensor(scene.thickness[None], dtype=torch.float32, device=dev)
     f1 = torch.tensor(scene.force[None], dtype=torch.float32, device=dev)
     for label, opts in CONFIGS.items():
@@ -86,14 +85,12 @@ def main() -> None:
         t_fwd = median_time(fwd, args.repeat, 2)
         t_b = median_time(lambda: p.predict(batch), max(3, args.repeat // 5), 2)
         n = p.n_parameters()
-        print(
-            f"| {label} | {n} | {4 * n / 2**20:.1f} | {1e3 * t_pred:.2f} | {1e3 * t_fwd:.2f} | "
-            f"{64 / t_b:.0f} |"
-        )
+        cells = [label, n, f"{4 * n / 2**20:.1f}", f"{1e3 * t_pred:.2f}", f"{1e3 * t_fwd:.2f}"]
+        print(row(cells + [f"{64 / t_b:.0f}"]))
     if args.fem:
         p = predictor.create("fem")
         t = median_time(lambda: p.predict(scene), 3)
-        print(f"| fem (reference mesh) | - | - | {1e3 * t:.0f} | - | {1 / t:.1f} |")
+        print(row(["fem (reference mesh)", "-", "-", f"{1e3 * t:.0f}", "-", f"{1 / t:.1f}"]))
 
 
 if __name__ == "__main__":

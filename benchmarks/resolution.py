@@ -15,6 +15,8 @@ import time
 
 import numpy as np
 
+from stmpl.table import markdown
+
 SPOTS = [(0.3, 0.4), (0.45, 0.5), (0.6, 0.55), (0.5, 0.35), (0.4, 0.65)]
 
 
@@ -95,19 +97,33 @@ def main() -> None:
             )
         rows.append(row)
         print(row, flush=True)
-    print(
-        "\n| subdivisions | vertices | spacing mm | fingertip touches (tol 0 / 2 mm) | "
-        "2 cm-radius disk touches | whole grasp | pinch | FEM 0.3 N disk: deepest mm, s, "
-        "shell nodes |"
-    )
-    print("|--:|--:|--:|---|---|--:|--:|---|")
+    columns = [
+        "subdivisions",
+        "vertices",
+        "spacing mm",
+        "fingertip touches (tol 0 / 2 mm)",
+        "2 cm-radius disk touches",
+        "whole grasp",
+        "pinch",
+        "FEM 0.3 N disk: deepest mm, s, shell nodes",
+    ]
+    cells = []
     for r in rows:
         fem = f"{r['fem_mm']:.3f}, {r['fem_s']:.1f}, {r['fem_nodes']}" if "fem_mm" in r else "-"
-        print(
-            f"| {r['level']} | {r['vertices']} | {r['spacing_mm']:.1f} | "
-            f"{'/'.join(map(str, r['tip']))} ; {'/'.join(map(str, r['tip_tol']))} | "
-            f"{'/'.join(map(str, r['disk']))} | {r['whole']} | {r['pinch']} | {fem} |"
+        cells.append(
+            [
+                r["level"],
+                r["vertices"],
+                f"{r['spacing_mm']:.1f}",
+                f"{'/'.join(map(str, r['tip']))} ; {'/'.join(map(str, r['tip_tol']))}",
+                "/".join(map(str, r["disk"])),
+                r["whole"],
+                r["pinch"],
+                fem,
+            ]
         )
+    print()
+    print(markdown(columns, cells, "rrrllrrl"))
 
 
 if __name__ == "__main__":

@@ -16,6 +16,7 @@ from stmpl import AnnyBody, loads, predictor, tissue
 from stmpl.metrics import sample_metrics
 from stmpl.pipeline import zoo
 from stmpl.scene import Scene
+from stmpl.table import header, row
 
 THICKNESS_M = (0.0055, 0.007, 0.0081, 0.0095)
 DISKS = (((0.42, 0.55), 0.02, 0.2), ((0.3, 0.7), 0.025, 0.4), ((0.5, 0.45), 0.03, 0.3))
@@ -25,8 +26,7 @@ def main() -> None:
     arm = AnnyBody().part("left_arm")
     fem = predictor.create("fem")
     models = {n: zoo.read(n) for n in zoo.names()}
-    print("| thickness mm | load | " + " | ".join(models) + " |")
-    print("|---|---|" + "--:|" * len(models))
+    print(header(["thickness mm", "load", *models], "ll" + "r" * len(models)))
     rows = []
     for t in THICKNESS_M:
         for uv, r, total in DISKS:
@@ -39,13 +39,9 @@ def main() -> None:
                 for n, m in models.items()
             }
             rows.append(rel)
-            print(
-                f"| {t * 1e3:g} | disk {r * 100:g} cm, {total:g} N | "
-                + " | ".join(f"{v:.2f}" for v in rel.values())
-                + " |",
-                flush=True,
-            )
-    print("| mean | | " + " | ".join(f"{np.mean([r[n] for r in rows]):.2f}" for n in models) + " |")
+            cells = [f"{v:.2f}" for v in rel.values()]
+            print(row([f"{t * 1e3:g}", f"disk {r * 100:g} cm, {total:g} N", *cells]), flush=True)
+    print(row(["mean", "", *(f"{np.mean([r[n] for r in rows]):.2f}" for n in models)]))
 
 
 if __name__ == "__main__":

@@ -1,10 +1,14 @@
 """The FEM's commands on the ``stmpl`` command line (entry-point group ``stmpl.commands``):
-``stmpl generate CONFIG`` makes a dataset.
+``stmpl generate CONFIG`` makes a dataset; ``stmpl solve`` solves one primitive scene and draws
+it with a section through the tissue shell.
 """
 
 from __future__ import annotations
 
 from fem.generate import generate
+from fem.pictures import deformation_figure
+from fem.predictor import FEMPredictor
+from stmpl.cli.options import fem_options, scene_of, scene_options
 
 
 def add_generate(sub) -> None:
@@ -24,7 +28,7 @@ def add_generate(sub) -> None:
 
 
 def generate_command(args) -> int:
-
+    """``stmpl generate``: make (or finish) a dataset and sum it up."""
     card = generate(
         args.config,
         args.out,
@@ -66,4 +70,47 @@ def generate_command(args) -> int:
             f"{card['placements_skipped']['by_reason']}"
         )
     print(f"content hash {card['hash']}")
+    return 0
+
+
+def add_solve(sub) -> None:
+    """Add ``solve`` to the ``stmpl`` subcommands ``sub``: the FEM on one primitive scene."""
+    si = sub.add_parser("solve", help="solve a primitive load with the FEM and draw its section")
+    scene_options(si)
+    fem_options(si)
+    si.add_argument("--size", type=int, default=256, help="UV image size in the picture, px")
+    si.add_argument("--out", help="PNG picture to write")
+    si.add_argument("--save", help="deformation file to write (.npz)")
+    si.add_argument("--vtu", help="the deformed tissue shell for ParaView (.vtu)")
+    si.set_defaults(func=solve_command)
+
+
+def solve_command(args) -> int:
+    """``stmpl solve``: the FEM's answer, each continuation level printed; a failed solve raises
+    with its reason.
+    """
+    scene = scene_of(args)
+    fem = FEMPredictor(res=args.res, levels=args.levels)
+    d = fem.predict(scene)
+    shell = fem.last_shell
+    print(
+        f"shell: {d.info['mesh']['nodes']} nodes, {d.info['mesh']['tets']} tets ({args.res}); "
+        f"{shell.mesh.quality()}"
+    )
+    for s in d.info["levels"]:
+        print(
+            f"  {s['total_force']:6.3f} N  ok  {s['iterations']} Newton steps  "
+            f"max |u| {1e3 * s['max_displacement']:.2f} mm  {s['time']:.2f} s"
+        )
+    if args.out:
+        deformation_figure(
+            d, shell.mesh.nodes, shell.mesh.tets, shell.displacement, args.out, size=args.size
+        )
+        print(f"wrote {args.out}")
+    if args.save:
+        d.save(args.save)
+        print(f"wrote {args.save}")
+    if args.vtu:
+        shell.mesh.to_vtu(args.vtu, point_data={"displacement": shell.displacement})
+        print(f"wrote {args.vtu}")
     return 0

@@ -25,7 +25,7 @@ import time
 
 import numpy as np
 
-from fem.local import GROW, first_margin, patch
+from fem.local import patch
 from fem.material import material
 from fem.material import material as make_material
 from fem.mesh import shell_mesh
@@ -34,6 +34,7 @@ from fem.solver import Solver, SolverOptions
 from stmpl.body.model import default_cache_dir
 from stmpl.files import atomic_savez
 from stmpl.part import BodyPart
+from stmpl.reach import GROW, first_margin
 
 
 def compliance(
@@ -131,8 +132,8 @@ def local_compliance(
 ) -> tuple[np.ndarray, dict]:
     """The columns ``(N, k, 3)`` (m/N) of :func:`compliance` for the vertices ``columns``
     ``(k,)`` of a uniform layer ``thickness`` (m), solved on the patch within ``margin`` of them
-    (default :func:`fem.local.first_margin` at :data:`COLUMN_THICKNESSES`); the patch grows by
-    ``grow`` (default :data:`fem.local.GROW`) until every column moves the ring next to its cut
+    (default :func:`stmpl.reach.first_margin` at :data:`COLUMN_THICKNESSES`); the patch grows by
+    ``grow`` (default :data:`stmpl.reach.GROW`) until every column moves the ring next to its cut
     by at most ``tolerance`` of its own largest displacement, up to the whole part. Rows outside
     the patch are zero. Returns the columns and a summary (margin, patch vertices, attempts,
     seconds).

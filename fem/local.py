@@ -11,8 +11,9 @@ converged: a patch whose every level failed grows too (the tight cut may be what
 failure above a still ring is the load's own and stands. Vertices outside the patch get zero
 displacement.
 
-The first margin grows with the load and the tissue (:func:`first_margin`): the contact's
-radius plus ``thicknesses`` times the largest thickness under it.
+The first margin grows with the load and the tissue (:func:`stmpl.reach.first_margin`): the
+contact's radius plus ``thicknesses`` times the largest thickness under it. How far a load
+reaches is :mod:`stmpl.reach`'s to say; this module solves the patch it gives.
 """
 
 from __future__ import annotations
@@ -24,18 +25,11 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
-from scipy.spatial import cKDTree
 
 from fem.simulate import simulate
 from stmpl.geometry import boundary_loops
 from stmpl.part import BodyPart
-
-TOLERANCE = 0.005
-"""How far the vertices next to the cut may move, relative to the deepest displacement."""
-GROW = 1.5
-"""Margin factor from one attempt to the next."""
-THICKNESSES = 6.0
-"""The first margin: the contact's radius plus this many times its largest thickness."""
+from stmpl.reach import GROW, RING_TOLERANCE, first_margin, near
 
 
 @dataclass(frozen=True, eq=False)
@@ -58,33 +52,15 @@ class Patch:
         return out
 
 
-def first_margin(
-    part: BodyPart, thickness: np.ndarray, force: np.ndarray, thicknesses: float = THICKNESSES
-) -> float:
-    """The first cut's margin, m: the radius of the loaded region (half its largest extent,
-    capped at 5 cm) plus ``thicknesses`` (default :data:`THICKNESSES`) times the thickest
-    tissue under it.
-    """
-    loaded = np.flatnonzero(force > 0)
-    x = part.vertices[loaded]
-    extent = float(np.linalg.norm(x.max(0) - x.min(0)))
-    return min(0.5 * extent, 0.05) + thicknesses * float(np.max(thickness[loaded]))
-
-
 def patch(part: BodyPart, force: np.ndarray, margin: float) -> Patch:
     """The patch of ``part`` within ``margin`` (m, straight-line) of a loaded vertex: the faces
     whose three vertices are that near, the connected pieces that hold a load.
     """
     loaded = np.flatnonzero(force > 0)
-    if len(loaded) == 0:
-        raise ValueError("the load has no loaded vertex (force is zero everywhere)")
-    near = (
-        cKDTree(part.vertices[loaded]).query(part.vertices, distance_upper_bound=margin)[0]
-        <= margin
-    )
+    close = near(part, force, margin)
     on = np.zeros(part.n_vertices, bool)
     on[loaded] = True  # the faces around a loaded vertex, however long, belong
-    fidx = np.flatnonzero(near[part.faces].all(1) | on[part.faces].any(1))
+    fidx = np.flatnonzero(close[part.faces].all(1) | on[part.faces].any(1))
     n = part.n_vertices
     if len(fidx) == len(part.faces):
         return Patch(part, np.arange(n), margin, np.zeros(0, np.int64), whole=True)
@@ -174,7 +150,7 @@ def simulate_local(
     material=None,
     options=None,
     margin: float | None = None,
-    tolerance: float = TOLERANCE,
+    tolerance: float = RING_TOLERANCE,
     grow: float = GROW,
 ):
     """:func:`fem.simulate.simulate` on the patch the load moves. Returns ``(mesh, solutions,

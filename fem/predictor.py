@@ -8,12 +8,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fem.config import FIDELITIES
 from fem.local import simulate_local
 from fem.mesh import ShellMesh
 from fem.simulate import resolution, simulate
 from fem.solver import Solution
-from stmpl.predictor import BasePredictor, PredictionFailed
+from stmpl.predictor import BasePredictor, PredictionFailed, check_fidelity
 from stmpl.scene import Scene
 
 
@@ -60,9 +59,7 @@ class FEMPredictor(BasePredictor):
         self.res = resolution(res)
         if isinstance(levels, bool) or int(levels) != levels or levels < 1:
             raise ValueError(f"levels must be an integer >= 1, got {levels!r}")
-        if fidelity not in FIDELITIES:
-            raise ValueError(f"fidelity must be one of {list(FIDELITIES)}, got {fidelity!r}")
-        self.fidelity = fidelity
+        self._fidelity = check_fidelity(fidelity)
         self.levels, self.material, self.options = int(levels), material, options
         self.last_shell: Shell | None = None
         self._last: dict = {}

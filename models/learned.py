@@ -14,7 +14,8 @@ from stmpl.body.mirror import MIRROR, mirror_twin
 from stmpl.data.dataset import same_mesh
 from stmpl.envelope import Envelope
 from stmpl.part import BodyPart, difference
-from stmpl.predictor import BasePredictor
+from stmpl.predictor import BasePredictor, check_fidelity
+from stmpl.reach import REGION_TOLERANCE
 from stmpl.scene import Deformation, Scene
 
 DISP_SCALE_MM = 10.0
@@ -76,8 +77,19 @@ class LearnedPredictor(BasePredictor):
 
     defaults: dict = {}
 
-    def __init__(self, part, config: dict | None = None, device: str = "cpu"):
+    def __init__(
+        self,
+        part,
+        config: dict | None = None,
+        device: str = "cpu",
+        fidelity: str = "full",
+        region_tolerance: float = REGION_TOLERANCE,
+    ):
         self.part = part
+        self._fidelity = check_fidelity(fidelity)
+        self.region_tolerance = float(region_tolerance)
+        """``fidelity="auto"``: the network answers where the prior moves the tissue by more
+        than this share of its deepest (:func:`stmpl.reach.moved`)."""
         self.config = self.options(config)
         self.per_newton = bool(self.config.get("per_newton", False))
         self.scale = float(self.config["disp_scale_mm"]) * 1e-3
@@ -319,14 +331,16 @@ class LearnedPredictor(BasePredictor):
         return checkpoint.write(path, tensors, side)
 
     @classmethod
-    def from_checkpoint(cls, path, device: str = "cpu"):
-
+    def from_checkpoint(cls, path, device: str = "cpu", **options):
+        """The predictor a checkpoint holds, on ``device``; ``options`` (``fidelity``,
+        ``region_tolerance``) go to the constructor.
+        """
         tensors, meta = checkpoint.read(path)
         if meta["kind"] != cls.name:
             raise ValueError(f"checkpoint {path} holds a {meta['kind']!r} model, not {cls.name!r}")
         arrays = {k[5:]: v.numpy() for k, v in tensors.items() if k.startswith("part.")}
         part = BodyPart.from_arrays(meta["part"], arrays, meta.get("part_source"))
-        p = cls(part, meta["config"], device=device)
+        p = cls(part, meta["config"], device=device, **options)
         state = {k[6:]: v for k, v in tensors.items() if k.startswith("model.")}
         try:
             p.model.load_state_dict(state)

@@ -5,10 +5,6 @@ input (:data:`models.features.PRIOR_SCALE`) and learns only the correction to it
 
 from __future__ import annotations
 
-import weakref
-
-import numpy as np
-
 from fem.compliance import ColumnStore
 from models.linear.operator import (
     ComplianceOperator,
@@ -20,10 +16,6 @@ from models.linear.operator import (
 )
 
 PRIORS = ("none", "linear")
-REGION_TOLERANCE = 0.01
-"""``fidelity="auto"``: a learned model on the linear prior answers where the prior moves the
-tissue by more than this share of its deepest displacement (and one ring of vertices wider); the
-prior alone answers elsewhere."""
 CORRECTION_SCALE = 0.05
 """On top of the prior the network's output is a correction in units of this share of ``raw``'s:
 corrections are a few per cent of the answer, and at full scale Adam's first steps would throw
@@ -135,23 +127,3 @@ def body_operator(predictor, k: int):
         op.exact = True
         ops[k] = op.to(predictor.device)
     return ops[k]
-
-
-_ADJACENCY: "weakref.WeakKeyDictionary" = weakref.WeakKeyDictionary()
-"""Each part's adjacency as float32 (sparse products), kept while the part lives."""
-
-
-def moved(part, force: np.ndarray, base: np.ndarray, rings: int = 1) -> np.ndarray:
-    """``fidelity="auto"``: per scene the ``(B, N)`` mask of the loaded vertices (``force``
-    ``(B, N)`` > 0) and of those the prior's answer ``base`` ``(B, N, 3)`` moves by more than
-    :data:`REGION_TOLERANCE` of its deepest, grown by ``rings`` rings of mesh neighbours.
-    """
-    adjacency = _ADJACENCY.get(part)
-    if adjacency is None:
-        adjacency = _ADJACENCY[part] = part.adjacency.astype(np.float32)
-    mag = np.linalg.norm(base, axis=-1)
-    m = (force > 0) | (mag > REGION_TOLERANCE * mag.max(-1, keepdims=True))
-    m &= (force > 0).any(-1, keepdims=True)  # an unloaded scene moves nothing
-    for _ in range(rings):
-        m = m | (adjacency @ m.T.astype(np.float32) > 0).T
-    return m

@@ -15,6 +15,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from stmpl.table import csv, markdown
+
 ACTIVE_MM = 0.001
 THRESHOLDS_MM = (0.1, 0.125, 0.15, 0.2, 0.5)
 
@@ -115,21 +117,18 @@ def table(results: dict[str, dict], fmt: str = "markdown") -> str:
     """A table of summaries ``{predictor name: summarise(...)}`` as markdown or CSV."""
     if fmt == "csv":
         head = ["predictor", "samples"] + [f"{k}_{s}" for k, _ in COLUMNS for s in ("mean", "std")]
-        lines = [",".join(head)]
-        for name, s in results.items():
-            vals = [name, str(s["samples"])] + [
-                f"{x:.6g}" for k, _ in COLUMNS for x in s.get(k, (np.nan, np.nan))
-            ]
-            lines.append(",".join(vals))
-        return "\n".join(lines) + "\n"
+        rows = [
+            [name, str(s["samples"])]
+            + [f"{x:.6g}" for k, _ in COLUMNS for x in s.get(k, (np.nan, np.nan))]
+            for name, s in results.items()
+        ]
+        return csv(head, rows)
     if fmt != "markdown":
         raise ValueError(f"fmt must be markdown or csv, got {fmt!r}")
-    head = (
-        "| predictor | n | "
-        + " | ".join(label + (" mm" if "%" not in label else "") for _, label in COLUMNS)
-        + " |"
-    )
-    lines = [head, "|---|--:|" + "--:|" * len(COLUMNS)]
+    head = ["predictor", "n"] + [
+        label + (" mm" if "%" not in label else "") for _, label in COLUMNS
+    ]
+    rows = []
     for name, s in results.items():
         cells = [
             "–"
@@ -139,5 +138,5 @@ def table(results: dict[str, dict], fmt: str = "markdown") -> str:
             else f"{s[k][0]:.1f} ± {s[k][1]:.1f}"
             for k, label in COLUMNS
         ]
-        lines.append(f"| {name} | {s['samples']} | " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+        rows.append([name, str(s["samples"]), *cells])
+    return markdown(head, rows, "lr" + "r" * len(COLUMNS))

@@ -13,6 +13,7 @@ The core knows no implementation. Predictors plug in as Python entry points of t
 
 from __future__ import annotations
 
+import copy
 import time
 import warnings
 from importlib.metadata import entry_points
@@ -110,16 +111,26 @@ def create(name: str, *args, **kwargs) -> "BasePredictor":
     return get(name)(*args, **kwargs)
 
 
-def read(path, device: str = "cpu") -> "BasePredictor":
-    """A trained predictor from its checkpoint file (the checkpoint names its kind)."""
+def read(path, device: str = "cpu", **options) -> "BasePredictor":
+    """A trained predictor from its checkpoint file (the checkpoint names its kind);
+    ``options`` (e.g. ``fidelity``) go to its constructor.
+    """
     kind = read_sidecar(path)["kind"]
     if kind not in names():
         raise ValueError(f"checkpoint {path} is of unknown kind {kind!r}; known: {names()}")
-    return get(kind).from_checkpoint(path, device=device)
+    return get(kind).from_checkpoint(path, device=device, **options)
 
 
 FIDELITIES = ("full", "auto")
-"""How much of a part a predictor models for a scene: all of it, or what the scene needs."""
+"""How much of a part a predictor models for a scene: all of it, or what the scene needs
+(:mod:`stmpl.reach`). The one list of them: the command line's choices come from here."""
+
+
+def check_fidelity(value) -> str:
+    """``value`` if it is one of :data:`FIDELITIES`, else ``ValueError`` naming it."""
+    if value not in FIDELITIES:
+        raise ValueError(f"fidelity must be one of {list(FIDELITIES)}, got {value!r}")
+    return value
 
 
 class BasePredictor:
@@ -139,10 +150,22 @@ class BasePredictor:
     """Whether a batch of scenes costs less per scene than one at a time. ``False`` for the FEM,
     which solves them one after the other in seconds each and may fail on one alone: callers
     that measure (evaluation, latency) then give it one scene at a time."""
-    fidelity = "full"
-    """``"full"`` models the whole part; ``"auto"`` only what the scene needs (the FEM: the patch
-    the load moves; the GNN: the subgraph around it), where the predictor can (others ignore
-    it). See :data:`FIDELITIES`."""
+    _fidelity = "full"
+
+    @property
+    def fidelity(self) -> str:
+        """``"full"`` models the whole part; ``"auto"`` only what the scene needs (the FEM: the
+        patch the load moves; the GNN: the subgraph around it), where the predictor can (others
+        ignore it). Given at construction (see :data:`FIDELITIES`); :meth:`with_fidelity` gives
+        a predictor of another fidelity.
+        """
+        return self._fidelity
+
+    def with_fidelity(self, fidelity: str) -> "BasePredictor":
+        """A copy of this predictor (sharing its model and caches) at ``fidelity``."""
+        other = copy.copy(self)
+        other._fidelity = check_fidelity(fidelity)
+        return other
 
     def predict(
         self, scenes: Scene | Sequence[Scene], strict: bool | None = None
@@ -152,8 +175,6 @@ class BasePredictor:
         call; with ``strict`` (default: the predictor's ``strict``) they raise
         ``PredictionFailed`` before anything is predicted.
         """
-        if self.fidelity not in FIDELITIES:
-            raise ValueError(f"fidelity must be one of {list(FIDELITIES)}, got {self.fidelity!r}")
         single = isinstance(scenes, Scene)
         batch = [scenes] if single else list(scenes)
         if not batch:

@@ -220,6 +220,25 @@ def test_no_module_past_the_line_budget(package):
     assert not long, f"modules over {MAX_LINES} lines: {long}"
 
 
+def test_the_tests_mirror_the_tree():
+    """Tests of a wing or package live in a folder of its name (``tests/contact/`` for
+    ``stmpl/contact/``, ``tests/fem/`` for ``fem/``), those of the root's modules at the top;
+    every test module is named after a module it tests, or a concern of the whole house.
+    """
+    wings = {p.name for p in (ROOT / "stmpl").iterdir() if (p / "__init__.py").is_file()}
+    folders = {p.name for p in (ROOT / "tests").iterdir() if p.is_dir() and p.name[0] != "_"}
+    folders -= {"recorded"}  # recorded outputs the tests compare with
+    assert folders == wings | {"fem", "models"} | ({"body"} & wings)
+    whole = {"architecture", "voice", "readme", "configs"}  # the house, not one module
+    for f in (ROOT / "tests").glob("test_*.py"):
+        name = f.stem.removeprefix("test_")
+        assert name in whole or f"stmpl.{name}" in MODULES, f"{f.name}: no stmpl/{name}.py"
+    for wing in wings:
+        for f in (ROOT / "tests" / wing).glob("test_*.py"):
+            name = f.stem.removeprefix("test_")
+            assert f"stmpl.{wing}.{name}" in MODULES, f"tests/{wing}/{f.name}: no such module"
+
+
 def test_every_predictor_plugs_in_by_entry_point(monkeypatch):
     """The core finds every shipped predictor without a list of its own; without the entry
     points the error says to install.

@@ -108,8 +108,8 @@ def test_learned_models_fit_a_few_samples(name, ds, make):
 @pytest.mark.parametrize("name", ["uv_unet", "gnn", "uv_unet/per_newton", "gnn/per_newton"])
 def test_reference_outputs(name):
     """Seeded tiny models on a fixed tube scene give the outputs recorded in
-    ``tests/data/reference_outputs.json``: a change to an architecture, its initialisation or its
-    features shows here (regenerate the file only for an intended change).
+    ``tests/recorded/reference_outputs.json``: a change to an architecture, its initialisation or
+    its features shows here (regenerate the file only for an intended change).
     """
     import json
     import pathlib
@@ -119,7 +119,7 @@ def test_reference_outputs(name):
     from stmpl import loads
 
     ref = json.loads(
-        (pathlib.Path(__file__).parent / "data" / "reference_outputs.json").read_text()
+        (pathlib.Path(__file__).parent / "recorded" / "reference_outputs.json").read_text()
     )["models"][name]
     part = tube(radius=0.04, length=0.2, n_around=16, n_along=12)
     scene = Scene.from_load(

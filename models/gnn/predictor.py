@@ -14,7 +14,6 @@ import numpy as np
 import torch
 from torch import nn
 
-from fem.local import first_margin
 from models.features import (
     PRESSURE_SCALE,
     PRIOR_SCALE,
@@ -25,7 +24,8 @@ from models.features import (
 from models.gnn.network import MeshGraphNet, NormalisedGraphNet, Normaliser
 from models.learned import LearnedPredictor
 from models.linear.operator import ComplianceOperator
-from models.prior import LinearPrior, moved
+from models.prior import LinearPrior
+from stmpl import reach
 
 
 class GNNPredictor(LinearPrior, LearnedPredictor):
@@ -153,9 +153,9 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         """``fidelity="auto"``: per scene ``(B, N)`` masks of the vertices whose answer the
         network gives and of the subgraph it runs on (that region and ``steps`` hops more,
         every input its answer depends on). The region is where the load moves the tissue: with
-        the linear prior ``base`` ``(B, N, 3)``, :func:`models.prior.moved` (the loaded vertices
+        the linear prior ``base`` ``(B, N, 3)``, :func:`stmpl.reach.moved` (the loaded vertices
         and those the prior moves by more than 1 % of its deepest, one ring wider); without
-        it, within :func:`fem.local.first_margin` of the load, as hops along the mesh's edges.
+        it, within :func:`stmpl.reach.first_margin` of the load, as hops along the mesh's edges.
         ``thickness``, ``force`` ``(B, N)`` numpy.
         """
         level = self.hops(thickness, force, base)
@@ -167,32 +167,11 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         """``(B, N)`` int: 0 on the vertices of :meth:`region`, ``k`` on those ``k`` hops from
         it (``k <= steps``: the subgraph), ``steps + 1`` beyond.
         """
-        if getattr(self, "_adjacency", None) is None:
-            e = self.part.edges
-            self._adjacency = self.part.adjacency.astype(np.float32)
-            self._edge = float(
-                np.median(np.linalg.norm(np.diff(self.part.vertices[e], axis=1)[:, 0], axis=1))
-            )
-        steps = int(self.config["steps"])
         if base is not None:  # where the linear FEM moves the tissue
-            inner = moved(self.part, force, base, rings=1)
+            inner = reach.moved(self.part, force, base, rings=1, tolerance=self.region_tolerance)
         else:
-            inner = np.zeros(force.shape, bool)
-            for b in range(len(force)):
-                m = force[b] > 0
-                if not m.any():
-                    continue
-                hops = int(np.ceil(first_margin(self.part, thickness[b], force[b]) / self._edge))
-                for _ in range(hops):
-                    m = m | (self._adjacency @ m.astype(np.float32) > 0)
-                inner[b] = m
-        level = np.where(inner, 0, steps + 1)
-        sub = inner
-        for k in range(1, steps + 1):
-            grown = sub | (self._adjacency @ sub.T.astype(np.float32) > 0).T
-            level[grown & ~sub] = k
-            sub = grown
-        return level
+            inner = reach.within_margin(self.part, thickness, force)
+        return reach.hops(self.part, inner, int(self.config["steps"]))
 
     def _raw_local(self, x, thickness, force, base, body=None):
         """:meth:`raw` on the subgraphs of :meth:`region`: the network's output inside each

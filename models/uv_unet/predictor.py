@@ -21,8 +21,9 @@ from torch import nn
 from models.features import PRESSURE_SCALE, PRIOR_SCALE, load_channels, normalised_thickness
 from models.learned import LearnedPredictor
 from models.linear.operator import ComplianceOperator
-from models.prior import CORRECTION_SCALE, LinearPrior, moved
+from models.prior import CORRECTION_SCALE, LinearPrior
 from models.uv_unet.network import UNet, WithPrior
+from stmpl import reach
 from stmpl.uv import UVMap
 
 
@@ -140,11 +141,16 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
     def _sample_cropped(self, x, force, base):
         """``fidelity="auto"`` on the prior, from the ``(B, N, C)`` :meth:`inputs` ``x``: per
         scene the network runs on a window of the chart (rasterised alone), the pixels that
-        sampling reads at :func:`models.prior.moved`'s vertices plus :attr:`crop_margin`,
+        sampling reads at :func:`stmpl.reach.moved`'s vertices plus :attr:`crop_margin`,
         aligned to the network's strides; those vertices get its correction (the whole image's,
         exactly), every other vertex none (the prior's answer stands).
         """
-        inner = moved(self.part, force.cpu().numpy(), base.detach().cpu().numpy())
+        inner = reach.moved(
+            self.part,
+            force.cpu().numpy(),
+            base.detach().cpu().numpy(),
+            tolerance=self.region_tolerance,
+        )
         m = self.uvmap
         out = x.new_zeros(x.shape[0], x.shape[1], 3)
         for b in np.flatnonzero(inner.any(-1)):

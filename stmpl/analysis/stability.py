@@ -37,6 +37,7 @@ from stmpl.pipeline.spec import key as spec_key
 from stmpl.pipeline.spec import label, predictor_from_spec
 from stmpl.predictor import ImpossibleAnswer, OutsideEnvelope, PredictionFailed
 from stmpl.scene import Scene
+from stmpl.table import markdown
 from stmpl.viz.chart import FAMILIES, family
 
 DEFAULTS = {
@@ -468,6 +469,29 @@ def envelope_map(points: list, names: list, path) -> pathlib.Path:
     return pathlib.Path(path)
 
 
+def _cells(p: dict, names: list[str]) -> list[str]:
+    """One sweep point's cell per predictor: relative MEE / peak error, or the deepest
+    displacement without the FEM, with its flags.
+    """
+    cells = []
+    for n in names:
+        r = p["predictors"].get(n, {})
+        if "refused" in r:
+            cells.append("refused")
+            continue
+        c = (
+            f"{r['rel_mee']:.2f} / {r['peak_err']:+.1f}"
+            if "rel_mee" in r
+            else f"{r['deepest_mm']:.2f} mm"
+        )
+        if r.get("inside") is False:
+            c += " out"
+        if not r["physical"]:
+            c += " IMPOSSIBLE"
+        cells.append(c)
+    return cells
+
+
 def report(cfg, points: list, out: pathlib.Path) -> pathlib.Path:
     """``stability.md``: per axis, the FEM's outcome and each predictor's errors and flags."""
     names = sorted({n for p in points for n in p.get("predictors", {})})
@@ -486,14 +510,11 @@ def report(cfg, points: list, out: pathlib.Path) -> pathlib.Path:
             f"## {axis}: {AXES[axis][0]}\n"
             + (f"\n![{axis}](stability_{axis}.png)\n" if shown else "")
         )
-        lines.append("| value | F total N | FEM | " + " | ".join(names) + " |")
-        lines.append("|--:|--:|---|" + "---|" * len(names))
+        rows = []
         for p in (q for q in points if q["axis"] == axis):
             if "skipped" in p:
-                lines.append(
-                    f"| {p['value']:g} | | not made on this mesh: "
-                    f"{p['skipped'].split(' (')[0]} |" + " |" * len(names)
-                )
+                why = f"not made on this mesh: {p['skipped'].split(' (')[0]}"
+                rows.append([f"{p['value']:g}", "", why] + [""] * len(names))
                 continue
             f = p["fem"]
             fem = (
@@ -501,25 +522,8 @@ def report(cfg, points: list, out: pathlib.Path) -> pathlib.Path:
                 if f["ok"]
                 else f"fails after {f['seconds']:.1f} s: {f['reason'].split(': ', 1)[-1]}"
             )
-            cells = []
-            for n in names:
-                r = p["predictors"].get(n, {})
-                if "refused" in r:
-                    cells.append("refused")
-                    continue
-                c = (
-                    f"{r['rel_mee']:.2f} / {r['peak_err']:+.1f}"
-                    if "rel_mee" in r
-                    else f"{r['deepest_mm']:.2f} mm"
-                )
-                if r.get("inside") is False:
-                    c += " out"
-                if not r["physical"]:
-                    c += " IMPOSSIBLE"
-                cells.append(c)
-            lines.append(
-                f"| {p['value']:g} | {p['total']:.3g} | {fem} | " + " | ".join(cells) + " |"
-            )
+            rows.append([f"{p['value']:g}", f"{p['total']:.3g}", fem] + _cells(p, names))
+        lines.append(markdown(["value", "F total N", "FEM", *names], rows, "rrl"))
         lines.append("")
     path = out / "stability.md"
     atomic_write_text(path, "\n".join(lines))

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from stmpl.table import csv, markdown
+
 PAPER = {
     # The paper's Tables 1-3 (MAE x, y, z, MEE in mm as mean, std; EE shares in %), as reported
     # (its data: SMPL arm, 1-10 N, FEM at E from the literature; not ours).
@@ -178,26 +180,26 @@ def table(rows: dict, paper: dict | None = None, fmt: str = "markdown") -> str:
     entries += [(name, dict(zip(PAPER_KEYS, vals)), True) for name, vals in (paper or {}).items()]
     if fmt == "csv":
         head = ["setup", "samples"] + [f"{k}_{s}" for k, *_ in COLUMNS for s in ("mean", "std")]
-        lines = [",".join(head)]
+        lines = []
         for name, r, _ in entries:
-            vals = [f'"{name}"', str(r.get("samples", ""))]
+            vals = [name, str(r.get("samples", ""))]
             for k, *_ in COLUMNS:
                 v = r.get(k, (np.nan, np.nan))
                 vals += [
                     f"{float(x):.6g}" for x in (v if isinstance(v, (list, tuple)) else (v, np.nan))
                 ]
-            lines.append(",".join(vals))
-        return "\n".join(lines) + "\n"
-    head = "| set-up | n | " + " | ".join(h for _, h, *_ in COLUMNS) + " |"
-    lines = [head, "|---|--:|" + "--:|" * len(COLUMNS)]
+            lines.append(vals)
+        return csv(head, lines)
+    head = ["set-up", "n"] + [h for _, h, *_ in COLUMNS]
+    lines = []
     for name, r, reported in entries:
         cells = [
             _cell(r.get(k), sc, dec) if k in r or not reported else "" for k, _, sc, dec in COLUMNS
         ]
         label = f"*{name}*" if reported else name
         n = f"{r.get('samples', '')}" + (f" ({r['failed']} failed)" if r.get("failed") else "")
-        lines.append(f"| {label} | {n} | " + " | ".join(cells) + " |")
-    return "\n".join(lines) + "\n"
+        lines.append([label, n, *cells])
+    return markdown(head, lines, "lr" + "r" * len(COLUMNS))
 
 
 TITLES = {

@@ -14,21 +14,25 @@ from __future__ import annotations
 
 import pathlib
 import time
-import warnings
 
 import numpy as np
 
 import stmpl.contact.pressing as contact
-from stmpl import predictor, tissue
-from stmpl.body.anny_body import phenotype_of, phenotype_options
 from stmpl.body.spec import part_from_spec
+from stmpl.cli import answers
+from stmpl.cli.options import (
+    body_options,
+    load_options,
+    model_options,
+    phenotype_of,
+    thickness_of,
+    thickness_option,
+)
 from stmpl.contact import objects
 from stmpl.contact.hand import GRIPS, Hand, grasp, palm_press
-from stmpl.pipeline.spec import label, predictor_from_spec
-from stmpl.predictor import ImpossibleAnswer, OutsideEnvelope, PredictionFailed
 from stmpl.scene import Scene
 from stmpl.viz.figures import export_mesh, vertex_colors
-from stmpl.viz.render import contact_figure, duration
+from stmpl.viz.render import contact_figure
 
 DEFAULT_MODEL = "zoo:gnn_arm_bodies"
 """The shipped GNN of the left arm of every anny body (the right arm answered in the mirror)."""
@@ -54,12 +58,6 @@ def add_arguments(sp) -> None:
         help="hand grip: whole hand, thumb and two fingers, or a pinch",
     )
     what.add_argument(
-        "--along",
-        type=float,
-        default=0.7,
-        help="grasp or strap position along the limb, 0..1 (default 0.7)",
-    )
-    what.add_argument(
         "--around",
         type=float,
         default=0.0,
@@ -82,14 +80,6 @@ def add_arguments(sp) -> None:
     what.add_argument(
         "--strap", action="store_true", help="a strap closed around the limb at --along"
     )
-    what.add_argument(
-        "--at",
-        type=float,
-        nargs=2,
-        metavar=("U", "V"),
-        default=(0.45, 0.5),
-        help="where an object is pressed, in chart coordinates",
-    )
     what.add_argument("--spin", type=float, default=0.0, help="object turn about the normal, rad")
     what.add_argument(
         "--pose",
@@ -105,41 +95,10 @@ def add_arguments(sp) -> None:
         default=2.0,
         help="how deep the object reaches into the skin, mm (default 2)",
     )
-    what.add_argument("--force", type=float, default=0.4, help="total force, N (default 0.4)")
-    sp.add_argument("--part", default="left_arm", help="body part (default left_arm)")
-
-    phenotype_options(sp)
-    sp.add_argument(
-        "--subdivide",
-        type=int,
-        default=None,
-        metavar="N",
-        help="the skin's resolution: every triangle of anny's part split into four "
-        "N times (default: the first model's own, 1 for the shipped models; 1 for "
-        "the FEM alone)",
-    )
-    sp.add_argument(
-        "--thickness",
-        type=float,
-        help="tissue thickness, mm (default: the "
-        "paper's heuristic from --weight, 5 mm thin .. 10 mm heavy; 7.5 at 0.5)",
-    )
-    sp.add_argument(
-        "--model",
-        action="append",
-        help=f"zoo:<name> or a checkpoint; repeat to "
-        f"compare (default {DEFAULT_MODEL}; on the belly {PART_MODELS['belly']})",
-    )
-    sp.add_argument("--compare", action="store_true", help="also solve the FEM, report errors")
-    sp.add_argument(
-        "--fidelity",
-        default="full",
-        choices=["full", "auto"],
-        help="full: model the whole part; auto: only what the scene needs (the GNN "
-        "on the subgraph around the contact, the FEM on the patch it moves)",
-    )
-    sp.add_argument("--res", default="reference", help="FEM resolution for --compare")
-    sp.add_argument("--levels", type=int, default=3, help="FEM continuation levels")
+    load_options(what)
+    body_options(sp, smpl=False)
+    thickness_option(sp)
+    model_options(sp, f"{DEFAULT_MODEL}; on the belly {PART_MODELS['belly']}")
     sp.add_argument("--out-dir", default="simulate_out", help="folder for the results")
 
 
@@ -192,100 +151,28 @@ def run(args) -> int:
     """``stmpl simulate``: build the scene, predict, compare, write and print."""
     t0 = time.perf_counter()
     specs = args.model or [default_model(args.part)]
-    preds = [
-        predictor_from_spec(spec, res=args.res, levels=args.levels, fidelity=args.fidelity)
-        for spec in specs
-    ]
-    sub = args.subdivide
-    if sub is None:  # the surface the first model was trained on, else the FEM's default
-        sub = next(
-            (
-                int(p.part.source.get("subdivisions", 0))
-                for p in preds
-                if getattr(p, "part", None) is not None
-            ),
-            1,
-        )
+    preds = answers.predictors(args, specs)
+    sub = answers.skin_of(preds, args.subdivide, 1)  # the FEM alone: the once-subdivided skin
     part = part_from_spec(
         {"model": "anny", "subdivisions": sub, "phenotype": phenotype_of(args)}, args.part
     )
     objs = pressings(args, part)
     touch = contact.contact(part, objs)
-    thick = (
-        tissue.from_weight(part, args.weight)
-        if args.thickness is None
-        else tissue.constant(part, args.thickness * 1e-3)
-    )
+    thick = thickness_of(args, part)
     scene = Scene.from_load(part, thick, touch.load())
     print(
         f"{part.name} ({part.n_vertices} vertices), {1e3 * float(thick.mean()):.3g} mm of "
         f"tissue; {touch.summary()}  [{time.perf_counter() - t0:.1f} s to set up]"
     )
-    out: dict = {}
-    for spec, p in zip(specs, preds):
-        first = None
-        with warnings.catch_warnings():  # printed as lines instead
-            warnings.simplefilter("ignore", ImpossibleAnswer)
-            warnings.simplefilter("ignore", OutsideEnvelope)
-            if not spec.startswith("fem"):
-                t1 = time.perf_counter()
-                p.predict(scene)  # warm-up, timed apart
-                first = time.perf_counter() - t1
-            out[label(spec)] = d = p.predict(scene)
-        slow = first is not None and first > max(0.2, 20 * d.info["seconds"])
-        print(
-            f"{label(spec):<16} deepest {1e3 * d.magnitude.max():6.3f} mm  "
-            f"{duration(d.info['seconds']):>10}"
-            + (
-                f"  (a model of the {p.part.name}, answering in the mirror)"
-                if d.info.get("mirrored")
-                else ""
-            )
-            + (
-                f"  (first call {duration(first)}: what this body and contact need, e.g. "
-                "the linear FEM's columns, was computed and cached)"
-                if slow
-                else ""
-            )
-        )
-        env = d.info.get("envelope")
-        if env and not env["inside"]:
-            print(
-                f"  NOTE: {label(spec)} answers outside the data it was trained and checked "
-                f"on: {'; '.join(env['outside'])}. Check it with --compare"
-            )
-        if not d.info.get("physical", True):
-            print(
-                f"  WARNING: {label(spec)} pushes the skin {d.info['max_compression']:.1f} x "
-                "the tissue's thickness inward: impossible; do not use this answer"
-            )
-    truth = None
-    if args.compare:
-        try:
-            truth = predictor.create(
-                "fem", res=args.res, levels=args.levels, fidelity=args.fidelity
-            ).predict(scene)
-        except PredictionFailed as e:
-            print(f"{'FEM (' + args.res + ')':<16} failed: {e}; no errors to show")
-    if truth is not None:
-        print(
-            f"{'FEM (' + args.res + ')':<16} deepest {1e3 * truth.magnitude.max():6.3f} mm  "
-            f"{duration(truth.info['seconds']):>10}"
-        )
-        active = truth.magnitude > 1e-6
-        peak = truth.magnitude.max()
-        for name, d in out.items():
-            err = np.linalg.norm(d.displacement - truth.displacement, axis=1)
-            print(
-                f"  {name}: error {100 * err[active].mean() / peak:.2f} % of the deepest, "
-                f"peak {100 * (d.magnitude.max() - peak) / peak:+.1f} %, largest error "
-                f"{1e3 * err.max():.3f} mm"
-            )
+    out = answers.answer(scene, specs, preds)
+    fem = answers.truth(scene, args) if args.compare else None
+    if fem is not None:
+        answers.errors(out, fem)
     folder = pathlib.Path(args.out_dir)
     folder.mkdir(parents=True, exist_ok=True)
     first = next(iter(out.values()))
     write_meshes(first, [o.posed() for o in objs], folder / "pressed")
-    contact_figure(out, truth, [o.posed() for o in objs], folder / "simulate.png")
+    contact_figure(out, fem, [o.posed() for o in objs], folder / "simulate.png")
     print(
         f"wrote {folder / 'pressed.glb'} (body and object), {folder / 'pressed.ply'}, "
         f"{folder / 'simulate.png'}"

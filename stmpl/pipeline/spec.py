@@ -12,30 +12,26 @@ from stmpl.pipeline import zoo
 
 
 def predictor_from_spec(
-    spec: str, device: str = "cpu", res: str = "reference", levels: int = 1, fidelity: str = "full"
+    spec: str,
+    device: str = "cpu",
+    res: str = "reference",
+    levels: int = 1,
+    fidelity: str = "full",
+    **options,
 ):
     """The predictor ``spec`` names (see the module docstring); ``res`` and ``levels`` are the
     FEM's resolution (unless the spec names one) and continuation levels; ``fidelity``
-    (``full`` or ``auto``, :data:`stmpl.predictor.FIDELITIES`) how much of the part it models.
+    (``full`` or ``auto``, :data:`stmpl.predictor.FIDELITIES`) how much of the part it models;
+    ``options`` go to a learned model's constructor (e.g. ``region_tolerance``).
     """
-    if fidelity not in predictor.FIDELITIES:
-        raise ValueError(f"fidelity must be one of {list(predictor.FIDELITIES)}, got {fidelity!r}")
+    predictor.check_fidelity(fidelity)
     if spec.startswith("zoo:"):
-        p = zoo.read(spec[4:], device=device)
-    elif spec == "fem" or spec.startswith("fem:"):
-        return predictor.create(
-            "fem",
-            res=spec.split(":", 1)[1] if ":" in spec else res,
-            levels=levels,
-            fidelity=fidelity,
-        )
-    elif pathlib.Path(spec).suffix == ".safetensors" or pathlib.Path(spec).exists():
-        p = predictor.read(spec, device=device)
-    else:
-        p = None
-    if p is not None:
-        p.fidelity = fidelity
-        return p
+        return zoo.read(spec[4:], device=device, fidelity=fidelity, **options)
+    if spec == "fem" or spec.startswith("fem:"):
+        res = spec.split(":", 1)[1] if ":" in spec else res
+        return predictor.create("fem", res=res, levels=levels, fidelity=fidelity)
+    if pathlib.Path(spec).suffix == ".safetensors" or pathlib.Path(spec).exists():
+        return predictor.read(spec, device=device, fidelity=fidelity, **options)
     raise ValueError(
         f"unknown predictor {spec!r}: give fem, fem:<resolution>, zoo:<name> or a "
         ".safetensors checkpoint"

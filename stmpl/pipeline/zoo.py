@@ -33,6 +33,7 @@ from stmpl.files import atomic_write_text
 from stmpl.metrics import sample_metrics
 from stmpl.pipeline.evaluate import evaluate_dataset, scenes_of
 from stmpl.predictor import OutsideEnvelope
+from stmpl.table import markdown
 
 MANIFEST = "manifest.json"
 FORMAT = "stmpl-zoo/1"
@@ -137,11 +138,12 @@ every point where a model breaks it, or the FEM fails, lies outside that model's
 (tests/test_stability.py)."""
 
 
-def read(name: str, device: str = "cpu", path=None):
+def read(name: str, device: str = "cpu", path=None, **options):
     """The predictor of zoo model ``name``, verified, on ``device``; its envelope gains the
-    boxes of the test sets it kept its promise on (the manifest's ``envelope``).
+    boxes of the test sets it kept its promise on (the manifest's ``envelope``). ``options``
+    (e.g. ``fidelity``) go to its constructor.
     """
-    p = predictor.read(verify(name, path), device=device)
+    p = predictor.read(verify(name, path), device=device, **options)
     e = entry(name, path)
     kept = {k: v for k, v in (e.get("envelope") or {}).items() if v["kept"]}
     if p.envelope is not None:
@@ -320,12 +322,10 @@ def table(path=None) -> str:
         },
         key=lambda k: (list(LABELS).index(k) if k in LABELS else len(LABELS), k),
     )
-    head = (
-        "| model | kind | parameters | MB | trained on | "
-        + " | ".join(f"{LABELS.get(k, k)}: MEE mm / rel. % / peak %" for k in cols)
-        + " |"
-    )
-    rows = [head, "|---|---|--:|--:|---|" + "--:|" * len(cols)]
+    head = ["model", "kind", "parameters", "MB", "trained on"] + [
+        f"{LABELS.get(k, k)}: MEE mm / rel. % / peak %" for k in cols
+    ]
+    rows = []
     for n, e in sorted(models.items()):
         ds = e.get("dataset") or {}
         metrics = {_column(k): v for k, v in (e.get("metrics") or {}).items()}
@@ -341,9 +341,13 @@ def table(path=None) -> str:
                 + ("–" if peak != peak else f"{peak:+.1f}")
             )
         rows.append(
-            f"| {n} | {e['kind']} | {e.get('parameters') or 0:,} | "
-            f"{e['bytes'] / 1e6:.2f} | {ds.get('name')} ({ds.get('hash')}) | "
-            + " | ".join(cells)
-            + " |"
+            [
+                n,
+                e["kind"],
+                f"{e.get('parameters') or 0:,}",
+                f"{e['bytes'] / 1e6:.2f}",
+                f"{ds.get('name')} ({ds.get('hash')})",
+                *cells,
+            ]
         )
-    return "\n".join(rows) + "\n"
+    return markdown(head, rows, "llrrl" + "r" * len(cols))

@@ -12,7 +12,8 @@ import pathlib
 
 import numpy as np
 
-from stmpl.viz.figures import _matplotlib, view_basis
+from stmpl.metrics import sample_metrics
+from stmpl.viz.figures import pyplot, view_basis
 
 
 def refine(triangles: np.ndarray, values: np.ndarray, levels: int = 2):
@@ -128,7 +129,7 @@ def contact_figure(
     """
     import matplotlib  # deferred: pictures only
 
-    plt = _matplotlib()
+    plt = pyplot()
     rows = ([("FEM", truth)] if truth is not None else []) + list(deformations.items())
     if not rows:
         raise ValueError("no deformations to draw")
@@ -170,13 +171,8 @@ def contact_figure(
         )
         lines = [head, f"deepest {mag.max():.2f} mm"]
         if truth is not None and d is not truth:
-            err = np.linalg.norm(d.displacement - truth.displacement, axis=1)
-            active = truth.magnitude > 1e-6
-            peak = truth.magnitude.max()
-            lines.append(
-                f"error {100 * err[active].mean() / peak:.2f} % of the deepest, "
-                f"peak {100 * (d.magnitude.max() - peak) / peak:+.1f} %"
-            )
+            m = sample_metrics(truth.displacement, d.displacement)
+            lines.append(f"error {m['rel_mee']:.2f} % of the deepest, peak {m['peak_err']:+.1f} %")
         warn = _warning(d)
         if warn:
             lines.append(warn)

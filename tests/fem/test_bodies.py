@@ -134,7 +134,7 @@ def test_smpl_format_bodies_run_the_same_path(tmp_path):
     from stmpl.metrics import sample_metrics
     from stmpl.pipeline.train import train
     from stmpl.scene import Scene
-    from tests.body.test_smpl import _model, _write_obj
+    from tests.body.test_smpl_body import _model, _write_obj
 
     data, t = _model()
     np.savez(tmp_path / "model.npz", **data)

@@ -7,7 +7,7 @@ import pytest
 
 from fem import local
 from fem.simulate import simulate
-from stmpl import loads
+from stmpl import loads, reach
 from stmpl.body.primitives import tube
 
 RES = {"subdivisions": 1, "layers": 2, "refine_radius": 0.03, "order": 1}
@@ -61,13 +61,13 @@ def test_local_matches_the_whole_solve_and_grows_when_too_tight(long_tube):
     assert all(s.ok for s in s2) and not res.patch.whole
     u = res.patch.lift(s2[-1].part_displacement(m2), part.n_vertices)
     assert np.linalg.norm(u - whole, axis=1).max() < 0.01 * peak
-    assert res.attempts[-1]["ring_moved"] <= local.TOLERANCE
+    assert res.attempts[-1]["ring_moved"] <= reach.RING_TOLERANCE
     assert res.patch.part.n_vertices < 0.6 * part.n_vertices
     # a first cut far too tight is grown until the ring stays still
     m3, s3, tight = local.simulate_local(part, t, ld.force, [0.2], RES, margin=0.012)
-    assert len(tight.attempts) > 1 and tight.attempts[0]["ring_moved"] > local.TOLERANCE
+    assert len(tight.attempts) > 1 and tight.attempts[0]["ring_moved"] > reach.RING_TOLERANCE
     assert [a["margin_m"] for a in tight.attempts] == pytest.approx(
-        [0.012 * local.GROW**k for k in range(len(tight.attempts))]
+        [0.012 * reach.GROW**k for k in range(len(tight.attempts))]
     )
     u3 = tight.patch.lift(s3[-1].part_displacement(m3), part.n_vertices)
     assert np.linalg.norm(u3 - whole, axis=1).max() < 0.01 * peak
@@ -105,4 +105,4 @@ def test_a_load_the_tissue_cannot_carry_fails_after_one_growth_not_the_whole_par
     mesh, sols, res = local.simulate_local(part, t, ld.force, [0.1, 0.2], RES, options=opts)
     assert not any(s.ok for s in sols)
     assert len(res.attempts) == local.FAILED_ATTEMPTS == 2 and not res.patch.whole
-    assert res.attempts[1]["margin_m"] == pytest.approx(local.GROW * res.attempts[0]["margin_m"])
+    assert res.attempts[1]["margin_m"] == pytest.approx(reach.GROW * res.attempts[0]["margin_m"])

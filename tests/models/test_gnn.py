@@ -34,8 +34,7 @@ def test_auto_fidelity_answers_on_the_subgraph_the_load_needs(ds, make):
     torch.nn.init.normal_(p.model.net.decoder[-1].weight, std=0.5)  # a correction that shows
     scenes = [s for s in scenes_of(ds, "test")[0] if s.thickness[0] < 0.006][:4]
     full = p.predict(scenes)
-    p.fidelity = "auto"
-    auto = p.predict(scenes)
+    auto = p.with_fidelity("auto").predict(scenes)
     lin = make("linear", ds).predict(scenes)
     t = np.stack([s.thickness for s in scenes])
     f = np.stack([s.force for s in scenes])
@@ -54,9 +53,10 @@ def test_auto_fidelity_answers_on_the_subgraph_the_load_needs(ds, make):
             a.displacement[~inner[b]], l.displacement[~inner[b]], rtol=1e-4, atol=1e-9
         )
         assert not np.allclose(f.displacement, l.displacement, atol=1e-7)  # it does correct
-    p.fidelity = "most"
     with pytest.raises(ValueError, match="fidelity must be one of"):
-        p.predict(scenes[0])
+        p.with_fidelity("most")
+    with pytest.raises(AttributeError):  # given at construction, not written after it
+        p.fidelity = "auto"
 
 
 def test_auto_fidelity_cuts_the_graph_where_no_input_is_lost(arm):
@@ -79,8 +79,7 @@ def test_auto_fidelity_cuts_the_graph_where_no_input_is_lost(arm):
         arm, tissue.constant(arm, 0.005), loads.disk(arm, uv=(0.3, 0.5), radius=0.02, total=0.2)
     )
     full = p.predict(s).displacement
-    p.fidelity = "auto"
-    auto = p.predict(s).displacement
+    auto = p.with_fidelity("auto").predict(s).displacement
     inner, sub = p.region(s.thickness[None], s.force[None])
     assert sub.sum() < arm.n_vertices / 2 and inner.sum() < sub.sum()
     np.testing.assert_allclose(auto[inner[0]], full[inner[0]], rtol=1e-4, atol=1e-9)

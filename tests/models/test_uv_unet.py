@@ -61,8 +61,8 @@ def test_auto_fidelity_runs_on_the_window_the_load_needs(ds, make):
     """
     import torch
 
-    from models.prior import moved
     from stmpl import predictor
+    from stmpl.reach import moved
 
     torch.manual_seed(0)
     p = predictor.create(
@@ -75,8 +75,7 @@ def test_auto_fidelity_runs_on_the_window_the_load_needs(ds, make):
     torch.nn.init.normal_(last.weight, std=0.5)  # a correction that shows
     scenes = [s for s in scenes_of(ds, "test")[0] if s.thickness[0] < 0.006][:4]
     full = p.predict(scenes)
-    p.fidelity = "auto"
-    auto = p.predict(scenes)
+    auto = p.with_fidelity("auto").predict(scenes)
     lin = predictor.create("linear", ds.part)
     lin.fit(ds, progress=False)
     lin = lin.predict(scenes)

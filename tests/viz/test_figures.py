@@ -42,11 +42,12 @@ def test_export_rejects_bad_input(arm, tmp_path):
 
 def test_section_of_a_flat_layer_has_the_layer_area():
     from fem.mesh import shell_mesh
+    from fem.pictures import section
     from stmpl.body.primitives import sheet
 
     part = sheet(0.1, 0.1, 8, 8)
     mesh = shell_mesh(part, np.full(part.n_vertices, 0.006), layers=2)
-    polys, vals = viz.section(
+    polys, vals = section(
         mesh.nodes,
         mesh.tets,
         np.array([0.013, 0.0, 0.0]),

@@ -55,7 +55,7 @@ def test_scene_of_spots(tmp_path, capsys, arm):
     sc = Scene.read(s)
     from stmpl import loads
 
-    ld = loads.spots(arm, uv=(0.5, 0.5), count=4, radius=0.008, spread=0.04, total=0.4)
+    ld = loads.spots(arm, uv=(0.45, 0.5), count=4, radius=0.008, spread=0.04, total=0.4)
     assert sc.force.sum() == pytest.approx(0.4) and np.count_nonzero(sc.force) == ld.count
     assert "spots: 0.4 N on" in capsys.readouterr().out
 
@@ -109,7 +109,23 @@ def test_simulate_command_solves_draws_and_saves(tmp_path, capsys, arm):
 
 def test_simulate_command_reports_a_failed_solve(capsys, arm):
     assert (
-        main(["solve", "--force", "8", "--levels", "1", "--res", "coarse", "--radius", "10"]) == 2
+        main(
+            [
+                "solve",
+                "--force",
+                "8",
+                "--levels",
+                "1",
+                "--res",
+                "coarse",
+                "--radius",
+                "10",
+                "--at",
+                "0.5",
+                "0.5",
+            ]
+        )
+        == 2
     )
     err = capsys.readouterr().err
     assert "FEM solve failed" in err and "Traceback" not in err and err.count("\n") == 1
@@ -142,7 +158,7 @@ def test_predict_command_runs_a_checkpoint_against_the_fem(tmp_path, capsys, arm
     )
     out = capsys.readouterr().out
     assert rc == 0 and (tmp_path / "p.png").stat().st_size > 20_000
-    assert "tiny_unet" in out and "fem (coarse)" in out and "MEE" in out
+    assert "tiny_unet" in out and "FEM (coarse)" in out and "MEE" in out
     assert (
         main(["predict", "--model", str(ckpt), "--force", "0.1", "--save", str(tmp_path / "d.npz")])
         == 0
@@ -155,17 +171,19 @@ def test_predict_command_runs_a_checkpoint_against_the_fem(tmp_path, capsys, arm
 
 def test_predict_says_when_a_scene_lies_outside_the_models_data(capsys, arm):
     """The outside evaluation's case: 5 N on a 2 cm disk. The shipped GNN answers (exit 0) with
-    one warning line naming the axes the scene leaves and one on the impossible answer.
+    one note naming the axes the scene leaves and one warning that the answer is impossible,
+    beside its line, as ``stmpl simulate`` says them.
     """
     assert main(["predict", "--force", "5", "--thickness", "7.5"]) == 0
-    err = capsys.readouterr().err
-    lines = [ln for ln in err.splitlines() if "warning" in ln]
-    assert len(lines) == 2, err
-    assert "outside the data its answers are backed by" in lines[0]
-    assert "force of a contact 5 N > 0.5 N" in lines[0] and "kPa" in lines[0]
-    assert "physically impossible" in lines[1]
+    out = capsys.readouterr().out
+    notes = [ln for ln in out.splitlines() if ln.lstrip().startswith(("NOTE", "WARNING"))]
+    assert len(notes) == 2, out
+    assert "answers outside the data it was trained and checked on" in notes[0]
+    assert "force of a contact 5 N > 0.5 N" in notes[0] and "kPa" in notes[0]
+    assert "impossible; do not use this answer" in notes[1]
     assert main(["predict", "--force", "0.3", "--thickness", "7.5"]) == 0
-    assert "warning" not in capsys.readouterr().err
+    out = capsys.readouterr().out
+    assert "NOTE" not in out and "WARNING" not in out
 
 
 def _fails(argv, capsys, message):
@@ -226,7 +244,7 @@ def test_a_permission_error_is_one_line(tmp_path, capsys, arm, monkeypatch):
     def refuse(fig, path, dpi):
         raise PermissionError(13, "Permission denied", str(path))
 
-    monkeypatch.setattr(stmpl.viz.figures, "_save_figure", refuse)
+    monkeypatch.setattr(stmpl.viz.figures, "save_figure", refuse)
     _fails(
         ["scene", "--force", "0.3", "--out", str(target)], capsys, f"Permission denied: {target}"
     )

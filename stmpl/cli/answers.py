@@ -1,0 +1,119 @@
+"""One runner for the commands that answer a scene (``stmpl predict`` and ``stmpl simulate``):
+each predictor answers it (its time that of a second, warm call), each answer says where it
+stands (outside its data, physically impossible), and with ``--compare`` the FEM solves it and
+each answer is measured against it (:func:`stmpl.metrics.sample_metrics`).
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+
+from stmpl import predictor
+from stmpl.metrics import sample_metrics
+from stmpl.pipeline.spec import label, predictor_from_spec
+from stmpl.predictor import ImpossibleAnswer, OutsideEnvelope, PredictionFailed
+from stmpl.viz.render import duration
+
+WIDTH = 20
+"""Characters of the name column."""
+
+
+def predictors(args, specs: list[str]) -> list:
+    """The predictors ``specs`` name, at the options' device, fidelity and FEM set-up."""
+    return [
+        predictor_from_spec(
+            spec, args.device, res=args.res, levels=args.levels, fidelity=args.fidelity
+        )
+        for spec in specs
+    ]
+
+
+def skin_of(preds: list, asked: int | None, default: int) -> int:
+    """How often the part is subdivided: as ``asked``, else the surface the first learned
+    model was trained on, else ``default``.
+    """
+    if asked is not None:
+        return asked
+    return next(
+        (
+            int(p.part.source.get("subdivisions", 0))
+            for p in preds
+            if getattr(p, "part", None) is not None
+        ),
+        default,
+    )
+
+
+def answer(scene, specs: list[str], preds: list) -> dict:
+    """``{label: Deformation}``: every predictor's answer to ``scene``, printed one line each
+    with a note where it lies outside its data or is impossible.
+    """
+    out = {}
+    for spec, p in zip(specs, preds):
+        first = None
+        with warnings.catch_warnings():  # said in the lines below instead
+            warnings.simplefilter("ignore", ImpossibleAnswer)
+            warnings.simplefilter("ignore", OutsideEnvelope)
+            if getattr(p, "batched", True):  # a learned model: warm up, the first call apart
+                t0 = time.perf_counter()
+                p.predict(scene)
+                first = time.perf_counter() - t0
+            out[label(spec)] = d = p.predict(scene)
+        _say(label(spec), p, d, first)
+    return out
+
+
+def _say(name: str, p, d, first: float | None) -> None:
+    slow = first is not None and first > max(0.2, 20 * d.info["seconds"])
+    line = f"{name:<{WIDTH}} deepest {1e3 * d.magnitude.max():6.3f} mm  "
+    line += f"{duration(d.info['seconds']):>10}"
+    if d.info.get("mirrored"):
+        line += f"  (a model of the {p.part.name}, answering in the mirror)"
+    if slow:
+        line += (
+            f"  (first call {duration(first)}: what this body and contact need, e.g. the "
+            "linear FEM's columns, was computed and cached)"
+        )
+    print(line)
+    env = d.info.get("envelope")
+    if env and not env["inside"]:
+        print(
+            f"  NOTE: {name} answers outside the data it was trained and checked on: "
+            f"{'; '.join(env['outside'])}. Check it with --compare"
+        )
+    if not d.info.get("physical", True):
+        print(
+            f"  WARNING: {name} pushes the skin {d.info['max_compression']:.1f} x the tissue's "
+            "thickness inward: impossible; do not use this answer"
+        )
+
+
+def truth(scene, args):
+    """The FEM's answer to ``scene`` at the options' resolution, levels and fidelity, printed;
+    ``None`` (and the reason printed) when the solve fails: the models' answers stand.
+    """
+    name = f"FEM ({args.res})"
+    fem = predictor.create("fem", res=args.res, levels=args.levels, fidelity=args.fidelity)
+    try:
+        d = fem.predict(scene)
+    except PredictionFailed as e:
+        print(f"{name:<{WIDTH}} failed: {e}; no errors to show")
+        return None
+    print(
+        f"{name:<{WIDTH}} deepest {1e3 * d.magnitude.max():6.3f} mm  "
+        f"{duration(d.info['seconds']):>10}"
+    )
+    return d
+
+
+def errors(out: dict, fem) -> None:
+    """Print each answer's error against the FEM's ``fem``: its mean error in mm and as a share
+    of the deepest displacement, its peak's error and its largest error.
+    """
+    for name, d in out.items():
+        m = sample_metrics(fem.displacement, d.displacement)
+        print(
+            f"  {name}: MEE {m['mee']:.4f} mm = {m['rel_mee']:.2f} % of the deepest, peak "
+            f"{m['peak_err']:+.1f} %, largest error {m['max_err']:.3f} mm"
+        )
