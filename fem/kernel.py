@@ -8,11 +8,13 @@ from __future__ import annotations
 import numpy as np
 
 
-def element_data(g, GG, aW, bW, cW, local, pos, sel, nnz: int) -> np.ndarray:
+def element_data(g, GG, aW, bW, cW, local, pos, sel, nnz: int, full=None) -> np.ndarray:
     """The tangent's CSR data (``(nnz,)``) with NumPy, from ``g`` ``(T, Q, n, 3)``
     (``H^T grad N``), ``GG`` ``(T, Q, n, n)``, the weighted tangent parts ``aW, bW, cW``
     ``(T, Q)``, the element entries ``local = (A, I, B, K)`` and their places ``pos`` among the
-    data (``sel`` selects the entries that have one).
+    data (``sel`` selects the entries that have one). ``full = (f, dW, eW)`` adds the long
+    form's terms ``dW f_ai f_bk + eW (f_ai g_bk + g_ai f_bk)``, ``f`` ``(T, Q, n, 3)`` being
+    ``F grad N``.
     """
     A, I, B, Kc = local
     vals = 0.0
@@ -23,6 +25,13 @@ def element_data(g, GG, aW, bW, cW, local, pos, sel, nnz: int) -> np.ndarray:
             + cW[:, q, None] * gq[:, A, Kc] * gq[:, B, I]
             + (I == Kc) * (aW[:, q, None] * GG[:, q][:, A, B])
         )
+        if full is not None:
+            f, dW, eW = full
+            fq = f[:, q]
+            vals = vals + (
+                dW[:, q, None] * fq[:, A, I] * fq[:, B, Kc]
+                + eW[:, q, None] * (fq[:, A, I] * gq[:, B, Kc] + gq[:, A, I] * fq[:, B, Kc])
+            )
     flat = vals.ravel()
     data = np.zeros(nnz)
     for p, s in zip(pos, sel):
@@ -65,5 +74,46 @@ def make_kernel():
     return kernel
 
 
+def make_full_kernel():
+    """The compiled kernel of the long form (laws of ``I1`` and ``J``): as
+    :func:`make_kernel`'s, plus ``dW f_ai f_bk + eW (f_ai g_bk + g_ai f_bk)`` with ``f`` the
+    gradients mapped by ``F``; ``None`` when Numba is absent.
+    """
+    try:
+        from numba import njit  # deferred: compiles the FEM's kernels
+    except ImportError:
+        return None
+
+    @njit(cache=True, nogil=True)
+    def kernel(g, f, GG, aW, bW, cW, dW, eW, pos, data):  # pragma: no cover - compiled
+        T, Q, n = g.shape[0], g.shape[1], g.shape[2]
+        for t in range(T):
+            for qp in range(Q):
+                e = 0
+                for p in range(3 * n):
+                    A, i = p // 3, p % 3
+                    for q in range(p, 3 * n):
+                        B, k = q // 3, q % 3
+                        j = pos[t, e]
+                        e += 1
+                        if j < 0:
+                            continue
+                        gai, gbk = g[t, qp, A, i], g[t, qp, B, k]
+                        fai, fbk = f[t, qp, A, i], f[t, qp, B, k]
+                        v = (
+                            bW[t, qp] * gai * gbk
+                            + cW[t, qp] * g[t, qp, A, k] * g[t, qp, B, i]
+                            + dW[t, qp] * fai * fbk
+                            + eW[t, qp] * (fai * gbk + gai * fbk)
+                        )
+                        if i == k:
+                            v += aW[t, qp] * GG[t, qp, A, B]
+                        data[j] += v
+
+    return kernel
+
+
 kernel = make_kernel()
 """The compiled kernel, or ``None`` without Numba (the solver then uses its NumPy path)."""
+full_kernel = make_full_kernel()
+"""The compiled kernel of the long form, or ``None`` without Numba."""

@@ -18,6 +18,22 @@ Linear elasticity (``eps = sym(F - I)``)::
     A_iJkL = mu (d_ik d_JL + d_iL d_Jk) + lam d_iJ d_kL
 
 Both agree to first order at ``F = I``. The paper's defaults: ``E = 1 kPa``, ``nu = 0.4``.
+
+Tissue laws (:class:`Yeoh`, :class:`Demiray`) split the energy into a shape part on the
+isochoric invariant ``Ib = J^(-2/3) I1`` and a volume part with bulk modulus ``K`` (Pa), as the
+fits of in-vivo indentation report them (``C10`` and ``K``)::
+
+    W = psi(Ib - 3) + U(J),    U(J) = K/4 (J^2 - 1 - 2 ln J)
+    Yeoh:     psi(x) = C10 x + C20 x^2 + C30 x^3          (C20 = C30 = 0: neo-Hookean)
+    Demiray:  psi(x) = a / (2 b) (exp(b x) - 1)            (stiffens exponentially)
+
+Their initial shear modulus is ``mu = 2 psi'(0)``. Any energy ``W(I1, J)`` has the tangent
+``A_iJkL = a d_ik d_JL + b H_Ji H_Lk + c H_Li H_Jk + d F_iJ F_kL + e (F_iJ H_Lk + H_Ji F_kL)``
+with ``a = 2 W_1``, ``b = J W_J + J^2 W_JJ``, ``c = -J W_J``, ``d = 4 W_11``, ``e = 2 J W_1J``
+(subscripts: partial derivatives in ``I1`` and ``J``); the compressible Neo-Hookean law is the
+case ``d = e = 0``, whose shorter form the solver keeps.
+
+:class:`Layered` gives each element the law of its tissue layer (skin, fat, muscle...).
 """
 
 from __future__ import annotations
@@ -25,6 +41,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.optimize import brentq
 
 _I = np.eye(3)
 
@@ -146,13 +163,224 @@ class LinearElastic(Material):
         return P, (np.full(T, mu), np.full(T, lam), np.full(T, mu), np.broadcast_to(_I, (T, 3, 3)))
 
 
-def tangent_from_parts(a, b, c, H) -> np.ndarray:
-    """``(T, 3, 3, 3, 3)`` tangent ``A_iJkL = a d_ik d_JL + b H_Ji H_Lk + c H_Li H_Jk``."""
-    return (
+def tangent_from_parts(a, b, c, H, d=None, e=None, F=None) -> np.ndarray:
+    """``(T, 3, 3, 3, 3)`` tangent ``A_iJkL = a d_ik d_JL + b H_Ji H_Lk + c H_Li H_Jk``, plus
+    ``d F_iJ F_kL + e (F_iJ H_Lk + H_Ji F_kL)`` when given.
+    """
+    A = (
         a[:, None, None, None, None] * np.einsum("ik,JL->iJkL", _I, _I)[None]
         + b[:, None, None, None, None] * np.einsum("tJi,tLk->tiJkL", H, H)
         + c[:, None, None, None, None] * np.einsum("tLi,tJk->tiJkL", H, H)
     )
+    if d is not None:
+        A = A + d[:, None, None, None, None] * np.einsum("tiJ,tkL->tiJkL", F, F)
+        A = A + e[:, None, None, None, None] * (
+            np.einsum("tiJ,tLk->tiJkL", F, H) + np.einsum("tJi,tkL->tiJkL", H, F)
+        )
+    return A
+
+
+def _invariant_parts(F, W1, WJ, W11, W1J, WJJ, Finv, J):
+    """``(P, (a, b, c, H, d, e, F))`` of an energy ``W(I1, J)`` from its partial derivatives
+    ``(T,)`` at ``F`` ``(T, 3, 3)`` (see the module's docstring).
+    """
+    FinvT = Finv.transpose(0, 2, 1)
+    P = (2 * W1)[:, None, None] * F + (J * WJ)[:, None, None] * FinvT
+    parts = (2 * W1, J * WJ + J**2 * WJJ, -J * WJ, Finv, 4 * W11, 2 * J * W1J, F)
+    return P, parts
+
+
+@dataclass(frozen=True)
+class IsochoricLaw:
+    """A law ``W = psi(Ib - 3) + U(J)`` with bulk modulus ``K`` (Pa); subclasses give ``psi``
+    and its first two derivatives (:meth:`shape`). Needs ``det F > 0``.
+    """
+
+    K: float = 0.0
+    name = "isochoric"
+
+    def _check(self, **positive) -> None:
+        for key, value in positive.items():
+            if not (np.isfinite(value) and value > 0):
+                raise ValueError(f"{self.name}: {key} must be > 0, got {value!r}")
+
+    def shape(self, x: np.ndarray):
+        """``(psi, psi', psi'')`` at ``x = Ib - 3`` ``(T,)``, J/m^3."""
+        raise NotImplementedError
+
+    @property
+    def mu(self) -> float:
+        """Initial shear modulus, Pa: ``2 psi'(0)``."""
+        return float(2 * self.shape(np.zeros(1))[1][0])
+
+    @property
+    def E(self) -> float:
+        """Initial Young's modulus, Pa: ``9 K mu / (3 K + mu)``."""
+        return 9 * self.K * self.mu / (3 * self.K + self.mu)
+
+    @property
+    def nu(self) -> float:
+        """Initial Poisson's ratio: ``(3 K - 2 mu) / (2 (3 K + mu))``."""
+        return (3 * self.K - 2 * self.mu) / (2 * (3 * self.K + self.mu))
+
+    def _derivatives(self, F: np.ndarray):
+        Finv, J = inv3(F)
+        I1 = np.einsum("tij,tij->t", F, F)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            s = np.cbrt(J) ** -2  # J^(-2/3)
+            ds = -2.0 / 3.0 * s / J  # d s / d J
+            d2s = 10.0 / 9.0 * s / J**2
+            psi, p1, p2 = self.shape(s * I1 - 3.0)
+            W1 = p1 * s
+            WJ = p1 * I1 * ds + 0.5 * self.K * (J - 1 / J)
+            W11 = p2 * s**2
+            W1J = p2 * s * I1 * ds + p1 * ds
+            WJJ = p2 * (I1 * ds) ** 2 + p1 * I1 * d2s + 0.5 * self.K * (1 + 1 / J**2)
+        return Finv, J, psi, (W1, WJ, W11, W1J, WJJ)
+
+    def energy(self, F: np.ndarray) -> np.ndarray:
+        """``(T,)`` energy density, J/m^3; ``inf`` where ``det F <= 0``."""
+        _, J, psi, _ = self._derivatives(F)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            U = 0.25 * self.K * (J**2 - 1 - 2 * np.log(J))
+        return np.where(J > 0, psi + U, np.inf)
+
+    def tangent_parts(self, F: np.ndarray):
+        """``(P, (a, b, c, H, d, e, F))``: the stress and the tangent's parts (module docstring)."""
+        Finv, J, _, (W1, WJ, W11, W1J, WJJ) = self._derivatives(F)
+        return _invariant_parts(F, W1, WJ, W11, W1J, WJJ, Finv, J)
+
+    def stress(self, F: np.ndarray) -> np.ndarray:
+        """``(T, 3, 3)`` first Piola-Kirchhoff stress, Pa."""
+        return self.tangent_parts(F)[0]
+
+    def stress_tangent(self, F: np.ndarray, tangent: bool = True):
+        """``(P, A)``: ``(T, 3, 3)`` stress and ``(T, 3, 3, 3, 3)`` tangent (``None`` unasked)."""
+        P, parts = self.tangent_parts(F)
+        return P, (tangent_from_parts(*parts) if tangent else None)
+
+
+@dataclass(frozen=True)
+class Yeoh(IsochoricLaw):
+    """Yeoh's law, ``psi = C10 x + C20 x^2 + C30 x^3`` (Pa each) on ``x = Ib - 3``, bulk modulus
+    ``K`` (Pa); with ``C20 = C30 = 0`` the incompressible-fit neo-Hookean law (``mu = 2 C10``).
+    Positive ``C20``, ``C30`` stiffen it as it is compressed or stretched.
+    """
+
+    C10: float = 0.0
+    C20: float = 0.0
+    C30: float = 0.0
+    name = "yeoh"
+
+    def __post_init__(self) -> None:
+        self._check(C10=self.C10, K=self.K)
+        if not (self.C20 >= 0 and self.C30 >= 0):
+            raise ValueError(f"yeoh: C20 and C30 must be >= 0, got {self.C20!r}, {self.C30!r}")
+
+    def shape(self, x):
+        c1, c2, c3 = self.C10, self.C20, self.C30
+        return (
+            c1 * x + c2 * x**2 + c3 * x**3,
+            c1 + 2 * c2 * x + 3 * c3 * x**2,
+            2 * c2 + 6 * c3 * x,
+        )
+
+
+@dataclass(frozen=True)
+class Demiray(IsochoricLaw):
+    """Demiray's exponential law, ``psi = a / (2 b) (exp(b x) - 1)`` on ``x = Ib - 3``: ``a``
+    (Pa) the initial shear modulus, ``b`` (dimensionless) how fast it stiffens; bulk modulus
+    ``K`` (Pa).
+    """
+
+    a: float = 0.0
+    b: float = 0.0
+    name = "demiray"
+
+    def __post_init__(self) -> None:
+        self._check(a=self.a, b=self.b, K=self.K)
+
+    def shape(self, x):
+        ex = np.exp(self.b * x)
+        return self.a / (2 * self.b) * (ex - 1), 0.5 * self.a * ex, 0.5 * self.a * self.b * ex
+
+
+@dataclass(frozen=True, eq=False)
+class Layered:
+    """Each element its own layer's law: ``laws`` (one per layer) and ``layer`` ``(T,)`` (the
+    layer of each element, in the mesh's element order). Evaluated on ``F`` ``(T Q, 3, 3)``,
+    ``Q`` quadrature points per element in a row.
+    """
+
+    laws: tuple
+    layer: np.ndarray
+    name = "layered"
+
+    def __post_init__(self) -> None:
+        layer = np.asarray(self.layer)
+        if layer.ndim != 1 or len(layer) == 0 or layer.min() < 0 or layer.max() >= len(self.laws):
+            raise ValueError(
+                f"layer must be (T,) indices into the {len(self.laws)} laws, got shape "
+                f"{layer.shape} with values {layer.min(initial=0)}..{layer.max(initial=0)}"
+            )
+
+    @property
+    def mu(self) -> float:
+        """The stiffest layer's initial shear modulus, Pa."""
+        return max(law.mu for law in self.laws)
+
+    def _groups(self, F):
+        q, rest = divmod(len(F), len(self.layer))
+        if rest:
+            raise ValueError(f"{len(F)} deformation gradients for {len(self.layer)} elements")
+        of = np.repeat(np.asarray(self.layer), q)
+        return [(law, np.flatnonzero(of == k)) for k, law in enumerate(self.laws)]
+
+    def energy(self, F: np.ndarray) -> np.ndarray:
+        """``(T Q,)`` energy density, J/m^3."""
+        W = np.empty(len(F))
+        for law, at in self._groups(F):
+            W[at] = law.energy(F[at])
+        return W
+
+    def tangent_parts(self, F: np.ndarray):
+        """The layers' stresses and tangent parts, element by element (the long form)."""
+        P = np.empty_like(F)
+        parts = [np.zeros(len(F)) for _ in range(3)] + [np.empty_like(F)]
+        parts += [np.zeros(len(F)), np.zeros(len(F)), F]
+        for law, at in self._groups(F):
+            Pk, pk = law.tangent_parts(F[at])
+            P[at] = Pk
+            for j, value in enumerate(pk[:4]):
+                parts[j][at] = value
+            if len(pk) == 7:
+                parts[4][at], parts[5][at] = pk[4], pk[5]
+        return P, tuple(parts)
+
+    def stress(self, F: np.ndarray) -> np.ndarray:
+        """``(T Q, 3, 3)`` first Piola-Kirchhoff stress, Pa."""
+        P = np.empty_like(F)
+        for law, at in self._groups(F):
+            P[at] = law.stress(F[at])
+        return P
+
+    def stress_tangent(self, F: np.ndarray, tangent: bool = True):
+        """``(P, A)`` as a single law's."""
+        P, parts = self.tangent_parts(F)
+        return P, (tangent_from_parts(*parts) if tangent else None)
+
+
+def uniaxial(law, stretch: float) -> tuple[float, float]:
+    """The exact homogeneous uniaxial state of ``law`` at axial ``stretch`` (free sides):
+    ``(nominal axial stress P_11 in Pa, lateral stretch)``, the lateral stretch found where
+    the lateral stress vanishes.
+    """
+
+    def state(t):
+        return law.stress(np.diag([stretch, t, t])[None].astype(float))[0]
+
+    t = brentq(lambda t: state(t)[1, 1], 0.2, 5.0, xtol=1e-14, rtol=1e-14)
+    return float(state(t)[0, 0]), float(t)
 
 
 MATERIALS = {"neo_hookean": NeoHookean, "linear": LinearElastic}

@@ -27,7 +27,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from fem.elements import ELEMENTS, TRI_EDGES, TRI_POINTS, TRI_WEIGHTS, quadratic, tri_shape
-from fem.kernel import element_data, kernel
+from fem.kernel import element_data, full_kernel, kernel
 from fem.linear_solvers import LINEAR_SOLVERS, IndefiniteTangent, make_linear_solver
 from fem.material import NeoHookean, det3
 from fem.mesh import ShellMesh
@@ -86,8 +86,10 @@ class Solver:
         mesh: the tissue shell (P1 tetrahedra; ``order=2`` adds a node on every edge).
         material: a material with ``energy`` and ``tangent_parts`` (default Neo-Hookean,
             E = 1 kPa, nu = 0.4).
-        fixed: optional ``(M, 3)`` bool mask of further fixed components on the mesh nodes (the
-            inner surface is always fixed; an edge node is fixed where both ends are).
+        fixed: optional ``(M, 3)`` bool mask of further fixed components on the mesh nodes (an
+            edge node is fixed where both ends are).
+        hold_inner: hold the inner surface (bone) in place, all three components (default);
+            ``False`` leaves it to ``fixed`` (a slab sliding on a rigid base, say).
         options: :class:`SolverOptions`.
         order: element order, 1 (4-node) or 2 (10-node tetrahedra, four quadrature points).
     """
@@ -99,6 +101,7 @@ class Solver:
         fixed: np.ndarray | None = None,
         options: SolverOptions | None = None,
         order: int = 1,
+        hold_inner: bool = True,
     ):
         if order not in ELEMENTS:
             raise ValueError(f"element order must be 1 or 2, got {order!r}")
@@ -108,7 +111,7 @@ class Solver:
         self.element = ELEMENTS[order]
         M = mesh.n_nodes
         mask = np.zeros((M, 3), dtype=bool)
-        mask[mesh.inner_nodes] = True
+        mask[mesh.inner_nodes] = hold_inner
         if self.options.rims == "fixed":
             mask[mesh.rim_nodes] = True
         if fixed is not None:
@@ -233,20 +236,31 @@ class Solver:
         when the linear solver wants it).
         """
         T, Q = self.W.shape
-        P, (a, b, c, H) = self.material.tangent_parts(self._F(u))
+        P, parts = self.material.tangent_parts(self._F(u))
+        a, b, c, H = parts[:4]
         r = self._scatter_force(P)
         g = np.matmul(self.G, np.asarray(H).reshape(T, Q, 3, 3))  # (T, Q, n, 3) H^T grad N
         aW, bW, cW = (np.asarray(x).reshape(T, Q) * self.W for x in (a, b, c))
-        if kernel is not None:
+        full = None
+        if len(parts) == 7:  # a law of I1 and J: the long form
+            Fq = np.asarray(parts[6]).reshape(T, Q, 3, 3)
+            fg = np.ascontiguousarray(np.matmul(self.G, Fq.transpose(0, 1, 3, 2)))  # F grad N
+            full = (fg, *(np.asarray(x).reshape(T, Q) * self.W for x in parts[4:6]))
+        if kernel is not None and (full is None or full_kernel is not None):
             data = np.zeros(self._nnz)
             for pos in self._pos2d:
-                kernel(g, self.GG, aW, bW, cW, pos, data)
+                if full is None:
+                    kernel(g, self.GG, aW, bW, cW, pos, data)
+                else:
+                    full_kernel(g, full[0], self.GG, aW, bW, cW, full[1], full[2], pos, data)
         else:
             if self._gather is None:  # each element entry's place in the data, if it has one
                 flat = [pos.ravel() for pos in self._pos2d]
                 sel = [np.flatnonzero(pos >= 0) for pos in flat]
                 self._gather = ([pos[s] for pos, s in zip(flat, sel)], sel)
-            data = element_data(g, self.GG, aW, bW, cW, self._local, *self._gather, self._nnz)
+            data = element_data(
+                g, self.GG, aW, bW, cW, self._local, *self._gather, self._nnz, full=full
+            )
         nf = len(self.free)
         K = sp.csr_matrix((data, self._indices, self._indptr), shape=(nf, nf))
         return r - f, K
