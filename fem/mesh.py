@@ -103,6 +103,13 @@ class ShellMesh:
         return (rim[None, :] + self.n_skin * np.arange(self.layers + 1)[:, None]).ravel()
 
     @cached_property
+    def tet_layers(self) -> np.ndarray:
+        """``(T,)`` the element layer of each tetrahedron, 0 under the skin to ``layers - 1``
+        on the inner surface.
+        """
+        return np.repeat(np.arange(self.layers), len(self.tets) // self.layers)
+
+    @cached_property
     def volumes(self) -> np.ndarray:
         """``(T,)`` rest volumes, m^3."""
         return tet_volumes(self.nodes, self.tets)
@@ -189,8 +196,13 @@ def shell_mesh(
     refine_near: np.ndarray | None = None,
     refine_radius: float = 0.03,
     normal_smoothing: int = 2,
+    fractions: np.ndarray | None = None,
 ) -> ShellMesh:
     """Build the tissue shell of ``part`` with per-vertex ``thickness`` ``(N,)`` in metres.
+
+    ``fractions``: the node layers' depths as shares of the thickness, from 0 (skin) to 1
+    (inner surface), rising: ``(layers + 1,)`` for every vertex alike, or ``(layers + 1, N)``
+    per vertex (tissue layers of their own thickness maps); default ``layers`` even layers.
 
     ``subdivisions`` levels of midpoint refinement apply to the whole skin, or, given
     ``refine_near`` ``(K, 3)`` points (m; e.g. the loaded vertices), only to the faces with a
@@ -237,8 +249,9 @@ def shell_mesh(
         offset = _unit(P @ offset)
     thick = interp @ t
     S = len(x)
-    frac = np.linspace(0.0, 1.0, layers + 1)
-    nodes = np.concatenate([x - a * thick[:, None] * offset for a in frac])
+    frac = _fractions(fractions, layers, n)
+    frac = np.stack([interp @ f for f in frac]) if frac.ndim == 2 else frac[:, None]
+    nodes = np.concatenate([x - (a * thick)[:, None] * offset for a in frac])
     tets = np.concatenate([_prism_tets(f, k * S, (k + 1) * S) for k in range(layers)])
     vol = tet_volumes(nodes, tets)
     tets[vol < 0] = tets[vol < 0][:, [0, 2, 1, 3]]
@@ -259,6 +272,22 @@ def shell_mesh(
     )
     _check_folds(mesh, f, x, offset, thick)
     return mesh
+
+
+def _fractions(fractions, layers: int, n: int) -> np.ndarray:
+    """The node layers' depth shares, checked: ``(layers + 1,)`` or ``(layers + 1, n)``."""
+    if fractions is None:
+        return np.linspace(0.0, 1.0, layers + 1)
+    f = np.asarray(fractions, dtype=float)
+    if f.shape not in ((layers + 1,), (layers + 1, n)):
+        raise ValueError(
+            f"fractions must have shape ({layers + 1},) or ({layers + 1}, {n}), got {f.shape}"
+        )
+    if not np.all(np.isfinite(f)) or np.any(f[0] != 0) or np.any(f[-1] != 1):
+        raise ValueError("fractions must be finite, 0 at the skin and 1 at the inner surface")
+    if np.any(np.diff(f, axis=0) <= 0):
+        raise ValueError("fractions must rise strictly from the skin inward")
+    return f
 
 
 def check_surface(vertices: np.ndarray, faces: np.ndarray) -> None:

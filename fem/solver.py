@@ -142,6 +142,9 @@ class Solver:
         self._force_idx = (3 * self.conn[:, :, None] + np.arange(3)).ravel()
         self.linear = make_linear_solver(self.options.linear_solver)
         self._pattern(upper=self.linear.upper)
+        self.potentials: list = []
+        """Further energies on the nodes (a rigid object's contact, :mod:`fem.contact`), each
+        with ``energy(u)``, ``gradient(u)`` and ``hessian(u, upper)``."""
 
     @property
     def order(self) -> int:
@@ -200,6 +203,7 @@ class Solver:
         self._nnz = K.nnz
         self._indices = K.indices.astype(np.int32)
         self._indptr = K.indptr.astype(np.int32)
+        self._keys = None  # row * n + column of each entry, made when a potential needs it
 
     def deformation_gradient(self, u: np.ndarray) -> np.ndarray:
         """``(T, Q, 3, 3)`` ``F = I + sum_a u_a (x) grad N_a`` at the quadrature points, for
@@ -214,11 +218,15 @@ class Solver:
     def energy(self, u: np.ndarray, f: np.ndarray) -> float:
         """Total potential energy, J (``inf`` if an element inverts)."""
         W = self.material.energy(self._F(u))
-        return float(self.W.ravel() @ W - np.vdot(f, u))
+        extra = sum(p.energy(u) for p in self.potentials)
+        return float(self.W.ravel() @ W - np.vdot(f, u) + extra)
 
     def residual(self, u: np.ndarray, f: np.ndarray) -> np.ndarray:
         """``(n_all, 3)`` out-of-balance force ``dPi/du``, N (fixed nodes included)."""
-        return self._scatter_force(self.material.stress(self._F(u))) - f
+        r = self._scatter_force(self.material.stress(self._F(u))) - f
+        for p in self.potentials:
+            r += p.gradient(u)
+        return r
 
     def _scatter_force(self, P: np.ndarray) -> np.ndarray:
         """``(n_all, 3)`` internal nodal forces ``f_a = sum_q w V P grad N_a`` from stresses
@@ -261,9 +269,36 @@ class Solver:
             data = element_data(
                 g, self.GG, aW, bW, cW, self._local, *self._gather, self._nnz, full=full
             )
+        for p in self.potentials:
+            r += p.gradient(u)
+            data += self._entries(*p.hessian(u))
         nf = len(self.free)
         K = sp.csr_matrix((data, self._indices, self._indptr), shape=(nf, nf))
         return r - f, K
+
+    def _entries(self, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray) -> np.ndarray:
+        """``(nnz,)``: a potential's Hessian entries (DOF indices ``3 node + i``) summed into
+        the tangent's CSR data; those on fixed DOFs (or below the diagonal, when the linear
+        solver keeps the upper triangle) dropped. They must lie inside the elements' pattern.
+        """
+        nf = len(self.free)
+        index = np.full(3 * self.n_all, -1, dtype=np.int64)
+        index[self.free] = np.arange(nf)
+        r, c = index[rows], index[cols]
+        keep = (r >= 0) & (c >= 0)
+        if self.linear.upper:
+            keep &= r <= c
+        r, c, vals = r[keep], c[keep], vals[keep]
+        if self._keys is None:
+            row_of = np.repeat(np.arange(nf, dtype=np.int64), np.diff(self._indptr))
+            self._keys = row_of * nf + self._indices
+        key = r * nf + c
+        at = np.searchsorted(self._keys, key)
+        if np.any(at >= len(self._keys)) or np.any(
+            self._keys[np.minimum(at, len(self._keys) - 1)] != key
+        ):
+            raise RuntimeError("a potential's Hessian reaches outside the tangent's pattern")
+        return np.bincount(at, weights=vals, minlength=self._nnz)
 
     def tangent_full(self, u: np.ndarray) -> sp.csr_matrix:
         """The full symmetric tangent on free DOFs (for checks)."""
@@ -407,6 +442,15 @@ class Solver:
             if np.isfinite(Et) and (Et <= E + 1e-4 * alpha * slope or (Et - E) <= 1e-12 * abs(E)):
                 return alpha, trial, Et
             alpha *= 0.5
+        if self.potentials:
+            # Near equilibrium the energy's change falls below its round-off (W sums terms of
+            # order mu to get mu eps^2): a full step that lowers the residual is taken instead.
+            trial = u + step
+            r0 = np.linalg.norm(self.residual(u, f).reshape(-1)[self.free])
+            r1 = np.linalg.norm(self.residual(trial, f).reshape(-1)[self.free])
+            Et = self.energy(trial, f)
+            if np.isfinite(Et) and abs(Et - E) <= 1e-6 * abs(E) and r1 < r0:
+                return 1.0, trial, Et
         return alpha, None, None
 
     def _newton(self, u: np.ndarray, f: np.ndarray) -> dict:
@@ -418,6 +462,8 @@ class Solver:
         opt = self.options
         free = self.free
         fnorm = max(np.linalg.norm(f.reshape(-1)[free]), 1e-30)
+        if self.potentials:  # pressed by an object: the contact forces set the scale
+            fnorm = max(fnorm, *(np.linalg.norm(p.gradient(u)) for p in self.potentials))
         E = self.energy(u, f)
         history: list[float] = []
         rel, factorisations, refresh = float("nan"), 0, True
@@ -503,6 +549,13 @@ class Solver:
             "residual": rel,
         }
 
+    def equilibrium(self, u: np.ndarray, f: np.ndarray) -> dict:
+        """Newton's method from ``u`` ``(n_all, 3)`` under nodal forces ``f`` ``(n_all, 3)``
+        and the :attr:`potentials`: ``{"ok", "u", "iterations", "residual"}`` or, failed,
+        ``{"ok": False, "reason", ...}``.
+        """
+        return self._newton(np.array(u, dtype=float), f)
+
     def _fail(self, res, iters, t0, force, substeps) -> Solution:
         return Solution(
             False,
@@ -515,6 +568,23 @@ class Solver:
             float(force.sum()),
             substeps,
         )
+
+    def check(self, u: np.ndarray) -> str:
+        """Why state ``u`` ``(n_all, 3)`` cannot be trusted (an inverted element, the skin
+        pushed past ``options.max_compression`` of the thickness), or ``""``.
+        """
+        detF = float(det3(self._F(u)).min())
+        if detF <= 0:
+            return f"inverted element (min det F {detF:.3g})"
+        m = self.mesh
+        inward = -np.einsum("si,si->s", u[: m.n_skin], m.skin_normals) / m.thickness
+        comp = float(inward.max())
+        if comp > self.options.max_compression:
+            return (
+                f"non-physical: the skin moves inward {comp:.2f} x the "
+                f"thickness (limit {self.options.max_compression})"
+            )
+        return ""
 
     def _checked_solution(self, res, u, iters, t0, force, substeps) -> Solution:
         detF = float(det3(self._F(u)).min())

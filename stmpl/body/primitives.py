@@ -80,10 +80,25 @@ def tube(
 
 
 def sheet(width: float = 0.2, height: float = 0.2, nx: int = 21, ny: int = 21) -> BodyPart:
-    """A flat rectangle in the z = 0 plane, normal +z, no seam."""
-    x, y = np.meshgrid(
-        np.linspace(-width / 2, width / 2, nx), np.linspace(-height / 2, height / 2, ny)
+    """A flat rectangle in the z = 0 plane, normal +z, no seam, ``nx`` by ``ny`` vertices."""
+    return grid(
+        np.linspace(-width / 2, width / 2, nx),
+        np.linspace(-height / 2, height / 2, ny),
+        options=dict(width=width, height=height, nx=nx, ny=ny),
     )
+
+
+def grid(xs, ys, options: dict | None = None) -> BodyPart:
+    """A flat sheet in the z = 0 plane, normal +z, whose vertices stand on the lines ``x = xs``
+    and ``y = ys`` (m, each rising strictly): fine where a verification needs it (under an
+    indenter), coarse far away.
+    """
+    xs, ys = np.asarray(xs, dtype=float), np.asarray(ys, dtype=float)
+    for name, c in (("xs", xs), ("ys", ys)):
+        if c.ndim != 1 or len(c) < 2 or not np.all(np.isfinite(c)) or np.any(np.diff(c) <= 0):
+            raise ValueError(f"{name} must be at least two finite coordinates rising strictly")
+    nx, ny = len(xs), len(ys)
+    x, y = np.meshgrid(xs, ys)
     v = np.stack([x.ravel(), y.ravel(), np.zeros(x.size)], 1)
     i, j = np.meshgrid(np.arange(ny - 1), np.arange(nx - 1), indexing="ij")
     a = i * nx + j
@@ -95,7 +110,6 @@ def sheet(width: float = 0.2, height: float = 0.2, nx: int = 21, ny: int = 21) -
     )
     uv, scale = normalise_chart(v[:, :2], v, faces, faces)
     normals = np.tile([0.0, 0.0, 1.0], (len(v), 1))
-
     return BodyPart(
         name="sheet",
         vertices=v,
@@ -108,7 +122,7 @@ def sheet(width: float = 0.2, height: float = 0.2, nx: int = 21, ny: int = 21) -
         rims=boundary_loops(faces),
         source={
             "body": "primitive",
-            "part": "sheet",
-            "options": dict(width=width, height=height, nx=nx, ny=ny),
+            "part": "sheet" if options else "grid",
+            "options": options or dict(xs=xs.tolist(), ys=ys.tolist()),
         },
     )

@@ -1,0 +1,447 @@
+"""Rigid objects pressed into the tissue: frictionless contact by an augmented Lagrangian.
+
+An object is a rigid shape with a signed distance ``phi`` (m; positive outside it) and its
+gradient, the object's outward normal. It is placed by a pose and pressed along a direction by
+a prescribed depth; the skin's nodes may not enter it. Each skin node ``i`` carries a share
+``w_i`` of the skin's area (m^2) and a contact pressure ``lambda_i`` (Pa). For a fixed
+``lambda`` the solver minimises the elastic energy plus
+
+    sum_i w_i / (2 k) (max(0, lambda_i - k phi_i)^2 - lambda_i^2)
+
+(penalty stiffness ``k`` in Pa/m), then updates ``lambda_i <- max(0, lambda_i - k phi_i)`` until
+the deepest penetration is below a tolerance (Uzawa's iteration; with ``lambda = 0`` it is the
+plain penalty method). The contact pressure is ``lambda`` where the skin touches, and the
+reaction force, the force the object must be pushed with, is the sum of ``w_i lambda_i`` along
+the object's normals.
+
+Shapes here: :class:`Sphere` (a fingertip, Hertz's indenter), :class:`Punch` (a flat-ended
+cylinder, a disk pressed face-on) and :class:`Box`. Lengths in m, pressures in Pa, forces in N.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from fem.elements import TRI_EDGES
+
+
+def _unit(v) -> np.ndarray:
+    v = np.asarray(v, dtype=float)
+    n = np.linalg.norm(v)
+    if v.shape != (3,) or not np.isfinite(n) or n == 0:
+        raise ValueError(f"a direction must be a finite nonzero 3-vector, got {v.tolist()}")
+    return v / n
+
+
+def _point(v, what: str) -> np.ndarray:
+    v = np.asarray(v, dtype=float)
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        raise ValueError(f"{what} must be a finite 3-vector (m), got {np.asarray(v).tolist()}")
+    return v
+
+
+def _positive(value, what: str) -> float:
+    if not (np.isfinite(value) and value > 0):
+        raise ValueError(f"{what} must be > 0, got {value!r}")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class Sphere:
+    """A rigid ball of ``radius`` (m) centred at ``centre`` ``(3,)`` (m)."""
+
+    centre: np.ndarray
+    radius: float
+    name = "sphere"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "centre", _point(self.centre, "centre"))
+        _positive(self.radius, "radius")
+
+    def moved(self, offset: np.ndarray) -> "Sphere":
+        """The same ball moved by ``offset`` ``(3,)`` (m)."""
+        return replace(self, centre=self.centre + offset)
+
+    def distance(self, x: np.ndarray):
+        """``(phi (K,), grad (K, 3), curvature (K, 3, 3))`` at points ``x`` ``(K, 3)``."""
+        d = x - self.centre
+        r = np.maximum(np.linalg.norm(d, axis=1), 1e-12)
+        n = d / r[:, None]
+        curv = (np.eye(3)[None] - n[:, :, None] * n[:, None, :]) / r[:, None, None]
+        return r - self.radius, n, curv
+
+
+@dataclass(frozen=True)
+class Punch:
+    """A rigid flat-ended cylinder of ``radius`` (m): its flat face a disk centred at
+    ``centre`` ``(3,)`` facing along ``axis`` ``(3,)`` (the way it presses), its body behind
+    the face.
+    """
+
+    centre: np.ndarray
+    axis: np.ndarray
+    radius: float
+    name = "punch"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "centre", _point(self.centre, "centre"))
+        object.__setattr__(self, "axis", _unit(self.axis))
+        _positive(self.radius, "radius")
+
+    def moved(self, offset: np.ndarray) -> "Punch":
+        """The same punch moved by ``offset`` ``(3,)`` (m)."""
+        return replace(self, centre=self.centre + offset)
+
+    def distance(self, x: np.ndarray):
+        """``(phi (K,), grad (K, 3), None)``: the exact signed distance to the semi-infinite
+        cylinder and its gradient (flat and straight faces: no curvature term is kept).
+        """
+        d = x - self.centre
+        y = d @ self.axis  # ahead of the face: y > 0
+        radial = d - y[:, None] * self.axis
+        rho = np.linalg.norm(radial, axis=1)
+        e = radial / np.maximum(rho, 1e-12)[:, None]
+        s = rho - self.radius
+        phi = np.empty(len(x))
+        grad = np.empty((len(x), 3))
+        inside = (y <= 0) & (s <= 0)
+        face = inside & (y >= s)
+        phi[face], grad[face] = y[face], self.axis
+        side = inside & ~face
+        phi[side], grad[side] = s[side], e[side]
+        out = ~inside
+        yp, sp_ = np.maximum(y[out], 0.0), np.maximum(s[out], 0.0)
+        phi[out] = np.hypot(yp, sp_)
+        g = yp[:, None] * self.axis + sp_[:, None] * e[out]
+        grad[out] = g / np.maximum(phi[out], 1e-300)[:, None]
+        return phi, grad, None
+
+
+@dataclass(frozen=True)
+class Box:
+    """A rigid box of ``half`` extents ``(3,)`` (m) about ``centre`` ``(3,)``, its axes the
+    columns of ``rotation`` ``(3, 3)``.
+    """
+
+    centre: np.ndarray
+    half: np.ndarray
+    rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
+    name = "box"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "centre", _point(self.centre, "centre"))
+        half = np.asarray(self.half, dtype=float)
+        if half.shape != (3,) or not np.all(np.isfinite(half)) or half.min() <= 0:
+            raise ValueError(f"half extents must be three positive lengths (m), got {half}")
+        object.__setattr__(self, "half", half)
+        R = np.asarray(self.rotation, dtype=float)
+        if R.shape != (3, 3) or not np.allclose(R.T @ R, np.eye(3), atol=1e-9):
+            raise ValueError("rotation must be a 3 x 3 orthonormal matrix")
+        object.__setattr__(self, "rotation", R)
+
+    def moved(self, offset: np.ndarray) -> "Box":
+        """The same box moved by ``offset`` ``(3,)`` (m)."""
+        return replace(self, centre=self.centre + offset)
+
+    def distance(self, x: np.ndarray):
+        """``(phi (K,), grad (K, 3), None)``: the box's exact signed distance."""
+        p = (x - self.centre) @ self.rotation  # box coordinates
+        q = np.abs(p) - self.half
+        out = np.maximum(q, 0.0)
+        dist_out = np.linalg.norm(out, axis=1)
+        inside = dist_out == 0
+        k = np.argmax(q, axis=1)
+        phi = np.where(inside, q.max(1), dist_out)
+        g = np.where(inside[:, None], 0.0, out / np.maximum(dist_out, 1e-300)[:, None])
+        rows = np.flatnonzero(inside)
+        g[rows, k[rows]] = 1.0
+        g *= np.sign(p) + (p == 0)
+        return phi, g @ self.rotation.T, None
+
+
+def skin_weights(solver) -> tuple[np.ndarray, np.ndarray]:
+    """``(nodes (K,), weights (K,))``: the skin's nodes (corners, and the edge nodes of
+    quadratic elements) and the share of the skin's area (m^2) each carries. A quadratic skin
+    triangle is split at its edge nodes into four, each sharing its area among its corners.
+    """
+    mesh = solver.mesh
+    tri = mesh.skin_faces
+    area = mesh.skin_face_areas
+    if solver.order == 1:
+        w = np.bincount(tri.ravel(), np.repeat(area / 3, 3), minlength=mesh.n_skin)
+        return np.arange(mesh.n_skin), w
+    key = solver.edges[:, 0] * solver.n_all + solver.edges[:, 1]
+    te = np.sort(tri[:, TRI_EDGES], axis=2)
+    mid = mesh.n_nodes + np.searchsorted(key, te[..., 0] * solver.n_all + te[..., 1])
+    w = np.bincount(tri.ravel(), np.repeat(area / 12, 3), minlength=solver.n_all)
+    w += np.bincount(mid.ravel(), np.repeat(area / 4, 3), minlength=solver.n_all)
+    nodes = np.flatnonzero(w > 0)
+    return nodes, w[nodes]
+
+
+class Contact:
+    """One object's contact with the skin of ``solver``'s mesh, as a potential the solver adds
+    to its energy (see the module docstring). ``stiffness``: the penalty ``k``, Pa/m.
+    """
+
+    def __init__(self, solver, shape, stiffness: float):
+        self.solver = solver
+        self.shape = shape
+        self.stiffness = _positive(stiffness, "contact stiffness")
+        self.nodes, self.weights = skin_weights(solver)
+        self.multipliers = np.zeros(len(self.nodes))
+        X = np.zeros((solver.n_all, 3))
+        X[: solver.mesh.n_nodes] = solver.mesh.nodes
+        if solver.order == 2:
+            X[solver.mesh.n_nodes :] = 0.5 * (
+                solver.mesh.nodes[solver.edges[:, 0]] + solver.mesh.nodes[solver.edges[:, 1]]
+            )
+        self.rest = X[self.nodes]
+
+    def _state(self, u: np.ndarray):
+        phi, grad, curv = self.shape.distance(self.rest + u[self.nodes])
+        p = np.maximum(self.multipliers - self.stiffness * phi, 0.0)
+        return phi, grad, curv, p
+
+    def energy(self, u: np.ndarray) -> float:
+        """The contact potential at displacement ``u`` ``(n_all, 3)``, J."""
+        _, _, _, p = self._state(u)
+        lam = self.multipliers
+        return float(np.sum(self.weights * (p**2 - lam**2)) / (2 * self.stiffness))
+
+    def gradient(self, u: np.ndarray) -> np.ndarray:
+        """``(n_all, 3)``: the potential's gradient, N (minus the contact forces on the skin)."""
+        _, grad, _, p = self._state(u)
+        out = np.zeros((self.solver.n_all, 3))
+        out[self.nodes] = -(self.weights * p)[:, None] * grad
+        return out
+
+    def hessian(self, u: np.ndarray):
+        """The potential's Hessian node by node: ``(rows, cols, values)`` over DOF indices
+        ``3 node + i``.
+        """
+        _, grad, curv, p = self._state(u)
+        on = p > 0
+        w = self.weights[on]
+        H = self.stiffness * w[:, None, None] * grad[on, :, None] * grad[on, None, :]
+        if curv is not None:
+            H -= (w * p[on])[:, None, None] * curv[on]
+        nodes = self.nodes[on]
+        i, k = np.divmod(np.arange(9), 3)
+        rows = (3 * nodes[:, None] + i).ravel()
+        cols = (3 * nodes[:, None] + k).ravel()
+        return rows, cols, H.reshape(-1)
+
+    def update(self, u: np.ndarray) -> float:
+        """Uzawa's step at the equilibrium ``u``: the multipliers become the contact pressures
+        that hold it (and what :meth:`pressures` and :meth:`force` report); returns the deepest
+        penetration, m.
+        """
+        phi, grad, _, p = self._state(u)
+        self.multipliers = p
+        self._normals = grad
+        return float(max(0.0, -phi.min(initial=0.0)))
+
+    def pressures(self) -> np.ndarray:
+        """``(K,)`` contact pressure on each skin node of :attr:`nodes` at the last update, Pa."""
+        return self.multipliers
+
+    def force(self) -> np.ndarray:
+        """``(3,)`` the force the skin exerts on the object at the last update, N (the object's
+        reaction).
+        """
+        return -np.sum((self.weights * self.multipliers)[:, None] * self._normals, axis=0)
+
+
+def stiffest_modulus(material) -> float:
+    """The largest initial Young's modulus (Pa) among a material's laws (one, or a layer's each)."""
+    laws = getattr(material, "laws", (material,))
+    return max(float(law.E) for law in laws)
+
+
+def default_stiffness(solver) -> float:
+    """A penalty stiffness, Pa/m: 100 times the stiffest law's Young's modulus over the skin's
+    median edge length (an element's own stiffness is about E / edge): a first solve leaves
+    about a hundredth of the depth as penetration, and each multiplier update removes most of
+    what is left.
+    """
+    mesh = solver.mesh
+    tri = mesh.skin_faces
+    edges = np.linalg.norm(mesh.nodes[tri] - mesh.nodes[np.roll(tri, 1, axis=1)], axis=2)
+    return 100.0 * stiffest_modulus(solver.material) / float(np.median(edges))
+
+
+@dataclass(frozen=True, eq=False)
+class Pressed:
+    """The answer to one depth of a pressed object.
+
+    Attributes:
+        ok: whether the solve converged (and the state is physical); else ``reason`` says why
+            and no displacement is given.
+        depth: how far the object was pushed from its placed pose, m.
+        displacement: ``(N, 3)`` on the part's vertices, m (``None`` when failed).
+        state: ``(n_all, 3)`` every node's displacement, for a warm start.
+        reaction: the force the object must be pushed with along its direction, N.
+        force: ``(3,)`` the force the skin exerts on the object, N.
+        pressure: ``(N,)`` contact pressure on the part's vertices, Pa.
+        area: contact area, m^2 (the skin area the object presses).
+        penetration: the deepest a skin node lies inside the object, m.
+        iterations: Newton iterations, all updates summed; ``updates``: multiplier updates.
+        time: seconds.
+    """
+
+    ok: bool
+    reason: str
+    depth: float
+    displacement: np.ndarray | None = None
+    state: np.ndarray | None = None
+    reaction: float = float("nan")
+    force: np.ndarray | None = None
+    pressure: np.ndarray | None = None
+    area: float = float("nan")
+    penetration: float = float("nan")
+    iterations: int = 0
+    updates: int = 0
+    time: float = 0.0
+
+
+def _relax(solver, contact, u, tolerance: float, max_updates: int) -> dict:
+    """Equilibrium at the contact's current pose, the multipliers updated until the deepest
+    penetration is within ``tolerance`` (m).
+    """
+    iters = 0
+    for k in range(max_updates + 1):
+        res = solver.equilibrium(u, np.zeros_like(u))
+        iters += res["iterations"]
+        if not res["ok"]:
+            return {**res, "iterations": iters, "updates": k}
+        u = res["u"]
+        gap = contact.update(u)
+        if gap <= tolerance:
+            return {**res, "u": u, "iterations": iters, "updates": k + 1, "penetration": gap}
+    return {
+        "ok": False,
+        "reason": f"contact: penetration {gap:.2e} m still above {tolerance:.1e} m after "
+        f"{max_updates} multiplier updates",
+        "iterations": iters,
+        "updates": max_updates,
+    }
+
+
+def press(
+    solver,
+    shape,
+    direction,
+    depths,
+    stiffness: float | None = None,
+    tolerance: float = 2e-3,
+    max_updates: int = 10,
+) -> list[Pressed]:
+    """Push ``shape`` (placed by its pose) along ``direction`` ``(3,)`` to each of ``depths``
+    (m, rising) into ``solver``'s tissue, each depth warm-started from the last; a depth that
+    fails is retried in up to ``solver.options.max_substeps`` halvings of its step, and the
+    depths after a failure are reported as skipped.
+
+    ``stiffness``: the penalty, Pa/m (default :func:`default_stiffness`); ``tolerance``: the
+    deepest penetration allowed, as a share of the depth (default 0.2 %).
+    """
+    direction = _unit(direction)
+    depths = [float(d) for d in depths]
+    if not depths or any(not np.isfinite(d) or d < 0 for d in depths):
+        raise ValueError(f"depths must be finite and >= 0 m, got {depths}")
+    if any(b <= a for a, b in zip(depths, depths[1:])):
+        raise ValueError(f"depths must rise strictly, got {depths}")
+    contact = Contact(solver, shape, stiffness or default_stiffness(solver))
+    if not 0 < tolerance < 1:
+        raise ValueError(f"tolerance is a share of the depth in (0, 1), got {tolerance!r}")
+    solver.potentials.append(contact)
+    try:
+        out, u, done, failed = [], np.zeros((solver.n_all, 3)), 0.0, None
+        for depth in depths:
+            if failed is not None:
+                out.append(
+                    Pressed(False, f"skipped: a smaller depth ({failed:.3g} m) failed", depth)
+                )
+                continue
+            t0 = time.perf_counter()
+            res = _march(solver, contact, shape, direction, u, done, depth, tolerance, max_updates)
+            if not res["ok"]:
+                failed = depth
+                out.append(
+                    Pressed(
+                        False,
+                        res["reason"] + f" (residual {res.get('residual', float('nan')):.2e})",
+                        depth,
+                        iterations=res["iterations"],
+                    )
+                )
+                continue
+            u, done = res["u"], depth
+            out.append(_answer(solver, contact, u, depth, direction, res, time.perf_counter() - t0))
+        return out
+    finally:
+        solver.potentials.remove(contact)
+
+
+def _march(solver, contact, shape, direction, u, start, depth, tolerance, max_updates) -> dict:
+    """From ``u`` at depth ``start`` to ``depth``, halving the step when one fails."""
+    s, step, iters, updates, substeps, res = start, depth - start, 0, 0, 0, None
+    while s < depth or res is None:
+        step = min(step, depth - s)
+        contact.shape = shape.moved((s + step) * direction)
+        keep = contact.multipliers.copy()
+        res = _relax(solver, contact, u, tolerance * (s + step), max_updates)
+        iters += res["iterations"]
+        updates += res.get("updates", 0)
+        if res["ok"]:
+            u, s = res["u"], s + step
+            continue
+        contact.multipliers = keep
+        if substeps >= solver.options.max_substeps:
+            return {**res, "iterations": iters}
+        substeps += 1
+        step /= 2
+    return {**res, "u": u, "iterations": iters, "updates": updates}
+
+
+def _vertex_pressure(solver, contact, u) -> np.ndarray:
+    """``(N,)`` contact pressure on the part's vertices, Pa: each skin node's contact force
+    (an edge node's shared by its edge's two ends) over the vertex's share of the skin.
+    """
+    mesh = solver.mesh
+    f = np.zeros(solver.n_all)
+    f[contact.nodes] = contact.weights * contact.pressures()
+    if solver.order == 2:
+        mid = f[mesh.n_nodes :]
+        f = f[: mesh.n_nodes].copy()
+        np.add.at(f, solver.edges[:, 0], 0.5 * mid)
+        np.add.at(f, solver.edges[:, 1], 0.5 * mid)
+    n = mesh.part.n_vertices
+    return f[:n] / mesh.part.vertex_areas
+
+
+def _answer(solver, contact, u, depth, direction, res, seconds) -> Pressed:
+    mesh = solver.mesh
+    n = mesh.part.n_vertices
+    checked = solver.check(u)
+    pressure = _vertex_pressure(solver, contact, u)
+    force = contact.force()
+    common = dict(iterations=res["iterations"], updates=res["updates"], time=seconds)
+    if checked:
+        return Pressed(False, checked, depth, **common)
+    return Pressed(
+        True,
+        "",
+        depth,
+        displacement=u[:n].copy(),
+        state=u,
+        reaction=float(-force @ direction),
+        force=force,
+        pressure=pressure,
+        area=float(mesh.part.vertex_areas[pressure > 0].sum()),
+        penetration=res["penetration"],
+        **common,
+    )

@@ -1,0 +1,111 @@
+"""Rigid objects pressed into the tissue: the contact's shapes, its potential, and the FEM's
+answers against the closed forms of :mod:`fem.verification`.
+"""
+
+import numpy as np
+import pytest
+
+from fem.contact import Box, Contact, Punch, Sphere, press
+from fem.material import NeoHookean
+from fem.solver import Solver, SolverOptions
+from fem.verification import hayes_kappa, quarter_slab
+
+
+def test_signed_distances_of_the_shapes():
+    x = np.array([[0.0, 0, 2], [0, 0, 0.5], [3, 0, 1], [0.5, 0.5, 0.5]])
+    phi, grad, _ = Sphere([0, 0, 1], 1.0).distance(x)
+    np.testing.assert_allclose(phi, [0.0, -0.5, 2.0, np.sqrt(0.75) - 1])
+    np.testing.assert_allclose(np.linalg.norm(grad, axis=1), 1.0)
+    punch = Punch([0, 0, 0], [0, 0, -1], 1.0)  # face at z = 0 pressing down, body above
+    phi, grad, _ = punch.distance(np.array([[0, 0, -0.3], [0, 0, 0.2], [2, 0, 0.5], [2, 0, -1]]))
+    np.testing.assert_allclose(phi, [0.3, -0.2, 1.0, np.sqrt(2)])
+    np.testing.assert_allclose(grad[0], [0, 0, -1])
+    np.testing.assert_allclose(grad[2], [1, 0, 0])
+    box = Box([0, 0, 0], [1, 2, 3])
+    phi, grad, _ = box.distance(np.array([[0, 0, 0], [2, 0, 0], [0.5, 1.9, 0]]))
+    np.testing.assert_allclose(phi, [-1, 1, -0.1])
+    np.testing.assert_allclose(grad[1:], [[1, 0, 0], [0, 1, 0]])
+
+
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda: Sphere([0, 0, np.nan], 1.0), "centre must be a finite 3-vector"),
+        (lambda: Sphere([0, 0, 0], 0.0), "radius must be > 0"),
+        (lambda: Punch([0, 0, 0], [0, 0, 0], 1.0), "nonzero 3-vector"),
+        (lambda: Box([0, 0, 0], [1, -1, 1]), "three positive lengths"),
+    ],
+)
+def test_bad_shapes_are_named(make, message):
+    with pytest.raises(ValueError, match=message):
+        make()
+
+
+def _slab(a_over_h, spacing=0.07, order=2):
+    h = 0.01
+    a = a_over_h * h
+    part, mesh, fixed = quarter_slab(h, a + 5 * h, a, spacing * a, 0.0015, 1.4)
+    solver = Solver(mesh, NeoHookean(1000.0, 0.45), fixed, SolverOptions(rims="free"), order=order)
+    return solver, a, h
+
+
+def test_the_contact_potential_is_consistent():
+    """Its gradient is its energy's, its Hessian its gradient's (finite differences)."""
+    solver, a, h = _slab(2.0, spacing=0.25, order=1)
+    c = Contact(solver, Punch([0, 0, 1e-4], [0, 0, -1], a), 1e6)
+    c.multipliers[:] = 5.0
+    rng = np.random.default_rng(0)
+    u = rng.normal(0, 2e-4, (solver.n_all, 3))
+    d = rng.normal(0, 1, (solver.n_all, 3))
+    e = 1e-8
+    fd = (c.energy(u + e * d) - c.energy(u - e * d)) / (2 * e)
+    assert fd == pytest.approx(np.vdot(c.gradient(u), d), rel=1e-5)
+    rows, cols, vals = c.hessian(u)
+    Hd = np.bincount(rows, vals * d.ravel()[cols], minlength=d.size)
+    fd = (c.gradient(u + e * d) - c.gradient(u - e * d)).ravel() / (2 * e)
+    np.testing.assert_allclose(Hd, fd, atol=1e-6 * np.abs(fd).max())
+
+
+def test_a_flat_punch_on_a_bonded_layer_meets_hayes():
+    """A rigid flat punch of radius a = 2 h pushed 1 % of h into a bonded layer (nu = 0.45),
+    displacement controlled: F / (2 E* a delta) within 3 % of Hayes et al.'s kappa; the
+    supports carry the reaction; the pressure is zero outside the punch, the contact area the
+    punch's face.
+    """
+    solver, a, h = _slab(2.0)
+    delta = 0.01 * h
+    (r,) = press(solver, Punch([0, 0, 0], [0, 0, -1], a), [0, 0, -1], [delta])
+    assert r.ok, r.reason
+    Es = 1000.0 / (1 - 0.45**2)
+    kappa = 4 * r.reaction / (2 * Es * a * delta)  # a quarter of the punch
+    assert kappa == pytest.approx(hayes_kappa(2.0, 0.45), rel=0.03)
+    assert r.penetration <= 2e-3 * delta
+    radius = np.linalg.norm(solver.mesh.part.vertices[:, :2], axis=1)
+    assert r.pressure[radius > a * 1.0001].max() == 0.0
+    s = 0.07 * a  # the rings' spacing at the rim: the area ends within one of it
+    assert np.pi * (a - s) ** 2 < 4 * r.area < np.pi * (a + s) ** 2
+    held = solver.residual(r.state, np.zeros_like(r.state))  # the tissue's own forces
+    held.reshape(-1)[solver.free] = 0.0  # what the supports (base, far rim) carry
+    assert held[:, 2].sum() == pytest.approx(r.reaction, rel=1e-6)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("a_over_h", [0.5, 1.0, 2.0])
+def test_hayes_on_a_finer_slab(a_over_h):
+    """The verification's full version: rings every a / 25 across the rim (33-133 s each)."""
+    solver, a, h = _slab(a_over_h, spacing=0.04)
+    delta = 0.01 * h
+    (r,) = press(solver, Punch([0, 0, 0], [0, 0, -1], a), [0, 0, -1], [delta])
+    assert r.ok, r.reason
+    kappa = 4 * r.reaction / (2 * 1000.0 / (1 - 0.45**2) * a * delta)
+    assert kappa == pytest.approx(hayes_kappa(a_over_h, 0.45), rel=0.03)
+
+
+def test_depths_must_rise_and_a_failure_skips_the_rest():
+    solver, a, h = _slab(2.0, spacing=0.25, order=1)
+    with pytest.raises(ValueError, match="depths must rise strictly"):
+        press(solver, Punch([0, 0, 0], [0, 0, -1], a), [0, 0, -1], [2e-4, 1e-4])
+    out = press(solver, Punch([0, 0, 0], [0, 0, -1], a), [0, 0, -1], [1e-4, 1.2 * h, 1.3 * h])
+    assert out[0].ok and not out[1].ok and out[1].displacement is None
+    assert out[2].reason.startswith("skipped")
+    assert not solver.potentials  # the contact leaves with the call
