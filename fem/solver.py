@@ -31,6 +31,7 @@ from fem.kernel import element_data, full_kernel, kernel
 from fem.linear_solvers import LINEAR_SOLVERS, IndefiniteTangent, make_linear_solver
 from fem.material import NeoHookean, det3
 from fem.mesh import ShellMesh
+from fem.pattern import Pattern
 from fem.solution import Solution
 
 
@@ -141,7 +142,7 @@ class Solver:
         self.GW = self.G * self.W[:, :, None, None]  # weighted gradients
         self._force_idx = (3 * self.conn[:, :, None] + np.arange(3)).ravel()
         self.linear = make_linear_solver(self.options.linear_solver)
-        self._pattern(upper=self.linear.upper)
+        self.pattern = Pattern.of(self.conn, self.n_all, self.free, upper=self.linear.upper)
         self.potentials: list = []
         """Further energies on the nodes (a rigid object's contact, :mod:`fem.contact`), each
         with ``energy(u)``, ``gradient(u)`` and ``hessian(u, upper)``."""
@@ -151,60 +152,6 @@ class Solver:
         return self.element.order
 
     # ------------------------------------------------------------------ assembly
-    def _pattern(self, upper: bool) -> None:
-        """Map the upper-triangle entries ``(p <= q)`` of each ``3n x 3n`` element matrix to
-        the CSR data of the free-DOF tangent (both triangles unless ``upper``).
-
-        Works on unique node pairs (``T n^2`` keys, not ``9 T n^2``): each pair's 3 x 3 block
-        is numbered once, and SciPy's CSR conversion orders the entries.
-        """
-        M, tets, n = self.n_all, self.conn, self.element.n
-        nf = len(self.free)
-        fmap = np.full(3 * M, -1, dtype=np.int64)
-        fmap[self.free] = np.arange(nf)
-        ea, eb = np.triu_indices(n)  # element node pairs a <= b: the only ones used
-        na, nb = tets[:, ea], tets[:, eb]  # (T, n(n+1)/2)
-        lo, hi = np.minimum(na, nb), np.maximum(na, nb)
-        pairs, inv = np.unique((lo * M + hi).ravel(), return_inverse=True)
-        idx = np.int32 if 18 * len(pairs) < 2**31 else np.int64  # halves the big arrays
-        pinv = np.zeros((len(tets), n, n), dtype=idx)
-        pinv[:, ea, eb] = inv.reshape(len(tets), -1)
-        plo, phi = np.divmod(pairs, M)
-        i, k = np.divmod(np.arange(9), 3)
-        row = fmap[3 * plo[:, None] + i]  # (P, 9) entry (i, k)
-        col = fmap[3 * phi[:, None] + k]
-        ok = (row >= 0) & (col >= 0) & ((plo[:, None] < phi[:, None]) | (i <= k))
-        ids = np.flatnonzero(ok.ravel())
-        r, c = row.ravel()[ids], col.ravel()[ids]
-        if upper:
-            rr, cc, tag = r, c, ids + 1
-        else:  # mirror off-diagonals
-            off = r != c
-            rr = np.concatenate([r, c[off]])
-            cc = np.concatenate([c, r[off]])
-            tag = np.concatenate([ids + 1, -(ids[off] + 1)])
-        K = sp.csr_matrix((tag.astype(float), (rr, cc)), shape=(nf, nf))
-        K.sort_indices()
-        tags = K.data.astype(np.int64)
-        up = np.full(9 * len(pairs), -1, dtype=idx)
-        dn = np.full(9 * len(pairs), -1, dtype=idx)
-        up[tags[tags > 0] - 1] = np.flatnonzero(tags > 0)
-        dn[-tags[tags < 0] - 1] = np.flatnonzero(tags < 0)
-        # element entry (a, i, b, k), p <= q -> pair entry (i, k), or (k, i) if node a > node b
-        p, q = np.triu_indices(3 * n)
-        A, I, B, Kc = p // 3, p % 3, q // 3, q % 3
-        self._local = (A, I, B, Kc)
-        swap = tets[:, A] > tets[:, B]  # (T, E)
-        eid = pinv[:, A, B]
-        eid *= 9
-        eid += np.where(swap, (3 * Kc + I).astype(idx), (3 * I + Kc).astype(idx))
-        self._pos2d = [up[eid]] if upper else [up[eid], dn[eid]]
-        self._gather = None  # the NumPy path's flat places, made when it runs
-        self._nnz = K.nnz
-        self._indices = K.indices.astype(np.int32)
-        self._indptr = K.indptr.astype(np.int32)
-        self._keys = None  # row * n + column of each entry, made when a potential needs it
-
     def deformation_gradient(self, u: np.ndarray) -> np.ndarray:
         """``(T, Q, 3, 3)`` ``F = I + sum_a u_a (x) grad N_a`` at the quadrature points, for
         nodal displacement ``u`` ``(n_all, 3)``.
@@ -255,50 +202,21 @@ class Solver:
             fg = np.ascontiguousarray(np.matmul(self.G, Fq.transpose(0, 1, 3, 2)))  # F grad N
             full = (fg, *(np.asarray(x).reshape(T, Q) * self.W for x in parts[4:6]))
         if kernel is not None and (full is None or full_kernel is not None):
-            data = np.zeros(self._nnz)
-            for pos in self._pos2d:
+            data = np.zeros(self.pattern.nnz)
+            for pos in self.pattern.places:
                 if full is None:
                     kernel(g, self.GG, aW, bW, cW, pos, data)
                 else:
                     full_kernel(g, full[0], self.GG, aW, bW, cW, full[1], full[2], pos, data)
         else:
-            if self._gather is None:  # each element entry's place in the data, if it has one
-                flat = [pos.ravel() for pos in self._pos2d]
-                sel = [np.flatnonzero(pos >= 0) for pos in flat]
-                self._gather = ([pos[s] for pos, s in zip(flat, sel)], sel)
-            data = element_data(
-                g, self.GG, aW, bW, cW, self._local, *self._gather, self._nnz, full=full
-            )
+            pat = self.pattern
+            data = element_data(g, self.GG, aW, bW, cW, pat.local, *pat.gather, pat.nnz, full=full)
         for p in self.potentials:
             r += p.gradient(u)
-            data += self._entries(*p.hessian(u))
+            data += self.pattern.entries(*p.hessian(u))
         nf = len(self.free)
-        K = sp.csr_matrix((data, self._indices, self._indptr), shape=(nf, nf))
+        K = sp.csr_matrix((data, self.pattern.indices, self.pattern.indptr), shape=(nf, nf))
         return r - f, K
-
-    def _entries(self, rows: np.ndarray, cols: np.ndarray, vals: np.ndarray) -> np.ndarray:
-        """``(nnz,)``: a potential's Hessian entries (DOF indices ``3 node + i``) summed into
-        the tangent's CSR data; those on fixed DOFs (or below the diagonal, when the linear
-        solver keeps the upper triangle) dropped. They must lie inside the elements' pattern.
-        """
-        nf = len(self.free)
-        index = np.full(3 * self.n_all, -1, dtype=np.int64)
-        index[self.free] = np.arange(nf)
-        r, c = index[rows], index[cols]
-        keep = (r >= 0) & (c >= 0)
-        if self.linear.upper:
-            keep &= r <= c
-        r, c, vals = r[keep], c[keep], vals[keep]
-        if self._keys is None:
-            row_of = np.repeat(np.arange(nf, dtype=np.int64), np.diff(self._indptr))
-            self._keys = row_of * nf + self._indices
-        key = r * nf + c
-        at = np.searchsorted(self._keys, key)
-        if np.any(at >= len(self._keys)) or np.any(
-            self._keys[np.minimum(at, len(self._keys) - 1)] != key
-        ):
-            raise RuntimeError("a potential's Hessian reaches outside the tangent's pattern")
-        return np.bincount(at, weights=vals, minlength=self._nnz)
 
     def tangent_full(self, u: np.ndarray) -> sp.csr_matrix:
         """The full symmetric tangent on free DOFs (for checks)."""
