@@ -220,15 +220,15 @@ class Contact:
         return out
 
     def hessian(self, u: np.ndarray):
-        """The potential's Hessian node by node: ``(rows, cols, values)`` over DOF indices
-        ``3 node + i``.
+        """The potential's Hessian node by node, ``(rows, cols, values)`` over DOF indices
+        ``3 node + i``: its positive part ``k w n n^T`` only. The curvature term of a curved
+        object, ``-w p grad^2 phi``, is left out: it softens the tissue sideways and can make the
+        tangent indefinite under a fingertip; without it Newton's steps stay descent steps.
         """
-        _, grad, curv, p = self._state(u)
+        _, grad, _, p = self._state(u)
         on = p > 0
         w = self.weights[on]
         H = self.stiffness * w[:, None, None] * grad[on, :, None] * grad[on, None, :]
-        if curv is not None:
-            H -= (w * p[on])[:, None, None] * curv[on]
         nodes = self.nodes[on]
         i, k = np.divmod(np.arange(9), 3)
         rows = (3 * nodes[:, None] + i).ravel()
@@ -259,6 +259,11 @@ class Contact:
         """
         return -np.sum((self.weights * self.multipliers)[:, None] * self._normals, axis=0)
 
+
+RTOL = 1e-6
+"""Newton's relative residual under contact: a skin node on the edge of the contact comes and
+goes between iterations, and the residual stalls near 1e-6 of the contact force (its share of
+the reaction is far below :data:`FORCE_TOLERANCE`)."""
 
 FORCE_TOLERANCE = 1e-3
 """Multiplier updates go on until the penetration left would add less than this share to the
@@ -324,7 +329,7 @@ def _relax(solver, contact, u, tolerance: float, max_updates: int) -> dict:
     """
     iters = 0
     for k in range(max_updates + 1):
-        res = solver.equilibrium(u, np.zeros_like(u))
+        res = solver.equilibrium(u, np.zeros_like(u), max(solver.options.rtol, RTOL))
         iters += res["iterations"]
         if not res["ok"]:
             return {**res, "iterations": iters, "updates": k}
@@ -349,11 +354,12 @@ def press(
     stiffness: float | None = None,
     tolerance: float = 2e-3,
     max_updates: int = 20,
+    max_step: float = 0.001,
 ) -> list[Pressed]:
     """Push ``shape`` (placed by its pose) along ``direction`` ``(3,)`` to each of ``depths``
-    (m, rising) into ``solver``'s tissue, each depth warm-started from the last; a depth that
-    fails is retried in up to ``solver.options.max_substeps`` halvings of its step, and the
-    depths after a failure are reported as skipped.
+    (m, rising) into ``solver``'s tissue, each depth warm-started from the last in steps of at
+    most ``max_step`` (m); a step that fails is retried in up to ``solver.options.max_substeps``
+    halvings, and the depths after a failure are reported as skipped.
 
     ``stiffness``: the penalty, Pa/m (default :func:`default_stiffness`); ``tolerance``: the
     deepest penetration allowed, as a share of the depth (default 0.2 %).
@@ -377,7 +383,9 @@ def press(
                 )
                 continue
             t0 = time.perf_counter()
-            res = _march(solver, contact, shape, direction, u, done, depth, tolerance, max_updates)
+            res = _march(
+                solver, contact, shape, direction, u, done, depth, tolerance, max_updates, max_step
+            )
             if not res["ok"]:
                 failed = depth
                 out.append(
@@ -396,11 +404,15 @@ def press(
         solver.potentials.remove(contact)
 
 
-def _march(solver, contact, shape, direction, u, start, depth, tolerance, max_updates) -> dict:
-    """From ``u`` at depth ``start`` to ``depth``, halving the step when one fails."""
+def _march(
+    solver, contact, shape, direction, u, start, depth, tolerance, max_updates, max_step
+) -> dict:
+    """From ``u`` at depth ``start`` to ``depth`` in steps of at most ``max_step``, halving the
+    step when one fails.
+    """
     s, step, iters, updates, substeps, res = start, depth - start, 0, 0, 0, None
     while s < depth or res is None:
-        step = min(step, depth - s)
+        step = min(step, depth - s, max_step)
         contact.shape = shape.moved((s + step) * direction)
         keep = contact.multipliers.copy()
         res = _relax(solver, contact, u, tolerance * (s + step), max_updates)

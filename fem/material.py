@@ -26,6 +26,7 @@ fits of in-vivo indentation report them (``C10`` and ``K``)::
     W = psi(Ib - 3) + U(J),    U(J) = K/4 (J^2 - 1 - 2 ln J)
     Yeoh:     psi(x) = C10 x + C20 x^2 + C30 x^3          (C20 = C30 = 0: neo-Hookean)
     Demiray:  psi(x) = a / (2 b) (exp(b x) - 1)            (stiffens exponentially)
+    Exponential: psi(x) = c/2 x + k1 / (2 k2) (exp(k2 x^2) - 1)   (adipose tissue)
 
 Their initial shear modulus is ``mu = 2 psi'(0)``. Any energy ``W(I1, J)`` has the tangent
 ``A_iJkL = a d_ik d_JL + b H_Ji H_Lk + c H_Li H_Jk + d F_iJ F_kL + e (F_iJ H_Lk + H_Ji F_kL)``
@@ -305,6 +306,32 @@ class Demiray(IsochoricLaw):
         return self.a / (2 * self.b) * (ex - 1), 0.5 * self.a * ex, 0.5 * self.a * self.b * ex
 
 
+@dataclass(frozen=True)
+class Exponential(IsochoricLaw):
+    """An isotropic exponential law, ``psi = c/2 x + k1 / (2 k2) (exp(k2 x^2) - 1)`` on
+    ``x = Ib - 3``: ``c`` (Pa) the initial shear modulus, ``k1`` (Pa) and ``k2``
+    (dimensionless) the stiffening of the collagen around the cells, as fitted to human
+    adipose tissue (Sommer et al. 2013); bulk modulus ``K`` (Pa).
+    """
+
+    c: float = 0.0
+    k1: float = 0.0
+    k2: float = 0.0
+    name = "exponential"
+
+    def __post_init__(self) -> None:
+        self._check(c=self.c, k1=self.k1, k2=self.k2, K=self.K)
+
+    def shape(self, x):
+        with np.errstate(over="ignore"):  # a trial state far past any real one: energy inf
+            ex = np.exp(self.k2 * x**2)
+        return (
+            0.5 * self.c * x + self.k1 / (2 * self.k2) * (ex - 1),
+            0.5 * self.c + self.k1 * x * ex,
+            self.k1 * ex * (1 + 2 * self.k2 * x**2),
+        )
+
+
 @dataclass(frozen=True, eq=False)
 class Layered:
     """Each element its own layer's law: ``laws`` (one per layer) and ``layer`` ``(T,)`` (the
@@ -379,7 +406,11 @@ def uniaxial(law, stretch: float) -> tuple[float, float]:
     def state(t):
         return law.stress(np.diag([stretch, t, t])[None].astype(float))[0]
 
-    t = brentq(lambda t: state(t)[1, 1], 0.2, 5.0, xtol=1e-14, rtol=1e-14)
+    guess = stretch**-0.5  # incompressible
+    lo, hi = guess / 1.2, guess * 1.2
+    while state(lo)[1, 1] * state(hi)[1, 1] > 0 and hi / lo < 100:
+        lo, hi = lo / 1.2, hi * 1.2
+    t = brentq(lambda t: state(t)[1, 1], lo, hi, xtol=1e-14, rtol=1e-14)
     return float(state(t)[0, 0]), float(t)
 
 

@@ -441,6 +441,18 @@ def _check_folds(mesh: ShellMesh, faces, skin, offset, thick) -> None:
         )
 
 
+def room(part: BodyPart, normal_smoothing: int = 2, share: float = 0.6) -> np.ndarray:
+    """``(N,)`` the depth (m) a shell may reach under each vertex of ``part`` without folding:
+    ``share`` of the smallest radius of curvature over the vertex's ring of neighbours (the
+    offset direction being the smoothed normals the shell uses).
+    """
+    offset = smooth_normals(part.vertices, part.faces, part.normals, normal_smoothing)
+    r = _curvature_radius(part.vertices, part.faces, offset)
+    adjacency = part.adjacency.tocsr()
+    ring = np.minimum.reduceat(r[adjacency.indices], adjacency.indptr[:-1])
+    return share * np.minimum(r, ring)
+
+
 def _curvature_radius(x, faces, n) -> np.ndarray:
     """``(S,)`` smallest radius of normal curvature over each node's edges (m)."""
     e = np.unique(

@@ -13,8 +13,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from fem.layers import preset
 from fem.material import NeoHookean
-from fem.mesh import ShellMesh, shell_mesh
+from fem.mesh import ShellMesh, room, shell_mesh
 from fem.solver import Solution, Solver, SolverOptions
 from stmpl.part import BodyPart
 
@@ -72,20 +73,45 @@ def mesh_for_load(
     res: str | Resolution | dict = "reference",
 ) -> ShellMesh:
     """The tissue shell for one load pattern ``force`` ``(N,)``, refined around its vertices."""
-    r = resolution(res)
     force = np.asarray(force, dtype=float)
     loaded = np.flatnonzero(force > 0)
     if len(loaded) == 0:
         raise ValueError("the load has no loaded vertex (force is zero everywhere)")
-    near = None if r.refine_radius is None else part.vertices[loaded]
-    return shell_mesh(
-        part,
-        thickness,
-        layers=r.layers,
+    return tissue_mesh(part, thickness, res, near=part.vertices[loaded])[0]
+
+
+def tissue_mesh(
+    part: BodyPart,
+    thickness: np.ndarray,
+    res: str | Resolution | dict = "reference",
+    tissue: str = "paper",
+    phenotype: dict | None = None,
+    near: np.ndarray | None = None,
+):
+    """``(mesh, material)``: the tissue shell of ``part`` refined near the points ``near``
+    ``(K, 3)`` (m), and its material. ``tissue``: a preset of :mod:`fem.layers`; ``paper``
+    meshes ``thickness`` ``(N,)`` (m) in the resolution's even layers of neo-Hookean gel (the
+    material is then ``None``: the solver's default), a layered preset meshes its skin, fat and
+    muscle (the scene's thickness being the skin and fat) with its own element layers.
+    """
+    r = resolution(res)
+    refine = dict(
         subdivisions=r.subdivisions,
-        refine_near=near,
+        refine_near=None if r.refine_radius is None or near is None else near,
         refine_radius=r.refine_radius or 0.03,
     )
+    stack = preset(tissue)
+    if stack is None:
+        return shell_mesh(part, thickness, layers=r.layers, **refine), None
+    layers = stack.thicknesses(thickness, phenotype, room(part))
+    mesh = shell_mesh(
+        part,
+        layers.sum(0),
+        layers=stack.elements,
+        fractions=stack.fractions(layers),
+        **refine,
+    )
+    return mesh, stack.material(mesh.tet_layers)
 
 
 def simulate(

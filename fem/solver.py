@@ -371,7 +371,7 @@ class Solver:
                 return 1.0, trial, Et
         return alpha, None, None
 
-    def _newton(self, u: np.ndarray, f: np.ndarray) -> dict:
+    def _newton(self, u: np.ndarray, f: np.ndarray, rtol: float | None = None) -> dict:
         """Newton iterations from ``u`` under nodal forces ``f``. The factorised tangent is kept
         while the residual still contracts by ``options.reuse`` per step (a solve with stored
         factors costs a sixth of a factorisation); otherwise, or when a kept factorisation gives
@@ -390,7 +390,7 @@ class Solver:
             rf = r.reshape(-1)[free]
             rel = float(np.linalg.norm(rf) / fnorm)
             history.append(rel)
-            if rel <= opt.rtol:
+            if rel <= (rtol or opt.rtol):
                 return {
                     "ok": True,
                     "u": u,
@@ -467,12 +467,12 @@ class Solver:
             "residual": rel,
         }
 
-    def equilibrium(self, u: np.ndarray, f: np.ndarray) -> dict:
+    def equilibrium(self, u: np.ndarray, f: np.ndarray, rtol: float | None = None) -> dict:
         """Newton's method from ``u`` ``(n_all, 3)`` under nodal forces ``f`` ``(n_all, 3)``
-        and the :attr:`potentials`: ``{"ok", "u", "iterations", "residual"}`` or, failed,
-        ``{"ok": False, "reason", ...}``.
+        and the :attr:`potentials`, to a relative residual ``rtol`` (default the options'):
+        ``{"ok", "u", "iterations", "residual"}`` or, failed, ``{"ok": False, "reason", ...}``.
         """
-        return self._newton(np.array(u, dtype=float), f)
+        return self._newton(np.array(u, dtype=float), f, rtol)
 
     def _fail(self, res, iters, t0, force, substeps) -> Solution:
         return Solution(

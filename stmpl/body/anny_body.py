@@ -150,36 +150,6 @@ class AnnyBody(CachedBodyModel):
         )
 
 
-def phenotype_options(parser) -> None:
-    """Add ``--gender``, ``--age``, ``--muscle``, ``--weight``, ``--height``, ``--proportions``
-    (each in [0, 1]; unset ones 0.5) to an ``argparse`` parser.
-    """
-    parser.add_argument(
-        "--weight",
-        type=float,
-        default=0.5,
-        help="anny weight phenotype in [0, 1] (thin..heavy; default 0.5)",
-    )
-    for name, what in (
-        ("gender", "female..male"),
-        ("age", "young..old"),
-        ("muscle", "low..high"),
-        ("height", "short..tall"),
-        ("proportions", "anny's proportions"),
-    ):
-        parser.add_argument(
-            f"--{name}",
-            type=float,
-            default=None,
-            help=f"anny {name} phenotype in [0, 1] ({what}; default 0.5)",
-        )
-
-
-def phenotype_of(args) -> dict[str, float]:
-    """The phenotype that :func:`phenotype_options` parsed into ``args`` (the ones given)."""
-    return {k: getattr(args, k) for k in PHENOTYPES if getattr(args, k, None) is not None}
-
-
 def check_phenotype(phenotype: dict[str, float]) -> dict[str, float]:
     """Validate phenotype values: known names, finite, in [0, 1]."""
     out = {}

@@ -51,7 +51,9 @@ def _slab(a_over_h, spacing=0.07, order=2, first_layer=0.0015, ratio=1.4):
 
 
 def test_the_contact_potential_is_consistent():
-    """Its gradient is its energy's, its Hessian its gradient's (finite differences)."""
+    """Its gradient is its energy's, its Hessian its gradient's (finite differences; a flat
+    punch's faces have no curvature term to leave out).
+    """
     solver, a, h = _slab(2.0, spacing=0.25, order=1)
     c = Contact(solver, Punch([0, 0, 1e-4], [0, 0, -1], a), 1e6)
     c.multipliers[:] = 5.0

@@ -1,0 +1,160 @@
+"""Tissue presets: the soft tissue as a stack of layers (skin, fat, muscle), each with its own
+law, meshed through its own depth.
+
+A scene gives the soft tissue's thickness above the fixed surface (``thickness``, m: the
+paper's layer, here the skin and the subcutaneous fat). A preset splits it into its layers and
+adds the relaxed muscle between the fat and the bone, the fixed surface moving down to the bone:
+
+- skin (epidermis and dermis as one layer, as Tran et al.'s identification needed them): the
+  preset's base thickness for the site, 10 % thicker in men than women (``gender`` 0 -> 1:
+  x 0.95 -> 1.05) and thinner with age (``age`` 0 -> 1: x 1.05 -> 0.80, about 6 % a decade
+  from the twenties on; Branchet et al. 1990);
+- fat: what the scene's thickness leaves under the skin (a scene too thin to leave
+  :data:`MIN_FAT` is refused);
+- muscle: the preset's base depth, x 0.8 -> 1.2 with anny's ``muscle`` phenotype 0 -> 1.
+
+The laws and their sources are in :data:`PRESETS` and ``docs/tissue.md``; ``paper`` is the
+paper's single layer of neo-Hookean gel (E = 1 kPa, nu = 0.4) over the scene's thickness.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from fem.material import Exponential, Layered, NeoHookean, Yeoh
+
+MIN_FAT = 0.0005
+"""The thinnest fat layer a preset meshes, m."""
+
+MIN_MUSCLE = 0.001
+"""The thinnest muscle layer a preset meshes where the limb leaves little room, m."""
+
+KPA = 1e3
+
+
+@dataclass(frozen=True)
+class Layer:
+    """One tissue layer: its ``name``, ``law`` (a material of :mod:`fem.material`) and how
+    many element layers run through it (``elements``); ``source`` cites the law's parameters.
+    """
+
+    name: str
+    law: object
+    elements: int
+    source: str
+
+
+@dataclass(frozen=True)
+class Preset:
+    """A site's tissue: ``layers`` from the skin inward (skin, fat, muscle), the skin's base
+    thickness ``skin`` (m) and the muscle's base depth ``muscle`` (m).
+    """
+
+    name: str
+    layers: tuple
+    skin: float
+    muscle: float
+    about: str
+
+    def thicknesses(
+        self, thickness: np.ndarray, phenotype: dict | None = None, room=None
+    ) -> np.ndarray:
+        """``(L, N)`` each layer's thickness per vertex, m, from the scene's ``thickness``
+        ``(N,)`` (skin and fat) and anny's ``phenotype`` (``gender``, ``age``, ``muscle`` in
+        [0, 1]; 0.5 unless given). ``room`` ``(N,)`` (m): the deepest the stack may reach
+        (where the limb is thin the muscle thins to fit, down to :data:`MIN_MUSCLE`).
+        """
+        t = np.asarray(thickness, dtype=float)
+        if t.ndim != 1 or not np.all(np.isfinite(t)) or t.min(initial=1.0) <= 0:
+            raise ValueError("thickness must be (N,) finite and > 0 m")
+        ph = {"gender": 0.5, "age": 0.5, "muscle": 0.5, **(phenotype or {})}
+        for key in ("gender", "age", "muscle"):
+            if not 0.0 <= float(ph[key]) <= 1.0:
+                raise ValueError(f"phenotype {key} must be in [0, 1], got {ph[key]!r}")
+        skin = np.full_like(t, self.skin * (0.95 + 0.1 * ph["gender"]) * (1.05 - 0.25 * ph["age"]))
+        short = t < skin + MIN_FAT
+        if np.any(short):
+            i = int(np.argmax(short))
+            raise ValueError(
+                f"thickness {1e3 * t[i]:.2f} mm at vertex {i} leaves no room for skin and fat "
+                f"(the {self.name} preset's skin is {1e3 * skin[i]:.2f} mm here, and the fat at "
+                f"least {1e3 * MIN_FAT:g} mm)"
+            )
+        fat = t - skin
+        muscle = np.full_like(t, self.muscle * (0.8 + 0.4 * ph["muscle"]))
+        if room is not None:
+            muscle = np.clip(np.asarray(room, dtype=float) - t, MIN_MUSCLE, muscle)
+        return np.stack([skin, fat, muscle])
+
+    def fractions(self, layers: np.ndarray) -> np.ndarray:
+        """``(E + 1, N)`` the node layers' depths as shares of the whole depth (each tissue
+        layer split evenly into its elements), for ``layers`` ``(L, N)`` thicknesses.
+        """
+        total = layers.sum(0)
+        depth = [np.zeros_like(total)]
+        for layer, t in zip(self.layers, layers):
+            step = t / layer.elements
+            depth += [depth[-1] + step * (k + 1) for k in range(layer.elements)]
+            depth[-1] = depth[-1]  # the interface, exactly
+        out = np.stack(depth) / total
+        out[-1] = 1.0
+        return out
+
+    def material(self, tet_layers: np.ndarray) -> Layered:
+        """The :class:`~fem.material.Layered` law of a mesh whose element layers are
+        ``tet_layers`` ``(T,)`` (0 under the skin), meshed by :meth:`fractions`.
+        """
+        tissue_of = np.repeat(np.arange(len(self.layers)), [x.elements for x in self.layers])
+        return Layered(tuple(x.law for x in self.layers), tissue_of[tet_layers])
+
+    @property
+    def elements(self) -> int:
+        """Element layers through the whole depth."""
+        return sum(x.elements for x in self.layers)
+
+
+SKIN = Layer(
+    "skin",
+    Yeoh(C10=150 * KPA, K=4000 * KPA),
+    1,
+    "Tran et al. 2007 (Comput. Methods Biomech. Biomed. Eng. 10:401; thesis, ENPC 2007): "
+    "epidermis and dermis as one neo-Hookean layer, C10 60-370 kPa over nine forearms (150 kPa "
+    "taken); K from their single-subject dermis fit (K / C10 = 27)",
+)
+FAT = Layer(
+    "fat",
+    Exponential(c=0.15 * KPA, k1=0.8 * KPA, k2=47.3, K=36 * KPA),
+    2,
+    "Sommer et al. 2013 (Acta Biomater. 9:9036), human subcutaneous adipose tissue: c 0.15 kPa, "
+    "k1 0.8 kPa, k2 47.3; K 36 kPa from Tran et al. 2007's hypodermis",
+)
+MUSCLE = Layer(
+    "muscle",
+    Yeoh(C10=1.2 * KPA, K=120 * KPA),
+    2,
+    "relaxed muscle, C10 0.7-1.7 kPa over nine forearms (Tran 2007 thesis; 1.2 kPa taken); "
+    "K for nu = 0.49",
+)
+PAPER = Layer(
+    "gel", NeoHookean(1000.0, 0.4), 2, "the paper's set-up: neo-Hookean, E = 1 kPa, nu = 0.4"
+)
+
+PRESETS = {
+    "forearm": Preset("forearm", (SKIN, FAT, MUSCLE), 0.0012, 0.010, "the dorsal forearm, relaxed"),
+    "upper_arm": Preset("upper_arm", (SKIN, FAT, MUSCLE), 0.0013, 0.015, "the upper arm, relaxed"),
+    "abdomen": Preset("abdomen", (SKIN, FAT, MUSCLE), 0.0019, 0.010, "the abdomen, relaxed"),
+}
+"""The layered presets by name (``paper`` is the single gel layer, :func:`preset`)."""
+
+
+def preset(name: str) -> Preset | None:
+    """The preset called ``name``; ``None`` for ``"paper"`` (the single gel layer)."""
+    if name == "paper":
+        return None
+    if name not in PRESETS:
+        raise ValueError(
+            f"unknown tissue preset {name!r}; choose paper or one of {sorted(PRESETS)}"
+        )
+    return PRESETS[name]
