@@ -320,6 +320,7 @@ class Pressed:
     iterations: int = 0
     updates: int = 0
     time: float = 0.0
+    multipliers: np.ndarray | None = field(default=None, repr=False)
 
 
 def _relax(solver, contact, u, tolerance: float, max_updates: int) -> dict:
@@ -364,44 +365,122 @@ def press(
     ``stiffness``: the penalty, Pa/m (default :func:`default_stiffness`); ``tolerance``: the
     deepest penetration allowed, as a share of the depth (default 0.2 %).
     """
-    direction = _unit(direction)
     depths = [float(d) for d in depths]
     if not depths or any(not np.isfinite(d) or d < 0 for d in depths):
         raise ValueError(f"depths must be finite and >= 0 m, got {depths}")
     if any(b <= a for a, b in zip(depths, depths[1:])):
         raise ValueError(f"depths must rise strictly, got {depths}")
-    contact = Contact(solver, shape, stiffness or default_stiffness(solver))
-    if not 0 < tolerance < 1:
-        raise ValueError(f"tolerance is a share of the depth in (0, 1), got {tolerance!r}")
-    solver.potentials.append(contact)
-    try:
-        out, u, done, failed = [], np.zeros((solver.n_all, 3)), 0.0, None
+    with _Pressing(solver, shape, direction, stiffness, tolerance, max_updates, max_step) as go:
+        out, last, failed = [], None, None
         for depth in depths:
             if failed is not None:
-                out.append(
-                    Pressed(False, f"skipped: a smaller depth ({failed:.3g} m) failed", depth)
-                )
+                reason = f"skipped: a smaller depth ({failed:.3g} m) failed"
+                out.append(Pressed(False, reason, depth))
                 continue
-            t0 = time.perf_counter()
-            res = _march(
-                solver, contact, shape, direction, u, done, depth, tolerance, max_updates, max_step
-            )
-            if not res["ok"]:
+            answer = go.to(depth, last)
+            out.append(answer)
+            if answer.ok:
+                last = answer
+            else:
                 failed = depth
-                out.append(
-                    Pressed(
-                        False,
-                        res["reason"] + f" (residual {res.get('residual', float('nan')):.2e})",
-                        depth,
-                        iterations=res["iterations"],
-                    )
-                )
-                continue
-            u, done = res["u"], depth
-            out.append(_answer(solver, contact, u, depth, direction, res, time.perf_counter() - t0))
         return out
-    finally:
-        solver.potentials.remove(contact)
+
+
+def press_to_force(
+    solver,
+    shape,
+    direction,
+    force: float,
+    rtol: float = 0.01,
+    step: float = 0.001,
+    stiffness: float | None = None,
+    max_updates: int = 20,
+) -> Pressed:
+    """Push ``shape`` along ``direction`` until the reaction is ``force`` (N) within ``rtol``:
+    the depth rises from the placed pose (steps of at most ``step``, m, each aimed at the force
+    by the last two answers' slope) until the reaction passes the force, then the depth is
+    found between the last two by the secant method (each try from the shallower state). A
+    press that fails first, or runs through the whole tissue, fails and says at what force.
+    """
+    force = _positive(force, "target force")
+    if not 0 < rtol < 0.5:
+        raise ValueError(f"rtol must lie in (0, 0.5), got {rtol!r}")
+    deepest = float(solver.mesh.thickness.max())
+    with _Pressing(solver, shape, direction, stiffness, 2e-3, max_updates, step) as go:
+        lo, hi = Pressed(True, "", 0.0, reaction=0.0), None
+        depth = min(step, deepest)
+        while hi is None:
+            answer = go.to(depth, lo if lo.depth > 0 else None)
+            if not answer.ok:
+                return replace(
+                    answer,
+                    reason=f"cannot carry {force:g} N: {answer.reason} at depth "
+                    f"{1e3 * depth:.2f} mm, after {lo.reaction:.3g} N",
+                )
+            if abs(answer.reaction - force) <= rtol * force:
+                return answer
+            if answer.reaction > force:
+                hi = answer
+                break
+            slope = (answer.reaction - lo.reaction) / (answer.depth - lo.depth)
+            lo = answer
+            aim = lo.depth + (force - lo.reaction) / max(slope, 1e-12)
+            depth = min(aim, lo.depth + 2 * step, deepest)
+            if depth <= lo.depth * (1 + 1e-9):
+                return replace(
+                    lo,
+                    ok=False,
+                    displacement=None,
+                    reason=f"cannot carry {force:g} N: the object reached the bone "
+                    f"({1e3 * deepest:.1f} mm) at {lo.reaction:.3g} N",
+                )
+        for _ in range(30):
+            w = (force - lo.reaction) / (hi.reaction - lo.reaction)
+            depth = lo.depth + min(max(w, 0.1), 0.9) * (hi.depth - lo.depth)
+            answer = go.to(depth, lo if lo.depth > 0 else None)
+            if not answer.ok:
+                return replace(answer, reason=f"cannot carry {force:g} N: {answer.reason}")
+            if abs(answer.reaction - force) <= rtol * force:
+                return answer
+            lo, hi = (answer, hi) if answer.reaction < force else (lo, answer)
+        return replace(answer, ok=False, displacement=None, reason="force control did not settle")
+
+
+class _Pressing:
+    """A contact on ``solver`` for the length of a ``with`` block; :meth:`to` answers one
+    depth from a former answer's state.
+    """
+
+    def __init__(self, solver, shape, direction, stiffness, tolerance, max_updates, max_step):
+        if not 0 < tolerance < 1:
+            raise ValueError(f"tolerance is a share of the depth in (0, 1), got {tolerance!r}")
+        self.solver, self.shape, self.direction = solver, shape, _unit(direction)
+        self.options = (tolerance, max_updates, max_step)
+        self.contact = Contact(solver, shape, stiffness or default_stiffness(solver))
+
+    def __enter__(self) -> "_Pressing":
+        self.solver.potentials.append(self.contact)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.solver.potentials.remove(self.contact)
+
+    def to(self, depth: float, start: Pressed | None) -> Pressed:
+        """The answer at ``depth`` (m), marching from ``start`` (rest when ``None``)."""
+        solver, contact = self.solver, self.contact
+        t0 = time.perf_counter()
+        if start is None:
+            u, done = np.zeros((solver.n_all, 3)), 0.0
+            contact.multipliers[:] = 0.0
+        else:
+            u, done = start.state, start.depth
+            contact.multipliers = start.multipliers.copy()
+        res = _march(solver, contact, self.shape, self.direction, u, done, depth, *self.options)
+        if not res["ok"]:
+            reason = res["reason"] + f" (residual {res.get('residual', float('nan')):.2e})"
+            return Pressed(False, reason, depth, iterations=res["iterations"])
+        seconds = time.perf_counter() - t0
+        return _answer(solver, contact, res["u"], depth, self.direction, res, seconds)
 
 
 def _march(
@@ -465,5 +544,6 @@ def _answer(solver, contact, u, depth, direction, res, seconds) -> Pressed:
         pressure=pressure,
         area=float(mesh.part.vertex_areas[pressure > 0].sum()),
         penetration=res["penetration"],
+        multipliers=contact.multipliers.copy(),
         **common,
     )

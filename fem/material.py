@@ -227,7 +227,7 @@ class IsochoricLaw:
     def _derivatives(self, F: np.ndarray):
         Finv, J = inv3(F)
         I1 = np.einsum("tij,tij->t", F, F)
-        with np.errstate(invalid="ignore", divide="ignore"):
+        with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
             s = np.cbrt(J) ** -2  # J^(-2/3)
             ds = -2.0 / 3.0 * s / J  # d s / d J
             d2s = 10.0 / 9.0 * s / J**2

@@ -364,11 +364,12 @@ class Solver:
             # Near equilibrium the energy's change falls below its round-off (W sums terms of
             # order mu to get mu eps^2): a full step that lowers the residual is taken instead.
             trial = u + step
-            r0 = np.linalg.norm(self.residual(u, f).reshape(-1)[self.free])
-            r1 = np.linalg.norm(self.residual(trial, f).reshape(-1)[self.free])
             Et = self.energy(trial, f)
-            if np.isfinite(Et) and abs(Et - E) <= 1e-6 * abs(E) and r1 < r0:
-                return 1.0, trial, Et
+            if np.isfinite(Et) and abs(Et - E) <= 1e-6 * abs(E):
+                r0 = np.linalg.norm(self.residual(u, f).reshape(-1)[self.free])
+                r1 = np.linalg.norm(self.residual(trial, f).reshape(-1)[self.free])
+                if r1 < r0:
+                    return 1.0, trial, Et
         return alpha, None, None
 
     def _newton(self, u: np.ndarray, f: np.ndarray, rtol: float | None = None) -> dict:
