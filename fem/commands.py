@@ -8,7 +8,7 @@ from __future__ import annotations
 from fem.generate import generate
 from fem.pictures import deformation_figure
 from fem.predictor import FEMPredictor
-from stmpl.cli.options import fem_options, scene_of, scene_options
+from stmpl.cli.options import fem_options, phenotype_of, scene_of, scene_options
 
 
 def add_generate(sub) -> None:
@@ -90,12 +90,14 @@ def solve_command(args) -> int:
     with its reason.
     """
     scene = scene_of(args)
-    fem = FEMPredictor(res=args.res, levels=args.levels)
+    fem = FEMPredictor(
+        res=args.res, levels=args.levels, tissue=args.tissue, phenotype=phenotype_of(args)
+    )
     d = fem.predict(scene)
     shell = fem.last_shell
     print(
-        f"shell: {d.info['mesh']['nodes']} nodes, {d.info['mesh']['tets']} tets ({args.res}); "
-        f"{shell.mesh.quality()}"
+        f"shell: {d.info['mesh']['nodes']} nodes, {d.info['mesh']['tets']} tets ({args.res}, "
+        f"{args.tissue}); {shell.mesh.quality()}"
     )
     for s in d.info["levels"]:
         print(

@@ -152,8 +152,11 @@ def simulate_local(
     margin: float | None = None,
     tolerance: float = RING_TOLERANCE,
     grow: float = GROW,
+    tissue: str = "paper",
+    phenotype: dict | None = None,
 ):
-    """:func:`fem.simulate.simulate` on the patch the load moves. Returns ``(mesh, solutions,
+    """:func:`fem.simulate.simulate` on the patch the load moves (of the ``tissue`` preset, shaped
+    by ``phenotype``). Returns ``(mesh, solutions,
     result)``: the patch's mesh and solutions (``Solution.part_displacement`` on the patch),
     and a :class:`LocalResult`; :meth:`Patch.lift` gives the whole part's displacement.
     """
@@ -165,7 +168,9 @@ def simulate_local(
     while True:
         p = patch(part, f, m)
         t0 = time.perf_counter()
-        mesh, sols = simulate(p.part, t[p.vertices], f[p.vertices], totals, res, material, options)
+        mesh, sols = simulate(
+            p.part, t[p.vertices], f[p.vertices], totals, res, material, options, tissue, phenotype
+        )
         moved = _ring_moved(p, mesh, sols)
         att = {
             "margin_m": m,

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fem.layers import preset
 from fem.local import simulate_local
 from fem.mesh import ShellMesh
 from fem.simulate import resolution, simulate
@@ -44,6 +45,8 @@ class FEMPredictor(BasePredictor):
         material, options: passed to the solver.
         fidelity: ``"full"`` solves the whole part; ``"auto"`` only the patch the load moves,
             grown until the tissue at its cut stays still (:mod:`fem.local`).
+        tissue: ``"paper"`` (the gel) or a layered preset of :mod:`fem.layers`, its layers
+            shaped by anny's ``phenotype``.
 
     A failed solve raises :class:`FEMFailed` (never a displacement). ``Deformation.info`` holds
     the last level's diagnostics and ``levels``, one diagnostics dict per continuation level;
@@ -54,9 +57,18 @@ class FEMPredictor(BasePredictor):
     batched = False
 
     def __init__(
-        self, res="reference", levels: int = 1, material=None, options=None, fidelity: str = "full"
+        self,
+        res="reference",
+        levels: int = 1,
+        material=None,
+        options=None,
+        fidelity: str = "full",
+        tissue: str = "paper",
+        phenotype: dict | None = None,
     ):
         self.res = resolution(res)
+        preset(tissue)  # an unknown name is refused here, not at the first scene
+        self.tissue, self.phenotype = tissue, dict(phenotype or {})
         if isinstance(levels, bool) or int(levels) != levels or levels < 1:
             raise ValueError(f"levels must be an integer >= 1, got {levels!r}")
         self._fidelity = check_fidelity(fidelity)
@@ -77,11 +89,27 @@ class FEMPredictor(BasePredictor):
             try:
                 if self.fidelity == "auto":
                     mesh, sols, local = simulate_local(
-                        s.part, s.thickness, s.force, totals, self.res, self.material, self.options
+                        s.part,
+                        s.thickness,
+                        s.force,
+                        totals,
+                        self.res,
+                        self.material,
+                        self.options,
+                        tissue=self.tissue,
+                        phenotype=self.phenotype,
                     )
                 else:
                     mesh, sols = simulate(
-                        s.part, s.thickness, s.force, totals, self.res, self.material, self.options
+                        s.part,
+                        s.thickness,
+                        s.force,
+                        totals,
+                        self.res,
+                        self.material,
+                        self.options,
+                        self.tissue,
+                        self.phenotype,
                     )
             except ValueError as e:  # a scene it cannot mesh (a thickness that folds)
                 raise FEMFailed(f"the FEM cannot build the tissue for this scene: {e}") from e
@@ -100,4 +128,8 @@ class FEMPredictor(BasePredictor):
         return out
 
     def info(self, scene: Scene) -> dict:
-        return {"resolution": self.res.to_dict(), **self._last.pop(id(scene), {})}
+        return {
+            "resolution": self.res.to_dict(),
+            "tissue": self.tissue,
+            **self._last.pop(id(scene), {}),
+        }

@@ -122,17 +122,27 @@ def simulate(
     res: str | Resolution | dict = "reference",
     material=None,
     options: SolverOptions | None = None,
+    tissue: str = "paper",
+    phenotype: dict | None = None,
 ) -> tuple[ShellMesh, list[Solution]]:
     """Solve the load pattern ``force`` ``(N,)`` (N per vertex) on ``part`` with per-vertex
     ``thickness`` ``(N,)`` (m), scaled to each total force in ``totals`` (N, rising; default
     the pattern's own total), by continuation. Returns the mesh and one :class:`Solution` per
     level; failed levels carry their reason and no displacement.
+
+    ``tissue``: ``"paper"`` (the gel of ``material``, default neo-Hookean E = 1 kPa) or a layered
+    preset of :mod:`fem.layers` (its own laws; ``phenotype`` shapes its layers).
     """
     force = np.asarray(force, dtype=float)
-    mesh = mesh_for_load(part, thickness, force, res)
+    loaded = np.flatnonzero(force > 0)
+    if len(loaded) == 0:
+        raise ValueError("the load has no loaded vertex (force is zero everywhere)")
+    if tissue != "paper" and material is not None:
+        raise ValueError(f"the {tissue} preset brings its own laws: give no material with it")
+    mesh, layered = tissue_mesh(part, thickness, res, tissue, phenotype, part.vertices[loaded])
     solver = Solver(
         mesh,
-        material if material is not None else NeoHookean(),
+        layered or (material if material is not None else NeoHookean()),
         options=options,
         order=resolution(res).order,
     )

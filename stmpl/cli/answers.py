@@ -10,6 +10,7 @@ import time
 import warnings
 
 from stmpl import predictor
+from stmpl.cli.options import phenotype_of
 from stmpl.metrics import sample_metrics
 from stmpl.pipeline.spec import label, predictor_from_spec
 from stmpl.predictor import ImpossibleAnswer, OutsideEnvelope, PredictionFailed
@@ -23,7 +24,13 @@ def predictors(args, specs: list[str]) -> list:
     """The predictors ``specs`` name, at the options' device, fidelity and FEM set-up."""
     return [
         predictor_from_spec(
-            spec, args.device, res=args.res, levels=args.levels, fidelity=args.fidelity
+            spec,
+            args.device,
+            res=args.res,
+            levels=args.levels,
+            fidelity=args.fidelity,
+            tissue=args.tissue,
+            phenotype=phenotype_of(args),
         )
         for spec in specs
     ]
@@ -93,8 +100,15 @@ def truth(scene, args):
     """The FEM's answer to ``scene`` at the options' resolution, levels and fidelity, printed;
     ``None`` (and the reason printed) when the solve fails: the models' answers stand.
     """
-    name = f"FEM ({args.res})"
-    fem = predictor.create("fem", res=args.res, levels=args.levels, fidelity=args.fidelity)
+    name = f"FEM ({args.res})" if args.tissue == "paper" else f"FEM ({args.res}, {args.tissue})"
+    fem = predictor.create(
+        "fem",
+        res=args.res,
+        levels=args.levels,
+        fidelity=args.fidelity,
+        tissue=args.tissue,
+        phenotype=phenotype_of(args),
+    )
     try:
         d = fem.predict(scene)
     except PredictionFailed as e:

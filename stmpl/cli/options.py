@@ -27,6 +27,8 @@ LEVELS = 3
 """The FEM's continuation levels up to the force."""
 RESOLUTION = "reference"
 """The FEM's mesh resolution."""
+TISSUE = "paper"
+"""The FEM's tissue preset (the FEM lists its presets and refuses an unknown name)."""
 LOADS = ("disk", "ellipse", "seam_disk", "spots", "band", "letter")
 """The primitive loads ``--load`` draws (:mod:`stmpl.loads`)."""
 
@@ -244,6 +246,12 @@ def fem_options(parser) -> None:
         type=positive,
         default=LEVELS,
         help=f"FEM continuation levels up to --force (default {LEVELS})",
+    )
+    parser.add_argument(
+        "--tissue",
+        default=TISSUE,
+        help="the FEM's tissue: paper (the paper's 1 kPa gel) or a layered preset of skin, fat "
+        f"and muscle (forearm, upper_arm, abdomen; docs/tissue.md); default {TISSUE}",
     )
 
 

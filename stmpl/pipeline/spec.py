@@ -17,10 +17,13 @@ def predictor_from_spec(
     res: str = "reference",
     levels: int = 1,
     fidelity: str = "full",
+    tissue: str = "paper",
+    phenotype: dict | None = None,
     **options,
 ):
     """The predictor ``spec`` names (see the module docstring); ``res`` and ``levels`` are the
-    FEM's resolution (unless the spec names one) and continuation levels; ``fidelity``
+    FEM's resolution (unless the spec names one) and continuation levels, ``tissue`` its tissue
+    preset (its layers shaped by anny's ``phenotype``); ``fidelity``
     (``full`` or ``auto``, :data:`stmpl.predictor.FIDELITIES`) how much of the part it models;
     ``options`` go to a learned model's constructor (e.g. ``region_tolerance``).
     """
@@ -29,7 +32,9 @@ def predictor_from_spec(
         return zoo.read(spec[4:], device=device, fidelity=fidelity, **options)
     if spec == "fem" or spec.startswith("fem:"):
         res = spec.split(":", 1)[1] if ":" in spec else res
-        return predictor.create("fem", res=res, levels=levels, fidelity=fidelity)
+        return predictor.create(
+            "fem", res=res, levels=levels, fidelity=fidelity, tissue=tissue, phenotype=phenotype
+        )
     if pathlib.Path(spec).suffix == ".safetensors" or pathlib.Path(spec).exists():
         return predictor.read(spec, device=device, fidelity=fidelity, **options)
     raise ValueError(

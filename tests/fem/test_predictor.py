@@ -5,7 +5,10 @@ solve.
 import numpy as np
 import pytest
 
-from stmpl import predictor
+from fem.material import NeoHookean
+from fem.simulate import simulate
+from stmpl import loads, predictor, tissue
+from stmpl.body.primitives import tube
 from stmpl.pipeline.evaluate import scenes_of
 from stmpl.scene import Scene
 
@@ -49,3 +52,24 @@ def test_a_scene_the_fem_cannot_mesh_is_a_failure_that_says_why(arm):
     )
     with pytest.raises(FEMFailed, match="cannot build the tissue.*folds the inner surface"):
         predictor.create("fem", res="coarse").predict(scene)
+
+
+def test_the_fem_predictor_solves_a_layered_preset():
+    """The paper's load on the forearm preset: the skin spreads the load and the fat stiffens,
+    so the dent is far shallower than in the gel; the answer names its tissue, and a preset
+    given with a material of its own, or an unknown preset, is refused by name.
+    """
+    part = tube(radius=0.035, length=0.08, n_around=24, n_along=8)
+    load = loads.disk(part, uv=(0.5, 0.5), radius=0.012, total=0.3)
+    scene = Scene.from_load(part, tissue.constant(part, 0.0075), load)
+    deepest = {}
+    for name in ("paper", "forearm"):
+        fem = predictor.create("fem", res="medium", levels=2, tissue=name)
+        d = fem.predict(scene)
+        assert d.info["tissue"] == name
+        deepest[name] = d.magnitude.max()
+    assert deepest["forearm"] < 0.5 * deepest["paper"]
+    with pytest.raises(ValueError, match="unknown tissue preset 'gel'"):
+        predictor.create("fem", tissue="gel")
+    with pytest.raises(ValueError, match="brings its own laws"):
+        simulate(part, scene.thickness, scene.force, material=NeoHookean(), tissue="forearm")
