@@ -8,7 +8,7 @@ import pytest
 from fem.contact import Box, Contact, Punch, Sphere, press, press_to_force
 from fem.material import NeoHookean
 from fem.solver import Solver, SolverOptions
-from fem.verification import hayes_kappa, quarter_slab
+from fem.verification import dimitriadis_force, hayes_kappa, hertz_force, quarter_slab
 
 
 def test_signed_distances_of_the_shapes():
@@ -148,3 +148,40 @@ def test_nearly_incompressible_layers_lock_with_linear_elements_not_quadratic_on
         assert r.ok, r.reason
         found[order] = 4 * r.reaction / (2 * 1000.0 / (1 - 0.49**2) * a * 0.01 * h) / kappa
     assert found[1] > 1.2 and found[2] == pytest.approx(1.0, abs=0.03)
+
+
+def _sphere_on_layer(h, chis, spacing, first_layer, ratio, nu=0.49, R=0.01):
+    """A rigid sphere of radius R pressed into a bonded layer of thickness h to each contact
+    radius ratio chi = (R delta)^(1/2) / h: the FEM's forces (the quarter's, times four).
+    """
+    depths = [(c * h) ** 2 / R for c in chis]
+    a = np.sqrt(R * depths[-1])
+    part, mesh, fixed = quarter_slab(h, a + 5 * h, a, spacing * a, first_layer, ratio)
+    solver = Solver(mesh, NeoHookean(1000.0, nu), fixed, SolverOptions(rims="free"), order=2)
+    out = press(solver, Sphere([0, 0, R], R), [0, 0, -1], depths)
+    assert all(r.ok for r in out), [r.reason for r in out]
+    return depths, [4 * r.reaction for r in out]
+
+
+@pytest.mark.slow
+def test_a_sphere_on_a_bonded_layer_meets_dimitriadis():
+    """A 10 mm sphere on a 5 mm layer (nu = 0.49) to contact radii of 0.1-0.3 h: within 5 % of
+    Dimitriadis et al.'s bonded-layer force (+0.3, -1.2, -0.5 %; about 3 min), where Hertz's
+    half-space is 15-49 % too soft.
+    """
+    h, R = 0.005, 0.01
+    depths, forces = _sphere_on_layer(h, [0.1, 0.2, 0.3], 0.08, h / 20, 1.3)
+    for d, f in zip(depths, forces):
+        assert f == pytest.approx(dimitriadis_force(1000.0, R, d, h), rel=0.05)
+        assert f > 1.1 * hertz_force(1000.0, 0.49, R, d)
+
+
+@pytest.mark.slow
+def test_a_sphere_on_a_thick_layer_meets_hertz():
+    """A 10 mm sphere pushed 9 um into a 10 mm layer (contact radius 0.03 h, nu = 0.49): within
+    5 % of Hertz's half-space force (+3.9 %, of which Dimitriadis' thickness correction is
+    +3.5 %; about 3 min).
+    """
+    h, R = 0.01, 0.01
+    (d,), (f,) = _sphere_on_layer(h, [0.03], 0.1, 0.0001, 1.4)
+    assert f == pytest.approx(hertz_force(1000.0, 0.49, R, d), rel=0.05)
