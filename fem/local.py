@@ -149,11 +149,11 @@ def simulate_local(
     res="reference",
     material=None,
     options=None,
+    tissue: str = "paper",
+    phenotype: dict | None = None,
     margin: float | None = None,
     tolerance: float = RING_TOLERANCE,
     grow: float = GROW,
-    tissue: str = "paper",
-    phenotype: dict | None = None,
 ):
     """:func:`fem.simulate.simulate` on the patch the load moves (of the ``tissue`` preset, shaped
     by ``phenotype``). Returns ``(mesh, solutions,

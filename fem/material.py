@@ -81,8 +81,21 @@ def lame(E: float, nu: float) -> tuple[float, float]:
     return E / (2 * (1 + nu)), E * nu / ((1 + nu) * (1 - 2 * nu))
 
 
+class Law:
+    """What every material gives from its ``tangent_parts``: the stress and the full tangent."""
+
+    def stress(self, F: np.ndarray) -> np.ndarray:
+        """``(T, 3, 3)`` first Piola-Kirchhoff stress, Pa."""
+        return self.tangent_parts(F)[0]
+
+    def stress_tangent(self, F: np.ndarray, tangent: bool = True):
+        """``(P, A)``: ``(T, 3, 3)`` stress and ``(T, 3, 3, 3, 3)`` tangent (``None`` unasked)."""
+        P, parts = self.tangent_parts(F)
+        return P, (tangent_from_parts(*parts) if tangent else None)
+
+
 @dataclass(frozen=True)
-class Material:
+class Material(Law):
     """An isotropic material given by ``E`` (Pa) and ``nu``; subclasses define ``energy`` and
     ``tangent_parts``, from which the stress and the full tangent follow.
     """
@@ -101,15 +114,6 @@ class Material:
     @property
     def lam(self) -> float:
         return lame(self.E, self.nu)[1]
-
-    def stress(self, F: np.ndarray) -> np.ndarray:
-        """``(T, 3, 3)`` first Piola-Kirchhoff stress, Pa."""
-        return self.tangent_parts(F)[0]
-
-    def stress_tangent(self, F: np.ndarray, tangent: bool = True):
-        """``(P, A)``: ``(T, 3, 3)`` stress and ``(T, 3, 3, 3, 3)`` tangent (``None`` unasked)."""
-        P, parts = self.tangent_parts(F)
-        return P, (tangent_from_parts(*parts) if tangent else None)
 
 
 @dataclass(frozen=True)
@@ -192,7 +196,7 @@ def _invariant_parts(F, W1, WJ, W11, W1J, WJJ, Finv, J):
 
 
 @dataclass(frozen=True)
-class IsochoricLaw:
+class IsochoricLaw(Law):
     """A law ``W = psi(Ib - 3) + U(J)`` with bulk modulus ``K`` (Pa); subclasses give ``psi``
     and its first two derivatives (:meth:`shape`). Needs ``det F > 0``.
     """
@@ -250,15 +254,6 @@ class IsochoricLaw:
         """``(P, (a, b, c, H, d, e, F))``: the stress and the tangent's parts (module docstring)."""
         Finv, J, _, (W1, WJ, W11, W1J, WJJ) = self._derivatives(F)
         return _invariant_parts(F, W1, WJ, W11, W1J, WJJ, Finv, J)
-
-    def stress(self, F: np.ndarray) -> np.ndarray:
-        """``(T, 3, 3)`` first Piola-Kirchhoff stress, Pa."""
-        return self.tangent_parts(F)[0]
-
-    def stress_tangent(self, F: np.ndarray, tangent: bool = True):
-        """``(P, A)``: ``(T, 3, 3)`` stress and ``(T, 3, 3, 3, 3)`` tangent (``None`` unasked)."""
-        P, parts = self.tangent_parts(F)
-        return P, (tangent_from_parts(*parts) if tangent else None)
 
 
 @dataclass(frozen=True)
@@ -333,7 +328,7 @@ class Exponential(IsochoricLaw):
 
 
 @dataclass(frozen=True, eq=False)
-class Layered:
+class Layered(Law):
     """Each element its own layer's law: ``laws`` (one per layer) and ``layer`` ``(T,)`` (the
     layer of each element, in the mesh's element order). Evaluated on ``F`` ``(T Q, 3, 3)``,
     ``Q`` quadrature points per element in a row.
@@ -390,11 +385,6 @@ class Layered:
         for law, at in self._groups(F):
             P[at] = law.stress(F[at])
         return P
-
-    def stress_tangent(self, F: np.ndarray, tangent: bool = True):
-        """``(P, A)`` as a single law's."""
-        P, parts = self.tangent_parts(F)
-        return P, (tangent_from_parts(*parts) if tangent else None)
 
 
 def uniaxial(law, stretch: float) -> tuple[float, float]:

@@ -86,31 +86,12 @@ class FEMPredictor(BasePredictor):
                 continue
             totals = total * np.arange(1, self.levels + 1) / self.levels
             local = None
+            setup = (totals, self.res, self.material, self.options, self.tissue, self.phenotype)
             try:
                 if self.fidelity == "auto":
-                    mesh, sols, local = simulate_local(
-                        s.part,
-                        s.thickness,
-                        s.force,
-                        totals,
-                        self.res,
-                        self.material,
-                        self.options,
-                        tissue=self.tissue,
-                        phenotype=self.phenotype,
-                    )
+                    mesh, sols, local = simulate_local(s.part, s.thickness, s.force, *setup)
                 else:
-                    mesh, sols = simulate(
-                        s.part,
-                        s.thickness,
-                        s.force,
-                        totals,
-                        self.res,
-                        self.material,
-                        self.options,
-                        self.tissue,
-                        self.phenotype,
-                    )
+                    mesh, sols = simulate(s.part, s.thickness, s.force, *setup)
             except ValueError as e:  # a scene it cannot mesh (a thickness that folds)
                 raise FEMFailed(f"the FEM cannot build the tissue for this scene: {e}") from e
             sol = sols[-1]
