@@ -15,7 +15,8 @@ import warnings
 
 import numpy as np
 
-from fem.contact import Sphere, press
+from fem.contact import press
+from fem.shapes import Sphere
 from fem.simulate import tissue_mesh
 from fem.solver import Solver
 from stmpl.body.primitives import tube

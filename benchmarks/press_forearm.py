@@ -17,7 +17,8 @@ import warnings
 
 import numpy as np
 
-from fem.contact import Sphere, press
+from fem.contact import press
+from fem.shapes import Sphere
 from fem.simulate import resolution, tissue_mesh
 from fem.solver import Solver
 from stmpl import AnnyBody, loads, tissue

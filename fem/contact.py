@@ -14,8 +14,10 @@ plain penalty method). The contact pressure is ``lambda`` where the skin touches
 reaction force, the force the object must be pushed with, is the sum of ``w_i lambda_i`` along
 the object's normals.
 
-Shapes here: :class:`Sphere` (a fingertip, Hertz's indenter), :class:`Punch` (a flat-ended
-cylinder, a disk pressed face-on) and :class:`Box`. Lengths in m, pressures in Pa, forces in N.
+The shapes live in :mod:`fem.shapes`: the exact :class:`~fem.shapes.Sphere`,
+:class:`~fem.shapes.Punch` and :class:`~fem.shapes.Box`, and any triangle mesh
+(:class:`~fem.shapes.Surface`: a user's object, anny's hand, which may close along a grip's
+path instead of moving along one direction). Lengths in m, pressures in Pa, forces in N.
 """
 
 from __future__ import annotations
@@ -26,140 +28,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from fem.elements import TRI_EDGES
-
-
-def _unit(v) -> np.ndarray:
-    v = np.asarray(v, dtype=float)
-    n = np.linalg.norm(v)
-    if v.shape != (3,) or not np.isfinite(n) or n == 0:
-        raise ValueError(f"a direction must be a finite nonzero 3-vector, got {v.tolist()}")
-    return v / n
-
-
-def _point(v, what: str) -> np.ndarray:
-    v = np.asarray(v, dtype=float)
-    if v.shape != (3,) or not np.all(np.isfinite(v)):
-        raise ValueError(f"{what} must be a finite 3-vector (m), got {np.asarray(v).tolist()}")
-    return v
-
-
-def _positive(value, what: str) -> float:
-    if not (np.isfinite(value) and value > 0):
-        raise ValueError(f"{what} must be > 0, got {value!r}")
-    return float(value)
-
-
-@dataclass(frozen=True)
-class Sphere:
-    """A rigid ball of ``radius`` (m) centred at ``centre`` ``(3,)`` (m)."""
-
-    centre: np.ndarray
-    radius: float
-    name = "sphere"
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "centre", _point(self.centre, "centre"))
-        _positive(self.radius, "radius")
-
-    def moved(self, offset: np.ndarray) -> "Sphere":
-        """The same ball moved by ``offset`` ``(3,)`` (m)."""
-        return replace(self, centre=self.centre + offset)
-
-    def distance(self, x: np.ndarray):
-        """``(phi (K,), grad (K, 3), curvature (K, 3, 3))`` at points ``x`` ``(K, 3)``."""
-        d = x - self.centre
-        r = np.maximum(np.linalg.norm(d, axis=1), 1e-12)
-        n = d / r[:, None]
-        curv = (np.eye(3)[None] - n[:, :, None] * n[:, None, :]) / r[:, None, None]
-        return r - self.radius, n, curv
-
-
-@dataclass(frozen=True)
-class Punch:
-    """A rigid flat-ended cylinder of ``radius`` (m): its flat face a disk centred at
-    ``centre`` ``(3,)`` facing along ``axis`` ``(3,)`` (the way it presses), its body behind
-    the face.
-    """
-
-    centre: np.ndarray
-    axis: np.ndarray
-    radius: float
-    name = "punch"
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "centre", _point(self.centre, "centre"))
-        object.__setattr__(self, "axis", _unit(self.axis))
-        _positive(self.radius, "radius")
-
-    def moved(self, offset: np.ndarray) -> "Punch":
-        """The same punch moved by ``offset`` ``(3,)`` (m)."""
-        return replace(self, centre=self.centre + offset)
-
-    def distance(self, x: np.ndarray):
-        """``(phi (K,), grad (K, 3), None)``: the exact signed distance to the semi-infinite
-        cylinder and its gradient (flat and straight faces: no curvature term is kept).
-        """
-        d = x - self.centre
-        y = d @ self.axis  # ahead of the face: y > 0
-        radial = d - y[:, None] * self.axis
-        rho = np.linalg.norm(radial, axis=1)
-        e = radial / np.maximum(rho, 1e-12)[:, None]
-        s = rho - self.radius
-        phi = np.empty(len(x))
-        grad = np.empty((len(x), 3))
-        inside = (y <= 0) & (s <= 0)
-        face = inside & (y >= s)
-        phi[face], grad[face] = y[face], self.axis
-        side = inside & ~face
-        phi[side], grad[side] = s[side], e[side]
-        out = ~inside
-        yp, sp_ = np.maximum(y[out], 0.0), np.maximum(s[out], 0.0)
-        phi[out] = np.hypot(yp, sp_)
-        g = yp[:, None] * self.axis + sp_[:, None] * e[out]
-        grad[out] = g / np.maximum(phi[out], 1e-300)[:, None]
-        return phi, grad, None
-
-
-@dataclass(frozen=True)
-class Box:
-    """A rigid box of ``half`` extents ``(3,)`` (m) about ``centre`` ``(3,)``, its axes the
-    columns of ``rotation`` ``(3, 3)``.
-    """
-
-    centre: np.ndarray
-    half: np.ndarray
-    rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
-    name = "box"
-
-    def __post_init__(self) -> None:
-        object.__setattr__(self, "centre", _point(self.centre, "centre"))
-        half = np.asarray(self.half, dtype=float)
-        if half.shape != (3,) or not np.all(np.isfinite(half)) or half.min() <= 0:
-            raise ValueError(f"half extents must be three positive lengths (m), got {half}")
-        object.__setattr__(self, "half", half)
-        R = np.asarray(self.rotation, dtype=float)
-        if R.shape != (3, 3) or not np.allclose(R.T @ R, np.eye(3), atol=1e-9):
-            raise ValueError("rotation must be a 3 x 3 orthonormal matrix")
-        object.__setattr__(self, "rotation", R)
-
-    def moved(self, offset: np.ndarray) -> "Box":
-        """The same box moved by ``offset`` ``(3,)`` (m)."""
-        return replace(self, centre=self.centre + offset)
-
-    def distance(self, x: np.ndarray):
-        """``(phi (K,), grad (K, 3), None)``: the box's exact signed distance."""
-        p = (x - self.centre) @ self.rotation  # box coordinates
-        q = np.abs(p) - self.half
-        out = np.maximum(q, 0.0)
-        dist_out = np.linalg.norm(out, axis=1)
-        inside = dist_out == 0
-        k = np.argmax(q, axis=1)
-        phi = np.where(inside, q.max(1), dist_out)
-        g = np.where(inside[:, None], 0.0, out / np.maximum(dist_out, 1e-300)[:, None])
-        rows = np.flatnonzero(inside)
-        g[rows, k[rows]] = 1.0
-        g *= np.sign(p) + (p == 0)
-        return phi, g @ self.rotation.T, None
+from fem.shapes import positive, unit
 
 
 def skin_weights(solver) -> tuple[np.ndarray, np.ndarray]:
@@ -190,7 +59,7 @@ class Contact:
     def __init__(self, solver, shape, stiffness: float):
         self.solver = solver
         self.shape = shape
-        self.stiffness = _positive(stiffness, "contact stiffness")
+        self.stiffness = positive(stiffness, "contact stiffness")
         self.nodes, self.weights = skin_weights(solver)
         self.multipliers = np.zeros(len(self.nodes))
         X = np.zeros((solver.n_all, 3))
@@ -298,7 +167,9 @@ class Pressed:
         depth: how far the object was pushed from its placed pose, m.
         displacement: ``(N, 3)`` on the part's vertices, m (``None`` when failed).
         state: ``(n_all, 3)`` every node's displacement, for a warm start.
-        reaction: the force the object must be pushed with along its direction, N.
+        reaction: the force the object must be pushed with along its direction, N; for a
+            mesh closing along a path (a grip), the total contact force.
+        total: the sum of the normal contact forces over the skin, N (a grip's squeeze).
         force: ``(3,)`` the force the skin exerts on the object, N.
         pressure: ``(N,)`` contact pressure on the part's vertices, Pa.
         area: contact area, m^2 (the skin area the object presses).
@@ -313,6 +184,7 @@ class Pressed:
     displacement: np.ndarray | None = None
     state: np.ndarray | None = None
     reaction: float = float("nan")
+    total: float = float("nan")
     force: np.ndarray | None = None
     pressure: np.ndarray | None = None
     area: float = float("nan")
@@ -358,7 +230,8 @@ def press(
     max_step: float = 0.001,
 ) -> list[Pressed]:
     """Push ``shape`` (placed by its pose) along ``direction`` ``(3,)`` to each of ``depths``
-    (m, rising) into ``solver``'s tissue, each depth warm-started from the last in steps of at
+    (m, rising) into ``solver``'s tissue (a :class:`~fem.shapes.Surface` with a path closes
+    along it, ``direction`` ``None``), each depth warm-started from the last in steps of at
     most ``max_step`` (m); a step that fails is retried in up to ``solver.options.max_substeps``
     halvings, and the depths after a failure are reported as skipped.
 
@@ -395,20 +268,24 @@ def press_to_force(
     step: float = 0.001,
     stiffness: float | None = None,
     max_updates: int = 20,
+    start: Pressed | None = None,
 ) -> Pressed:
     """Push ``shape`` along ``direction`` until the reaction is ``force`` (N) within ``rtol``:
-    the depth rises from the placed pose (steps of at most ``step``, m, each aimed at the force
-    by the last two answers' slope) until the reaction passes the force, then the depth is
-    found between the last two by the secant method (each try from the shallower state). A
+    the depth rises from the placed pose, or from ``start`` (an answer of the same object and
+    solver carrying less than ``force``), in steps of at most ``step`` (m), each aimed at the
+    force by the last two answers' slope, until the reaction passes the force; then the depth
+    is found between the last two by the secant method (each try from the shallower state). A
     press that fails first, or runs through the whole tissue, fails and says at what force.
     """
-    force = _positive(force, "target force")
+    force = positive(force, "target force")
     if not 0 < rtol < 0.5:
         raise ValueError(f"rtol must lie in (0, 0.5), got {rtol!r}")
+    if start is not None and not (start.ok and start.reaction < force):
+        raise ValueError(f"start must be an answer that carries less than {force:g} N")
     deepest = float(solver.mesh.thickness.max())
     with _Pressing(solver, shape, direction, stiffness, 2e-3, max_updates, step) as go:
-        lo, hi = Pressed(True, "", 0.0, reaction=0.0), None
-        depth = min(step, deepest)
+        lo, hi = start or Pressed(True, "", 0.0, reaction=0.0), None
+        depth = min(lo.depth + step, deepest)
         while hi is None:
             answer = go.to(depth, lo if lo.depth > 0 else None)
             if not answer.ok:
@@ -454,7 +331,10 @@ class _Pressing:
     def __init__(self, solver, shape, direction, stiffness, tolerance, max_updates, max_step):
         if not 0 < tolerance < 1:
             raise ValueError(f"tolerance is a share of the depth in (0, 1), got {tolerance!r}")
-        self.solver, self.shape, self.direction = solver, shape, _unit(direction)
+        if direction is None and getattr(shape, "path", None) is None:
+            raise ValueError("a direction is needed (only a mesh with a path closes without one)")
+        self.direction = None if direction is None else unit(direction)
+        self.solver, self.shape = solver, shape
         self.options = (tolerance, max_updates, max_step)
         self.contact = Contact(solver, shape, stiffness or default_stiffness(solver))
 
@@ -492,7 +372,7 @@ def _march(
     s, step, iters, updates, substeps, res = start, depth - start, 0, 0, 0, None
     while s < depth or res is None:
         step = min(step, depth - s, max_step)
-        contact.shape = shape.moved((s + step) * direction)
+        contact.shape = shape.pushed(s + step, direction)
         keep = contact.multipliers.copy()
         res = _relax(solver, contact, u, tolerance * (s + step), max_updates)
         iters += res["iterations"]
@@ -530,6 +410,8 @@ def _answer(solver, contact, u, depth, direction, res, seconds) -> Pressed:
     checked = solver.check(u)
     pressure = _vertex_pressure(solver, contact, u)
     force = contact.force()
+    total = float(np.sum(contact.weights * contact.multipliers))
+    reaction = total if direction is None else float(-force @ direction)
     common = dict(iterations=res["iterations"], updates=res["updates"], time=seconds)
     if checked:
         return Pressed(False, checked, depth, **common)
@@ -539,7 +421,8 @@ def _answer(solver, contact, u, depth, direction, res, seconds) -> Pressed:
         depth,
         displacement=u[:n].copy(),
         state=u,
-        reaction=float(-force @ direction),
+        reaction=reaction,
+        total=total,
         force=force,
         pressure=pressure,
         area=float(mesh.part.vertex_areas[pressure > 0].sum()),

@@ -5,9 +5,10 @@ their laws, element by element.
 import numpy as np
 import pytest
 
-from fem.contact import Sphere, press
+from fem.contact import press
 from fem.layers import MIN_FAT, MIN_MUSCLE, PRESETS, preset
 from fem.mesh import shell_mesh
+from fem.shapes import Sphere
 from fem.simulate import tissue_mesh
 from fem.solver import Solver
 from stmpl.body.primitives import sheet, tube

@@ -1,0 +1,72 @@
+"""The contact wing's objects as the FEM's rigid shapes: a posed mesh
+(:class:`~stmpl.contact.pressing.Pressing`: a disk, a box, a user's file, a posed hand) and
+anny's hand closing in a grip (:func:`grip`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fem.shapes import ROUNDING, Surface
+from stmpl.contact.hand import Hand, SkinDistance, grasp
+from stmpl.contact.pressing import Pressing
+from stmpl.part import BodyPart
+
+OPEN = 0.01
+"""m: how far back along its path a grip may open to clear the skin."""
+
+
+def surface(pressing: Pressing, rounding: float = ROUNDING) -> Surface:
+    """The object of ``pressing`` in body coordinates, as a rigid :class:`Surface`."""
+    m = pressing.posed()
+    return Surface(np.asarray(m.vertices), np.asarray(m.faces), rounding, name=pressing.name)
+
+
+def grip(
+    part: BodyPart,
+    hand: Hand,
+    along: float = 0.5,
+    around: float = 0.0,
+    kind: str = "whole",
+    reach: float = 0.008,
+    rounding: float = ROUNDING,
+) -> Surface:
+    """Set anny's ``hand`` around the limb ``part`` (see :func:`stmpl.contact.hand.grasp`),
+    closing in a ``kind`` of grip: a :class:`Surface` with a path, at depth 0 clear of the skin
+    (its nearest point touching), at depth ``d`` (m) closed ``d`` further. The path is the
+    straight line between the hand set 1 mm and ``reach`` (m, below 10 mm) deep, carried back
+    until the hand clears the skin. A hand that cuts into the limb however far it opens (a
+    finger the grasp could not stretch clear) is refused, with the finger's name and depth.
+    """
+    if not (np.isfinite(reach) and 0.002 <= reach < 0.01):
+        raise ValueError(f"reach must lie in [2, 10) mm, got {1e3 * reach:g} mm")
+    first = 0.001
+    near = grasp(part, hand, along, around, kind, depth=first)
+    deep = grasp(part, hand, along, around, kind, depth=reach)
+    path = (deep.vertices - near.vertices) / (reach - first)
+    skin = SkinDistance(part)
+
+    def clearance(back: float) -> np.ndarray:
+        return skin(near.vertices - back * path)
+
+    lo, hi = 0.0, None
+    for back in np.arange(0.0, OPEN + 1e-9, 0.0005):
+        if clearance(back).min() >= 0:
+            hi = back
+            break
+        lo = back
+    if hi is None:
+        d = clearance(OPEN)
+        worst = int(np.argmin(d))
+        finger = next((f for f, ids in hand.finger_of.items() if worst in ids), "palm")
+        raise ValueError(
+            f"the hand's {finger} lies {-1e3 * d[worst]:.1f} mm inside the skin however far the "
+            f"{kind} grip opens (at {along:g} along, {around:g} around): choose another place "
+            "or grip"
+        )
+    if hi > 0:
+        for _ in range(20):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if clearance(mid).min() < 0 else (lo, mid)
+    start = near.vertices - hi * path
+    return Surface(start, deep.faces, rounding, path=path, name=f"hand ({kind} grip)")

@@ -1,0 +1,312 @@
+"""Rigid objects for the FEM's contact: each a signed distance ``phi`` (m; positive outside)
+with its gradient (the object's outward normal), placed by a pose and pushed by a depth.
+
+:class:`Sphere` (a fingertip, Hertz's indenter), :class:`Punch` (a flat-ended cylinder, a disk
+pressed face-on) and :class:`Box` have exact distances. :class:`Surface` is any triangle mesh
+(a user's object, anny's hand): the distance to its nearest triangle, signed by the normals
+interpolated over that triangle, less a small ``rounding`` that makes the object's surface
+smooth (its edges and corners rounded by that radius), so that Newton's steps see a normal that
+turns continuously. A surface may also close along a per-vertex ``path`` (a hand's grip), where
+the rigid shapes move along one direction. Lengths in m.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+
+def unit(v) -> np.ndarray:
+    v = np.asarray(v, dtype=float)
+    n = np.linalg.norm(v)
+    if v.shape != (3,) or not np.isfinite(n) or n == 0:
+        raise ValueError(f"a direction must be a finite nonzero 3-vector, got {v.tolist()}")
+    return v / n
+
+
+def point(v, what: str) -> np.ndarray:
+    v = np.asarray(v, dtype=float)
+    if v.shape != (3,) or not np.all(np.isfinite(v)):
+        raise ValueError(f"{what} must be a finite 3-vector (m), got {np.asarray(v).tolist()}")
+    return v
+
+
+def positive(value, what: str) -> float:
+    if not (np.isfinite(value) and value > 0):
+        raise ValueError(f"{what} must be > 0, got {value!r}")
+    return float(value)
+
+
+@dataclass(frozen=True)
+class Sphere:
+    """A rigid ball of ``radius`` (m) centred at ``centre`` ``(3,)`` (m)."""
+
+    centre: np.ndarray
+    radius: float
+    name = "sphere"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "centre", point(self.centre, "centre"))
+        positive(self.radius, "radius")
+
+    def pushed(self, depth: float, direction: np.ndarray) -> "Sphere":
+        """The same shape ``depth`` (m) along ``direction`` ``(3,)``."""
+        return self.moved(depth * direction)
+
+    def moved(self, offset: np.ndarray) -> "Sphere":
+        """The same ball moved by ``offset`` ``(3,)`` (m)."""
+        return replace(self, centre=self.centre + offset)
+
+    def distance(self, x: np.ndarray):
+        """``(phi (K,), grad (K, 3), curvature (K, 3, 3))`` at points ``x`` ``(K, 3)``."""
+        d = x - self.centre
+        r = np.maximum(np.linalg.norm(d, axis=1), 1e-12)
+        n = d / r[:, None]
+        curv = (np.eye(3)[None] - n[:, :, None] * n[:, None, :]) / r[:, None, None]
+        return r - self.radius, n, curv
+
+
+@dataclass(frozen=True)
+class Punch:
+    """A rigid flat-ended cylinder of ``radius`` (m): its flat face a disk centred at
+    ``centre`` ``(3,)`` facing along ``axis`` ``(3,)`` (the way it presses), its body behind
+    the face.
+    """
+
+    centre: np.ndarray
+    axis: np.ndarray
+    radius: float
+    name = "punch"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "centre", point(self.centre, "centre"))
+        object.__setattr__(self, "axis", unit(self.axis))
+        positive(self.radius, "radius")
+
+    def pushed(self, depth: float, direction: np.ndarray) -> "Punch":
+        """The same shape ``depth`` (m) along ``direction`` ``(3,)``."""
+        return self.moved(depth * direction)
+
+    def moved(self, offset: np.ndarray) -> "Punch":
+        """The same punch moved by ``offset`` ``(3,)`` (m)."""
+        return replace(self, centre=self.centre + offset)
+
+    def distance(self, x: np.ndarray):
+        """``(phi (K,), grad (K, 3), None)``: the exact signed distance to the semi-infinite
+        cylinder and its gradient (flat and straight faces: no curvature term is kept).
+        """
+        d = x - self.centre
+        y = d @ self.axis  # ahead of the face: y > 0
+        radial = d - y[:, None] * self.axis
+        rho = np.linalg.norm(radial, axis=1)
+        e = radial / np.maximum(rho, 1e-12)[:, None]
+        s = rho - self.radius
+        phi = np.empty(len(x))
+        grad = np.empty((len(x), 3))
+        inside = (y <= 0) & (s <= 0)
+        face = inside & (y >= s)
+        phi[face], grad[face] = y[face], self.axis
+        side = inside & ~face
+        phi[side], grad[side] = s[side], e[side]
+        out = ~inside
+        yp, sp_ = np.maximum(y[out], 0.0), np.maximum(s[out], 0.0)
+        phi[out] = np.hypot(yp, sp_)
+        g = yp[:, None] * self.axis + sp_[:, None] * e[out]
+        grad[out] = g / np.maximum(phi[out], 1e-300)[:, None]
+        return phi, grad, None
+
+
+@dataclass(frozen=True)
+class Box:
+    """A rigid box of ``half`` extents ``(3,)`` (m) about ``centre`` ``(3,)``, its axes the
+    columns of ``rotation`` ``(3, 3)``.
+    """
+
+    centre: np.ndarray
+    half: np.ndarray
+    rotation: np.ndarray = field(default_factory=lambda: np.eye(3))
+    name = "box"
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "centre", point(self.centre, "centre"))
+        half = np.asarray(self.half, dtype=float)
+        if half.shape != (3,) or not np.all(np.isfinite(half)) or half.min() <= 0:
+            raise ValueError(f"half extents must be three positive lengths (m), got {half}")
+        object.__setattr__(self, "half", half)
+        R = np.asarray(self.rotation, dtype=float)
+        if R.shape != (3, 3) or not np.allclose(R.T @ R, np.eye(3), atol=1e-9):
+            raise ValueError("rotation must be a 3 x 3 orthonormal matrix")
+        object.__setattr__(self, "rotation", R)
+
+    def pushed(self, depth: float, direction: np.ndarray) -> "Box":
+        """The same shape ``depth`` (m) along ``direction`` ``(3,)``."""
+        return self.moved(depth * direction)
+
+    def moved(self, offset: np.ndarray) -> "Box":
+        """The same box moved by ``offset`` ``(3,)`` (m)."""
+        return replace(self, centre=self.centre + offset)
+
+    def distance(self, x: np.ndarray):
+        """``(phi (K,), grad (K, 3), None)``: the box's exact signed distance."""
+        p = (x - self.centre) @ self.rotation  # box coordinates
+        q = np.abs(p) - self.half
+        out = np.maximum(q, 0.0)
+        dist_out = np.linalg.norm(out, axis=1)
+        inside = dist_out == 0
+        k = np.argmax(q, axis=1)
+        phi = np.where(inside, q.max(1), dist_out)
+        g = np.where(inside[:, None], 0.0, out / np.maximum(dist_out, 1e-300)[:, None])
+        rows = np.flatnonzero(inside)
+        g[rows, k[rows]] = 1.0
+        g *= np.sign(p) + (p == 0)
+        return phi, g @ self.rotation.T, None
+
+
+ROUNDING = 5e-4
+"""m: the default rounding of a :class:`Surface` (its faces offset outward by half a mm)."""
+
+BAND = 0.005
+"""m: how far from a :class:`Surface` its distance is exact; farther points (which no contact
+pressure reaches) get this distance."""
+
+
+def closest_points(tri: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(c (K, 3), weights (K, 3))``: the point of each triangle ``tri`` ``(K, 3, 3)``
+    closest to ``x`` ``(K, 3)`` and its barycentric weights: the projection on the plane if it
+    falls inside, else the nearest point of the three edges. Exact at any scale (no absolute
+    tolerances: a millimetre triangle is as good as a metre one).
+    """
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    ab, ac, ap = b - a, c - a, x - a
+    d00 = np.einsum("ki,ki->k", ab, ab)
+    d01 = np.einsum("ki,ki->k", ab, ac)
+    d11 = np.einsum("ki,ki->k", ac, ac)
+    d20 = np.einsum("ki,ki->k", ap, ab)
+    d21 = np.einsum("ki,ki->k", ap, ac)
+    den = d00 * d11 - d01**2
+    ok = den > 1e-12 * np.maximum(d00 * d11, 1e-300)
+    den = np.where(ok, den, 1.0)
+    v = (d11 * d20 - d01 * d21) / den
+    w = (d00 * d21 - d01 * d20) / den
+    weights = np.stack([1 - v - w, v, w], axis=1)
+    best = np.einsum("kj,kji->ki", weights, tri)
+    inside = ok & (weights.min(axis=1) >= 0)
+    dist = np.where(inside, np.linalg.norm(x - best, axis=1), np.inf)
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        s0, s1 = tri[:, i], tri[:, j]
+        e = s1 - s0
+        t = np.einsum("ki,ki->k", x - s0, e) / np.maximum(np.einsum("ki,ki->k", e, e), 1e-300)
+        t = np.clip(t, 0.0, 1.0)
+        q = s0 + t[:, None] * e
+        d = np.linalg.norm(x - q, axis=1)
+        closer = d < dist
+        best[closer], dist[closer] = q[closer], d[closer]
+        wq = np.zeros((int(closer.sum()), 3))
+        wq[:, i], wq[:, j] = 1 - t[closer], t[closer]
+        weights[closer] = wq
+    return best, weights
+
+
+@dataclass(frozen=True, eq=False)
+class Surface:
+    """A rigid triangle mesh: ``vertices`` ``(V, 3)`` (m, body coordinates) and ``faces``
+    ``(F, 3)`` with outward normals, its faces offset outward by ``rounding`` (m). ``path``
+    ``(V, 3)``, optional: how far each vertex moves per metre of depth (the mesh then closes by
+    :meth:`pushed` along it, as a hand grips, instead of moving along one direction). The mesh
+    need not be closed where nothing presses (a hand cut at the wrist).
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    rounding: float = ROUNDING
+    path: np.ndarray | None = None
+    name: str = "mesh"
+
+    def __post_init__(self) -> None:
+        v = np.asarray(self.vertices, dtype=float)
+        f = np.asarray(self.faces)
+        if v.ndim != 2 or v.shape[1] != 3 or len(v) < 3 or not np.all(np.isfinite(v)):
+            raise ValueError(f"{self.name}: vertices must be a finite (V >= 3, 3) array (m)")
+        if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0 or f.dtype.kind not in "iu":
+            raise ValueError(f"{self.name}: faces must be a non-empty (F, 3) integer array")
+        if f.min() < 0 or f.max() >= len(v):
+            raise ValueError(f"{self.name}: faces index vertices outside 0..{len(v) - 1}")
+        if not (np.isfinite(self.rounding) and self.rounding >= 0):
+            raise ValueError(f"{self.name}: rounding must be a length >= 0 m, got {self.rounding}")
+        tri = v[f]
+        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        if not np.linalg.norm(n, axis=1).sum() > 0:
+            raise ValueError(f"{self.name}: the mesh is degenerate (no surface area)")
+        if self.path is not None:
+            p = np.asarray(self.path, dtype=float)
+            if p.shape != v.shape or not np.all(np.isfinite(p)):
+                raise ValueError(f"{self.name}: path must be a finite {v.shape} array (m per m)")
+            object.__setattr__(self, "path", p)
+        object.__setattr__(self, "vertices", v)
+        object.__setattr__(self, "faces", f.astype(np.int64))
+        # angle-weighted vertex normals: the sign of a point off an edge or a corner
+        unit_n = n / np.maximum(np.linalg.norm(n, axis=1), 1e-300)[:, None]
+        vn = np.zeros_like(v)
+        for k in range(3):
+            a = tri[:, (k + 1) % 3] - tri[:, k]
+            b = tri[:, (k + 2) % 3] - tri[:, k]
+            cos = np.einsum("ij,ij->i", a, b) / np.maximum(
+                np.linalg.norm(a, axis=1) * np.linalg.norm(b, axis=1), 1e-300
+            )
+            np.add.at(vn, f[:, k], np.arccos(np.clip(cos, -1, 1))[:, None] * unit_n)
+        vn /= np.maximum(np.linalg.norm(vn, axis=1), 1e-300)[:, None]
+        centroid = tri.mean(1)
+        reach = float(np.linalg.norm(tri - centroid[:, None], axis=2).max())
+        object.__setattr__(self, "_index", (tri, vn, cKDTree(centroid), reach, unit_n))
+
+    def moved(self, offset: np.ndarray) -> "Surface":
+        """The same mesh moved by ``offset`` ``(3,)`` (m)."""
+        return replace(self, vertices=self.vertices + offset)
+
+    def pushed(self, depth: float, direction: np.ndarray | None) -> "Surface":
+        """The mesh ``depth`` (m) along ``direction`` ``(3,)``, or, for a mesh with a
+        :attr:`path` (``direction`` ``None``), closed ``depth`` along it.
+        """
+        if self.path is None:
+            if direction is None:
+                raise ValueError(f"{self.name}: a mesh without a path needs a direction")
+            return self.moved(depth * direction)
+        if direction is not None:
+            raise ValueError(f"{self.name}: a mesh with a path closes along it, not a direction")
+        return replace(self, vertices=self.vertices + depth * self.path)
+
+    def distance(self, x: np.ndarray):
+        """``(phi (K,), grad (K, 3), None)`` at points ``x`` ``(K, 3)``: exact within
+        :data:`BAND` of the mesh; farther points may get :data:`BAND` (a lower bound).
+        """
+        tri, vn, tree, reach, normal = self._index
+        d0, nearest = tree.query(x)
+        # far points: BAND, signed by the nearest face's side (no pressure reaches them)
+        grad = x - tree.data[nearest]
+        phi = np.where(np.einsum("ki,ki->k", grad, normal[nearest]) < 0, -BAND, BAND)
+        grad /= np.maximum(np.linalg.norm(grad, axis=1), 1e-300)[:, None]
+        near = np.flatnonzero(d0 < BAND + self.rounding + reach)
+        if len(near) == 0:
+            return phi, grad, None
+        # the nearest triangle's centroid lies within d + reach, and d <= d0 + reach
+        lists = tree.query_ball_point(x[near], d0[near] + 2 * reach + 1e-12)
+        counts = np.fromiter((len(c) for c in lists), int, len(lists))
+        point = np.repeat(np.arange(len(near)), counts)
+        face = np.fromiter((t for c in lists for t in c), int, int(counts.sum()))
+        xp = x[near][point]
+        c, bary = closest_points(tri[face], xp)
+        dist = np.linalg.norm(xp - c, axis=1)
+        order = np.lexsort((dist, point))
+        first = order[np.r_[0, np.flatnonzero(np.diff(point[order])) + 1]]
+        face, c, dist, xq, bary = face[first], c[first], dist[first], xp[first], bary[first]
+        at = np.einsum("kj,kji->ki", bary, vn[self.faces[face]])
+        side = np.sign(np.einsum("ki,ki->k", xq - c, at))
+        side[side == 0] = 1.0
+        g = (xq - c) * (side / np.maximum(dist, 1e-300))[:, None]
+        flat = dist < 1e-12
+        g[flat] = at[flat] / np.maximum(np.linalg.norm(at[flat], axis=1), 1e-300)[:, None]
+        phi[near] = side * dist - self.rounding
+        grad[near] = g
+        return phi, grad, None

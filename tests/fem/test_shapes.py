@@ -1,0 +1,123 @@
+"""The FEM's rigid objects: exact signed distances, and a triangle mesh's distance against them."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from fem.shapes import BAND, Box, Punch, Sphere, Surface, closest_points
+
+
+def test_signed_distances_of_the_shapes():
+    x = np.array([[0.0, 0, 2], [0, 0, 0.5], [3, 0, 1], [0.5, 0.5, 0.5]])
+    phi, grad, _ = Sphere([0, 0, 1], 1.0).distance(x)
+    np.testing.assert_allclose(phi, [0.0, -0.5, 2.0, np.sqrt(0.75) - 1])
+    np.testing.assert_allclose(np.linalg.norm(grad, axis=1), 1.0)
+    punch = Punch([0, 0, 0], [0, 0, -1], 1.0)  # face at z = 0 pressing down, body above
+    phi, grad, _ = punch.distance(np.array([[0, 0, -0.3], [0, 0, 0.2], [2, 0, 0.5], [2, 0, -1]]))
+    np.testing.assert_allclose(phi, [0.3, -0.2, 1.0, np.sqrt(2)])
+    np.testing.assert_allclose(grad[0], [0, 0, -1])
+    np.testing.assert_allclose(grad[2], [1, 0, 0])
+    box = Box([0, 0, 0], [1, 2, 3])
+    phi, grad, _ = box.distance(np.array([[0, 0, 0], [2, 0, 0], [0.5, 1.9, 0]]))
+    np.testing.assert_allclose(phi, [-1, 1, -0.1])
+    np.testing.assert_allclose(grad[1:], [[1, 0, 0], [0, 1, 0]])
+
+
+@pytest.mark.parametrize("scale", [1.0, 1e-3])
+def test_closest_points_on_triangles_at_any_scale(scale):
+    """Against a dense sampling of each triangle (the nearest sample is never closer), at a
+    metre's scale and a millimetre's.
+    """
+    rng = np.random.default_rng(2)
+    tri = scale * rng.normal(size=(300, 3, 3))
+    x = scale * rng.normal(size=(300, 3))
+    c, w = closest_points(tri, x)
+    np.testing.assert_allclose(np.einsum("kj,kji->ki", w, tri), c, atol=1e-12 * scale)
+    assert w.min() >= 0 and np.allclose(w.sum(1), 1)
+    s = np.linspace(0, 1, 60)
+    a, b = np.meshgrid(s, s)
+    keep = a + b <= 1
+    bary = np.stack([1 - a[keep] - b[keep], a[keep], b[keep]], 1)  # (S, 3)
+    samples = np.einsum("sj,kji->ksi", bary, tri)
+    sampled = np.linalg.norm(samples - x[:, None], axis=2).min(1)
+    found = np.linalg.norm(c - x, axis=1)
+    assert np.all(found <= sampled + 1e-12 * scale)
+
+
+def _points(rng, n, half):
+    return rng.uniform(-half, half, size=(n, 3))
+
+
+def test_a_box_mesh_has_the_box_exact_distance_within_the_band():
+    """A box's mesh (12 triangles) without rounding: the same signed distance and normal as
+    the exact box, inside and out, wherever the distance is exact (within BAND).
+    """
+    half = np.array([0.01, 0.02, 0.015])
+    mesh = trimesh.creation.box(extents=2 * half)
+    surface = Surface(mesh.vertices, mesh.faces, rounding=0.0)
+    x = _points(np.random.default_rng(0), 4000, 0.03)
+    phi, grad, _ = surface.distance(x)
+    exact, exact_grad, _ = Box([0, 0, 0], half).distance(x)
+    band = exact < BAND
+    assert band.sum() > 1000 and (exact < 0).sum() > 200
+    np.testing.assert_allclose(phi[band], exact[band], atol=1e-12)
+    np.testing.assert_allclose(grad[band], exact_grad[band], atol=1e-9)
+    far = ~band & ~np.isclose(phi, exact, rtol=0, atol=1e-12)
+    assert far.any() and np.all(phi[far] == BAND)  # a lower bound where no pressure reaches
+
+
+def test_a_sphere_mesh_is_the_sphere_up_to_its_facets_and_rounding():
+    """An icosphere of radius 8 mm (2562 vertices), rounded by 0.5 mm: the distance of a
+    sphere of 8.5 mm within the facets' sagitta (about 0.01 mm).
+    """
+    r, rounding = 0.008, 5e-4
+    mesh = trimesh.creation.icosphere(subdivisions=4, radius=r)
+    surface = Surface(mesh.vertices, mesh.faces, rounding=rounding).moved(np.array([0, 0, r]))
+    rng = np.random.default_rng(1)
+    x = rng.normal(size=(3000, 3))
+    x = x / np.linalg.norm(x, axis=1)[:, None] * rng.uniform(0.5 * r, r + 4e-3, (3000, 1))
+    x += [0, 0, r]
+    phi, grad, _ = surface.distance(x)
+    exact, exact_grad, _ = Sphere([0, 0, r], r + rounding).distance(x)
+    plane = np.abs(np.einsum("ij,ij->i", mesh.face_normals, mesh.triangles[:, 0]))
+    sagitta = r - plane.min()  # how far a face's centre lies under the sphere
+    assert np.abs(phi - exact).max() <= sagitta + 1e-9
+    assert np.einsum("ij,ij->i", grad, exact_grad).min() > 0.99
+
+
+def test_a_mesh_moves_or_closes_along_its_path():
+    mesh = trimesh.creation.box(extents=(0.02, 0.02, 0.02))
+    surface = Surface(mesh.vertices, mesh.faces, rounding=0.0)
+    down = np.array([0.0, 0, -1])
+    moved = surface.pushed(0.003, down)
+    np.testing.assert_allclose(moved.vertices, mesh.vertices + [0, 0, -0.003])
+    path = np.where(mesh.vertices[:, 2:] > 0, down, 0.0)  # the top face comes down
+    squeezed = Surface(mesh.vertices, mesh.faces, rounding=0.0, path=path).pushed(0.004, None)
+    phi, _, _ = squeezed.distance(np.array([[0.0, 0, 0.007], [0, 0, 0.005]]))
+    np.testing.assert_allclose(phi, [0.001, -0.001], atol=1e-12)
+    with pytest.raises(ValueError, match="without a path needs a direction"):
+        surface.pushed(0.001, None)
+    with pytest.raises(ValueError, match="closes along it, not a direction"):
+        Surface(mesh.vertices, mesh.faces, path=path).pushed(0.001, down)
+
+
+@pytest.mark.parametrize(
+    "make, message",
+    [
+        (lambda: Sphere([0, 0, np.nan], 1.0), "centre must be a finite 3-vector"),
+        (lambda: Sphere([0, 0, 0], 0.0), "radius must be > 0"),
+        (lambda: Punch([0, 0, 0], [0, 0, 0], 1.0), "nonzero 3-vector"),
+        (lambda: Box([0, 0, 0], [1, -1, 1]), "three positive lengths"),
+        (lambda: Surface([[0, 0, 0], [1, 0, 0], [0, np.inf, 0]], [[0, 1, 2]]), "finite"),
+        (lambda: Surface([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 3]]), "outside 0..2"),
+        (lambda: Surface([[0, 0, 0], [1, 0, 0], [2, 0, 0]], [[0, 1, 2]]), "degenerate"),
+        (lambda: Surface([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], rounding=-1), "rounding"),
+        (
+            lambda: Surface([[0, 0, 0], [1, 0, 0], [0, 1, 0]], [[0, 1, 2]], path=np.zeros((2, 3))),
+            "path must be",
+        ),
+    ],
+)
+def test_bad_shapes_are_named(make, message):
+    with pytest.raises(ValueError, match=message):
+        make()
