@@ -23,6 +23,10 @@ def add_generate(sub) -> None:
     ge.add_argument(
         "--max-bodies", type=int, help="a config of several bodies: stop after the first this many"
     )
+    ge.add_argument(
+        "--tissue",
+        help="tissue preset in place of the config's (paper, forearm, upper_arm, abdomen)",
+    )
     ge.add_argument("--quiet", action="store_true", help="no progress bar")
     ge.set_defaults(func=generate_command)
 
@@ -38,6 +42,7 @@ def generate_command(args) -> int:
         progress=not args.quiet,
         max_shards=args.max_shards,
         max_bodies=args.max_bodies,
+        tissue=args.tissue,
     )
     if not card:
         print("stopped early (--max-shards or --max-bodies); run again to finish")

@@ -10,6 +10,7 @@ import json
 import numpy as np
 
 from fem.bodies import check_bodies
+from fem.layers import preset
 from fem.material import material
 from fem.simulate import resolution
 from fem.solver import SolverOptions
@@ -24,6 +25,7 @@ DEFAULTS = {
     "part": "left_arm",
     "thickness_mm": [5.0, 7.5, 10.0],
     "material": {"name": "neo_hookean", "E": 1000.0, "nu": 0.4},
+    "tissue": "paper",
     "resolution": "reference",
     "fidelity": "full",
     "forces": [0.25, 0.5, 0.75, 1.0],
@@ -37,7 +39,7 @@ DEFAULTS = {
     "linear": False,
     "bodies": None,
 }
-OPTIONAL = {"fidelity": "full", "linear": False, "bodies": None}
+OPTIONAL = {"fidelity": "full", "linear": False, "bodies": None, "tissue": "paper"}
 """Keys whose default leaves a config's hash as it was before the key existed."""
 """``bodies``: ``phenotypes`` (a list of anny phenotypes), ``sample`` (``{count, seed, age}``:
 that many drawn from anny's shape distribution, adults of ``age`` [lo, hi] years), or for an
@@ -106,6 +108,7 @@ def check(cfg: dict) -> None:
     checked.one_of(par["backend"], "parallel.backend", BACKENDS)
     checked.integer(par["workers"], "parallel.workers", 1)
     _check_setup(cfg)
+    _check_tissue(cfg)
     checked.one_of(cfg["fidelity"], "fidelity", FIDELITIES)
     if not isinstance(cfg["linear"], bool):
         raise ValueError(f"linear must be true or false, got {cfg['linear']!r}")
@@ -138,6 +141,24 @@ def _check_setup(cfg: dict) -> None:
         except TypeError as e:
             raise ValueError(f"{key}: {e}") from e
     resolution(cfg["resolution"])
+
+
+def _check_tissue(cfg: dict) -> None:
+    """``tissue``: ``paper`` (the gel of ``material``) or a layered preset, which brings its
+    own laws (``material`` then stays at its default) and has no linear FEM yet.
+    """
+    if not isinstance(cfg["tissue"], str):
+        raise ValueError(f"tissue must be a preset name, got {cfg['tissue']!r}")
+    if preset(cfg["tissue"]) is None:
+        return
+    if cfg["material"] != DEFAULTS["material"]:
+        raise ValueError(
+            f"the {cfg['tissue']} tissue brings its own laws: remove material from the config"
+        )
+    if cfg["linear"]:
+        raise ValueError(
+            f"linear: the linear FEM of the layered {cfg['tissue']} tissue is not built"
+        )
 
 
 def config_hash(cfg: dict) -> str:

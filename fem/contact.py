@@ -134,6 +134,11 @@ RTOL = 1e-6
 goes between iterations, and the residual stalls near 1e-6 of the contact force (its share of
 the reaction is far below :data:`FORCE_TOLERANCE`)."""
 
+FLOOR = 1e-4
+"""Where Newton's line search can no longer lower the energy under contact (a hand's many
+contact nodes, each on the edge of touching), a residual this small of the contact force is
+converged: a tenth of :data:`FORCE_TOLERANCE`."""
+
 FORCE_TOLERANCE = 1e-3
 """Multiplier updates go on until the penetration left would add less than this share to the
 contact force."""
@@ -202,7 +207,7 @@ def _relax(solver, contact, u, tolerance: float, max_updates: int) -> dict:
     """
     iters = 0
     for k in range(max_updates + 1):
-        res = solver.equilibrium(u, np.zeros_like(u), max(solver.options.rtol, RTOL))
+        res = solver.equilibrium(u, np.zeros_like(u), max(solver.options.rtol, RTOL), FLOOR)
         iters += res["iterations"]
         if not res["ok"]:
             return {**res, "iterations": iters, "updates": k}

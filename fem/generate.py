@@ -182,13 +182,19 @@ def generate(
     part: BodyPart | None = None,
     max_shards: int | None = None,
     max_bodies: int | None = None,
+    tissue: str | None = None,
 ) -> dict:
     """Generate (or finish) the dataset of ``config`` (a YAML path or a dict) in folder ``out``
-    (default ``data/<name>``). Returns the card. ``max_shards`` stops after that many new shards
+    (default ``data/<name>``; ``data/<name>-<tissue>`` when ``tissue`` names a layered preset
+    in place of the config's). Returns the card. ``max_shards`` stops after that many new shards
     (for tests and trial runs; the card is then not written and ``{}`` is returned);
     ``max_bodies``, for a config of several bodies, stops after that many bodies.
     """
     cfg = read_config(config)
+    if tissue is not None:
+        cfg = read_config({**cfg, "tissue": tissue})
+        if tissue != "paper" and out is None:
+            out = pathlib.Path("data") / f"{cfg['name']}-{tissue}"
     if cfg["bodies"] is not None:  # one member dataset per body
         if part is not None:
             raise ValueError("a bodies config makes its own parts; part= is not taken")

@@ -372,7 +372,9 @@ class Solver:
                     return 1.0, trial, Et
         return alpha, None, None
 
-    def _newton(self, u: np.ndarray, f: np.ndarray, rtol: float | None = None) -> dict:
+    def _newton(
+        self, u: np.ndarray, f: np.ndarray, rtol: float | None = None, floor: float = 0.0
+    ) -> dict:
         """Newton iterations from ``u`` under nodal forces ``f``. The factorised tangent is kept
         while the residual still contracts by ``options.reuse`` per step (a solve with stored
         factors costs a sixth of a factorisation); otherwise, or when a kept factorisation gives
@@ -451,6 +453,14 @@ class Solver:
                 if not fresh:
                     refresh = True
                     continue
+                if rel <= floor:
+                    return {
+                        "ok": True,
+                        "u": u,
+                        "iterations": it + 1,
+                        "residual": rel,
+                        "factorisations": factorisations,
+                    }
                 inv = not np.isfinite(self.energy(u + 2.0**-11 * step, f))
                 reason = (
                     "element inversion: every step along the Newton direction makes det F <= 0"
@@ -468,12 +478,16 @@ class Solver:
             "residual": rel,
         }
 
-    def equilibrium(self, u: np.ndarray, f: np.ndarray, rtol: float | None = None) -> dict:
+    def equilibrium(
+        self, u: np.ndarray, f: np.ndarray, rtol: float | None = None, floor: float = 0.0
+    ) -> dict:
         """Newton's method from ``u`` ``(n_all, 3)`` under nodal forces ``f`` ``(n_all, 3)``
         and the :attr:`potentials`, to a relative residual ``rtol`` (default the options'):
         ``{"ok", "u", "iterations", "residual"}`` or, failed, ``{"ok": False, "reason", ...}``.
+        ``floor``: a residual at which a step the line search cannot improve ends the solve
+        as converged (the round-off floor of a contact whose nodes come and go; 0: never).
         """
-        return self._newton(np.array(u, dtype=float), f, rtol)
+        return self._newton(np.array(u, dtype=float), f, rtol, floor)
 
     def _fail(self, res, iters, t0, force, substeps) -> Solution:
         return Solution(

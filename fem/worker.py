@@ -36,7 +36,9 @@ def solve_shard(payload: dict) -> dict:
     part = BodyPart.from_arrays(
         payload["part_name"], payload["part_arrays"], payload["part_source"]
     )
-    mat = material(**cfg["material"])
+    tissue = cfg.get("tissue", "paper")
+    mat = material(**cfg["material"]) if tissue == "paper" else None
+    phenotype = cfg["body"].get("phenotype")
     opts = SolverOptions(**cfg["solver"])
     forces = np.asarray(cfg["forces"], dtype=float)
     rec = {k: [] for k in FLOATS + INTS + DOUBLES + STRINGS}
@@ -66,12 +68,28 @@ def solve_shard(payload: dict) -> dict:
         try:
             if cfg.get("fidelity", "full") == "auto":
                 mesh, sols, local = simulate_local(
-                    part, thickness, load.force, levels, cfg["resolution"], mat, opts
+                    part,
+                    thickness,
+                    load.force,
+                    levels,
+                    cfg["resolution"],
+                    mat,
+                    opts,
+                    tissue,
+                    phenotype,
                 )
                 lift = local.patch.lift
             else:
                 mesh, sols = simulate(
-                    part, thickness, load.force, levels, cfg["resolution"], mat, opts
+                    part,
+                    thickness,
+                    load.force,
+                    levels,
+                    cfg["resolution"],
+                    mat,
+                    opts,
+                    tissue,
+                    phenotype,
                 )
         except ValueError as e:  # a shell that cannot be meshed (folds) is a failure too
             for f in levels:

@@ -262,3 +262,40 @@ def test_fidelity_auto_solves_patches_within_a_percent_of_the_whole(tmp_path):
     assert config_hash(read_config(_cfg(fidelity="auto"))) != config_hash(full)
     with pytest.raises(ValueError, match="fidelity must be one of"):
         read_config(_cfg(fidelity="local"))
+
+
+def test_a_layered_tissue_dataset_holds_the_presets_answers(tmp_path):
+    """``tissue: forearm`` (or ``stmpl generate --tissue forearm``): each sample is what the
+    layered FEM answers, and the card keeps the preset.
+    """
+    cfg = _cfg(
+        thickness_mm=[7.5],
+        forces=[0.5, 1.0],
+        max_pressure=1e6,
+        placements={"disk": {"centres": 1, "radii": [0.02]}},
+    )
+    card = generate(cfg, tmp_path / "d", progress=False, tissue="forearm")
+    assert card["config"]["tissue"] == "forearm" and card["samples"] == 2
+    ds = Dataset(tmp_path / "d")
+    a = ds.arrays()
+    from fem.placements import make_load
+
+    load = make_load(ds.part, plan(read_config(cfg)).placements[0])
+    th = a["thickness"][0].astype(float)
+    mesh, sols = simulate(ds.part, th, load.force, [0.5, 1.0], cfg["resolution"], tissue="forearm")
+    i = int(np.argmax(a["total"]))
+    np.testing.assert_allclose(a["displacement"][i], sols[-1].part_displacement(mesh), atol=1e-7)
+
+
+@pytest.mark.parametrize(
+    "over, message",
+    [
+        ({"tissue": "bone"}, "unknown tissue preset 'bone'"),
+        ({"tissue": 3}, "tissue must be a preset name"),
+        ({"tissue": "forearm", "material": {"name": "neo_hookean", "E": 2000.0}}, "own laws"),
+        ({"tissue": "forearm", "linear": True}, "linear FEM of the layered"),
+    ],
+)
+def test_a_bad_tissue_is_named(over, message):
+    with pytest.raises(ValueError, match=message):
+        read_config(_cfg(**over))
