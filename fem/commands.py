@@ -25,7 +25,8 @@ def add_generate(sub) -> None:
     )
     ge.add_argument(
         "--tissue",
-        help="tissue preset in place of the config's (paper, forearm, upper_arm, abdomen)",
+        help="tissue in place of the config's: paper, forearm, upper_arm, abdomen, or a YAML "
+        "file of layers (docs/tissue.md)",
     )
     ge.add_argument("--quiet", action="store_true", help="no progress bar")
     ge.set_defaults(func=generate_command)

@@ -10,7 +10,7 @@ import json
 import numpy as np
 
 from fem.bodies import check_bodies
-from fem.layers import preset
+from fem.layers import preset, read_tissue
 from fem.material import material
 from fem.simulate import resolution
 from fem.solver import SolverOptions
@@ -64,6 +64,8 @@ BACKENDS = ("serial", "processes", "dask")
 def read_config(source) -> dict:
     """A checked, completed dataset config from a YAML path or a dict."""
     cfg = checked.read(source, DEFAULTS, "dataset config", merge=("parallel",), name="dataset")
+    if isinstance(cfg["tissue"], str) and cfg["tissue"].endswith((".yaml", ".yml")):
+        cfg["tissue"] = read_tissue(cfg["tissue"])  # the layers themselves decide the samples
     check(cfg)
     return cfg
 
@@ -144,21 +146,23 @@ def _check_setup(cfg: dict) -> None:
 
 
 def _check_tissue(cfg: dict) -> None:
-    """``tissue``: ``paper`` (the gel of ``material``) or a layered preset, which brings its
-    own laws (``material`` then stays at its default) and has no linear FEM yet.
+    """``tissue``: ``paper`` (the gel of ``material``), a layered preset or a tissue file's
+    layers (:func:`fem.layers.from_mapping`), which bring their own laws (``material`` then
+    stays at its default) and have no linear FEM yet.
     """
-    if not isinstance(cfg["tissue"], str):
-        raise ValueError(f"tissue must be a preset name, got {cfg['tissue']!r}")
-    if preset(cfg["tissue"]) is None:
+    if not isinstance(cfg["tissue"], (str, dict)):
+        raise ValueError(
+            f"tissue must be a preset name or a mapping of layers, got {cfg['tissue']!r}"
+        )
+    stack = preset(cfg["tissue"])
+    if stack is None:
         return
     if cfg["material"] != DEFAULTS["material"]:
         raise ValueError(
-            f"the {cfg['tissue']} tissue brings its own laws: remove material from the config"
+            f"the {stack.name} tissue brings its own laws: remove material from the config"
         )
     if cfg["linear"]:
-        raise ValueError(
-            f"linear: the linear FEM of the layered {cfg['tissue']} tissue is not built"
-        )
+        raise ValueError(f"linear: the linear FEM of the layered {stack.name} tissue is not built")
 
 
 def config_hash(cfg: dict) -> str:

@@ -29,6 +29,7 @@ import stmpl
 from fem.backends import run
 from fem.bodies import member_folder, members
 from fem.config import config_hash, read_config
+from fem.layers import preset
 from fem.placements import Plan, plan
 from stmpl.data.dataset import BODIES_FORMAT
 from stmpl.data.format import (
@@ -194,7 +195,7 @@ def generate(
     if tissue is not None:
         cfg = read_config({**cfg, "tissue": tissue})
         if tissue != "paper" and out is None:
-            out = pathlib.Path("data") / f"{cfg['name']}-{tissue}"
+            out = pathlib.Path("data") / f"{cfg['name']}-{preset(cfg['tissue']).name}"
     if cfg["bodies"] is not None:  # one member dataset per body
         if part is not None:
             raise ValueError("a bodies config makes its own parts; part= is not taken")

@@ -20,10 +20,12 @@ paper's single layer of neo-Hookean gel (E = 1 kPa, nu = 0.4) over the scene's t
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
+import yaml
 
-from fem.material import Exponential, Layered, NeoHookean, Yeoh
+from fem.material import Demiray, Exponential, Layered, NeoHookean, Yeoh
 
 MIN_FAT = 0.0005
 """The thinnest fat layer a preset meshes, m."""
@@ -149,12 +151,129 @@ PRESETS = {
 """The layered presets by name (``paper`` is the single gel layer, :func:`preset`)."""
 
 
-def preset(name: str) -> Preset | None:
-    """The preset called ``name``; ``None`` for ``"paper"`` (the single gel layer)."""
-    if name == "paper":
+LAWS = {"yeoh": Yeoh, "exponential": Exponential, "demiray": Demiray, "neo_hookean": NeoHookean}
+"""The laws a tissue file may name, with their parameters (Pa, or dimensionless) as keys."""
+
+LAYER_NAMES = ("skin", "fat", "muscle")
+FILE_KEYS = {"name", "based_on", "about", "skin_mm", "muscle_mm", "layers"}
+LAYER_KEYS = {"law", "elements", "source"}
+
+
+def preset(spec: str | dict) -> Preset | None:
+    """The preset ``spec`` names: ``"paper"`` (``None``: the single gel layer), a preset of
+    :data:`PRESETS`, a YAML file of layers (``*.yaml``), or that file's mapping (see
+    :func:`from_mapping`).
+    """
+    if isinstance(spec, dict):
+        return from_mapping(spec)
+    if not isinstance(spec, str) or not spec:
+        raise ValueError(f"a tissue is a preset name or a YAML file of layers, got {spec!r}")
+    if spec.endswith((".yaml", ".yml")):
+        return from_mapping(read_tissue(spec))
+    if spec == "paper":
         return None
-    if name not in PRESETS:
+    if spec not in PRESETS:
         raise ValueError(
-            f"unknown tissue preset {name!r}; choose paper or one of {sorted(PRESETS)}"
+            f"unknown tissue preset {spec!r}; choose paper, one of {sorted(PRESETS)}, or a "
+            "YAML file of layers"
         )
-    return PRESETS[name]
+    return PRESETS[spec]
+
+
+def read_tissue(path: str) -> dict:
+    """The mapping of a YAML file of layers (checked when it is built, :func:`from_mapping`)."""
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"tissue file {path} does not exist")
+    try:
+        spec = yaml.safe_load(p.read_text())
+    except yaml.YAMLError as e:
+        raise ValueError(f"tissue file {path} is not YAML: {e}") from e
+    if not isinstance(spec, dict):
+        raise ValueError(f"tissue file {path} must hold a mapping of keys {sorted(FILE_KEYS)}")
+    return spec
+
+
+def from_mapping(spec: dict) -> Preset:
+    """A preset from a mapping (a tissue file's contents)::
+
+        name: firm_forearm      # required
+        based_on: forearm       # optional: every value not given comes from this preset
+        skin_mm: 1.0            # the skin's base thickness, mm
+        muscle_mm: 12           # the muscle's base depth, mm
+        layers:                 # any of skin, fat, muscle; each a law and its parameters (Pa)
+          skin: {law: yeoh, C10: 200000, K: 5.4e6, elements: 1, source: "..."}
+          fat: {law: exponential, c: 150, k1: 800, k2: 47.3, K: 36000}
+
+    Laws: :data:`LAWS` (``neo_hookean`` takes ``E`` and ``nu``; the others ``K`` and their own
+    constants). Without ``based_on``, ``skin_mm``, ``muscle_mm`` and all three layers are needed.
+    """
+    unknown = set(spec) - FILE_KEYS
+    if unknown:
+        raise ValueError(f"tissue: unknown keys {sorted(unknown)}; use {sorted(FILE_KEYS)}")
+    name = spec.get("name")
+    if not isinstance(name, str) or not name or name in PRESETS or name == "paper":
+        raise ValueError(f"tissue: name must be a new non-empty name, got {name!r}")
+    base = spec.get("based_on")
+    if base is not None and (not isinstance(base, str) or base not in PRESETS):
+        raise ValueError(f"tissue: based_on must be one of {sorted(PRESETS)}, got {base!r}")
+    layers = spec.get("layers") or {}
+    if not isinstance(layers, dict) or set(layers) - set(LAYER_NAMES):
+        raise ValueError(f"tissue: layers must be a mapping of {LAYER_NAMES} to laws")
+    if base is None:
+        missing = {"skin_mm", "muscle_mm"} - set(spec) | set(LAYER_NAMES) - set(layers)
+        if missing:
+            raise ValueError(f"tissue {name}: without based_on, give {sorted(missing)}")
+    known = PRESETS[base] if base else None
+    built = []
+    for i, layer in enumerate(LAYER_NAMES):
+        if layer in layers:
+            built.append(_layer(name, layer, layers[layer], known.layers[i] if known else None))
+        else:
+            built.append(known.layers[i])
+    skin = _millimetres(spec, "skin_mm", known.skin if known else None, name)
+    muscle = _millimetres(spec, "muscle_mm", known.muscle if known else None, name)
+    about = spec.get("about", f"from a file{f', based on {base}' if base else ''}")
+    return Preset(name, tuple(built), skin, muscle, str(about))
+
+
+def _millimetres(spec: dict, key: str, default, name: str) -> float:
+    if key not in spec:
+        return default
+    v = spec[key]
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0 < v < 100):
+        raise ValueError(f"tissue {name}: {key} must be a length in (0, 100) mm, got {v!r}")
+    return 1e-3 * float(v)
+
+
+def _number(v, what: str) -> float:
+    """A finite number; a string that reads as one too (YAML reads ``4.0e6`` as a string)."""
+    if isinstance(v, str):
+        try:
+            v = float(v)
+        except ValueError:
+            pass
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v):
+        raise ValueError(f"{what} must be a number, got {v!r}")
+    return float(v)
+
+
+def _layer(name: str, layer: str, spec, known: Layer | None) -> Layer:
+    """One layer of a tissue file: its law built from its parameters."""
+    where = f"tissue {name}, {layer}"
+    if not isinstance(spec, dict) or "law" not in spec:
+        raise ValueError(f"{where}: give a mapping with a law ({sorted(LAWS)}) and its parameters")
+    law = spec["law"]
+    if law not in LAWS:
+        raise ValueError(f"{where}: unknown law {law!r}; choose one of {sorted(LAWS)}")
+    params = {k: _number(v, f"{where}: {k}") for k, v in spec.items() if k not in LAYER_KEYS}
+    try:
+        built = LAWS[law](**params)
+    except TypeError as e:
+        raise ValueError(f"{where}: {law} takes other parameters ({e})") from e
+    except ValueError as e:
+        raise ValueError(f"{where}: {e}") from e
+    elements = spec.get("elements", known.elements if known else 2)
+    if isinstance(elements, bool) or not isinstance(elements, int) or not 1 <= elements <= 8:
+        raise ValueError(f"{where}: elements must be an integer in 1..8, got {elements!r}")
+    return Layer(layer, built, elements, str(spec.get("source", "given in a tissue file")))

@@ -251,7 +251,8 @@ def fem_options(parser) -> None:
         "--tissue",
         default=TISSUE,
         help="the FEM's tissue: paper (the paper's 1 kPa gel) or a layered preset of skin, fat "
-        f"and muscle (forearm, upper_arm, abdomen; docs/tissue.md); default {TISSUE}",
+        f"and muscle (forearm, upper_arm, abdomen), or a YAML file of layers (docs/tissue.md); "
+        f"default {TISSUE}",
     )
 
 

@@ -291,7 +291,7 @@ def test_a_layered_tissue_dataset_holds_the_presets_answers(tmp_path):
     "over, message",
     [
         ({"tissue": "bone"}, "unknown tissue preset 'bone'"),
-        ({"tissue": 3}, "tissue must be a preset name"),
+        ({"tissue": 3}, "tissue must be a preset name or a mapping"),
         ({"tissue": "forearm", "material": {"name": "neo_hookean", "E": 2000.0}}, "own laws"),
         ({"tissue": "forearm", "linear": True}, "linear FEM of the layered"),
     ],

@@ -92,3 +92,84 @@ def test_a_fingertip_on_the_layered_forearm_stiffens_into_newtons():
     f = force["forearm"]
     assert f[-1] > 1.0 and f[1] - f[0] < f[2] - f[1]  # newtons, and convex
     assert force["paper"][0] < 0.2 * f[0]
+
+
+def test_a_tissue_file_overrides_a_preset_layer_by_layer(tmp_path):
+    """A YAML file of layers: what it gives replaces the preset's (the skin's law and base
+    thickness here), the rest is the preset's; without ``based_on`` every part is needed.
+    """
+    path = tmp_path / "firm.yaml"
+    path.write_text(
+        "name: firm_forearm\nbased_on: forearm\nskin_mm: 1.5\n"
+        "layers:\n  skin: {law: yeoh, C10: 300000, C20: 1000, K: 8.0e6, elements: 2}\n"
+    )
+    firm = preset(str(path))
+    assert firm.name == "firm_forearm" and firm.skin == pytest.approx(0.0015)
+    assert firm.muscle == PRESETS["forearm"].muscle
+    skin = firm.layers[0]
+    assert (skin.law.C10, skin.law.C20, skin.law.K, skin.elements) == (3e5, 1e3, 8e6, 2)
+    assert firm.layers[1:] == PRESETS["forearm"].layers[1:]
+    t = firm.thicknesses(np.full(3, 0.0075), {"gender": 0.5, "age": 0.2})
+    np.testing.assert_allclose(t[0], 0.0015 * 1.0 * (1.05 - 0.05))
+    whole = {
+        "name": "gel_on_muscle",
+        "skin_mm": 1.0,
+        "muscle_mm": 5,
+        "layers": {
+            "skin": {"law": "neo_hookean", "E": 9e5, "nu": 0.49},
+            "fat": {"law": "demiray", "a": 500.0, "b": 5.0, "K": 3e4},
+            "muscle": {"law": "yeoh", "C10": 1200.0, "K": 1.2e5},
+        },
+    }
+    assert [x.law.name for x in preset(whole).layers] == ["neo_hookean", "demiray", "yeoh"]
+
+
+@pytest.mark.parametrize(
+    "spec, message",
+    [
+        ({"name": "x", "based_on": "forearm", "colour": 1}, "unknown keys \\['colour'\\]"),
+        ({"name": "forearm", "based_on": "forearm"}, "name must be a new"),
+        ({"name": "x", "based_on": "leg"}, "based_on must be one of"),
+        (
+            {"name": "x", "skin_mm": 1},
+            "without based_on, give \\['fat', 'muscle', 'muscle_mm', 'skin'\\]",
+        ),
+        ({"name": "x", "based_on": "forearm", "skin_mm": -1}, "skin_mm must be a length"),
+        (
+            {"name": "x", "based_on": "forearm", "layers": {"bone": {"law": "yeoh"}}},
+            "layers must be a mapping of",
+        ),
+        (
+            {"name": "x", "based_on": "forearm", "layers": {"fat": {"law": "ogden"}}},
+            "fat: unknown law 'ogden'",
+        ),
+        (
+            {"name": "x", "based_on": "forearm", "layers": {"fat": {"law": "yeoh", "mu": 1.0}}},
+            "fat: yeoh takes other parameters",
+        ),
+        (
+            {"name": "x", "based_on": "forearm", "layers": {"fat": {"law": "yeoh", "C10": -1}}},
+            "fat: yeoh: C10",
+        ),
+        (
+            {"name": "x", "based_on": "forearm", "layers": {"fat": {"law": "yeoh", "C10": "a"}}},
+            "C10 must be a number",
+        ),
+    ],
+)
+def test_a_bad_tissue_file_is_named(spec, message):
+    with pytest.raises(ValueError, match=message):
+        preset(spec)
+
+
+def test_a_missing_or_broken_tissue_file_is_named(tmp_path):
+    with pytest.raises(ValueError, match="does not exist"):
+        preset(str(tmp_path / "none.yaml"))
+    (tmp_path / "bad.yaml").write_text("name: [\n")
+    with pytest.raises(ValueError, match="is not YAML"):
+        preset(str(tmp_path / "bad.yaml"))
+    (tmp_path / "list.yaml").write_text("- 1\n")
+    with pytest.raises(ValueError, match="must hold a mapping"):
+        preset(str(tmp_path / "list.yaml"))
+    with pytest.raises(ValueError, match="unknown tissue preset 'leg'"):
+        preset("leg")
