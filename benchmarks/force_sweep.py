@@ -28,7 +28,7 @@ from fem.shapes import Punch, Sphere
 from fem.simulate import resolution, tissue_mesh
 from fem.solver import Solver
 from stmpl import AnnyBody, loads, tissue
-from stmpl.contact.hand import Hand
+from stmpl.contact.hand import Hand, SkinDistance
 from stmpl.machine import describe
 from stmpl.table import header, row
 
@@ -69,8 +69,8 @@ def solve_case(part_name, obj, where, res, body) -> list[dict]:
     if obj == "grip":
         kind, along = where
         shape, direction = grip(part, Hand(side="R"), along=along, kind=kind), None
-        phi, _, _ = shape.pushed(0.004, None).distance(part.vertices)
-        near = part.vertices[phi < 0.003]
+        closed = shape.pushed(0.005, None).vertices
+        near = closed[SkinDistance(part)(closed) < 0]  # where the grip presses, 5 mm closed
     else:
         disk = loads.disk(part, uv=where, radius=DISK_RADIUS, total=1.0)
         centre = part.vertices[disk.vertices].mean(0)

@@ -395,7 +395,9 @@ def _march(
 
 def _vertex_pressure(solver, contact, u) -> np.ndarray:
     """``(N,)`` contact pressure on the part's vertices, Pa: each skin node's contact force
-    (an edge node's shared by its edge's two ends) over the vertex's share of the skin.
+    (an edge node's shared by its edge's two ends, a node of the refined skin by the part's
+    vertices it is interpolated from: the transpose of ``mesh.interp``, which keeps the total)
+    over the vertex's share of the skin.
     """
     mesh = solver.mesh
     f = np.zeros(solver.n_all)
@@ -405,8 +407,8 @@ def _vertex_pressure(solver, contact, u) -> np.ndarray:
         f = f[: mesh.n_nodes].copy()
         np.add.at(f, solver.edges[:, 0], 0.5 * mid)
         np.add.at(f, solver.edges[:, 1], 0.5 * mid)
-    n = mesh.part.n_vertices
-    return f[:n] / mesh.part.vertex_areas
+    on_part = mesh.interp.T @ f[: mesh.n_skin]
+    return np.asarray(on_part).ravel() / mesh.part.vertex_areas
 
 
 def _answer(solver, contact, u, depth, direction, res, seconds) -> Pressed:

@@ -26,7 +26,10 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from fem.simulate import simulate
+from fem.contact import press_to_force
+from fem.material import NeoHookean
+from fem.simulate import resolution, simulate, tissue_mesh
+from fem.solver import Solver
 from stmpl.geometry import boundary_loops
 from stmpl.part import BodyPart
 from stmpl.reach import GROW, RING_TOLERANCE, first_margin, near
@@ -201,3 +204,73 @@ def _ring_moved(p: Patch, mesh, sols) -> float:
         return float("inf")
     u = np.linalg.norm(ok[-1].part_displacement(mesh), axis=1)
     return float(u[p.ring].max() / max(u.max(), 1e-30))
+
+
+def press_local(
+    part: BodyPart,
+    thickness,
+    shape,
+    direction,
+    force: float,
+    res="reference",
+    tissue: str = "forearm",
+    phenotype: dict | None = None,
+    margin: float | None = None,
+    tolerance: float = RING_TOLERANCE,
+    grow: float = GROW,
+    footprint: float = 0.003,
+    **kwargs,
+):
+    """A rigid ``shape`` pushed along ``direction`` (see :mod:`fem.contact`) until it carries
+    ``force`` (N), solved on the patch it moves: the object's footprint (the vertices it would
+    reach ``footprint`` m deep into the rest state) stands for the load in :func:`patch`, and
+    the patch grows as for a load when the ring next to the cut moves. ``kwargs`` go to
+    :func:`fem.contact.press_to_force`. Returns ``(answer, result)``: the
+    :class:`~fem.contact.Pressed` answer with its displacement ``(N, 3)`` and pressure ``(N,)``
+    on the whole part (zero outside the patch; its ``state`` is the patch's), and a
+    :class:`LocalResult`.
+    """
+    t = np.asarray(thickness, dtype=float)
+    phi, _, _ = shape.pushed(footprint, direction).distance(part.vertices)
+    touched = phi < 0
+    if not touched.any():
+        touched[np.argmin(phi)] = True
+    f = touched.astype(float)  # the footprint, as a load pattern: how far a press reaches
+    m = first_margin(part, t, f) if margin is None else float(margin)
+    result, failed = None, 0
+    while True:
+        p = patch(part, f, m)
+        t0 = time.perf_counter()
+        mesh, layered = tissue_mesh(
+            p.part, t[p.vertices], res, tissue, phenotype, part.vertices[touched]
+        )
+        solver = Solver(mesh, layered or NeoHookean(), order=resolution(res).order)
+        answer = press_to_force(solver, shape, direction, force, **kwargs)
+        if p.whole:
+            moved = 0.0
+        elif not answer.ok or len(p.ring) == 0:
+            moved = float("inf")
+        else:
+            u = np.linalg.norm(answer.displacement, axis=1)
+            moved = float(u[p.ring].max() / max(u.max(), 1e-30))
+        result = result or LocalResult(p)
+        result.patch = p
+        result.attempts.append(
+            {
+                "margin_m": m,
+                "vertices": int(len(p.vertices)),
+                "whole": p.whole,
+                "seconds": time.perf_counter() - t0,
+                "ring_moved": moved,
+            }
+        )
+        failed = failed + 1 if not answer.ok else 0
+        if p.whole or moved <= tolerance or failed >= FAILED_ATTEMPTS:
+            break
+        m *= grow
+    if not answer.ok:
+        return answer, result
+    pressure = np.zeros(part.n_vertices)
+    pressure[p.vertices] = answer.pressure
+    lifted = p.lift(answer.displacement, part.n_vertices)
+    return dataclasses.replace(answer, displacement=lifted, pressure=pressure), result

@@ -167,9 +167,13 @@ class Box:
 ROUNDING = 5e-4
 """m: the default rounding of a :class:`Surface` (its faces offset outward by half a mm)."""
 
-BAND = 0.005
+BAND = 0.002
 """m: how far from a :class:`Surface` its distance is exact; farther points (which no contact
-pressure reaches) get this distance."""
+pressure reaches: a press moves at most a millimetre a step) get this distance."""
+
+NEAREST = 8
+"""How many triangles, by their centroids, a point's nearest is first sought among; a point
+they do not settle is checked against every triangle within reach."""
 
 
 def closest_points(tri: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -287,20 +291,34 @@ class Surface:
         grad = x - tree.data[nearest]
         phi = np.where(np.einsum("ki,ki->k", grad, normal[nearest]) < 0, -BAND, BAND)
         grad /= np.maximum(np.linalg.norm(grad, axis=1), 1e-300)[:, None]
-        near = np.flatnonzero(d0 < BAND + self.rounding + reach)
+        # the nearest point lies no farther than the nearest centroid (d <= d0), and its
+        # triangle's centroid within d + reach
+        near = np.flatnonzero(d0 - reach < BAND + self.rounding)
         if len(near) == 0:
             return phi, grad, None
-        # the nearest triangle's centroid lies within d + reach, and d <= d0 + reach
-        lists = tree.query_ball_point(x[near], d0[near] + 2 * reach + 1e-12)
-        counts = np.fromiter((len(c) for c in lists), int, len(lists))
-        point = np.repeat(np.arange(len(near)), counts)
-        face = np.fromiter((t for c in lists for t in c), int, int(counts.sum()))
-        xp = x[near][point]
-        c, bary = closest_points(tri[face], xp)
-        dist = np.linalg.norm(xp - c, axis=1)
-        order = np.lexsort((dist, point))
-        first = order[np.r_[0, np.flatnonzero(np.diff(point[order])) + 1]]
-        face, c, dist, xq, bary = face[first], c[first], dist[first], xp[first], bary[first]
+        xq = x[near]
+        k = min(NEAREST, len(tri))
+        dk, ik = tree.query(xq, k=k)
+        dk, ik = dk.reshape(len(xq), k), ik.reshape(len(xq), k)
+        c, bary = closest_points(tri[ik.ravel()], np.repeat(xq, k, axis=0))
+        dist = np.linalg.norm(np.repeat(xq, k, axis=0) - c, axis=1).reshape(len(xq), k)
+        j = np.argmin(dist, axis=1)
+        rows = np.arange(len(xq))
+        face, dist = ik[rows, j], dist[rows, j]
+        c, bary = c.reshape(len(xq), k, 3)[rows, j], bary.reshape(len(xq), k, 3)[rows, j]
+        # a point whose k nearest centroids do not settle it: every triangle in reach
+        unsure = np.flatnonzero(dk[:, -1] < dist + reach) if k < len(tri) else []
+        if len(unsure):
+            lists = tree.query_ball_point(xq[unsure], dist[unsure] + reach + 1e-12)
+            counts = np.fromiter((len(c) for c in lists), int, len(lists))
+            point = np.repeat(np.arange(len(unsure)), counts)
+            cand = np.fromiter((t for c in lists for t in c), int, int(counts.sum()))
+            cc, cb = closest_points(tri[cand], xq[unsure][point])
+            cd = np.linalg.norm(xq[unsure][point] - cc, axis=1)
+            order = np.lexsort((cd, point))
+            first = order[np.r_[0, np.flatnonzero(np.diff(point[order])) + 1]]
+            face[unsure], dist[unsure] = cand[first], cd[first]
+            c[unsure], bary[unsure] = cc[first], cb[first]
         at = np.einsum("kj,kji->ki", bary, vn[self.faces[face]])
         side = np.sign(np.einsum("ki,ki->k", xq - c, at))
         side[side == 0] = 1.0

@@ -184,5 +184,8 @@ def test_a_mesh_presses_as_the_shape_it_approximates():
     assert closed.total == pytest.approx(meshed.total, rel=1e-9)
     assert closed.reaction == closed.total
     assert meshed.total == pytest.approx(meshed.reaction, rel=0.01)  # nearly all along the push
+    # the pressure map on the part's vertices keeps the whole contact force
+    carried = float(np.sum(meshed.pressure * part.vertex_areas))
+    assert carried == pytest.approx(meshed.total, rel=1e-9)
     with pytest.raises(ValueError, match="a direction is needed"):
         press(solver, surface, None, [depth])

@@ -6,11 +6,16 @@ import numpy as np
 import pytest
 
 from fem import local
-from fem.simulate import simulate
+from fem.contact import press_to_force
+from fem.material import NeoHookean
+from fem.shapes import Punch
+from fem.simulate import simulate, tissue_mesh
+from fem.solver import Solver
 from stmpl import loads, reach
 from stmpl.body.primitives import tube
 
 RES = {"subdivisions": 1, "layers": 2, "refine_radius": 0.03, "order": 1}
+RES_P2 = {"subdivisions": 0, "layers": 1, "refine_radius": None, "order": 2}
 
 
 @pytest.fixture(scope="module")
@@ -106,3 +111,45 @@ def test_a_load_the_tissue_cannot_carry_fails_after_one_growth_not_the_whole_par
     assert not any(s.ok for s in sols)
     assert len(res.attempts) == local.FAILED_ATTEMPTS == 2 and not res.patch.whole
     assert res.attempts[1]["margin_m"] == pytest.approx(reach.GROW * res.attempts[0]["margin_m"])
+
+
+def _press_both(part, tissue, force, radius, res, order):
+    """A disk pushed into ``part`` until it carries ``force``: the patch's answer and the
+    whole part's.
+    """
+    t = np.full(part.n_vertices, 0.0075)
+    top = int(np.argmin(np.abs(part.vertices[:, 2] - 0.2) + 10 * (1 - part.normals[:, 0])))
+    p, n = part.vertices[top], part.normals[top]
+    shape = Punch(p, -n, radius)
+    answer, result = local.press_local(part, t, shape, -n, force, res, tissue)
+    mesh, material = tissue_mesh(part, t, res, tissue, near=p[None])
+    solver = Solver(mesh, material or NeoHookean(), order=order)
+    return answer, result, press_to_force(solver, shape, -n, force), p
+
+
+@pytest.mark.parametrize(
+    "tissue, force, res, order",
+    [
+        ("paper", 0.1, RES, 1),
+        pytest.param("forearm", 1.0, RES_P2, 2, marks=pytest.mark.slow),
+    ],
+)
+def test_a_pressed_object_solved_on_its_patch_matches_the_whole_part(
+    long_tube, tissue, force, res, order
+):
+    """A 20 mm disk pushed until it carries a force, on the paper's gel (fast) and the forearm
+    preset (slow, 1 N): the patch's answer lies within 1 % (of the deepest displacement) of
+    the whole tube's, carries the force within 1 %, and its pressure sits under the disk.
+    """
+    answer, result, whole, p = _press_both(long_tube, tissue, force, 0.02, res, order)
+    assert answer.ok and whole.ok, (answer.reason, whole.reason)
+    assert not result.patch.whole
+    assert result.patch.part.n_vertices < 0.6 * long_tube.n_vertices
+    assert answer.reaction == pytest.approx(force, rel=0.01)
+    peak = np.linalg.norm(whole.displacement, axis=1).max()
+    assert np.linalg.norm(answer.displacement - whole.displacement, axis=1).max() < 0.01 * peak
+    pressed = answer.pressure > 0
+    assert np.linalg.norm(long_tube.vertices[pressed] - p, axis=1).max() < 0.02 + 0.015
+    # the refined skin's contact forces all reach the part's vertices
+    carried = float(np.sum(whole.pressure * long_tube.vertex_areas))
+    assert carried == pytest.approx(whole.total, rel=1e-9)

@@ -1,0 +1,108 @@
+"""A 10 N disk on the layered forearm, solved on the whole arm and on the patch it moves: the
+time of each, and how far the two answers lie apart.
+
+    python benchmarks/press_local.py [--force 10] [--tissue forearm] [--res reference]
+        [--radius-mm 10] [--repeats 2]
+
+The disk (a rigid flat punch) starts touching the skin at chart point (0.35, 0.5) of anny's
+left arm and is pushed along the inward normal until it carries the force (within 1 %), from
+rest each time. Run it alone: the times are wall-clock, each the best of ``--repeats``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+import warnings
+
+import numpy as np
+
+from fem.contact import press_to_force
+from fem.local import press_local
+from fem.shapes import Punch
+from fem.simulate import resolution, tissue_mesh
+from fem.solver import Solver
+from stmpl import AnnyBody, loads, tissue
+from stmpl.machine import describe
+from stmpl.table import header, row
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--force", type=float, default=10.0, help="N")
+    ap.add_argument("--tissue", default="forearm")
+    ap.add_argument("--res", default="reference")
+    ap.add_argument("--radius-mm", type=float, default=10.0)
+    ap.add_argument("--repeats", type=int, default=2)
+    args = ap.parse_args()
+    warnings.simplefilter("ignore")
+    part = AnnyBody(phenotype={"weight": 0.5}).part("left_arm")
+    thickness = tissue.from_weight(part, 0.5)
+    r = 1e-3 * args.radius_mm
+    disk = loads.disk(part, uv=(0.35, 0.5), radius=r, total=1.0)
+    centre = part.vertices[disk.vertices].mean(0)
+    at = disk.vertices[np.argmin(np.linalg.norm(part.vertices[disk.vertices] - centre, axis=1))]
+    p, n = part.vertices[at], part.normals[at]
+    shape = Punch(p, -n, r)
+    print(
+        f"{args.force:g} N, {args.radius_mm:g} mm disk on the {args.tissue} preset of anny's left "
+        f"arm ({part.n_vertices} vertices), {args.res} resolution; {describe()}"
+    )
+
+    def whole():
+        mesh, material = tissue_mesh(part, thickness, args.res, args.tissue, near=p[None])
+        solver = Solver(mesh, material, order=resolution(args.res).order)
+        return press_to_force(solver, shape, -n, args.force), len(solver.free)
+
+    def local():
+        answer, result = press_local(part, thickness, shape, -n, args.force, args.res, args.tissue)
+        return answer, result
+
+    times = {"whole": [], "local": []}
+    for _ in range(args.repeats):
+        t0 = time.perf_counter()
+        full, dofs = whole()
+        times["whole"].append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        near, result = local()
+        times["local"].append(time.perf_counter() - t0)
+    if not (full.ok and near.ok):
+        print(f"failed: whole {full.reason or 'ok'}; local {near.reason or 'ok'}")
+        return
+    peak = np.linalg.norm(full.displacement, axis=1).max()
+    gap = np.linalg.norm(near.displacement - full.displacement, axis=1).max() / peak
+    att = result.attempts[-1]
+    print(header(["solve", "s (best)", "DOFs / patch", "depth mm", "reaction N", "note"], "lrrrrl"))
+    print(
+        row(
+            [
+                "whole arm",
+                f"{min(times['whole']):.1f}",
+                f"{dofs} DOFs",
+                f"{1e3 * full.depth:.3f}",
+                f"{full.reaction:.3f}",
+                "",
+            ]
+        )
+    )
+    print(
+        row(
+            [
+                "local",
+                f"{min(times['local']):.1f}",
+                f"{att['vertices']} of {part.n_vertices} vertices",
+                f"{1e3 * near.depth:.3f}",
+                f"{near.reaction:.3f}",
+                f"{len(result.attempts)} attempt(s), margin {1e3 * att['margin_m']:.0f} mm, "
+                f"ring moved {100 * att['ring_moved']:.2f} %",
+            ]
+        )
+    )
+    print(
+        f"\nlocal vs whole: largest displacement gap {100 * gap:.2f} % of the deepest "
+        f"({1e3 * peak:.2f} mm); {min(times['whole']) / min(times['local']):.1f}x faster"
+    )
+
+
+if __name__ == "__main__":
+    main()
