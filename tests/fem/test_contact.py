@@ -189,3 +189,4 @@ def test_a_mesh_presses_as_the_shape_it_approximates():
     assert carried == pytest.approx(meshed.total, rel=1e-9)
     with pytest.raises(ValueError, match="a direction is needed"):
         press(solver, surface, None, [depth])
+    assert solver.options.stagnation == SolverOptions().stagnation  # patience only while pressing
