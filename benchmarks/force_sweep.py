@@ -101,6 +101,8 @@ def solve_case(part_name, obj, where, res, body) -> list[dict]:
                 reaction=answer.reaction,
                 area_cm2=1e4 * answer.area,
                 peak_kpa=1e-3 * float(answer.pressure.max()),
+                min_det_f=answer.min_det_F,
+                compression=answer.compression,
                 seconds=answer.time,
             )
         out.append(rec)

@@ -185,6 +185,8 @@ class Pressed:
         pressure: ``(N,)`` contact pressure on the part's vertices, Pa.
         area: contact area, m^2 (the skin area the object presses).
         penetration: the deepest a skin node lies inside the object, m.
+        min_det_F: the smallest volume ratio in the tissue; ``compression``: how far the skin
+            moves inward as a share of the tissue's depth under it (its largest).
         iterations: Newton iterations, all updates summed; ``updates``: multiplier updates.
         time: seconds.
     """
@@ -200,6 +202,8 @@ class Pressed:
     pressure: np.ndarray | None = None
     area: float = float("nan")
     penetration: float = float("nan")
+    min_det_F: float = float("nan")
+    compression: float = float("nan")
     iterations: int = 0
     updates: int = 0
     time: float = 0.0
@@ -427,6 +431,7 @@ def _answer(solver, contact, u, depth, direction, res, seconds) -> Pressed:
     mesh = solver.mesh
     n = mesh.part.n_vertices
     checked = solver.check(u)
+    detF, compression = solver.measures(u)
     pressure = _vertex_pressure(solver, contact, u)
     force = contact.force()
     total = float(np.sum(contact.weights * contact.multipliers))
@@ -446,6 +451,8 @@ def _answer(solver, contact, u, depth, direction, res, seconds) -> Pressed:
         pressure=pressure,
         area=float(mesh.part.vertex_areas[pressure > 0].sum()),
         penetration=res["penetration"],
+        min_det_F=detF,
+        compression=compression,
         multipliers=contact.multipliers.copy(),
         **common,
     )

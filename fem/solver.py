@@ -502,16 +502,23 @@ class Solver:
             substeps,
         )
 
+    def measures(self, u: np.ndarray) -> tuple[float, float]:
+        """``(min det F, compression)`` of state ``u`` ``(n_all, 3)``: the smallest volume
+        ratio over the quadrature points, and how far the skin moves inward as a share of the
+        tissue's depth under it (the largest over the skin).
+        """
+        detF = float(det3(self._F(u)).min())
+        m = self.mesh
+        inward = -np.einsum("si,si->s", u[: m.n_skin], m.skin_normals) / m.thickness
+        return detF, float(inward.max())
+
     def check(self, u: np.ndarray) -> str:
         """Why state ``u`` ``(n_all, 3)`` cannot be trusted (an inverted element, the skin
         pushed past ``options.max_compression`` of the thickness), or ``""``.
         """
-        detF = float(det3(self._F(u)).min())
+        detF, comp = self.measures(u)
         if detF <= 0:
             return f"inverted element (min det F {detF:.3g})"
-        m = self.mesh
-        inward = -np.einsum("si,si->s", u[: m.n_skin], m.skin_normals) / m.thickness
-        comp = float(inward.max())
         if comp > self.options.max_compression:
             return (
                 f"non-physical: the skin moves inward {comp:.2f} x the "
@@ -520,11 +527,8 @@ class Solver:
         return ""
 
     def _checked_solution(self, res, u, iters, t0, force, substeps) -> Solution:
-        detF = float(det3(self._F(u)).min())
-        m = self.mesh
-        skin_u = u[: m.n_skin]
-        inward = -np.einsum("si,si->s", skin_u, m.skin_normals) / m.thickness
-        comp = float(inward.max())
+        detF, comp = self.measures(u)
+        skin_u = u[: self.mesh.n_skin]
         umax = float(np.linalg.norm(skin_u, axis=1).max())
         elapsed = time.perf_counter() - t0
         base = dict(
@@ -547,4 +551,4 @@ class Solver:
                 None,
                 **base,
             )
-        return Solution(True, "", u[: m.n_nodes], state=u, **base)
+        return Solution(True, "", u[: self.mesh.n_nodes], state=u, **base)

@@ -184,6 +184,10 @@ def test_a_mesh_presses_as_the_shape_it_approximates():
     assert closed.total == pytest.approx(meshed.total, rel=1e-9)
     assert closed.reaction == closed.total
     assert meshed.total == pytest.approx(meshed.reaction, rel=0.01)  # nearly all along the push
+    # the state's own measures: the skin under the ball moves in by the depth, and the
+    # tissue under it loses volume (nu = 0.45) without inverting
+    assert meshed.compression == pytest.approx(depth / h, rel=0.02)
+    assert 0.9 < meshed.min_det_F < 1.0
     # the pressure map on the part's vertices keeps the whole contact force
     carried = float(np.sum(meshed.pressure * part.vertex_areas))
     assert carried == pytest.approx(meshed.total, rel=1e-9)
