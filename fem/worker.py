@@ -66,31 +66,12 @@ def solve_shard(payload: dict) -> dict:
             continue
         lift = None
         try:
+            setup = (part, thickness, load.force, levels, cfg["resolution"], mat, opts)
             if cfg.get("fidelity", "full") == "auto":
-                mesh, sols, local = simulate_local(
-                    part,
-                    thickness,
-                    load.force,
-                    levels,
-                    cfg["resolution"],
-                    mat,
-                    opts,
-                    tissue,
-                    phenotype,
-                )
+                mesh, sols, local = simulate_local(*setup, tissue, phenotype)
                 lift = local.patch.lift
             else:
-                mesh, sols = simulate(
-                    part,
-                    thickness,
-                    load.force,
-                    levels,
-                    cfg["resolution"],
-                    mat,
-                    opts,
-                    tissue,
-                    phenotype,
-                )
+                mesh, sols = simulate(*setup, tissue, phenotype)
         except ValueError as e:  # a shell that cannot be meshed (folds) is a failure too
             for f in levels:
                 failures.append(
