@@ -159,11 +159,13 @@ FILE_KEYS = {"name", "based_on", "about", "skin_mm", "muscle_mm", "layers"}
 LAYER_KEYS = {"law", "elements", "source"}
 
 
-def preset(spec: str | dict) -> Preset | None:
+def preset(spec: str | dict | Preset) -> Preset | None:
     """The preset ``spec`` names: ``"paper"`` (``None``: the single gel layer), a preset of
-    :data:`PRESETS`, a YAML file of layers (``*.yaml``), or that file's mapping (see
-    :func:`from_mapping`).
+    :data:`PRESETS`, a YAML file of layers (``*.yaml``), that file's mapping (see
+    :func:`from_mapping`), or a :class:`Preset` itself.
     """
+    if isinstance(spec, Preset):
+        return spec
     if isinstance(spec, dict):
         return from_mapping(spec)
     if not isinstance(spec, str) or not spec:

@@ -1,0 +1,71 @@
+"""How many element layers each tissue layer needs: a rigid 8 mm sphere pressed into the
+forearm preset of an arm-sized tube (as ``press_convergence.py``, the skin refined twice near
+the contact), with one layer's element count raised at a time from the preset's (skin 1, fat 2,
+muscle 2; quadratic tetrahedra).
+
+    python benchmarks/layer_convergence.py [--depths-mm 2 4] [--tissue forearm]
+
+Each row changes one count; the reactions are compared with the preset's row. Run it alone:
+the times are wall-clock.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+import warnings
+from dataclasses import replace
+
+import numpy as np
+
+from fem.contact import press
+from fem.layers import preset
+from fem.shapes import Sphere
+from fem.simulate import tissue_mesh
+from fem.solver import Solver
+from stmpl.body.primitives import tube
+from stmpl.machine import describe
+from stmpl.table import header, row
+
+VARIANTS = [{}, {"skin": 2}, {"skin": 3}, {"fat": 4}, {"muscle": 4}]
+"""Element counts changed from the preset's, a row each (the first: the preset itself)."""
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--depths-mm", type=float, nargs="+", default=[2.0, 4.0])
+    ap.add_argument("--tissue", default="forearm")
+    args = ap.parse_args()
+    warnings.simplefilter("ignore")
+    part = tube(radius=0.035, length=0.08, n_around=24, n_along=8)
+    thickness = np.full(part.n_vertices, 0.0075)
+    top = int(np.argmax(part.vertices[:, 0] - 10 * np.abs(part.vertices[:, 2] - 0.04)))
+    p, n = part.vertices[top], part.normals[top]
+    depths = [1e-3 * d for d in args.depths_mm]
+    base = preset(args.tissue)
+    print(f"{args.tissue} on a tube, 8 mm sphere, skin refined twice; {describe()}")
+    columns = ["elements (skin, fat, muscle)", "DOFs"]
+    columns += [f"reaction at {d:g} mm, N (change)" for d in args.depths_mm]
+    print(header(columns + ["s"], "l" + "r" * (len(columns))))
+    reference = None
+    for change in VARIANTS:
+        layers = tuple(replace(x, elements=change.get(x.name, x.elements)) for x in base.layers)
+        stack = replace(base, layers=layers)
+        res = {"subdivisions": 2, "layers": 2, "refine_radius": 0.02, "order": 2}
+        t0 = time.perf_counter()
+        mesh, material = tissue_mesh(part, thickness, res, stack, near=p[None])
+        solver = Solver(mesh, material, order=2)
+        out = press(solver, Sphere(p + 0.008 * n, 0.008), -n, depths)
+        forces = [r.reaction if r.ok else float("nan") for r in out]
+        reference = reference or forces
+        cells = [
+            f"{f:.4f} ({100 * (f / r0 - 1):+.1f} %)" if r.ok else r.reason
+            for f, r0, r in zip(forces, reference, out)
+        ]
+        counts = ", ".join(str(x.elements) for x in layers)
+        seconds = f"{time.perf_counter() - t0:.0f}"
+        print(row([counts, len(solver.free), *cells, seconds]), flush=True)
+
+
+if __name__ == "__main__":
+    main()
