@@ -16,14 +16,12 @@ import time
 import warnings
 from dataclasses import replace
 
-import numpy as np
-
 from fem.contact import press
 from fem.layers import preset
 from fem.shapes import Sphere
 from fem.simulate import tissue_mesh
 from fem.solver import Solver
-from stmpl.body.primitives import tube
+from fem.verification import arm_tube
 from stmpl.machine import describe
 from stmpl.table import header, row
 
@@ -37,10 +35,7 @@ def main() -> None:
     ap.add_argument("--tissue", default="forearm")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
-    part = tube(radius=0.035, length=0.08, n_around=24, n_along=8)
-    thickness = np.full(part.n_vertices, 0.0075)
-    top = int(np.argmax(part.vertices[:, 0] - 10 * np.abs(part.vertices[:, 2] - 0.04)))
-    p, n = part.vertices[top], part.normals[top]
+    part, thickness, p, n = arm_tube()
     depths = [1e-3 * d for d in args.depths_mm]
     base = preset(args.tissue)
     print(f"{args.tissue} on a tube, 8 mm sphere, skin refined twice; {describe()}")

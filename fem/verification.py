@@ -31,7 +31,7 @@ from scipy.integrate import quad
 
 from fem.mesh import ShellMesh, shell_mesh
 from stmpl.body.extract import normalise_chart
-from stmpl.body.primitives import grid
+from stmpl.body.primitives import grid, tube
 from stmpl.part import BodyPart
 
 
@@ -160,3 +160,14 @@ def quarter_slab(
     fixed[np.abs(y) < 1e-12, 1] = True
     fixed[np.hypot(x, y) > radius * (1 - 1e-9)] = True
     return part, mesh, fixed
+
+
+def arm_tube() -> tuple:
+    """``(part, thickness (N,), point (3,), normal (3,))``: an arm-sized tube (radius 35 mm,
+    80 mm long) under 7.5 mm of skin and fat, and the skin point at its middle where the
+    convergence studies press.
+    """
+    part = tube(radius=0.035, length=0.08, n_around=24, n_along=8)
+    thickness = np.full(part.n_vertices, 0.0075)
+    top = int(np.argmax(part.vertices[:, 0] - 10 * np.abs(part.vertices[:, 2] - 0.04)))
+    return part, thickness, part.vertices[top], part.normals[top]

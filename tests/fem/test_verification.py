@@ -3,7 +3,14 @@
 import numpy as np
 import pytest
 
-from fem.verification import dimitriadis_force, graded, hayes_kappa, hertz_force, quarter_disk
+from fem.verification import (
+    arm_tube,
+    dimitriadis_force,
+    graded,
+    hayes_kappa,
+    hertz_force,
+    quarter_disk,
+)
 
 HAYES_045 = {0.2: 1.252, 0.4: 1.599, 0.6: 2.031, 0.8: 2.532, 1.0: 3.085, 1.5: 4.638, 2.0: 6.380}
 """Hayes et al. (1972)'s published kappa at nu = 0.45, as tabulated in the literature."""
@@ -35,3 +42,11 @@ def test_quarter_disk_rings_are_circles():
     assert part.vertex_areas.sum() == pytest.approx(np.pi / 4 * 0.004**2, rel=0.03)
     steps = graded(0.001, 0.01, 1.3)
     assert steps[0] == 0 and steps[-1] == 0.01 and np.all(np.diff(steps) > 0)
+
+
+def test_the_arm_tube_presses_at_its_middle_along_its_outward_normal():
+    part, thickness, point, normal = arm_tube()
+    assert thickness.shape == (part.n_vertices,) and np.all(thickness == 0.0075)
+    assert np.hypot(point[0], point[1]) == pytest.approx(0.035)
+    assert abs(point[2] - 0.04) < 0.08 / 7  # the ring nearest the middle
+    np.testing.assert_allclose(normal, point * [1, 1, 0] / 0.035, atol=1e-9)
