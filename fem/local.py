@@ -174,7 +174,8 @@ def simulate_local(
         mesh, sols = simulate(
             p.part, t[p.vertices], f[p.vertices], totals, res, material, options, tissue, phenotype
         )
-        moved = _ring_moved(p, mesh, sols)
+        ok = [x for x in sols if x.ok]
+        moved = _ring_moved(p, ok[-1].part_displacement(mesh) if ok else None)
         att = {
             "margin_m": m,
             "vertices": int(len(p.vertices)),
@@ -191,19 +192,19 @@ def simulate_local(
         m *= grow
 
 
-def _ring_moved(p: Patch, mesh, sols) -> float:
-    """How far the ring next to the cut moved at the last level that converged, relative to the
-    deepest displacement there: ``inf`` when no level converged (a patch too tight may be what
-    failed, so it grows; a failure with the ring still is the load's own) or the patch has no
-    ring (all of it on the cut); 0 for the whole part.
+def _ring_moved(p: Patch, u: np.ndarray | None) -> float:
+    """How far the ring next to the cut moved in ``u`` ``(k, 3)`` (the patch's displacement at
+    the last answer that converged), relative to the deepest displacement: ``inf`` when none
+    converged (``u`` ``None``: a patch too tight may be what failed, so it grows; a failure with
+    the ring still is the load's own) or the patch has no ring (all of it on the cut); 0 for
+    the whole part.
     """
     if p.whole:
         return 0.0
-    ok = [s for s in sols if s.ok]
-    if not ok or len(p.ring) == 0:
+    if u is None or len(p.ring) == 0:
         return float("inf")
-    u = np.linalg.norm(ok[-1].part_displacement(mesh), axis=1)
-    return float(u[p.ring].max() / max(u.max(), 1e-30))
+    norm = np.linalg.norm(u, axis=1)
+    return float(norm[p.ring].max() / max(norm.max(), 1e-30))
 
 
 def press_local(
@@ -246,13 +247,7 @@ def press_local(
         )
         solver = Solver(mesh, layered or NeoHookean(), order=resolution(res).order)
         answer = press_to_force(solver, shape, direction, force, **kwargs)
-        if p.whole:
-            moved = 0.0
-        elif not answer.ok or len(p.ring) == 0:
-            moved = float("inf")
-        else:
-            u = np.linalg.norm(answer.displacement, axis=1)
-            moved = float(u[p.ring].max() / max(u.max(), 1e-30))
+        moved = _ring_moved(p, answer.displacement if answer.ok else None)
         result = result or LocalResult(p)
         result.patch = p
         result.attempts.append(
