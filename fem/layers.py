@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from fem.material import Demiray, Exponential, Layered, NeoHookean, Yeoh
+from fem.material import Demiray, Exponential, Layered, Limits, NeoHookean, Yeoh
 
 MIN_FAT = 0.0005
 """The thinnest fat layer a preset meshes, m."""
@@ -59,6 +59,7 @@ class Preset:
     skin: float
     muscle: float
     about: str
+    limits: Limits | None = None
 
     def thicknesses(
         self, thickness: np.ndarray, phenotype: dict | None = None, room=None
@@ -109,13 +110,22 @@ class Preset:
         ``tet_layers`` ``(T,)`` (0 under the skin), meshed by :meth:`fractions`.
         """
         tissue_of = np.repeat(np.arange(len(self.layers)), [x.elements for x in self.layers])
-        return Layered(tuple(x.law for x in self.layers), tissue_of[tet_layers])
+        laws = tuple(x.law for x in self.layers)
+        return Layered(laws, tissue_of[tet_layers], self.limits)
 
     @property
     def elements(self) -> int:
         """Element layers through the whole depth."""
         return sum(x.elements for x in self.layers)
 
+
+INCOMPRESSIBLE = 2000 * KPA
+"""The bulk modulus of fat and relaxed muscle, Pa: a stand-in for incompressibility (tissue is
+mostly water, whose bulk modulus is 2.2 GPa; Sommer et al. 2013 fit adipose tissue as
+incompressible). The fits' own K (36 kPa for the hypodermis, nu = 0.49 for muscle) let the
+fat and muscle lose a third of their volume under a 10 N fingertip once the fat has stiffened
+in shear; with this K they keep 0.87 of it at worst, and quadratic tetrahedra stay free of
+locking (a flat punch at nu = 0.49999 within 1.7 % of Hayes)."""
 
 SKIN = Layer(
     "skin",
@@ -127,26 +137,35 @@ SKIN = Layer(
 )
 FAT = Layer(
     "fat",
-    Exponential(c=0.15 * KPA, k1=0.8 * KPA, k2=47.3, K=36 * KPA),
+    Exponential(c=0.15 * KPA, k1=0.8 * KPA, k2=47.3, K=INCOMPRESSIBLE),
     2,
     "Sommer et al. 2013 (Acta Biomater. 9:9036), human subcutaneous adipose tissue: c 0.15 kPa, "
-    "k1 0.8 kPa, k2 47.3; K 36 kPa from Tran et al. 2007's hypodermis",
+    "k1 0.8 kPa, k2 47.3, fitted as incompressible; K 2 MPa stands for that",
 )
 MUSCLE = Layer(
     "muscle",
-    Yeoh(C10=1.2 * KPA, K=120 * KPA),
+    Yeoh(C10=1.2 * KPA, K=INCOMPRESSIBLE),
     2,
     "relaxed muscle, C10 0.7-1.7 kPa over nine forearms (Tran 2007 thesis; 1.2 kPa taken); "
-    "K for nu = 0.49",
+    "K 2 MPa for a nearly incompressible muscle (nu 0.4994)",
 )
 PAPER = Layer(
     "gel", NeoHookean(1000.0, 0.4), 2, "the paper's set-up: neo-Hookean, E = 1 kPa, nu = 0.4"
 )
 
+TRUSTED = Limits(
+    0.8,
+    0.6,
+    "layered tissue is nearly incompressible, and the reaction under mesh refinement is "
+    "measured up to this compression",
+)
+"""The layered presets' trust bounds (``docs/tissue.md``, where they were measured)."""
+
+LAYERS = (SKIN, FAT, MUSCLE)
 PRESETS = {
-    "forearm": Preset("forearm", (SKIN, FAT, MUSCLE), 0.0012, 0.010, "the dorsal forearm, relaxed"),
-    "upper_arm": Preset("upper_arm", (SKIN, FAT, MUSCLE), 0.0013, 0.015, "the upper arm, relaxed"),
-    "abdomen": Preset("abdomen", (SKIN, FAT, MUSCLE), 0.0019, 0.010, "the abdomen, relaxed"),
+    "forearm": Preset("forearm", LAYERS, 0.0012, 0.010, "the dorsal forearm, relaxed", TRUSTED),
+    "upper_arm": Preset("upper_arm", LAYERS, 0.0013, 0.015, "the upper arm, relaxed", TRUSTED),
+    "abdomen": Preset("abdomen", LAYERS, 0.0019, 0.010, "the abdomen, relaxed", TRUSTED),
 }
 """The layered presets by name (``paper`` is the single gel layer, :func:`preset`)."""
 
@@ -205,7 +224,7 @@ def from_mapping(spec: dict) -> Preset:
         muscle_mm: 12           # the muscle's base depth, mm
         layers:                 # any of skin, fat, muscle; each a law and its parameters (Pa)
           skin: {law: yeoh, C10: 200000, K: 5.4e6, elements: 1, source: "..."}
-          fat: {law: exponential, c: 150, k1: 800, k2: 47.3, K: 36000}
+          fat: {law: exponential, c: 150, k1: 800, k2: 47.3, K: 2.0e6}
 
     Laws: :data:`LAWS` (``neo_hookean`` takes ``E`` and ``nu``; the others ``K`` and their own
     constants). Without ``based_on``, ``skin_mm``, ``muscle_mm`` and all three layers are needed.
@@ -236,7 +255,7 @@ def from_mapping(spec: dict) -> Preset:
     skin = _millimetres(spec, "skin_mm", known.skin if known else None, name)
     muscle = _millimetres(spec, "muscle_mm", known.muscle if known else None, name)
     about = spec.get("about", f"from a file{f', based on {base}' if base else ''}")
-    return Preset(name, tuple(built), skin, muscle, str(about))
+    return Preset(name, tuple(built), skin, muscle, str(about), TRUSTED)
 
 
 def _millimetres(spec: dict, key: str, default, name: str) -> float:

@@ -81,8 +81,31 @@ def lame(E: float, nu: float) -> tuple[float, float]:
     return E / (2 * (1 + nu)), E * nu / ((1 + nu) * (1 - 2 * nu))
 
 
+@dataclass(frozen=True)
+class Limits:
+    """Where a tissue's answers are trusted: the smallest volume ratio ``min_det_F`` anywhere in
+    it and the largest ``max_compression`` (how far the skin moves inward as a share of the
+    tissue's depth under it). ``source`` says where the bounds come from.
+    """
+
+    min_det_F: float
+    max_compression: float
+    source: str = ""
+
+    def __post_init__(self) -> None:
+        if not (0.0 <= self.min_det_F < 1.0 and 0.0 < self.max_compression <= 1.0):
+            raise ValueError(
+                f"limits need min_det_F in [0, 1) and max_compression in (0, 1], got "
+                f"{self.min_det_F!r} and {self.max_compression!r}"
+            )
+
+
 class Law:
-    """What every material gives from its ``tangent_parts``: the stress and the full tangent."""
+    """What every material gives from its ``tangent_parts``: the stress and the full tangent.
+    ``limits`` (a :class:`Limits`, or ``None``) bound where its answers are trusted.
+    """
+
+    limits = None
 
     def stress(self, F: np.ndarray) -> np.ndarray:
         """``(T, 3, 3)`` first Piola-Kirchhoff stress, Pa."""
@@ -330,12 +353,14 @@ class Exponential(IsochoricLaw):
 @dataclass(frozen=True, eq=False)
 class Layered(Law):
     """Each element its own layer's law: ``laws`` (one per layer) and ``layer`` ``(T,)`` (the
-    layer of each element, in the mesh's element order). Evaluated on ``F`` ``(T Q, 3, 3)``,
-    ``Q`` quadrature points per element in a row.
+    layer of each element, in the mesh's element order), and the tissue's trust bounds
+    ``limits`` (:class:`Limits`, or ``None``). Evaluated on ``F`` ``(T Q, 3, 3)``, ``Q``
+    quadrature points per element in a row.
     """
 
     laws: tuple
     layer: np.ndarray
+    limits: Limits | None = None
     name = "layered"
 
     def __post_init__(self) -> None:

@@ -513,16 +513,33 @@ class Solver:
         return detF, float(inward.max())
 
     def check(self, u: np.ndarray) -> str:
-        """Why state ``u`` ``(n_all, 3)`` cannot be trusted (an inverted element, the skin
-        pushed past ``options.max_compression`` of the thickness), or ``""``.
+        """Why state ``u`` ``(n_all, 3)`` cannot be trusted, or ``""``: see :meth:`distrust`."""
+        return self.distrust(*self.measures(u))
+
+    def distrust(self, detF: float, compression: float) -> str:
+        """Why a state of smallest volume ratio ``detF`` and skin ``compression`` (share of
+        the depth) cannot be trusted, or ``""``: an inverted element, the skin pushed past
+        ``options.max_compression``, or past the material's :class:`~fem.material.Limits`.
         """
-        detF, comp = self.measures(u)
         if detF <= 0:
             return f"inverted element (min det F {detF:.3g})"
-        if comp > self.options.max_compression:
+        if compression > self.options.max_compression:
             return (
-                f"non-physical: the skin moves inward {comp:.2f} x the "
+                f"non-physical: the skin moves inward {compression:.2f} x the "
                 f"thickness (limit {self.options.max_compression})"
+            )
+        limits = self.material.limits
+        if limits is None:
+            return ""
+        if detF < limits.min_det_F:
+            return (
+                f"not trusted: the tissue keeps {detF:.2f} of its volume at worst "
+                f"(trusted down to {limits.min_det_F:g}; {limits.source})"
+            )
+        if compression > limits.max_compression:
+            return (
+                f"not trusted: the skin moves inward {compression:.2f} x the tissue's depth "
+                f"(trusted up to {limits.max_compression:g}; {limits.source})"
             )
         return ""
 
@@ -541,14 +558,7 @@ class Solver:
             max_displacement=umax,
             max_compression=comp,
         )
-        if detF <= 0:
-            return Solution(False, f"inverted element (min det F {detF:.3g})", None, **base)
-        if comp > self.options.max_compression:
-            return Solution(
-                False,
-                f"non-physical: the skin moves inward {comp:.2f} x the "
-                f"thickness (limit {self.options.max_compression})",
-                None,
-                **base,
-            )
+        reason = self.distrust(detF, comp)
+        if reason:
+            return Solution(False, reason, None, **base)
         return Solution(True, "", u[: self.mesh.n_nodes], state=u, **base)

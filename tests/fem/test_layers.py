@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fem.contact import press
-from fem.layers import MIN_FAT, MIN_MUSCLE, PRESETS, preset
+from fem.layers import MIN_FAT, MIN_MUSCLE, PRESETS, TRUSTED, preset
 from fem.mesh import shell_mesh
 from fem.shapes import Sphere
 from fem.simulate import tissue_mesh
@@ -69,6 +69,7 @@ def test_the_fem_meshes_a_preset_on_a_curved_part():
     assert mesh.layers == PRESETS["forearm"].elements
     assert mesh.thickness.max() == pytest.approx(0.0175, rel=1e-6)
     assert mat.name == "layered" and len(mat.laws) == 3 and len(mat.layer) == len(mesh.tets)
+    assert mat.limits == TRUSTED and 0 < TRUSTED.min_det_F < 1 and 0 < TRUSTED.max_compression < 1
     gel, none = tissue_mesh(part, t, "coarse")
     assert none is None and gel.thickness.max() == pytest.approx(0.0075)
 
@@ -109,6 +110,7 @@ def test_a_tissue_file_overrides_a_preset_layer_by_layer(tmp_path):
     skin = firm.layers[0]
     assert (skin.law.C10, skin.law.C20, skin.law.K, skin.elements) == (3e5, 1e3, 8e6, 2)
     assert firm.layers[1:] == PRESETS["forearm"].layers[1:]
+    assert firm.limits == TRUSTED  # a file's layered tissue is trusted as far as the presets
     t = firm.thicknesses(np.full(3, 0.0075), {"gender": 0.5, "age": 0.2})
     np.testing.assert_allclose(t[0], 0.0015 * 1.0 * (1.05 - 0.05))
     whole = {

@@ -1,10 +1,21 @@
 """Verification of the FEM solver against closed forms, finite differences and scikit-fem."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from fem.linear_solvers import available_linear_solvers
-from fem.material import Demiray, Layered, LinearElastic, NeoHookean, Yeoh, lame, uniaxial
+from fem.material import (
+    Demiray,
+    Layered,
+    Limits,
+    LinearElastic,
+    NeoHookean,
+    Yeoh,
+    lame,
+    uniaxial,
+)
 from fem.mesh import shell_mesh
 from fem.solver import Solver, SolverOptions
 from stmpl.body.primitives import sheet, tube
@@ -240,6 +251,32 @@ def test_non_physical_states_are_rejected():
     strict = Solver(mesh, options=SolverOptions(max_compression=0.5 * ok.max_compression))
     bad = strict.solve(force)
     assert not bad.ok and "non-physical" in bad.reason and bad.displacement is None
+
+
+def test_a_tissue_s_trust_bounds_reject_an_answer_past_them():
+    """A layered tissue's :class:`Limits` are checked on every answer: the same solve is
+    trusted under loose bounds and failed with its reason when the volume ratio or the
+    compression it reaches lies past them.
+    """
+    part = sheet(0.1, 0.1, 9, 9)
+    mesh = shell_mesh(part, np.full(part.n_vertices, 0.01), layers=2)
+    force = np.zeros(part.n_vertices)
+    force[40] = 0.1
+    laws = (NeoHookean(), NeoHookean())
+    loose = _layered(mesh, laws)
+    ok = Solver(mesh, loose).solve(force)
+    assert ok.ok and 0 < ok.min_det_F < 1 and 0 < ok.max_compression < 1
+    for limits, words in [
+        (Limits(0.5 * (1 + ok.min_det_F), 1.0, "src"), "keeps"),
+        (Limits(0.0, 0.5 * ok.max_compression, "src"), "moves inward"),
+    ]:
+        bad = Solver(mesh, replace(loose, limits=limits)).solve(force)
+        assert not bad.ok and bad.displacement is None
+        assert bad.reason.startswith("not trusted") and words in bad.reason and "src" in bad.reason
+    with pytest.raises(ValueError, match="min_det_F in"):
+        Limits(1.2, 0.5)
+    with pytest.raises(ValueError, match="max_compression in"):
+        Limits(0.5, 0.0)
 
 
 def test_bad_input_is_named():
