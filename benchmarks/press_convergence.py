@@ -19,8 +19,11 @@ import time
 import warnings
 from dataclasses import replace
 
+import numpy as np
+
 from fem.contact import press
 from fem.layers import preset
+from fem.material import det3
 from fem.shapes import Sphere
 from fem.simulate import tissue_mesh
 from fem.solver import Solver
@@ -44,7 +47,7 @@ def main() -> None:
     stack = preset(args.tissue)
     if stack is not None:
         stack = replace(stack, limits=None)
-    runs = []
+    runs, where = [], []
     for level in args.levels:
         res = {"subdivisions": level, "layers": 2, "refine_radius": 0.02, "order": 2}
         t0 = time.perf_counter()
@@ -52,20 +55,34 @@ def main() -> None:
         solver = Solver(mesh, material, order=2)
         out = press(solver, Sphere(p + 0.008 * n, 0.008), -n, depths)
         runs.append(out)
+        where.append([weakest(solver, r) for r in out])
         cells = [f"{r.reaction:.4f}" if r.ok else r.reason for r in out]
         seconds = f"{time.perf_counter() - t0:.0f}"
         print(row([level, len(solver.free), *cells, seconds]), flush=True)
     if len(runs) < 2:
         return
     print()
-    columns = ["depth mm", "change, last refinement", "min det F", "compression"]
-    print(header(columns, "rrrr"))
-    for d, coarse, fine in zip(args.depths_mm, runs[-2], runs[-1]):
+    columns = ["depth mm", "change, last refinement", "min det F", "in", "compression"]
+    print(header(columns, "rrrlr"))
+    for d, coarse, fine, layer in zip(args.depths_mm, runs[-2], runs[-1], where[-1]):
         if not (coarse.ok and fine.ok):
-            print(row([f"{d:g}", (fine if coarse.ok else coarse).reason, "-", "-"]))
+            print(row([f"{d:g}", (fine if coarse.ok else coarse).reason, "-", "-", "-"]))
             continue
         change = f"{100 * (fine.reaction / coarse.reaction - 1):+.1f} %"
-        print(row([f"{d:g}", change, f"{fine.min_det_F:.3f}", f"{fine.compression:.2f}"]))
+        cells = [f"{d:g}", change, f"{fine.min_det_F:.3f}", layer, f"{fine.compression:.2f}"]
+        print(row(cells))
+
+
+def weakest(solver, answer) -> str:
+    """The tissue layer where ``answer`` keeps the least of its volume (``-`` if it failed)."""
+    if not answer.ok:
+        return "-"
+    J = det3(solver._F(answer.state))
+    layer = getattr(solver.material, "layer", None)
+    if layer is None:
+        return "gel"
+    at = np.repeat(np.asarray(layer), len(J) // len(layer))[np.argmin(J)]
+    return ("skin", "fat", "muscle")[at] if at < 3 else f"layer {at}"
 
 
 if __name__ == "__main__":

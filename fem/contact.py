@@ -291,7 +291,7 @@ def press_to_force(
     force by the last two answers' slope, until the reaction passes the force; then the depth
     is found between the last two by the secant method (each try from the shallower state). A
     step that lands past the tissue's trust bounds (:class:`~fem.material.Limits`) is shortened
-    up to four times; a press that fails first, or runs through the whole tissue, fails and says
+    up to six times; a press that fails first, or runs through the whole tissue, fails and says
     at what force.
     """
     force = positive(force, "target force")
@@ -305,7 +305,7 @@ def press_to_force(
         depth = min(lo.depth + step, deepest)
         while hi is None:
             answer = go.to(depth, lo if lo.depth > 0 else None)
-            for _ in range(4):  # a step past the tissue's trust bounds: try a shorter one
+            for _ in range(6):  # a step past the tissue's trust bounds: try a shorter one
                 if answer.ok or not answer.reason.startswith("not trusted"):
                     break
                 depth = 0.5 * (lo.depth + depth)

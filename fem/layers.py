@@ -119,14 +119,6 @@ class Preset:
         return sum(x.elements for x in self.layers)
 
 
-INCOMPRESSIBLE = 2000 * KPA
-"""The bulk modulus of fat and relaxed muscle, Pa: a stand-in for incompressibility (tissue is
-mostly water, whose bulk modulus is 2.2 GPa; Sommer et al. 2013 fit adipose tissue as
-incompressible). The fits' own K (36 kPa for the hypodermis, nu = 0.49 for muscle) let the
-fat and muscle lose a third of their volume under a 10 N fingertip once the fat has stiffened
-in shear; with this K they keep 0.87 of it at worst, and quadratic tetrahedra stay free of
-locking (a flat punch at nu = 0.49999 within 1.7 % of Hayes)."""
-
 SKIN = Layer(
     "skin",
     Yeoh(C10=150 * KPA, K=4000 * KPA),
@@ -137,17 +129,17 @@ SKIN = Layer(
 )
 FAT = Layer(
     "fat",
-    Exponential(c=0.15 * KPA, k1=0.8 * KPA, k2=47.3, K=INCOMPRESSIBLE),
+    Exponential(c=0.15 * KPA, k1=0.8 * KPA, k2=47.3, K=36 * KPA),
     2,
     "Sommer et al. 2013 (Acta Biomater. 9:9036), human subcutaneous adipose tissue: c 0.15 kPa, "
-    "k1 0.8 kPa, k2 47.3, fitted as incompressible; K 2 MPa stands for that",
+    "k1 0.8 kPa, k2 47.3; K 36 kPa from Tran et al. 2007's hypodermis",
 )
 MUSCLE = Layer(
     "muscle",
-    Yeoh(C10=1.2 * KPA, K=INCOMPRESSIBLE),
+    Yeoh(C10=1.2 * KPA, K=120 * KPA),
     2,
     "relaxed muscle, C10 0.7-1.7 kPa over nine forearms (Tran 2007 thesis; 1.2 kPa taken); "
-    "K 2 MPa for a nearly incompressible muscle (nu 0.4994)",
+    "K for nu = 0.49",
 )
 PAPER = Layer(
     "gel", NeoHookean(1000.0, 0.4), 2, "the paper's set-up: neo-Hookean, E = 1 kPa, nu = 0.4"
@@ -156,10 +148,13 @@ PAPER = Layer(
 TRUSTED = Limits(
     0.8,
     0.6,
-    "layered tissue is nearly incompressible, and the reaction under mesh refinement is "
-    "measured up to this compression",
+    "tissue is nearly incompressible; past these the fits' bulk moduli let it lose volume",
 )
-"""The layered presets' trust bounds (``docs/tissue.md``, where they were measured)."""
+"""The layered presets' trust bounds: tissue is nearly incompressible, yet with the fits'
+bulk moduli (fat 36 kPa, muscle 120 kPa) the fat, once stiffened in shear, and the soft
+muscle under it give way in volume: an 8 mm fingertip 8-10 mm into an arm-sized tube leaves
+the muscle 0.79-0.67 of its volume at 0.46-0.57 compression (``docs/tissue.md``). Beyond a
+volume ratio of 0.8, or the skin pushed in 0.6 of the tissue's depth, an answer is failed."""
 
 LAYERS = (SKIN, FAT, MUSCLE)
 PRESETS = {
@@ -224,7 +219,7 @@ def from_mapping(spec: dict) -> Preset:
         muscle_mm: 12           # the muscle's base depth, mm
         layers:                 # any of skin, fat, muscle; each a law and its parameters (Pa)
           skin: {law: yeoh, C10: 200000, K: 5.4e6, elements: 1, source: "..."}
-          fat: {law: exponential, c: 150, k1: 800, k2: 47.3, K: 2.0e6}
+          fat: {law: exponential, c: 150, k1: 800, k2: 47.3, K: 36000}
 
     Laws: :data:`LAWS` (``neo_hookean`` takes ``E`` and ``nu``; the others ``K`` and their own
     constants). Without ``based_on``, ``skin_mm``, ``muscle_mm`` and all three layers are needed.

@@ -9,7 +9,7 @@ import pytest
 import trimesh
 
 from fem.contact import Contact, press, press_to_force
-from fem.material import NeoHookean
+from fem.material import Layered, Limits, NeoHookean
 from fem.shapes import Punch, Sphere, Surface
 from fem.solver import Solver, SolverOptions
 from fem.verification import dimitriadis_force, hayes_kappa, hertz_force, quarter_slab
@@ -107,6 +107,30 @@ def test_force_control_finds_the_depth_that_carries_a_force():
     failed = press_to_force(solver, punch, [0, 0, -1], 1e3, step=0.2 * h)
     assert not failed.ok and failed.reason.startswith("cannot carry 1000 N")
     assert failed.displacement is None
+
+
+def test_force_control_steps_back_inside_the_trust_bounds():
+    """A tissue trusted to twice the target's compression: force control's first step
+    lands past it, is shortened, and meets the force; a force that needs more is failed with
+    the bound named.
+    """
+    solver, a, h = _slab(2.0, spacing=0.25)
+    punch = Punch([0, 0, 0], [0, 0, -1], a)
+    (known,) = press(solver, punch, [0, 0, -1], [0.008 * h])
+    assert known.ok, known.reason
+    layer = np.zeros(len(solver.mesh.tets), dtype=int)
+    limits = Limits(0.0, 2 * known.compression, "test")
+    bounded = Solver(
+        solver.mesh,
+        Layered((solver.material,), layer, limits),
+        options=solver.options,
+        order=2,
+    )
+    found = press_to_force(bounded, punch, [0, 0, -1], known.reaction, step=0.025 * h)
+    assert found.ok, found.reason
+    assert found.reaction == pytest.approx(known.reaction, rel=0.01)
+    failed = press_to_force(bounded, punch, [0, 0, -1], 3 * known.reaction, step=0.003 * h)
+    assert not failed.ok and "not trusted" in failed.reason and "trusted up to" in failed.reason
 
 
 def test_nearly_incompressible_layers_lock_with_linear_elements_not_quadratic_ones():
