@@ -39,8 +39,22 @@ def positive(value, what: str) -> float:
     return float(value)
 
 
+class Centred:
+    """A rigid shape placed by its ``centre`` ``(3,)`` (m): pushed or moved, the same shape
+    with its centre moved.
+    """
+
+    def pushed(self, depth: float, direction: np.ndarray):
+        """The same shape ``depth`` (m) along ``direction`` ``(3,)``."""
+        return self.moved(depth * direction)
+
+    def moved(self, offset: np.ndarray):
+        """The same shape moved by ``offset`` ``(3,)`` (m)."""
+        return replace(self, centre=self.centre + offset)
+
+
 @dataclass(frozen=True)
-class Sphere:
+class Sphere(Centred):
     """A rigid ball of ``radius`` (m) centred at ``centre`` ``(3,)`` (m)."""
 
     centre: np.ndarray
@@ -50,14 +64,6 @@ class Sphere:
     def __post_init__(self) -> None:
         object.__setattr__(self, "centre", point(self.centre, "centre"))
         positive(self.radius, "radius")
-
-    def pushed(self, depth: float, direction: np.ndarray) -> "Sphere":
-        """The same shape ``depth`` (m) along ``direction`` ``(3,)``."""
-        return self.moved(depth * direction)
-
-    def moved(self, offset: np.ndarray) -> "Sphere":
-        """The same ball moved by ``offset`` ``(3,)`` (m)."""
-        return replace(self, centre=self.centre + offset)
 
     def distance(self, x: np.ndarray):
         """``(phi (K,), grad (K, 3), curvature (K, 3, 3))`` at points ``x`` ``(K, 3)``."""
@@ -69,7 +75,7 @@ class Sphere:
 
 
 @dataclass(frozen=True)
-class Punch:
+class Punch(Centred):
     """A rigid flat-ended cylinder of ``radius`` (m): its flat face a disk centred at
     ``centre`` ``(3,)`` facing along ``axis`` ``(3,)`` (the way it presses), its body behind
     the face.
@@ -84,14 +90,6 @@ class Punch:
         object.__setattr__(self, "centre", point(self.centre, "centre"))
         object.__setattr__(self, "axis", unit(self.axis))
         positive(self.radius, "radius")
-
-    def pushed(self, depth: float, direction: np.ndarray) -> "Punch":
-        """The same shape ``depth`` (m) along ``direction`` ``(3,)``."""
-        return self.moved(depth * direction)
-
-    def moved(self, offset: np.ndarray) -> "Punch":
-        """The same punch moved by ``offset`` ``(3,)`` (m)."""
-        return replace(self, centre=self.centre + offset)
 
     def distance(self, x: np.ndarray):
         """``(phi (K,), grad (K, 3), None)``: the exact signed distance to the semi-infinite
@@ -119,7 +117,7 @@ class Punch:
 
 
 @dataclass(frozen=True)
-class Box:
+class Box(Centred):
     """A rigid box of ``half`` extents ``(3,)`` (m) about ``centre`` ``(3,)``, its axes the
     columns of ``rotation`` ``(3, 3)``.
     """
@@ -139,14 +137,6 @@ class Box:
         if R.shape != (3, 3) or not np.allclose(R.T @ R, np.eye(3), atol=1e-9):
             raise ValueError("rotation must be a 3 x 3 orthonormal matrix")
         object.__setattr__(self, "rotation", R)
-
-    def pushed(self, depth: float, direction: np.ndarray) -> "Box":
-        """The same shape ``depth`` (m) along ``direction`` ``(3,)``."""
-        return self.moved(depth * direction)
-
-    def moved(self, offset: np.ndarray) -> "Box":
-        """The same box moved by ``offset`` ``(3,)`` (m)."""
-        return replace(self, centre=self.centre + offset)
 
     def distance(self, x: np.ndarray):
         """``(phi (K,), grad (K, 3), None)``: the box's exact signed distance."""
