@@ -113,7 +113,47 @@ def make_full_kernel():
     return kernel
 
 
+def outer_data(beta, coef, pos, sel, local, nnz: int) -> np.ndarray:
+    """The CSR data (``(nnz,)``) of every element's rank-one matrix ``coef_t beta_t beta_t^T``
+    with NumPy: ``beta`` ``(T, 3 n)`` (entry ``3 a + i``: node ``a``, component ``i``),
+    ``coef`` ``(T,)``; ``local``, ``pos``, ``sel`` as in :func:`element_data`.
+    """
+    A, I, B, Kc = local
+    vals = (coef[:, None] * beta[:, 3 * A + I] * beta[:, 3 * B + Kc]).ravel()
+    data = np.zeros(nnz)
+    for p, s in zip(pos, sel):
+        data += np.bincount(p, weights=vals[s], minlength=nnz)
+    return data
+
+
+def make_outer_kernel():
+    """A Numba kernel adding every element's ``coef_t beta_t beta_t^T`` (upper entries) to the
+    CSR data; ``None`` when Numba is absent.
+    """
+    try:
+        from numba import njit  # deferred: compiles the FEM's kernels
+    except ImportError:
+        return None
+
+    @njit(cache=True, nogil=True)
+    def kernel(beta, coef, pos, data):  # pragma: no cover - compiled
+        T, m = beta.shape
+        for t in range(T):
+            e = 0
+            for p in range(m):
+                bp = coef[t] * beta[t, p]
+                for q in range(p, m):
+                    j = pos[t, e]
+                    e += 1
+                    if j >= 0:
+                        data[j] += bp * beta[t, q]
+
+    return kernel
+
+
 kernel = make_kernel()
 """The compiled kernel, or ``None`` without Numba (the solver then uses its NumPy path)."""
 full_kernel = make_full_kernel()
 """The compiled kernel of the long form, or ``None`` without Numba."""
+outer_kernel = make_outer_kernel()
+"""The compiled kernel of the elements' rank-one terms (mean dilatation), or ``None``."""

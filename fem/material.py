@@ -251,7 +251,8 @@ class IsochoricLaw(Law):
         """Initial Poisson's ratio: ``(3 K - 2 mu) / (2 (3 K + mu))``."""
         return (3 * self.K - 2 * self.mu) / (2 * (3 * self.K + self.mu))
 
-    def _derivatives(self, F: np.ndarray):
+    def _derivatives(self, F: np.ndarray, volume: bool = True):
+        K = self.K if volume else 0.0
         Finv, J = inv3(F)
         I1 = np.einsum("tij,tij->t", F, F)
         with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
@@ -260,10 +261,10 @@ class IsochoricLaw(Law):
             d2s = 10.0 / 9.0 * s / J**2
             psi, p1, p2 = self.shape(s * I1 - 3.0)
             W1 = p1 * s
-            WJ = p1 * I1 * ds + 0.5 * self.K * (J - 1 / J)
+            WJ = p1 * I1 * ds + 0.5 * K * (J - 1 / J)
             W11 = p2 * s**2
             W1J = p2 * s * I1 * ds + p1 * ds
-            WJJ = p2 * (I1 * ds) ** 2 + p1 * I1 * d2s + 0.5 * self.K * (1 + 1 / J**2)
+            WJJ = p2 * (I1 * ds) ** 2 + p1 * I1 * d2s + 0.5 * K * (1 + 1 / J**2)
         return Finv, J, psi, (W1, WJ, W11, W1J, WJJ)
 
     def energy(self, F: np.ndarray) -> np.ndarray:
@@ -277,6 +278,22 @@ class IsochoricLaw(Law):
         """``(P, (a, b, c, H, d, e, F))``: the stress and the tangent's parts (module docstring)."""
         Finv, J, _, (W1, WJ, W11, W1J, WJJ) = self._derivatives(F)
         return _invariant_parts(F, W1, WJ, W11, W1J, WJJ, Finv, J)
+
+    def shape_energy(self, F: np.ndarray) -> np.ndarray:
+        """``(T,)`` the shape part ``psi(Ib - 3)`` alone, J/m^3; ``inf`` where ``det F <= 0``."""
+        _, J, psi, _ = self._derivatives(F, volume=False)
+        return np.where(J > 0, psi, np.inf)
+
+    def shape_parts(self, F: np.ndarray):
+        """As :meth:`tangent_parts`, of the shape part alone (the volume part left to the
+        solver's mean dilatation).
+        """
+        Finv, J, _, (W1, WJ, W11, W1J, WJJ) = self._derivatives(F, volume=False)
+        return _invariant_parts(F, W1, WJ, W11, W1J, WJJ, Finv, J)
+
+    def bulk_moduli(self, n_elements: int) -> np.ndarray:
+        """``(T,)`` every element's bulk modulus ``K``, Pa."""
+        return np.full(n_elements, float(self.K))
 
 
 @dataclass(frozen=True)
@@ -410,6 +427,56 @@ class Layered(Law):
         for law, at in self._groups(F):
             P[at] = law.stress(F[at])
         return P
+
+    def bulk_moduli(self, n_elements: int) -> np.ndarray | None:
+        """``(T,)`` each element's bulk modulus ``K`` (Pa) when every layer's law splits into a
+        shape part and a volume part ``U(J)`` (:class:`IsochoricLaw`), else ``None``.
+        """
+        if len(self.layer) != n_elements:
+            raise ValueError(f"{n_elements} elements for a layering of {len(self.layer)}")
+        if not all(isinstance(law, IsochoricLaw) for law in self.laws):
+            return None
+        return np.array([law.K for law in self.laws], dtype=float)[np.asarray(self.layer)]
+
+    def shape_energy(self, F: np.ndarray) -> np.ndarray:
+        """``(T Q,)`` the layers' shape parts alone, J/m^3 (:meth:`IsochoricLaw.shape_energy`)."""
+        W = np.empty(len(F))
+        for law, at in self._groups(F):
+            W[at] = law.shape_energy(F[at])
+        return W
+
+    def shape_parts(self, F: np.ndarray):
+        """The stresses and tangent parts of the layers' shape parts alone
+        (:meth:`IsochoricLaw.shape_parts`).
+        """
+        P = np.empty_like(F)
+        parts = [np.empty(len(F)) for _ in range(3)] + [np.empty_like(F)]
+        parts += [np.empty(len(F)), np.empty(len(F)), F]
+        for law, at in self._groups(F):
+            Pk, pk = law.shape_parts(F[at])
+            P[at] = Pk
+            for j in range(6):
+                parts[j][at] = pk[j]
+        return P, tuple(parts)
+
+
+def volumetric(K: np.ndarray, J: np.ndarray):
+    """``(U, U', U'')`` of the volume part ``U(J) = K/4 (J^2 - 1 - 2 ln J)`` at volume ratios
+    ``J`` ``(T,)`` with bulk moduli ``K`` ``(T,)`` (Pa): J/m^3, Pa, Pa; ``U = inf`` where
+    ``J <= 0``.
+    """
+    with np.errstate(invalid="ignore", divide="ignore"):
+        U = np.where(J > 0, 0.25 * K * (J**2 - 1 - 2 * np.log(J)), np.inf)
+        return U, 0.5 * K * (J - 1 / J), 0.5 * K * (1 + 1 / J**2)
+
+
+def bulk_moduli(material, n_elements: int) -> np.ndarray | None:
+    """``(T,)`` each element's bulk modulus (Pa) when ``material`` splits into a shape part and
+    a volume part ``U(J)`` (the tissue laws), else ``None`` (the compressible neo-Hookean and
+    linear laws, whose volume terms are not separable).
+    """
+    split = getattr(material, "bulk_moduli", None)
+    return None if split is None else split(n_elements)
 
 
 def uniaxial(law, stretch: float) -> tuple[float, float]:

@@ -12,6 +12,18 @@ Assembly is a vectorised NumPy kernel over all elements: with the tangent in the
 scatter into the (fixed) sparse pattern is one ``bincount``. A test checks it against
 scikit-fem's own assembly.
 
+Nearly incompressible tissue laws (a shape part and a volume part ``U(J)``, bulk modulus ``K``)
+take their volume part on each element's mean volume ratio, ``theta_t = (1/V_t) int J dV``
+(mean dilatation, Nagtegaal et al. 1974; Simo, Taylor & Pister 1985: the mixed u-p element with
+one pressure per element, condensed)::
+
+    Pi(u) = sum_t [ sum_q w_q V_t psi(Ib(F_q) - 3) + V_t U(theta_t) ] - f . u
+
+so the quadratic elements do not lock as ``K / mu`` grows. Its stress adds ``p_t J F^-T`` at
+every point (``p_t = U'(theta_t)``, the element's pressure) and its tangent the element's
+rank-one matrix ``V_t U''(theta_t) beta beta^T``, ``beta_ai = sum_q w_q J_q (F_q^-T grad N_a)_i``.
+The compressible neo-Hookean law (the paper's) keeps its volume term at every point.
+
 A solve that does not converge, or would need an inverted element, returns a :class:`Solution`
 with ``ok = False`` and a reason, never a displacement. So does a converged state that pushes the
 skin through the fixed inner surface (``inward displacement > thickness``: converged but
@@ -27,9 +39,9 @@ import numpy as np
 import scipy.sparse as sp
 
 from fem.elements import ELEMENTS, TRI_EDGES, TRI_POINTS, TRI_WEIGHTS, quadratic, tri_shape
-from fem.kernel import element_data, full_kernel, kernel
+from fem.kernel import element_data, full_kernel, kernel, outer_data, outer_kernel
 from fem.linear_solvers import LINEAR_SOLVERS, IndefiniteTangent, make_linear_solver
-from fem.material import NeoHookean, det3
+from fem.material import NeoHookean, bulk_moduli, det3, inv3, volumetric
 from fem.mesh import ShellMesh
 from fem.pattern import Pattern
 from fem.solution import Solution
@@ -53,6 +65,9 @@ class SolverOptions:
             (see :meth:`ShellMesh.nodal_forces`).
         rims: ``"fixed"`` holds the part's cut rims (all layers) where the tissue would go on
             into the rest of the body; ``"free"`` leaves the cut faces traction-free.
+        volume: where a law's volume part is evaluated: ``"mean"`` on each element's mean
+            volume ratio (mean dilatation, no volumetric locking; laws with a bulk modulus),
+            ``"point"`` at every quadrature point, ``"auto"`` mean where the law allows it.
     """
 
     rtol: float = 1e-7
@@ -64,6 +79,7 @@ class SolverOptions:
     linear_solver: str = "auto"
     force_mode: str = "traction"
     rims: str = "fixed"
+    volume: str = "auto"
 
     def __post_init__(self) -> None:
         if self.linear_solver not in ("auto", *LINEAR_SOLVERS):
@@ -73,6 +89,8 @@ class SolverOptions:
             )
         if self.force_mode not in ("traction", "nodal"):
             raise ValueError(f"unknown force_mode {self.force_mode!r}; use 'traction' or 'nodal'")
+        if self.volume not in ("auto", "mean", "point"):
+            raise ValueError(f"volume must be 'auto', 'mean' or 'point', got {self.volume!r}")
         if self.rims not in ("fixed", "free"):
             raise ValueError(f"rims must be 'fixed' or 'free', got {self.rims!r}")
         if not (self.rtol > 0 and self.max_iter >= 1 and self.max_compression > 0):
@@ -141,6 +159,15 @@ class Solver:
         self.GG = np.matmul(self.G, self.G.transpose(0, 1, 3, 2))  # (T, Q, n, n)
         self.GW = self.G * self.W[:, :, None, None]  # weighted gradients
         self._force_idx = (3 * self.conn[:, :, None] + np.arange(3)).ravel()
+        self.bulk = None
+        """``(T,)`` the elements' bulk moduli (Pa) under mean dilatation, else ``None``."""
+        if self.options.volume != "point":
+            self.bulk = bulk_moduli(self.material, len(mesh.tets))
+            if self.bulk is None and self.options.volume == "mean":
+                raise ValueError(
+                    f"mean dilatation needs laws with a bulk modulus (the tissue laws); "
+                    f"{type(self.material).__name__} has none"
+                )
         self.linear = make_linear_solver(self.options.linear_solver)
         self.pattern = Pattern.of(self.conn, self.n_all, self.free, upper=self.linear.upper)
         self.potentials: list = []
@@ -162,15 +189,45 @@ class Solver:
     def _F(self, u: np.ndarray) -> np.ndarray:
         return self.deformation_gradient(u).reshape(-1, 3, 3)
 
+    def volume_ratios(self, u: np.ndarray) -> np.ndarray:
+        """``(T,)`` each element's mean volume ratio ``theta_t = sum_q w_q det F_q``."""
+        T, Q = self.W.shape
+        return det3(self._F(u)).reshape(T, Q) @ self.element.weights
+
     def energy(self, u: np.ndarray, f: np.ndarray) -> float:
         """Total potential energy, J (``inf`` if an element inverts)."""
-        W = self.material.energy(self._F(u))
+        F = self._F(u)
         extra = sum(p.energy(u) for p in self.potentials)
-        return float(self.W.ravel() @ W - np.vdot(f, u) + extra)
+        if self.bulk is None:
+            stored = self.W.ravel() @ self.material.energy(F)
+        else:
+            T, Q = self.W.shape
+            theta = det3(F).reshape(T, Q) @ self.element.weights
+            shape = self.material.shape_energy(F)
+            stored = self.W.ravel() @ shape + self.V @ volumetric(self.bulk, theta)[0]
+        return float(stored - np.vdot(f, u) + extra)
+
+    def _pressure(self, F: np.ndarray):
+        """Mean dilatation's point data at ``F`` ``(T Q, 3, 3)``: ``(F^-T (T Q, 3, 3),
+        J (T, Q), U'(theta) (T,), U''(theta) (T,))``.
+        """
+        T, Q = self.W.shape
+        Finv, J = inv3(F)
+        J = J.reshape(T, Q)
+        _, dU, d2U = volumetric(self.bulk, J @ self.element.weights)
+        return Finv.transpose(0, 2, 1), J, dU, d2U
+
+    def _stress(self, F: np.ndarray) -> np.ndarray:
+        """``(T Q, 3, 3)`` first Piola-Kirchhoff stress, Pa (mean dilatation's pressure in)."""
+        if self.bulk is None:
+            return self.material.stress(F)
+        FinvT, J, dU, _ = self._pressure(F)
+        pJ = (dU[:, None] * J).reshape(-1)
+        return self.material.shape_parts(F)[0] + pJ[:, None, None] * FinvT
 
     def residual(self, u: np.ndarray, f: np.ndarray) -> np.ndarray:
         """``(n_all, 3)`` out-of-balance force ``dPi/du``, N (fixed nodes included)."""
-        r = self._scatter_force(self.material.stress(self._F(u))) - f
+        r = self._scatter_force(self._stress(self._F(u))) - f
         for p in self.potentials:
             r += p.gradient(u)
         return r
@@ -186,12 +243,24 @@ class Solver:
             -1, 3
         )
 
-    def assemble(self, u: np.ndarray, f: np.ndarray):
+    def assemble(self, u: np.ndarray, f: np.ndarray, definite: bool = False):
         """``(r (n_all, 3), K)``: residual and the tangent on free DOFs (CSR; upper triangle only
-        when the linear solver wants it).
+        when the linear solver wants it). ``definite``: under mean dilatation, leave out the
+        elements' pressure stiffness ``p J (H_Ji H_Lk - H_Li H_Jk)``, which a poor first guess
+        (a pressure far above the shear modulus) can make indefinite; Newton's steps then
+        still descend, and the answer is checked against the full tangent.
         """
         T, Q = self.W.shape
-        P, parts = self.material.tangent_parts(self._F(u))
+        F = self._F(u)
+        if self.bulk is None:
+            P, parts = self.material.tangent_parts(F)
+        else:  # the shape part at the points, the pressure p_t J F^-T of each element
+            P, parts = self.material.shape_parts(F)
+            FinvT, J, dU, d2U = self._pressure(F)
+            pJ = (dU[:, None] * J).reshape(-1)
+            P = P + pJ[:, None, None] * FinvT
+            if not definite:
+                parts = (parts[0], parts[1] + pJ, parts[2] - pJ, *parts[3:])
         a, b, c, H = parts[:4]
         r = self._scatter_force(P)
         g = np.matmul(self.G, np.asarray(H).reshape(T, Q, 3, 3))  # (T, Q, n, 3) H^T grad N
@@ -211,6 +280,15 @@ class Solver:
         else:
             pat = self.pattern
             data = element_data(g, self.GG, aW, bW, cW, pat.local, *pat.gather, pat.nnz, full=full)
+        if self.bulk is not None:  # each element's rank-one volume term V U'' beta beta^T
+            beta = np.einsum("q,tq,tqai->tai", self.element.weights, J, g).reshape(T, -1)
+            coef = self.V * d2U
+            if outer_kernel is not None:
+                for pos in self.pattern.places:
+                    outer_kernel(np.ascontiguousarray(beta), coef, pos, data)
+            else:
+                pat = self.pattern
+                data += outer_data(beta, coef, *pat.gather, pat.local, pat.nnz)
         for p in self.potentials:
             r += p.gradient(u)
             data += self.pattern.entries(*p.hessian(u))
@@ -335,18 +413,49 @@ class Solver:
         out[self.free] = r[self.free]
         return out.reshape(-1, 3)
 
-    def _factorise(self, u: np.ndarray, f: np.ndarray) -> tuple[str, int] | None:
+    def _factorise(
+        self, u: np.ndarray, f: np.ndarray, definite: bool = False
+    ) -> tuple[str, int] | None:
         """Assemble and factorise the tangent at ``u``; ``None``, or why it failed and whether
         the iteration counts (``(reason, 1)`` when the tangent itself was built).
+        ``definite``: the tangent without the pressure stiffness (:meth:`assemble`).
         """
         try:
-            _, K = self.assemble(u, f)
+            _, K = self.assemble(u, f, definite)
             self.linear.factor(K)
         except IndefiniteTangent:
             return "indefinite tangent: the layer buckles", 1
         except (RuntimeError, ValueError) as e:
             return f"linear solve failed: {e}", 0
         return None
+
+    def _refactorise(self, u: np.ndarray, f: np.ndarray) -> tuple[tuple[str, int] | None, bool]:
+        """:meth:`_factorise` at ``u``; under mean dilatation an indefinite tangent is tried
+        again without its pressure stiffness: ``(failure or None, whether it was left out)``.
+        """
+        failed = self._factorise(u, f)
+        if failed is not None and failed[1] and self.bulk is not None:
+            return self._factorise(u, f, definite=True), True
+        return failed, False
+
+    def _converged(self, u, f, it: int, rel: float, factorisations: int, definite: bool) -> dict:
+        """Newton's answer at ``u``; when steps were taken without the pressure stiffness, the
+        full tangent must be positive definite there (a stable state), else the layer buckles.
+        """
+        if definite and self._factorise(u, f) is not None:
+            return {
+                "ok": False,
+                "reason": "indefinite tangent at the answer: the layer buckles",
+                "iterations": it + 1,
+                "residual": rel,
+            }
+        return {
+            "ok": True,
+            "u": u,
+            "iterations": it,
+            "residual": rel,
+            "factorisations": factorisations,
+        }
 
     def _line_search(self, u: np.ndarray, f: np.ndarray, step: np.ndarray, E: float, slope: float):
         """Backtracking (Armijo, halving up to 12 times) along ``step`` from ``u`` of energy
@@ -388,19 +497,14 @@ class Solver:
         E = self.energy(u, f)
         history: list[float] = []
         rel, factorisations, refresh = float("nan"), 0, True
+        definite = False  # steps taken with the tangent less its pressure stiffness
         r = self.residual(u, f)
         for it in range(opt.max_iter + 1):
             rf = r.reshape(-1)[free]
             rel = float(np.linalg.norm(rf) / fnorm)
             history.append(rel)
             if rel <= (rtol or opt.rtol):
-                return {
-                    "ok": True,
-                    "u": u,
-                    "iterations": it,
-                    "residual": rel,
-                    "factorisations": factorisations,
-                }
+                return self._converged(u, f, it, rel, factorisations, definite)
             if it == opt.max_iter:
                 break
             if len(history) > opt.stagnation and history[-1] > 0.5 * history[-1 - opt.stagnation]:
@@ -414,7 +518,8 @@ class Solver:
             if len(history) > 1 and rel > opt.reuse * history[-2]:
                 refresh = True
             if refresh:
-                failed = self._factorise(u, f)
+                failed, left_out = self._refactorise(u, f)
+                definite |= left_out
                 if failed is not None:
                     reason, spent = failed
                     return {
@@ -504,10 +609,14 @@ class Solver:
 
     def measures(self, u: np.ndarray) -> tuple[float, float]:
         """``(min det F, compression)`` of state ``u`` ``(n_all, 3)``: the smallest volume
-        ratio over the quadrature points, and how far the skin moves inward as a share of the
-        tissue's depth under it (the largest over the skin).
+        ratio (over the quadrature points, or of the elements under mean dilatation), and how
+        far the skin moves inward as a share of the tissue's depth under it (the largest over
+        the skin).
         """
-        detF = float(det3(self._F(u)).min())
+        if self.bulk is None:
+            detF = float(det3(self._F(u)).min())
+        else:
+            detF = float(self.volume_ratios(u).min())
         m = self.mesh
         inward = -np.einsum("si,si->s", u[: m.n_skin], m.skin_normals) / m.thickness
         return detF, float(inward.max())

@@ -91,22 +91,28 @@ def _layered(mesh, laws=(NeoHookean(), YEOH)):
 
 
 @pytest.mark.parametrize(
-    "material,order",
+    "material,order,volume",
     [
-        (NeoHookean(), 1),
-        (LinearElastic(), 1),
-        (NeoHookean(), 2),
-        (YEOH, 1),
-        (DEMIRAY, 2),
-        ("layered", 1),
-        ("layered", 2),
+        (NeoHookean(), 1, "auto"),
+        (LinearElastic(), 1, "auto"),
+        (NeoHookean(), 2, "auto"),
+        (YEOH, 1, "point"),
+        (DEMIRAY, 2, "point"),
+        (DEMIRAY, 2, "mean"),
+        ("layered", 1, "auto"),
+        ("layered", 2, "auto"),
+        ("tissue", 2, "mean"),
     ],
 )
-def test_tangent_matches_finite_differences_of_the_residual(material, order):
+def test_tangent_matches_finite_differences_of_the_residual(material, order, volume):
     part, mesh = _small_shell(layers=2 if order == 1 else 1)
     if material == "layered":
         material = _layered(mesh)
-    S = Solver(mesh, material, options=SolverOptions(linear_solver="superlu"), order=order)
+    elif material == "tissue":
+        material = _layered(mesh, (YEOH, DEMIRAY))
+    options = SolverOptions(linear_solver="superlu", volume=volume)
+    S = Solver(mesh, material, options=options, order=order)
+    assert (S.bulk is not None) == (volume == "mean")
     rng = np.random.default_rng(1)
     u = np.zeros((S.n_all, 3))
     u.reshape(-1)[S.free] = rng.normal(0, 5e-4, len(S.free))
@@ -280,6 +286,11 @@ def test_a_tissue_s_trust_bounds_reject_an_answer_past_them():
 
 
 def test_bad_input_is_named():
+    part, mesh = _small_shell(layers=1)
+    with pytest.raises(ValueError, match="mean dilatation needs laws with a bulk modulus"):
+        Solver(mesh, NeoHookean(), options=SolverOptions(volume="mean"))
+    with pytest.raises(ValueError, match="volume must be"):
+        SolverOptions(volume="average")
     part, mesh = _small_shell()
     S = Solver(mesh)
     with pytest.raises(ValueError, match="force must have shape"):
@@ -305,18 +316,22 @@ def test_compiled_and_numpy_assembly_agree(monkeypatch):
     assert fs.kernel is not None, "numba is missing: the compiled kernel cannot be checked"
     part, mesh = _small_shell(layers=1)
     rng = np.random.default_rng(3)
-    assert fs.full_kernel is not None
+    assert fs.full_kernel is not None and fs.outer_kernel is not None
     cases = [("superlu", 1, None), ("pardiso", 1, None), ("superlu", 2, None)]
-    cases += [("superlu", 1, "layered"), ("pardiso", 2, "layered")]
+    cases += [("superlu", 1, "layered"), ("pardiso", 2, "layered"), ("pardiso", 2, "tissue")]
+    cases += [("superlu", 2, "tissue")]
     for name, order, material in cases:
         if name not in available_linear_solvers():
             continue
-        material = _layered(mesh, (NeoHookean(), DEMIRAY)) if material else None
+        if material:
+            laws = (YEOH, DEMIRAY) if material == "tissue" else (NeoHookean(), DEMIRAY)
+            material = _layered(mesh, laws)
         S = Solver(mesh, material, options=SolverOptions(linear_solver=name), order=order)
         u = np.zeros((S.n_all, 3))
         u.reshape(-1)[S.free] = rng.normal(0, 5e-4, len(S.free))
         K1 = S.assemble(u, u)[1]
         monkeypatch.setattr(fs, "kernel", None)
+        monkeypatch.setattr(fs, "outer_kernel", None)
         K2 = S.assemble(u, u)[1]
         monkeypatch.undo()
         assert abs(K1 - K2).max() <= 1e-12 * abs(K2).max()
