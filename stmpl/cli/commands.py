@@ -91,9 +91,17 @@ def zoo_models(args) -> int:
     if args.action == "list":
         print(zoo.table(args.zoo), end="")
     elif args.action == "verify":
+        bad = []
         for name in args.names or zoo.names(args.zoo):
-            f = zoo.verify(name, args.zoo)
+            try:
+                f = zoo.verify(name, args.zoo)
+            except (ValueError, OSError, LookupError) as e:
+                print(f"{name}: FAILED: {e}")
+                bad.append(name)
+                continue
             print(f"{name}: {f.name} ok")
+        if bad:
+            raise ValueError(f"{len(bad)} zoo model(s) failed verification: {', '.join(bad)}")
     elif args.action == "limit":
         if not args.sweep:
             raise ValueError("zoo limit needs --sweep CONFIG (a stability sweep that has run)")
@@ -110,7 +118,7 @@ def zoo_models(args) -> int:
             if args.command_line
             else None
         )
-        e = zoo.add(args.checkpoint, args.names[0], trained, args.zoo, args.evaluate_on)
+        e = zoo.add(args.checkpoint, args.names[0], trained, args.zoo, args.evaluate_on, args.force)
         print(f"added {args.names[0]}: {e['file']} ({e['bytes'] / 1e6:.2f} MB)")
     return 0
 

@@ -112,6 +112,7 @@ def parser() -> argparse.ArgumentParser:
     zo.add_argument("--command-line", help="add: the command that trained it")
     zo.add_argument("--machine", help="add: the machine it trained on")
     zo.add_argument("--time", help="add: how long it trained")
+    zo.add_argument("--force", action="store_true", help="add: replace a model of the same name")
     zo.add_argument(
         "--evaluate-on",
         nargs="+",

@@ -53,9 +53,8 @@ def add_arguments(sp) -> None:
     )
     what.add_argument(
         "--grip",
-        default="whole",
         choices=sorted(GRIPS),
-        help="hand grip: whole hand, thumb and two fingers, or a pinch",
+        help="hand grip on a limb: whole hand (default), thumb and two fingers, or a pinch",
     )
     what.add_argument(
         "--around",
@@ -105,9 +104,18 @@ def add_arguments(sp) -> None:
 def pressings(args, part) -> list:
     """The :class:`~stmpl.contact.pressing.Pressing` objects the options describe."""
     mm = 1e-3
-    chosen = [k for k in ("object", "sphere", "letters") if getattr(args, k)] + (
+    chosen = [k for k in ("object", "sphere", "letters") if getattr(args, k) is not None] + (
         ["strap"] if args.strap else []
     )
+    if args.object is not None and not args.object.strip():
+        raise ValueError("--object needs a mesh file's path, got an empty one")
+    if args.sphere is not None and not (np.isfinite(args.sphere) and args.sphere > 0):
+        raise ValueError(f"--sphere needs a radius above 0 mm, got {args.sphere:g}")
+    if args.letters is not None and not args.letters.strip():
+        raise ValueError("--letters needs some text to press, got none")
+    if args.grip is not None and (chosen or part.axis is None):
+        where = f"--{chosen[0]} presses" if chosen else f"the {part.name} has no limb to grasp"
+        raise ValueError(f"--grip chooses how the hand grasps a limb; {where}: leave it out")
     if len(chosen) > 1:
         raise ValueError(f"choose one object, got {', '.join('--' + k for k in chosen)}")
     if args.pose is not None and chosen[:1] not in (["object"], ["sphere"], ["letters"]):
@@ -143,8 +151,9 @@ def pressings(args, part) -> list:
                 part, hand, tuple(args.at), args.depth * mm, np.pi / 2 + args.spin, args.force
             )
         ]
-    g = grasp(part, hand, args.along, args.around, args.grip, args.depth * mm)
-    return [g.pressing(args.force, f"right hand ({args.grip})")]
+    kind = args.grip or "whole"
+    g = grasp(part, hand, args.along, args.around, kind, args.depth * mm)
+    return [g.pressing(args.force, f"right hand ({kind})")]
 
 
 def run(args) -> int:

@@ -113,8 +113,13 @@ def press(
     """
     if not np.isfinite(depth):
         raise ValueError(f"depth must be finite, got {depth!r}")
+    zmin, zmax = float(mesh.vertices[:, 2].min()), float(mesh.vertices[:, 2].max())
+    if depth >= zmax - zmin:
+        raise ValueError(
+            f"depth {depth * 1e3:g} mm would sink the whole object into the skin (it is "
+            f"{(zmax - zmin) * 1e3:.3g} mm tall along the press); press less deep"
+        )
     frame = surface_frame(part, at, uv=uv, spin=spin)
-    zmin = float(mesh.vertices[:, 2].min())
     frame[:3, 3] -= (depth + zmin) * frame[:3, 2]
     return frame
 

@@ -95,11 +95,19 @@ def read_mesh(path):
     if path.suffix.lower() not in MESH_FILES:
         raise ValueError(f"{path.name}: not a mesh file stmpl reads ({', '.join(MESH_FILES)})")
     try:
-        mesh = trimesh.load(str(path), force="mesh", process=True)
+        # read as stored first: processing would drop non-finite vertices and their faces
+        mesh = trimesh.load(str(path), force="mesh", process=False)
     except Exception as e:  # noqa: BLE001 - trimesh raises many kinds for a broken file
         raise ValueError(f"{path} is not a readable mesh: {type(e).__name__}: {e}") from e
     if not isinstance(mesh, trimesh.Trimesh) or len(mesh.faces) == 0:
         raise ValueError(f"{path} holds no triangle mesh")
+    bad = ~np.isfinite(mesh.vertices).all(axis=1)
+    if bad.any():
+        raise ValueError(
+            f"{path}: {int(bad.sum())} of its {len(mesh.vertices)} vertices are not finite "
+            f"(the first: vertex {int(np.flatnonzero(bad)[0])}); fix the file"
+        )
+    mesh.process()
     return mesh
 
 

@@ -156,14 +156,25 @@ def read(name: str, device: str = "cpu", path=None, **options):
 
 
 def add(
-    checkpoint, name: str, trained: dict | None = None, path=None, evaluate_on: list | None = None
+    checkpoint,
+    name: str,
+    trained: dict | None = None,
+    path=None,
+    evaluate_on: list | None = None,
+    replace: bool = False,
 ) -> dict:
     """Copy a checkpoint (and its sidecar) into the zoo as ``name`` and record it in the
     manifest with ``trained`` (how it was made: command, time, machine). ``evaluate_on``: more
     dataset folders (e.g. the out-of-distribution sets) whose test split is measured and kept in
-    the entry's metrics under the dataset's name. Returns the entry.
+    the entry's metrics under the dataset's name. A model of that name already there is
+    replaced only with ``replace``. Returns the entry.
     """
     check_name(name)
+    if not replace and (root(path) / MANIFEST).is_file() and name in names(path):
+        raise ValueError(
+            f"the zoo already has a model named {name!r}; choose another name or replace it "
+            "(--force)"
+        )
     src = pathlib.Path(checkpoint)
     _, meta = read_checkpoint(src)  # checks the file against its sidecar
     if meta["bytes"] > MAX_BYTES:

@@ -59,6 +59,13 @@ def test_letters_against_the_fem(tmp_path, capsys, arm):
         (["--sphere", "8", "--letters", "A"], "choose one object"),
         (["--object", "missing.stl"], "mesh file not found"),
         (["--sphere", "8", "--depth", "-5"], "no contact"),
+        (["--sphere", "8", "--depth", "500"], "depth 500 mm would sink the whole object"),
+        (["--sphere", "0"], "--sphere needs a radius above 0 mm, got 0"),
+        (["--sphere", "nan"], "--sphere needs a radius above 0 mm, got nan"),
+        (["--letters", ""], "--letters needs some text"),
+        (["--object", ""], "--object needs a mesh file's path"),
+        (["--sphere", "8", "--grip", "pinch"], "--grip chooses how the hand grasps a limb"),
+        (["--part", "belly", "--grip", "pinch"], "the belly has no limb to grasp"),
     ],
 )
 def test_bad_requests_end_in_one_line(tmp_path, capsys, arm, argv, message):

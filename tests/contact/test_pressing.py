@@ -123,6 +123,9 @@ def test_mesh_files(tmp_path, plate):
         C.read_mesh(tmp_path / "tip.txt")
     with pytest.raises(FileNotFoundError, match="mesh file not found"):
         C.read_mesh(tmp_path / "none.stl")
+    (tmp_path / "nan.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 nan\nf 1 2 3\nf 1 2 4\n")
+    with pytest.raises(ValueError, match="1 of its 4 vertices are not finite .the first: vertex 3"):
+        C.read_mesh(tmp_path / "nan.obj")
 
 
 def test_pose_matrix_rotation_vector():

@@ -109,7 +109,28 @@ def test_an_edited_sidecar_is_refused_even_with_a_new_digest(zoo_dir, capsys):
     with pytest.raises(ValueError, match="unet_tiny.json does not match the manifest"):
         zoo.read("unet_tiny", path=folder)
     assert main(["zoo", "verify", "--zoo", str(folder)]) == 2
-    assert "does not match the manifest" in capsys.readouterr().err
+    cap = capsys.readouterr()
+    assert "unet_tiny: FAILED" in cap.out and "does not match the manifest" in cap.out
+    assert "1 zoo model(s) failed verification: unet_tiny" in cap.err
+
+
+def test_add_refuses_a_taken_name_and_verify_lists_every_model(zoo_dir, tmp_path, capsys):
+    from stmpl.cli.main import main
+
+    folder, _, p = zoo_dir
+    ckpt = p.save(tmp_path / "other.safetensors")
+    zoo.add(ckpt, "unet_other", path=folder)
+    with pytest.raises(ValueError, match="already has a model named 'unet_other'"):
+        zoo.add(ckpt, "unet_other", path=folder)
+    argv = ["zoo", "add", "unet_other", "--checkpoint", str(ckpt), "--zoo", str(folder)]
+    assert main(argv) == 2 and "(--force)" in capsys.readouterr().err
+    assert main([*argv, "--force"]) == 0
+    (folder / "unet_tiny.safetensors").write_bytes(b"truncated")
+    assert main(["zoo", "verify", "--zoo", str(folder)]) == 2
+    cap = capsys.readouterr()
+    assert "unet_tiny: FAILED" in cap.out and "truncated or altered" in cap.out
+    assert "unet_other: unet_other.safetensors ok" in cap.out
+    assert "1 zoo model(s) failed verification: unet_tiny" in cap.err
 
 
 @pytest.mark.parametrize("name", ["../outside", "a/b", "..", "", ".hidden"])
@@ -146,7 +167,7 @@ def test_cli_zoo(zoo_dir, capsys):
     m["models"]["unet_tiny"]["sha256"] = "0" * 64
     (folder / "manifest.json").write_text(json.dumps(m))
     assert main(["zoo", "verify", "--zoo", str(folder)]) == 2
-    assert "SHA-256" in capsys.readouterr().err
+    assert "SHA-256" in capsys.readouterr().out
 
 
 def test_the_shipped_zoo_verifies_and_beats_naive_on_a_fem_solve(anny_body, tmp_path, monkeypatch):
