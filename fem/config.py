@@ -6,8 +6,11 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
+import pathlib
 
 import numpy as np
+import yaml
 
 from fem.bodies import check_bodies
 from fem.layers import preset, read_tissue
@@ -56,6 +59,17 @@ PLACEMENT_KEYS = {
     "grasp": {"along", "around", "grips", "hand_heights", "depth"},
     "palm": {"uv", "spins", "hand_heights", "depth"},
 }
+PLACEMENT_VALUES = {
+    "centres": "count",
+    "spread": "number",
+    "depth": "number",
+    "uv": "pairs",
+    "semi_axes": "pairs",
+    "chars": "strings",
+    "grips": "strings",
+    "counts": "counts",
+}
+"""What each placement key holds; any other key is a list of numbers."""
 BACKENDS = ("serial", "processes", "dask")
 # FIDELITIES (stmpl.predictor): ``full`` solves the whole part; ``auto`` the patch the load
 # moves (:mod:`fem.local`)
@@ -68,6 +82,21 @@ def read_config(source) -> dict:
         cfg["tissue"] = read_tissue(cfg["tissue"])  # the layers themselves decide the samples
     check(cfg)
     return cfg
+
+
+NOTED = ("forces", "thickness_mm")
+"""Keys that decide the samples and whose defaults a config rarely means to take: a config
+that leaves them out is told what was used."""
+
+
+def defaulted(source) -> list[str]:
+    """Of :data:`NOTED`, the keys a config (a YAML path or a mapping) leaves to the defaults,
+    each as ``"key: value"``.
+    """
+    raw = source
+    if isinstance(source, (str, os.PathLike)):
+        raw = yaml.safe_load(pathlib.Path(source).read_text()) or {}
+    return [f"{k}: {DEFAULTS[k]}" for k in NOTED if k not in raw]
 
 
 def _numbers(values, name: str) -> np.ndarray:
@@ -129,8 +158,43 @@ def _check_placements(pl) -> None:
             raise ValueError(
                 f"placements.{kind} takes keys {sorted(PLACEMENT_KEYS[kind])}, got {spec!r}"
             )
-        if "centres" in spec:
-            checked.integer(spec["centres"], f"placements.{kind}.centres", 1)
+        for key, value in spec.items():
+            _check_placement_value(value, f"placements.{kind}.{key}", PLACEMENT_VALUES.get(key))
+
+
+def _check_placement_value(value, name: str, holds: str | None) -> None:
+    """One placement key's value: a count, a finite number, or a non-empty list of numbers,
+    counts, ``[a, b]`` pairs or strings (``holds``; ``None``: numbers).
+    """
+    if holds == "count":
+        checked.integer(value, name, 1)
+        return
+    if holds == "number":
+        checked.number(value, name)
+        return
+    what = {
+        "pairs": "[a, b] pairs of numbers",
+        "strings": "strings",
+        "counts": "integers >= 1",
+    }.get(holds, "numbers")
+    if not isinstance(value, list) or not value:
+        raise ValueError(f"{name} must be a non-empty list of {what}, got {value!r}")
+    for x in value:
+        if holds == "strings":
+            ok = isinstance(x, str) and x.strip() != ""
+        elif holds == "counts":
+            ok = isinstance(x, int) and not isinstance(x, bool) and x >= 1
+        elif holds == "pairs":
+            ok = isinstance(x, list) and len(x) == 2 and all(_finite(v) for v in x)
+        else:
+            ok = _finite(x)
+        if not ok:
+            raise ValueError(f"{name} must be a non-empty list of {what}, got {value!r}")
+
+
+def _finite(x) -> bool:
+    """Whether ``x`` is a finite number (not a bool)."""
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and np.isfinite(x)
 
 
 def _check_setup(cfg: dict) -> None:

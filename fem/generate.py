@@ -28,7 +28,7 @@ from tqdm import tqdm
 import stmpl
 from fem.backends import run
 from fem.bodies import member_folder, members
-from fem.config import config_hash, read_config
+from fem.config import config_hash, defaulted, read_config
 from fem.layers import preset
 from fem.placements import Plan, plan
 from stmpl.data.dataset import BODIES_FORMAT
@@ -192,6 +192,9 @@ def generate(
     ``max_bodies``, for a config of several bodies, stops after that many bodies.
     """
     cfg = read_config(config)
+    if progress:
+        for note in defaulted(config):
+            print(f"note: the config does not set it, so {note} (the default)")
     if tissue is not None:
         cfg = read_config({**cfg, "tissue": tissue})
         if tissue != "paper" and out is None:

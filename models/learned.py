@@ -10,6 +10,7 @@ import torch
 
 from models.features import MIN_TOTAL_N, total_force
 from stmpl import checkpoint
+from stmpl import config as checked
 from stmpl.body.mirror import MIRROR, mirror_twin
 from stmpl.data.dataset import same_mesh
 from stmpl.envelope import Envelope
@@ -76,6 +77,8 @@ class LearnedPredictor(BasePredictor):
     """
 
     defaults: dict = {}
+    counts: tuple = ()
+    """The options that are counts (integers >= 1): a network's width, depth, steps..."""
 
     def __init__(
         self,
@@ -116,8 +119,9 @@ class LearnedPredictor(BasePredictor):
         out = {**allowed, **(config or {})}
         if out.get("loss", "mse") not in LOSSES:
             raise ValueError(f"loss must be one of {LOSSES}, got {out['loss']!r}")
-        if not float(out["disp_scale_mm"]) > 0:
-            raise ValueError(f"disp_scale_mm must be > 0, got {out['disp_scale_mm']}")
+        checked.number(out["disp_scale_mm"], "disp_scale_mm", 0, low_open=True, unit="mm")
+        for key in cls.counts:
+            checked.integer(out[key], key, 1)
         return out
 
     # -- bodies

@@ -176,6 +176,10 @@ class BasePredictor:
         ``PredictionFailed`` before anything is predicted.
         """
         single = isinstance(scenes, Scene)
+        if not single and not hasattr(scenes, "__iter__"):
+            raise TypeError(
+                f"predict takes a Scene or a list of Scenes, got {type(scenes).__name__}"
+            )
         batch = [scenes] if single else list(scenes)
         if not batch:
             raise ValueError("predict needs at least one scene")

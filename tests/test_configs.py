@@ -39,6 +39,12 @@ def test_bad_model_options_fail_on_load():
         read_config({"model": "gnn", "data": "x", "options": {"width": 3}})
     with pytest.raises(ValueError, match="loss must be one of"):
         read_config({"model": "gnn", "data": "x", "options": {"loss": "l1"}})
+    with pytest.raises(ValueError, match="steps must be an integer >= 1, got -2"):
+        read_config({"model": "gnn", "data": "x", "options": {"steps": -2}})
+    with pytest.raises(ValueError, match="width must be an integer >= 1, got '16'"):
+        read_config({"model": "uv_unet", "data": "x", "options": {"width": "16"}})
+    with pytest.raises(ValueError, match="disp_scale_mm must be a number"):
+        read_config({"model": "gnn", "data": "x", "options": {"disp_scale_mm": "ten"}})
 
 
 @pytest.mark.parametrize(

@@ -50,6 +50,7 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         "operator": "stored",
         "geometry": False,
     }
+    counts = ("latent", "steps")
 
     def edge_features(self, part) -> np.ndarray:
         """``(2E, 4)`` edge inputs of a body of the mesh: the rest-pose offset ``x_j - x_i``

@@ -53,6 +53,7 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
         "prior": "none",
         "operator": "stored",
     }
+    counts = ("size", "width", "depth")
 
     def build_model(self) -> nn.Module:
 

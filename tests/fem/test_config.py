@@ -32,6 +32,18 @@ def _cfg(**over):
         ({"seed": 1.5}, "seed must be an integer"),
         ({"forces": [0.1, True]}, "forces must be a non-empty list of numbers"),
         ({"placements": {"disk": {"centres": 2.5}}}, "placements.disk.centres must be an integer"),
+        (
+            {"placements": {"letter": {"uv": [0.5, 0.5]}}},
+            r"placements.letter.uv must be a non-empty list of \[a, b\] pairs",
+        ),
+        (
+            {"placements": {"letter": {"heights": [float("nan")]}}},
+            "placements.letter.heights must be a non-empty list of numbers, got .nan",
+        ),
+        ({"placements": {"disk": {"radii": ["5 mm"]}}}, "placements.disk.radii must be"),
+        ({"placements": {"grasp": {"grips": [""]}}}, "placements.grasp.grips must be"),
+        ({"placements": {"spots": {"counts": [0]}}}, "placements.spots.counts must be"),
+        ({"placements": {"palm": {"depth": "2"}}}, "placements.palm.depth must be a number"),
         ({"parallel": {"backend": "threads"}}, "parallel.backend must be one of"),
         ({"parallel": {"workers": 0}}, "parallel.workers must be an integer >= 1"),
         ({"body": {"model": "tube", "radius": 0.04, "colour": "red"}}, "unknown body keys"),
@@ -195,3 +207,12 @@ def test_palm_placements(anny_body):
     assert len({tuple(q["touched"]) for q in p.placements}) == 4  # four different presses
     with pytest.raises(ValueError, match="placements.palm takes keys"):
         read_config({**cfg, "placements": {"palm": {"centres": 3}}})
+
+
+def test_a_config_that_leaves_the_forces_out_is_told_the_defaults(tmp_path):
+    from fem.config import defaulted
+
+    path = tmp_path / "only.yaml"
+    path.write_text("part: left_arm\nplacements: {disk: {centres: 2}}\nthickness_mm: [7.5]\n")
+    assert defaulted(path) == ["forces: [0.25, 0.5, 0.75, 1.0]"]
+    assert defaulted({"forces": [1.0], "thickness_mm": [5.0]}) == []
