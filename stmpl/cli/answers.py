@@ -52,12 +52,20 @@ def skin_of(preds: list, asked: int | None, default: int) -> int:
     )
 
 
-def answer(scene, specs: list[str], preds: list) -> dict:
+def answer(scene, specs: list[str], preds: list, strict: bool = False) -> dict:
     """``{label: Deformation}``: every predictor's answer to ``scene``, printed one line each
-    with a note where it lies outside its data or is impossible.
+    with a note where it lies outside its data or is impossible. ``strict``: such a scene or
+    answer raises :class:`PredictionFailed` instead.
     """
     out = {}
     for spec, p in zip(specs, preds):
+        if strict:
+            why = p.outside([scene])[0]
+            if why:
+                raise PredictionFailed(
+                    f"{label(spec)}: the scene lies outside the data its answers are backed "
+                    f"by ({'; '.join(why)}); --strict refuses it"
+                )
         first = None
         with warnings.catch_warnings():  # said in the lines below instead
             warnings.simplefilter("ignore", ImpossibleAnswer)
@@ -67,6 +75,11 @@ def answer(scene, specs: list[str], preds: list) -> dict:
                 p.predict(scene)
                 first = time.perf_counter() - t0
             out[label(spec)] = d = p.predict(scene)
+        if strict and not d.info.get("physical", True):
+            raise PredictionFailed(
+                f"{label(spec)} pushes the skin {d.info['max_compression']:.1f} x the tissue's "
+                "thickness inward, which is impossible; --strict refuses the answer"
+            )
         _say(label(spec), p, d, first)
     return out
 

@@ -41,7 +41,7 @@ def predict(args) -> int:
     specs = args.model or [default_model(args.part)]
     preds = answers.predictors(args, specs)
     s = scene_of(args, answers.skin_of(preds, args.subdivide, 0))
-    out = answers.answer(s, specs, preds)
+    out = answers.answer(s, specs, preds, args.strict)
     fem = answers.truth(s, args) if args.compare else None
     if fem is not None:
         answers.errors(out, fem)

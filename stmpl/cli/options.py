@@ -275,6 +275,12 @@ def model_options(parser, default: str) -> None:
         "the first model's own, 1 for the shipped models)",
     )
     parser.add_argument("--compare", action="store_true", help="also solve the FEM, report errors")
+    parser.add_argument(
+        "--strict",
+        action="store_true",
+        help="refuse a scene outside a model's data, or an impossible answer, instead of "
+        "answering with a note",
+    )
     fidelity_option(parser)
     device_option(parser)
     fem_options(parser)

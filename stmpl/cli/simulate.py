@@ -173,7 +173,7 @@ def run(args) -> int:
         f"{part.name} ({part.n_vertices} vertices), {1e3 * float(thick.mean()):.3g} mm of "
         f"tissue; {touch.summary()}  [{time.perf_counter() - t0:.1f} s to set up]"
     )
-    out = answers.answer(scene, specs, preds)
+    out = answers.answer(scene, specs, preds, args.strict)
     fem = answers.truth(scene, args) if args.compare else None
     if fem is not None:
         answers.errors(out, fem)

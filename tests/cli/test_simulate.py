@@ -142,6 +142,11 @@ def test_a_press_past_the_envelope_is_said_and_a_failed_fem_is_one_line(tmp_path
     line = [ln for ln in out.splitlines() if ln.startswith("FEM (coarse)")][0]
     assert " ".join(line.split()).startswith("FEM (coarse) failed: the FEM solve failed at 5 N")
     assert "Traceback" not in out and (tmp_path / "simulate.png").is_file()
+    strict = ["simulate", "--sphere", "20", "--depth", "4", "--force", "5", "--strict"]
+    assert main([*strict, "--out-dir", str(tmp_path / "strict")]) == 2
+    err = capsys.readouterr().err
+    assert "gnn_arm_bodies: the scene lies outside the data" in err and "--strict refuses" in err
+    assert not (tmp_path / "strict").exists()
 
 
 def test_any_body_and_its_right_arm(tmp_path, capsys):
