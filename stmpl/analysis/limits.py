@@ -36,11 +36,28 @@ def measured(cfg: dict, part) -> list[tuple[object, list[dict]]]:
     """The sweep's points as ``(scene, records)``: every cached record of the scene (a cache
     may hold more than one, from earlier versions of the code; judge them together).
     """
-    points = json.loads((pathlib.Path(cfg["out"]) / "points.json").read_text()).values()
+    f = pathlib.Path(cfg["out"]) / "points.json"
+    if not f.is_file():
+        raise FileNotFoundError(f"{f} not found: run the stability sweep {cfg['name']} first")
+    try:
+        points = json.loads(f.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise ValueError(f"{f} is not the sweep's JSON ({e}); run the sweep again") from e
+    if not isinstance(points, dict):
+        raise ValueError(f"{f} must map points to records; run the sweep again")
     by = {}
-    for rec in points:
-        if "skipped" not in rec:
-            by.setdefault((rec["axis"], float(rec["value"])), []).append(rec)
+    for key, rec in points.items():
+        if isinstance(rec, dict) and "skipped" in rec:
+            continue
+        if (
+            not isinstance(rec, dict)
+            or any(k not in rec for k in ("axis", "value", "fem", "predictors"))
+            or not isinstance(rec["fem"], dict)
+            or "ok" not in rec["fem"]
+            or not isinstance(rec["value"], (int, float))
+        ):
+            raise ValueError(f"{f}: point {key!r} is not a sweep record; run the sweep again")
+        by.setdefault((rec["axis"], float(rec["value"])), []).append(rec)
     return [(scene_at(part, cfg["base"], a, v), recs) for (a, v), recs in sorted(by.items())]
 
 

@@ -179,3 +179,23 @@ def test_a_limit_caps_every_box_and_survives_a_round_trip(ds):
         )
     with pytest.raises(ValueError, match="max or range axis"):
         env.limit("rim_distance", 0.01)
+
+
+@pytest.mark.parametrize(
+    "text,message",
+    [
+        (None, "run the stability sweep"),
+        ("{not json", "is not the sweep's JSON"),
+        ("[1, 2]", "must map points to records"),
+        ('{"a": {"axis": "force"}}', "point 'a' is not a sweep record"),
+    ],
+)
+def test_a_missing_or_malformed_sweep_is_named(tmp_path, arm, text, message):
+    from stmpl.analysis import limits
+
+    cfg = stability.read_config("configs/ablation/stability.yaml")
+    cfg = {**cfg, "out": str(tmp_path)}
+    if text is not None:
+        (tmp_path / "points.json").write_text(text)
+    with pytest.raises((ValueError, FileNotFoundError), match=message):
+        limits.measured(cfg, arm)
