@@ -38,20 +38,22 @@ def run(p: Plan, todo: list[int], par: dict, threads: int):
             yield solve_shard(payload(p, k, None))
         return
     if par["backend"] == "processes":
-        with cf.ProcessPoolExecutor(
+        ex = cf.ProcessPoolExecutor(
             par["workers"],
             mp_context=mp.get_context("spawn"),
             initializer=_watch_parent,
             initargs=(os.getpid(),),
-        ) as ex:
-            futs = [ex.submit(solve_shard, payload(p, k, threads)) for k in todo]
-            try:
-                for f in cf.as_completed(futs):
-                    yield f.result()
-            except BaseException:
-                for f in futs:
-                    f.cancel()
-                raise
+        )
+        futs = [ex.submit(solve_shard, payload(p, k, threads)) for k in todo]
+        try:
+            for f in cf.as_completed(futs):
+                yield f.result()
+        except BaseException:  # stopped (Ctrl-C, SIGTERM) or failed: the workers go at once
+            for proc in list((getattr(ex, "_processes", None) or {}).values()):
+                proc.terminate()
+            ex.shutdown(wait=False, cancel_futures=True)
+            raise
+        ex.shutdown()
         return
     from dask.distributed import (
         Client,

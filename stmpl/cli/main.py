@@ -9,7 +9,9 @@ from __future__ import annotations
 
 import argparse
 import logging
+import signal
 import sys
+import threading
 import traceback
 import warnings
 from importlib.metadata import entry_points
@@ -150,9 +152,36 @@ def _message(exc: BaseException) -> str:
     return " ".join(text.split())
 
 
+RESUMABLE = {"generate", "train", "ablate"}
+"""Commands whose finished work is kept on disk and picked up when run again."""
+
+
+class Stopped(KeyboardInterrupt):
+    """The process was asked to stop (SIGTERM): raised where it runs, so that every ``finally``
+    (temporary files removed, workers shut down) runs as on Ctrl-C.
+    """
+
+
+def _stop(signum, frame) -> None:
+    raise Stopped(signal.Signals(signum).name)
+
+
 def main(argv=None) -> int:
-    """Run ``stmpl`` with ``argv`` (default: the process's); returns the exit code."""
+    """Run ``stmpl`` with ``argv`` (default: the process's); returns the exit code (130 after
+    Ctrl-C, 143 after SIGTERM, each said in one line).
+    """
     args = parser().parse_args(argv)
+    if threading.current_thread() is threading.main_thread():
+        previous = signal.signal(signal.SIGTERM, _stop)
+        try:
+            return _run(args)
+        finally:
+            signal.signal(signal.SIGTERM, previous)
+    return _run(args)
+
+
+def _run(args) -> int:
+    """Run the parsed command, its expected failures and stops in one line each."""
     logging.basicConfig(
         level=logging.INFO if args.verbose else logging.WARNING,
         format="%(levelname)s %(name)s: %(message)s",
@@ -171,6 +200,15 @@ def main(argv=None) -> int:
             traceback.print_exc()
         print(f"stmpl {args.command}: error: {_message(exc)}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt as exc:
+        how = f"by {exc.args[0]}" if isinstance(exc, Stopped) else "by Ctrl-C"
+        kept = (
+            "; what was finished is kept, and the same command resumes from it"
+            if args.command in RESUMABLE
+            else ""
+        )
+        print(f"stmpl {args.command}: stopped {how}{kept}", file=sys.stderr)
+        return 143 if isinstance(exc, Stopped) else 130
 
 
 if __name__ == "__main__":

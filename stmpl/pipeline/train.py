@@ -201,6 +201,10 @@ def train(config, resume: bool = True, progress: bool = True):
     cfg = read_config(config)
     out = pathlib.Path(cfg["out"])
     out.mkdir(parents=True, exist_ok=True)
+    for stale in sorted(out.glob("*.tmp")):  # a run killed while it wrote
+        stale.unlink()
+        if progress:
+            print(f"removed {stale}, left by a run that was killed while writing it")
     ds = open_data(cfg["data"])
     p = _model(cfg, ds)
     device = torch.device(cfg["device"])

@@ -237,6 +237,28 @@ def test_workers_leave_when_the_generator_is_killed(tmp_path):
     assert not alive, [p.pid for p in alive]
 
 
+def test_sigterm_stops_generate_in_one_line_and_leaves_no_temporary_file(tmp_path):
+    psutil = pytest.importorskip("psutil")
+    cfg = _cfg(shard_tasks=1, parallel={"backend": "processes", "workers": 2})
+    path = tmp_path / "cfg.yaml"
+    path.write_text(yaml.safe_dump(cfg))
+    out = tmp_path / "stopped"
+    argv = [sys.executable, "-m", "stmpl.cli.main", "generate", str(path), "--out", str(out)]
+    proc = subprocess.Popen(argv, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+    parent = psutil.Process(proc.pid)
+    deadline = time.time() + 120
+    while time.time() < deadline and not list(out.glob("shard-*.h5")):
+        time.sleep(0.05)
+    workers = parent.children(recursive=True)
+    proc.send_signal(signal.SIGTERM)
+    err = proc.communicate(timeout=60)[1]
+    assert proc.returncode == 143, err
+    assert "stmpl generate: stopped by SIGTERM; what was finished is kept" in err
+    assert "Traceback" not in err
+    _, alive = psutil.wait_procs(workers, timeout=10)
+    assert not alive and not list(out.glob("*.tmp"))
+
+
 def test_fidelity_auto_solves_patches_within_a_percent_of_the_whole(tmp_path):
     """The same plan solved whole and on patches (fem.local): the same samples, displacements
     within 1 % of each sample's largest; the config hash of the default (full) is the one

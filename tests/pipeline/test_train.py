@@ -46,7 +46,9 @@ def test_naive_trains_checkpoints_and_reloads(tiny_dataset, tmp_path):
 def test_training_resumes_where_it_stopped(tiny_dataset, tmp_path):
     a = train(_cfg(tiny_dataset, tmp_path / "a", epochs=6), progress=False)
     train(_cfg(tiny_dataset, tmp_path / "b", epochs=3), progress=False)
+    (tmp_path / "b" / "state.pt.x1y2.tmp").write_bytes(b"")  # a run killed as it wrote
     b = train(_cfg(tiny_dataset, tmp_path / "b", epochs=6), progress=False)  # extends the run
+    assert not list((tmp_path / "b").glob("*.tmp"))
     ha = json.loads((tmp_path / "a" / "history.json").read_text())
     hb = json.loads((tmp_path / "b" / "history.json").read_text())
     assert len(ha) == len(hb) == 6
