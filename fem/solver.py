@@ -245,10 +245,12 @@ class Solver:
 
     def assemble(self, u: np.ndarray, f: np.ndarray, definite: bool = False):
         """``(r (n_all, 3), K)``: residual and the tangent on free DOFs (CSR; upper triangle only
-        when the linear solver wants it). ``definite``: under mean dilatation, leave out the
-        elements' pressure stiffness ``p J (H_Ji H_Lk - H_Li H_Jk)``, which a poor first guess
-        (a pressure far above the shear modulus) can make indefinite; Newton's steps then
-        still descend, and the answer is checked against the full tangent.
+        when the linear solver wants it). ``definite``: under mean dilatation, the elements'
+        pressure stiffness ``p J ((tr A)^2 - tr(A A))`` (``A = dF F^-1``) is replaced by its
+        positive part at every point, ``|p| J |dev sym A|^2`` under compression and
+        ``p J (2/3 (tr A)^2 + |skew A|^2)`` under tension: where pressures far above the shear
+        modulus make the full tangent indefinite, Newton's steps still descend, and the answer
+        is checked against the full tangent.
         """
         T, Q = self.W.shape
         F = self._F(u)
@@ -259,12 +261,23 @@ class Solver:
             FinvT, J, dU, d2U = self._pressure(F)
             pJ = (dU[:, None] * J).reshape(-1)
             P = P + pJ[:, None, None] * FinvT
-            if not definite:
-                parts = (parts[0], parts[1] + pJ, parts[2] - pJ, *parts[3:])
+            if definite:  # b (tr A)^2 + c tr(A A) + s tr(A A^T), positive semi-definite
+                m, push = np.abs(pJ), pJ < 0
+                db, dc = np.where(push, -m / 3, 2 * m / 3), np.where(push, m / 2, -m / 2)
+            else:
+                db, dc = pJ, -pJ
+            parts = (parts[0], parts[1] + db, parts[2] + dc, *parts[3:])
         a, b, c, H = parts[:4]
         r = self._scatter_force(P)
         g = np.matmul(self.G, np.asarray(H).reshape(T, Q, 3, 3))  # (T, Q, n, 3) H^T grad N
         aW, bW, cW = (np.asarray(x).reshape(T, Q) * self.W for x in (a, b, c))
+        GG = self.GG
+        if self.bulk is not None and definite:  # tr(A A^T) = d_ik g_a.g_b: into the a term
+            s = (0.5 * np.abs(pJ)).reshape(T, Q)
+            GG = aW[..., None, None] * self.GG + (s * self.W)[..., None, None] * np.matmul(
+                g, g.transpose(0, 1, 3, 2)
+            )
+            aW = np.ones((T, Q))
         full = None
         if len(parts) == 7:  # a law of I1 and J: the long form
             Fq = np.asarray(parts[6]).reshape(T, Q, 3, 3)
@@ -274,12 +287,12 @@ class Solver:
             data = np.zeros(self.pattern.nnz)
             for pos in self.pattern.places:
                 if full is None:
-                    kernel(g, self.GG, aW, bW, cW, pos, data)
+                    kernel(g, GG, aW, bW, cW, pos, data)
                 else:
-                    full_kernel(g, full[0], self.GG, aW, bW, cW, full[1], full[2], pos, data)
+                    full_kernel(g, full[0], GG, aW, bW, cW, full[1], full[2], pos, data)
         else:
             pat = self.pattern
-            data = element_data(g, self.GG, aW, bW, cW, pat.local, *pat.gather, pat.nnz, full=full)
+            data = element_data(g, GG, aW, bW, cW, pat.local, *pat.gather, pat.nnz, full=full)
         if self.bulk is not None:  # each element's rank-one volume term V U'' beta beta^T
             beta = np.einsum("q,tq,tqai->tai", self.element.weights, J, g).reshape(T, -1)
             coef = self.V * d2U

@@ -130,6 +130,25 @@ def test_tangent_matches_finite_differences_of_the_residual(material, order, vol
     assert dE == pytest.approx(np.vdot(S.residual(u, zero), d), rel=1e-6)
 
 
+def test_the_definite_tangent_adds_only_the_pressure_stiffness_s_negative_part_back():
+    """Under mean dilatation the fallback tangent replaces each point's pressure stiffness by
+    its positive part, so it exceeds the full tangent by a positive semi-definite matrix and is
+    positive definite where the full one is not (pressures far above the shear modulus).
+    """
+    part, mesh = _small_shell(layers=1)
+    soft = Demiray(K=2e6, a=50.0, b=8.0)  # fat-like: shear modulus 50 Pa, nearly incompressible
+    S = Solver(mesh, soft, options=SolverOptions(linear_solver="superlu", volume="mean"), order=2)
+    rng = np.random.default_rng(4)
+    u = np.zeros((S.n_all, 3))
+    u.reshape(-1)[S.free] = rng.normal(0, 2e-4, len(S.free))
+    zero = np.zeros_like(u)
+    full = S.assemble(u, zero)[1].toarray()
+    definite = S.assemble(u, zero, definite=True)[1].toarray()
+    scale = np.abs(full).max()
+    assert np.linalg.eigvalsh(definite - full).min() > -1e-9 * scale
+    assert np.linalg.eigvalsh(full).min() < 0 < np.linalg.eigvalsh(definite).min()
+
+
 def test_assembly_matches_scikit_fem():
     skfem = pytest.importorskip("skfem")
     from skfem.models.elasticity import linear_elasticity
