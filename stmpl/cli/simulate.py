@@ -136,6 +136,11 @@ def pressings(args, part) -> list:
             if k == "object"
             else (f"sphere {args.sphere:g} mm" if k == "sphere" else f"letters {args.letters}")
         )
+        if k == "object" and not mesh.is_watertight:
+            print(
+                f"note: {pathlib.Path(args.object).name} is not watertight; what lies inside it "
+                "is judged by its nearest faces' normals"
+            )
         if args.pose is not None:
             pose = contact.pose_matrix(np.asarray(args.pose[:3]) * mm, args.pose[3:])
         else:

@@ -102,7 +102,14 @@ def test_an_object_file_at_a_pose(tmp_path, capsys, arm):
         )
         == 0
     )
-    assert "ball 0.2 N on" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "ball 0.2 N on" in out and "not watertight" not in out
+    cup = objects.sphere(0.01).apply_translation([0, 0, -0.01])
+    cup.update_faces(cup.face_normals[:, 2] < 0.9)  # the top cut open: a cup
+    cup.export(tmp_path / "cup.stl")
+    argv = ["simulate", "--object", str(tmp_path / "cup.stl"), "--force", "0.2"]
+    assert main([*argv, "--out-dir", str(tmp_path / "c")]) == 0
+    assert "note: cup.stl is not watertight" in capsys.readouterr().out
     assert (
         main(["simulate", "--pose", "0", "0", "0", "0", "0", "0", "--out-dir", str(tmp_path / "o")])
         == 2
