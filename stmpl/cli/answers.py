@@ -109,9 +109,10 @@ def _say(name: str, p, d, first: float | None) -> None:
         )
 
 
-def truth(scene, args):
+def truth(scene, args, failures: dict | None = None):
     """The FEM's answer to ``scene`` at the options' resolution, levels and fidelity, printed;
-    ``None`` (and the reason printed) when the solve fails: the models' answers stand.
+    ``None`` (and the reason printed, and kept in ``failures`` under the FEM's name) when the
+    solve fails: the models' answers stand.
     """
     name = f"FEM ({args.res})" if args.tissue == "paper" else f"FEM ({args.res}, {args.tissue})"
     fem = predictor.create(
@@ -126,12 +127,42 @@ def truth(scene, args):
         d = fem.predict(scene)
     except PredictionFailed as e:
         print(f"{name:<{WIDTH}} failed: {e}; no errors to show")
+        if failures is not None:
+            failures[name] = str(e)
         return None
     print(
         f"{name:<{WIDTH}} deepest {1e3 * d.magnitude.max():6.3f} mm  "
         f"{duration(d.info['seconds']):>10}"
     )
     return d
+
+
+def record(out: dict, fem, failures: dict) -> dict:
+    """What a run found, for a file beside its pictures: every answer's deepest displacement
+    (mm), time (s), whether it lies inside its data and is possible (with the reasons), its
+    errors against the FEM's answer, and every solve that failed with why.
+    """
+    answers = {}
+    for name, d in out.items():
+        env = d.info.get("envelope") or {}
+        a = {
+            "deepest_mm": round(1e3 * float(d.magnitude.max()), 6),
+            "seconds": d.info.get("seconds"),
+            "inside_envelope": env.get("inside", True),
+            "outside_because": env.get("outside", []),
+            "physical": bool(d.info.get("physical", True)),
+        }
+        if fem is not None:
+            m = sample_metrics(fem.displacement, d.displacement)
+            a["against_fem"] = {k: round(float(m[k]), 6) for k in ("mee", "rel_mee", "peak_err")}
+        answers[name] = a
+    fem_record = None
+    if fem is not None:
+        fem_record = {
+            "deepest_mm": round(1e3 * float(fem.magnitude.max()), 6),
+            "seconds": fem.info.get("seconds"),
+        }
+    return {"answers": answers, "fem": fem_record, "failed": dict(failures)}
 
 
 def errors(out: dict, fem) -> None:

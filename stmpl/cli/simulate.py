@@ -12,6 +12,7 @@ PLY) and a picture, and prints each method's time.
 
 from __future__ import annotations
 
+import json
 import pathlib
 import time
 
@@ -30,6 +31,7 @@ from stmpl.cli.options import (
 )
 from stmpl.contact import objects
 from stmpl.contact.hand import GRIPS, Hand, grasp, palm_press
+from stmpl.files import atomic_write_text
 from stmpl.scene import Scene
 from stmpl.viz.figures import export_mesh, vertex_colors
 from stmpl.viz.render import contact_figure
@@ -179,17 +181,21 @@ def run(args) -> int:
         f"tissue; {touch.summary()}  [{time.perf_counter() - t0:.1f} s to set up]"
     )
     out = answers.answer(scene, specs, preds, args.strict)
-    fem = answers.truth(scene, args) if args.compare else None
+    failures: dict = {}
+    fem = answers.truth(scene, args, failures) if args.compare else None
     if fem is not None:
         answers.errors(out, fem)
     folder = pathlib.Path(args.out_dir)
     folder.mkdir(parents=True, exist_ok=True)
     first = next(iter(out.values()))
     write_meshes(first, [o.posed() for o in objs], folder / "pressed")
-    contact_figure(out, fem, [o.posed() for o in objs], folder / "simulate.png")
+    contact_figure(out, fem, [o.posed() for o in objs], folder / "simulate.png", failed=failures)
+    atomic_write_text(
+        folder / "simulate.json", json.dumps(answers.record(out, fem, failures), indent=1)
+    )
     print(
         f"wrote {folder / 'pressed.glb'} (body and object), {folder / 'pressed.ply'}, "
-        f"{folder / 'simulate.png'}"
+        f"{folder / 'simulate.png'}, {folder / 'simulate.json'} (every answer and failure)"
     )
     return 0
 

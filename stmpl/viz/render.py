@@ -9,6 +9,7 @@ headless machine). The camera looks at the contact along the skin's mean outward
 from __future__ import annotations
 
 import pathlib
+import textwrap
 
 import numpy as np
 
@@ -119,13 +120,20 @@ def _warning(d) -> str | None:
 
 
 def contact_figure(
-    deformations: dict, truth=None, objects=(), path=None, dpi: int = 110, title: str | None = None
+    deformations: dict,
+    truth=None,
+    objects=(),
+    path=None,
+    dpi: int = 110,
+    title: str | None = None,
+    failed: dict | None = None,
 ):
     """A PNG of one pressed scene: a panel per method (``deformations``: name ->
     :class:`~stmpl.scene.Deformation`; ``truth``, e.g. the FEM's, first) showing the deformed
     skin in 3D coloured by |u| (mm, one scale for all panels) with the ``objects``
     (``trimesh`` meshes in body coordinates) drawn see-through, the method's time and, against
-    ``truth``, its relative mean error and its peak.
+    ``truth``, its relative mean error and its peak. ``failed``: name -> why, the solves that
+    gave no answer, each a panel of the skin at rest that says so in red.
     """
     import matplotlib  # deferred: pictures only
 
@@ -133,14 +141,17 @@ def contact_figure(
     rows = ([("FEM", truth)] if truth is not None else []) + list(deformations.items())
     if not rows:
         raise ValueError("no deformations to draw")
-    part = rows[0][1].scene.part
-    basis, centre, reach = contact_camera(rows[0][1])
+    first = rows[0][1]
+    rows = [(name, why) for name, why in (failed or {}).items()] + rows
+    part = first.scene.part
+    basis, centre, reach = contact_camera(first)
     basis = turned(basis)
-    top = max(max(d.magnitude.max() for _, d in rows) * 1e3, 1e-6)
+    answered = [d for _, d in rows if not isinstance(d, str)]
+    top = max(max(d.magnitude.max() for d in answered) * 1e3, 1e-6)
     scale = float(np.clip(DENT_MM / top, 1.0, 10.0))
     cmap = matplotlib.colormaps["YlOrRd"]  # light where still: the shading shows shape
     fig = plt.figure(figsize=(max(4.4 * len(rows) + 1.0, 10.0), 5.2))
-    warned = any(_warning(d) for _, d in rows)  # a fourth title line: lower panels
+    warned = any(isinstance(d, str) or _warning(d) for _, d in rows)  # lower the panels
     grid = fig.add_gridspec(
         1,
         len(rows) + 1,
@@ -154,6 +165,18 @@ def contact_figure(
     axes = [fig.add_subplot(grid[0, k]) for k in range(len(rows))]
     cx, cy = (centre @ basis.T)[:2]
     for (name, d), ax in zip(rows, axes):
+        if isinstance(d, str):  # a solve that failed: the skin at rest, and why
+            tri = part.vertices[part.faces]
+            meshes = [(tri, (0.85, 0.85, 0.85, 1.0), True)]
+            for m in objects:
+                v = np.asarray(m.vertices)[np.asarray(m.faces)]
+                meshes.append((v, (0.6, 0.8, 1.0, 0.3), True))
+            draw_meshes(ax, basis, meshes)
+            ax.set_xlim(cx - reach, cx + reach)
+            ax.set_ylim(cy - reach, cy + reach)
+            why = textwrap.fill(d, 44, max_lines=3, placeholder=" ...")
+            ax.set_title(f"{name}: failed, no answer\n{why}", fontsize=10, color="#a00000")
+            continue
         drawn = part.vertices + scale * d.displacement
         tri, val = refine(drawn[part.faces], d.magnitude[part.faces] * 1e3)
         meshes = [(tri, cmap(val.mean(1) / top), True)]  # the far side hidden
@@ -180,7 +203,7 @@ def contact_figure(
     sm = matplotlib.cm.ScalarMappable(matplotlib.colors.Normalize(0, top), cmap)
     fig.colorbar(sm, cax=fig.add_subplot(grid[0, -1]), label="displacement |u| (mm)")
     fig.suptitle(
-        (title or _title(rows[0][1].scene))
+        (title or _title(first.scene))
         + (
             f"\n(dents drawn {scale:.0f}x deeper than they are; colours true)"
             if scale > 1.05

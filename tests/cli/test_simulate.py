@@ -1,5 +1,7 @@
 """`stmpl simulate`, the main job: an object pressed on the arm, predicted, written, drawn."""
 
+import json
+
 import numpy as np
 import pytest
 import trimesh
@@ -149,6 +151,10 @@ def test_a_press_past_the_envelope_is_said_and_a_failed_fem_is_one_line(tmp_path
     line = [ln for ln in out.splitlines() if ln.startswith("FEM (coarse)")][0]
     assert " ".join(line.split()).startswith("FEM (coarse) failed: the FEM solve failed at 5 N")
     assert "Traceback" not in out and (tmp_path / "simulate.png").is_file()
+    found = json.loads((tmp_path / "simulate.json").read_text())
+    assert found["fem"] is None and found["failed"]["FEM (coarse)"].startswith("the FEM solve")
+    gnn = found["answers"]["gnn_arm_bodies"]
+    assert not gnn["inside_envelope"] and not gnn["physical"] and gnn["outside_because"]
     strict = ["simulate", "--sphere", "20", "--depth", "4", "--force", "5", "--strict"]
     assert main([*strict, "--out-dir", str(tmp_path / "strict")]) == 2
     err = capsys.readouterr().err
