@@ -87,9 +87,14 @@ def evaluate_models(args) -> int:
 
 
 def zoo_models(args) -> int:
-    """``stmpl zoo list|verify|add|measure|limit``."""
+    """``stmpl zoo list|show|verify|add|measure|limit``."""
     if args.action == "list":
-        print(zoo.table(args.zoo), end="")
+        print(zoo.brief(args.zoo), end="")
+        print("every figure of a model: stmpl zoo show NAME")
+    elif args.action == "show":
+        if len(args.names) != 1:
+            raise ValueError("zoo show needs one model NAME (stmpl zoo list names them)")
+        print(zoo.show(args.names[0], args.zoo), end="")
     elif args.action == "verify":
         bad = []
         for name in args.names or zoo.names(args.zoo):

@@ -105,10 +105,12 @@ def parser() -> argparse.ArgumentParser:
     ab.set_defaults(func=commands.ablate)
 
     zo = sub.add_parser(
-        "zoo", help="the shipped models: list, verify, add, measure on more datasets"
+        "zoo", help="the shipped models: list, show, verify, add, measure on more datasets"
     )
-    zo.add_argument("action", choices=["list", "verify", "add", "measure", "limit"])
-    zo.add_argument("names", nargs="*", help="model names (verify, measure: default all; add: one)")
+    zo.add_argument("action", choices=["list", "show", "verify", "add", "measure", "limit"])
+    zo.add_argument(
+        "names", nargs="*", help="model names (verify, measure: default all; show, add: one)"
+    )
     zo.add_argument("--zoo", help="zoo folder (default $STMPL_ZOO or the repository's zoo/)")
     zo.add_argument("--checkpoint", help="add: the .safetensors checkpoint to add")
     zo.add_argument("--command-line", help="add: the command that trained it")

@@ -318,6 +318,58 @@ def _column(key: str) -> str:
     return "bodies_" + key[6:] if key.startswith("belly_") else key
 
 
+def brief(path=None) -> str:
+    """The zoo in a table under 100 columns: each model's kind, part, size, and its relative
+    MEE (%) on its in-distribution test split and over the other sets it was measured on (the
+    range); ``stmpl zoo show NAME`` gives every figure.
+    """
+    rows = []
+    for n, e in sorted(manifest(path)["models"].items()):
+        metrics = {k: v for k, v in (e.get("metrics") or {}).items() if k != "val"}
+        test = (metrics.pop("test", None) or {}).get("rel_mee", [None])[0]
+        other = [v["rel_mee"][0] for v in metrics.values() if "rel_mee" in v]
+        rows.append(
+            [
+                n,
+                e["kind"],
+                str(e.get("part") or "–"),
+                f"{e['bytes'] / 1e6:.2f}",
+                "–" if test is None else f"{test:.2f}",
+                "–" if not other else f"{min(other):.2f}-{max(other):.2f} ({len(other)} sets)",
+            ]
+        )
+    head = ["model", "kind", "part", "MB", "test rel. MEE %", "other sets rel. MEE %"]
+    return markdown(head, rows, "lllrrr")
+
+
+def show(name: str, path=None) -> str:
+    """Every figure of zoo model ``name``, one line each: what it is, how it was made, and per
+    measured set its MEE (mm), relative MEE (%) and peak error (%).
+    """
+    e = entry(name, path)
+    ds = e.get("dataset") or {}
+    trained = e.get("trained") or {}
+    lines = [
+        f"{name}: {e['kind']}, {e.get('parameters') or 0:,} parameters, "
+        f"{e['bytes'] / 1e6:.2f} MB ({e['file']})",
+        f"  part: {e.get('part')}",
+        f"  trained on: {ds.get('name')} (content hash {ds.get('hash')})",
+    ]
+    lines += [f"  {k}: {v}" for k, v in trained.items() if v]
+    for k, t in sorted((e.get("metrics") or {}).items()):
+        if "mee" not in t:
+            continue
+        peak = t.get("peak_err", [float("nan")])[0]
+        label = LABELS.get(_column(k), k)
+        lines.append(
+            f"  {label if label == k else f'{label} ({k})'}: MEE {t['mee'][0]:.4f} mm, relative "
+            f"{t['rel_mee'][0]:.2f} %, peak " + ("–" if peak != peak else f"{peak:+.1f} %")
+        )
+    for axis, lim in (e.get("limits") or {}).items():
+        lines.append(f"  capped: {axis} <= {lim['max']:g} ({lim.get('source', '')})")
+    return "\n".join(lines) + "\n"
+
+
 def table(path=None) -> str:
     """A markdown table of the zoo: name, kind, size, training dataset, and on the test split of
     every kind of dataset it was measured on the MEE (mm), the relative MEE (%) and the mean

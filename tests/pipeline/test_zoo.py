@@ -160,7 +160,15 @@ def test_cli_zoo(zoo_dir, capsys):
 
     folder, _, _ = zoo_dir
     assert main(["zoo", "list", "--zoo", str(folder)]) == 0
-    assert "unet_tiny" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "| unet_tiny | uv_unet |" in out and "| 10.00 |" in out
+    assert max(len(line) for line in out.splitlines()) <= 100
+    assert main(["zoo", "show", "unet_tiny", "--zoo", str(folder)]) == 0
+    out = capsys.readouterr().out
+    assert "in-distribution test (test): MEE 0.5000 mm, relative 10.00 %" in out
+    assert "command: stmpl train x.yaml" in out
+    assert main(["zoo", "show", "--zoo", str(folder)]) == 2
+    assert "zoo show needs one model NAME" in capsys.readouterr().err
     assert main(["zoo", "verify", "--zoo", str(folder)]) == 0
     assert "unet_tiny: unet_tiny.safetensors ok" in capsys.readouterr().out
     m = json.loads((folder / "manifest.json").read_text())
