@@ -232,6 +232,22 @@ def _title(scene) -> str:
         else (load.summary() if load is not None else f"{scene.total_force:g} N")
     )
     return (
-        f"{scene.part.name} ({scene.part.n_vertices} vertices), "
+        f"{scene.part.name} ({scene.part.n_vertices} vertices){body_words(scene.part)}, "
         f"{1e3 * float(np.median(scene.thickness)):.1f} mm tissue\n{text}"
     )
+
+
+def body_words(part) -> str:
+    """`` of anny (weight 0.7, muscle 0.3)``: the body a part comes from and the phenotype
+    values that differ from anny's defaults (``" of anny (default body)"`` when none does);
+    ``""`` for a part with no body model behind it.
+    """
+    src = part.source or {}
+    body = src.get("body")
+    if not body:
+        return ""
+    phenotype = (src.get("options") or {}).get("phenotype") or {}
+    changed = [f"{k} {v:g}" for k, v in phenotype.items() if abs(v - 0.5) > 1e-9]
+    if not phenotype:
+        return f" of {body}"
+    return f" of {body} ({', '.join(changed) if changed else 'default body'})"

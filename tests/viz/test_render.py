@@ -49,3 +49,16 @@ def test_contact_figure(tmp_path, arm):
     assert "physically impossible" in fig.axes[0].get_title()
     with pytest.raises(ValueError, match="no deformations"):
         contact_figure({})
+
+
+def test_titles_name_the_body_s_phenotype(arm):
+    from dataclasses import replace
+
+    from stmpl.viz.render import body_words
+
+    phenotype = {"gender": 0.5, "weight": 0.7, "muscle": 0.3}
+    heavy = replace(arm, source={"body": "anny", "options": {"phenotype": phenotype}})
+    assert body_words(heavy) == " of anny (weight 0.7, muscle 0.3)"
+    plain = replace(arm, source={"body": "anny", "options": {"phenotype": {"weight": 0.5}}})
+    assert body_words(plain) == " of anny (default body)"
+    assert body_words(replace(arm, source={})) == ""
