@@ -51,9 +51,10 @@ so the limb's roundness and the dent read as shape."""
 TILT = (np.radians(28.0), np.radians(18.0))
 """Camera turn (about its up axis) and tilt (about its right axis), so a limb recedes in depth
 instead of lying flat across the picture."""
-DENT_MM = 4.0
-"""Pictures draw the displacement exaggerated so the deepest point sits this deep (at most 10x,
-never less than 1x); the factor is written on the picture."""
+EXAGGERATION = 3.0
+"""Pictures draw every displacement this many times its size, so that a dent of a millimetre
+reads as shape; where that would draw the skin deeper than the tissue is thick, they draw it
+true to scale instead. The picture says which."""
 
 
 def turned(basis: np.ndarray, yaw: float = TILT[0], pitch: float = TILT[1]) -> np.ndarray:
@@ -148,16 +149,18 @@ def contact_figure(
     basis = turned(basis)
     answered = [d for _, d in rows if not isinstance(d, str)]
     top = max(max(d.magnitude.max() for d in answered) * 1e3, 1e-6)
-    scale = float(np.clip(DENT_MM / top, 1.0, 10.0))
+    depth = 1e3 * float(np.median(first.scene.thickness))
+    scale = EXAGGERATION if EXAGGERATION * top <= depth else 1.0
     cmap = matplotlib.colormaps["YlOrRd"]  # light where still: the shading shows shape
-    fig = plt.figure(figsize=(max(4.4 * len(rows) + 1.0, 10.0), 5.2))
+    width = 4.4 * len(rows) + 1.6
+    fig = plt.figure(figsize=(width, 5.2))
     warned = any(isinstance(d, str) or _warning(d) for _, d in rows)  # lower the panels
     grid = fig.add_gridspec(
         1,
         len(rows) + 1,
         width_ratios=[1] * len(rows) + [0.05],
         left=0.01,
-        right=0.94,
+        right=1 - 0.8 / width,  # room for the colour bar's label
         bottom=0.03,
         top=0.72 if warned else 0.76,
         wspace=0.05,
@@ -202,16 +205,14 @@ def contact_figure(
         ax.set_title("\n".join(lines), fontsize=10, color="#a00000" if warn else "black")
     sm = matplotlib.cm.ScalarMappable(matplotlib.colors.Normalize(0, top), cmap)
     fig.colorbar(sm, cax=fig.add_subplot(grid[0, -1]), label="displacement |u| (mm)")
-    fig.suptitle(
-        (title or _title(first.scene))
-        + (
-            f"\n(dents drawn {scale:.0f}x deeper than they are; colours true)"
-            if scale > 1.05
-            else ""
-        ),
-        y=0.985,
-        fontsize=10,
+    text = (title or _title(first.scene)) + (
+        f"\n(displacements drawn {scale:g}x their size; colours true)"
+        if scale > 1
+        else "\n(displacements drawn true to scale)"
     )
+    chars = int(13 * width)  # what a line of 10 pt text holds across the figure
+    text = "\n".join(textwrap.fill(line, chars) for line in text.splitlines())
+    fig.suptitle(text, y=0.985, fontsize=10)
     if path is not None:
         pathlib.Path(path).parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(path, dpi=dpi)
