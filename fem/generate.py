@@ -221,6 +221,13 @@ def generate(
     _check_solvable(p)
     _prepare(out, cfg, p, chash)
     todo = [k for k in range(p.n_shards) if read_shard_meta(shard_path(out, k), chash) is None]
+    if progress:
+        for k in todo:
+            if shard_path(out, k).is_file():
+                print(
+                    f"{shard_path(out, k).name} is unreadable, changed since it was written or "
+                    "of another config: solving it again"
+                )
     if max_shards is not None:
         todo = todo[:max_shards]
     runs_path = out / "runs.json"

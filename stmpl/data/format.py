@@ -114,12 +114,16 @@ def write_shard(folder, shard: int, records: dict, attrs: dict) -> pathlib.Path:
             for k in STRINGS:
                 h.create_dataset(k, data=np.asarray(records[k], dtype=object),
                                  dtype=h5py.string_dtype())
+        content = read_shard(tmp)[1]["content"]  # as a reader will see it
+        with h5py.File(tmp, "a") as h:
+            h.attrs["written"] = content
     return path
 
 
 def read_shard(path, keys=ARRAYS + STRINGS) -> tuple[dict, dict]:
     """``(arrays, attrs)`` of a shard and its content hash as ``attrs["content"]``; raises
-    ``ValueError`` naming the file if it is unreadable."""
+    ``ValueError`` naming the file if it is unreadable, or changed since it was written (its
+    content against the hash it was written with, ``attrs["written"]``)."""
     import h5py  # deferred: dataset shards only
 
     try:
@@ -134,6 +138,12 @@ def read_shard(path, keys=ARRAYS + STRINGS) -> tuple[dict, dict]:
     h = hashlib.sha256()
     _hash_arrays(h, arrays)
     attrs["content"] = h.hexdigest()
+    written = attrs.get("written")
+    if written is not None and written != attrs["content"]:
+        raise ValueError(
+            f"dataset shard {path} was changed after it was written (its content no longer "
+            "matches the hash it was written with)"
+        )
     return arrays, attrs
 
 

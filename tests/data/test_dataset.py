@@ -12,7 +12,7 @@ from stmpl.data.dataset import Dataset
 from stmpl.data.format import content_hash, part_hash
 
 
-def test_dataset_errors_name_the_problem(tmp_path, tiny_config):
+def test_dataset_errors_name_the_problem(tmp_path, tiny_config, capsys):
     import h5py
 
     with pytest.raises(FileNotFoundError, match="card.json"):
@@ -25,8 +25,12 @@ def test_dataset_errors_name_the_problem(tmp_path, tiny_config):
     original = first.read_bytes()
     with h5py.File(first, "r+") as h:  # an edited sample: its file still reads
         h["displacement"][0, 0, 0] = 2 * h["displacement"][0, 0, 0] + 1e-6
-    with pytest.raises(ValueError, match=f"{first.name} does not match card.json"):
+    with pytest.raises(ValueError, match=f"{first.name} was changed after it was written"):
         Dataset(tmp_path / "d").arrays("train")
+    card = Dataset(tmp_path / "d").card["hash"]
+    generate(tiny_config(thickness_mm=[7.5], forces=[0.05]), tmp_path / "d", progress=True)
+    assert f"{first.name} is unreadable, changed since it was written" in capsys.readouterr().out
+    assert Dataset(tmp_path / "d").card["hash"] == card  # solved again, as it was
     first.write_bytes(original)
     second.write_bytes(second.read_bytes()[:200])  # a truncated shard
     with pytest.raises(ValueError, match=f"{second.name} is corrupt"):
@@ -207,7 +211,7 @@ def test_a_linear_answer_is_kept_and_hashed(tmp_path, tiny_config):
     shard = sorted((tmp_path / "d").glob("shard-*.h5"))[0]
     with h5py.File(shard, "r+") as h:
         h["linear"][0, 0, 0] += 1e-4
-    with pytest.raises(ValueError, match="does not match card.json"):
+    with pytest.raises(ValueError, match="was changed after it was written"):
         Dataset(tmp_path / "d").arrays()
 
 
