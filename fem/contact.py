@@ -188,7 +188,7 @@ class Pressed:
         min_det_F: the smallest volume ratio in the tissue; ``compression``: how far the skin
             moves inward as a share of the tissue's depth under it (its largest).
         iterations: Newton iterations, all updates summed; ``updates``: multiplier updates.
-        time: seconds.
+        time: seconds the answer took (under force control, the whole search).
     """
 
     ok: bool
@@ -292,13 +292,22 @@ def press_to_force(
     is found between the last two by the secant method (each try from the shallower state). A
     step that lands past the tissue's trust bounds (:class:`~fem.material.Limits`) is shortened
     up to six times; a press that fails first, or runs through the whole tissue, fails and says
-    at what force.
+    at what force. The answer's ``time`` is the whole search's.
     """
     force = positive(force, "target force")
     if not 0 < rtol < 0.5:
         raise ValueError(f"rtol must lie in (0, 0.5), got {rtol!r}")
     if start is not None and not (start.ok and start.reaction < force):
         raise ValueError(f"start must be an answer that carries less than {force:g} N")
+    t0 = time.perf_counter()
+    answer = _force_control(
+        solver, shape, direction, force, rtol, step, stiffness, max_updates, start
+    )
+    return replace(answer, time=time.perf_counter() - t0)
+
+
+def _force_control(solver, shape, direction, force, rtol, step, stiffness, max_updates, start):
+    """:func:`press_to_force`'s search, its arguments checked."""
     deepest = float(solver.mesh.thickness.max())
     with _Pressing(solver, shape, direction, stiffness, 2e-3, max_updates, step) as go:
         lo, hi = start or Pressed(True, "", 0.0, reaction=0.0), None
