@@ -99,6 +99,22 @@ class Limits:
                 f"{self.min_det_F!r} and {self.max_compression!r}"
             )
 
+    def reason(self, detF: float, compression: float) -> str:
+        """Why a state of smallest volume ratio ``detF`` and skin ``compression`` (a share of
+        the tissue's depth) lies past these bounds, or ``""``.
+        """
+        if detF < self.min_det_F:
+            return (
+                f"not trusted: the tissue keeps {detF:.2f} of its volume at worst "
+                f"(trusted down to {self.min_det_F:g}; {self.source})"
+            )
+        if compression > self.max_compression:
+            return (
+                f"not trusted: the skin moves inward {compression:.2f} x the tissue's depth "
+                f"(trusted up to {self.max_compression:g}; {self.source})"
+            )
+        return ""
+
 
 class Law:
     """What every material gives from its ``tangent_parts``: the stress and the full tangent.

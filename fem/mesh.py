@@ -22,6 +22,7 @@ import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
 
+from fem.elements import TRI_EDGES, TRI_POINTS, TRI_WEIGHTS, tri_shape
 from stmpl.geometry import triangle_areas
 from stmpl.part import BodyPart
 
@@ -138,6 +139,31 @@ class ShellMesh:
             float(dih.min()),
             float(dih.max()),
         )
+
+    def quadratic_forces(self, force: np.ndarray, edges: np.ndarray) -> np.ndarray:
+        """``(M + E, 3)`` consistent nodal forces of quadratic elements for per-vertex normal
+        forces ``(N,)`` (N): the linear pressure they make integrated against the 6-node skin
+        triangles (nodes, then the midpoints of ``edges`` ``(E, 2)``, sorted pairs).
+        """
+        n_all = self.n_nodes + len(edges)
+        p = self.interp @ (np.asarray(force, float) / self.part.vertex_areas)
+        tri = self.skin_faces
+        key = edges[:, 0] * n_all + edges[:, 1]
+        te = np.sort(tri[:, TRI_EDGES], axis=2)  # (K, 3, 2)
+        mid = self.n_nodes + np.searchsorted(key, te[..., 0] * n_all + te[..., 1])
+        nodes6 = np.concatenate([tri, mid], axis=1)  # (K, 6)
+        pq = TRI_POINTS @ p[tri].T  # (Qs, K)
+        N6 = tri_shape(2, TRI_POINTS)  # (Qs, 6)
+        load = self.skin_face_areas[:, None] * np.einsum("q,qk,qa->ka", TRI_WEIGHTS, pq, N6)
+        mag = np.bincount(nodes6.ravel(), weights=load.ravel(), minlength=n_all)
+        normals = np.zeros((n_all, 3))
+        normals[: self.n_skin] = self.skin_normals
+        skin_edge = (edges[:, 0] < self.n_skin) & (edges[:, 1] < self.n_skin)
+        nm = self.skin_normals[edges[skin_edge, 0]] + self.skin_normals[edges[skin_edge, 1]]
+        normals[self.n_nodes + np.flatnonzero(skin_edge)] = nm / np.linalg.norm(
+            nm, axis=1, keepdims=True
+        )
+        return -mag[:, None] * normals
 
     def nodal_forces(self, force: np.ndarray, mode: str = "traction") -> np.ndarray:
         """``(M, 3)`` nodal force vectors (N) for per-vertex normal forces on the part.

@@ -36,6 +36,20 @@ class Solution:
     state: np.ndarray | None = None
     info: dict = field(default_factory=dict)
 
+    @classmethod
+    def failed(
+        cls,
+        reason: str,
+        total_force: float,
+        iterations: int = 0,
+        residual: float = float("nan"),
+        time: float = 0.0,
+        substeps: int = 0,
+    ) -> "Solution":
+        """A failed solve: no displacement, ``reason`` says why."""
+        nan = float("nan")
+        return cls(False, reason, None, iterations, residual, nan, time, total_force, substeps)
+
     def diagnostics(self) -> dict:
         """JSON-ready scalars."""
         return {

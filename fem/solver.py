@@ -33,68 +33,18 @@ non-physical).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
-from fem.elements import ELEMENTS, TRI_EDGES, TRI_POINTS, TRI_WEIGHTS, quadratic, tri_shape
+from fem.elements import ELEMENTS, quadratic
 from fem.kernel import element_data, full_kernel, kernel, outer_data, outer_kernel
-from fem.linear_solvers import LINEAR_SOLVERS, IndefiniteTangent, make_linear_solver
+from fem.linear_solvers import IndefiniteTangent, make_linear_solver
 from fem.material import NeoHookean, bulk_moduli, det3, inv3, volumetric
 from fem.mesh import ShellMesh
+from fem.options import SolverOptions
 from fem.pattern import Pattern
 from fem.solution import Solution
-
-
-@dataclass(frozen=True)
-class SolverOptions:
-    """Newton settings.
-
-    Attributes:
-        rtol: converged when ``|r| <= rtol * |f|`` (free DOFs).
-        max_iter: Newton iterations per solve (per force level or sub-step).
-        reuse: keep the factorised tangent while the residual falls at least this much per
-            step (0 for plain Newton: a new factorisation every step).
-        stagnation: fail when the residual has not halved over this many iterations.
-        max_substeps: a failed force increment is halved up to this many times.
-        max_compression: reject states whose skin moves inward by more than this share of the
-            local thickness (1.0: skin reaches bone).
-        linear_solver: ``"auto"``, ``"pardiso"``, ``"superlu"`` or ``"cg"`` (AMG-preconditioned).
-        force_mode: how per-vertex forces become nodal forces, ``"traction"`` or ``"nodal"``
-            (see :meth:`ShellMesh.nodal_forces`).
-        rims: ``"fixed"`` holds the part's cut rims (all layers) where the tissue would go on
-            into the rest of the body; ``"free"`` leaves the cut faces traction-free.
-        volume: where a law's volume part is evaluated: ``"mean"`` on each element's mean
-            volume ratio (mean dilatation, no volumetric locking; laws with a bulk modulus),
-            ``"point"`` at every quadrature point, ``"auto"`` mean where the law allows it.
-    """
-
-    rtol: float = 1e-7
-    max_iter: int = 40
-    reuse: float = 0.1
-    stagnation: int = 6
-    max_substeps: int = 3
-    max_compression: float = 1.0
-    linear_solver: str = "auto"
-    force_mode: str = "traction"
-    rims: str = "fixed"
-    volume: str = "auto"
-
-    def __post_init__(self) -> None:
-        if self.linear_solver not in ("auto", *LINEAR_SOLVERS):
-            raise ValueError(
-                f"unknown linear_solver {self.linear_solver!r}; choose auto or one "
-                f"of {sorted(LINEAR_SOLVERS)}"
-            )
-        if self.force_mode not in ("traction", "nodal"):
-            raise ValueError(f"unknown force_mode {self.force_mode!r}; use 'traction' or 'nodal'")
-        if self.volume not in ("auto", "mean", "point"):
-            raise ValueError(f"volume must be 'auto', 'mean' or 'point', got {self.volume!r}")
-        if self.rims not in ("fixed", "free"):
-            raise ValueError(f"rims must be 'fixed' or 'free', got {self.rims!r}")
-        if not (self.rtol > 0 and self.max_iter >= 1 and self.max_compression > 0):
-            raise ValueError("rtol, max_iter and max_compression must be positive")
 
 
 class Solver:
@@ -322,27 +272,7 @@ class Solver:
         if self.order == 1 or self.options.force_mode == "nodal":
             f = mesh.nodal_forces(force, self.options.force_mode)
             return np.concatenate([f, np.zeros((len(self.edges), 3))])
-        # P2: integrate the linear pressure against the 6-node skin triangles
-        p = mesh.interp @ (np.asarray(force, float) / mesh.part.vertex_areas)
-        tri = mesh.skin_faces
-        key = self.edges[:, 0] * self.n_all + self.edges[:, 1]
-        te = np.sort(tri[:, TRI_EDGES], axis=2)  # (K, 3, 2)
-        mid = mesh.n_nodes + np.searchsorted(key, te[..., 0] * self.n_all + te[..., 1])
-        nodes6 = np.concatenate([tri, mid], axis=1)  # (K, 6)
-        area = mesh.skin_face_areas
-        pq = TRI_POINTS @ p[tri].T  # (Qs, K)
-        N6 = tri_shape(2, TRI_POINTS)  # (Qs, 6)
-        load = area[:, None] * np.einsum("q,qk,qa->ka", TRI_WEIGHTS, pq, N6)  # (K, 6)
-        mag = np.bincount(nodes6.ravel(), weights=load.ravel(), minlength=self.n_all)
-        normals = np.zeros((self.n_all, 3))
-        normals[: mesh.n_skin] = mesh.skin_normals
-        e = self.edges
-        skin_edge = (e[:, 0] < mesh.n_skin) & (e[:, 1] < mesh.n_skin)
-        nm = mesh.skin_normals[e[skin_edge, 0]] + mesh.skin_normals[e[skin_edge, 1]]
-        normals[mesh.n_nodes + np.flatnonzero(skin_edge)] = nm / np.linalg.norm(
-            nm, axis=1, keepdims=True
-        )
-        return -mag[:, None] * normals
+        return mesh.quadratic_forces(force, self.edges)
 
     # ------------------------------------------------------------------ solving
     def solve(self, force: np.ndarray, u0: np.ndarray | None = None) -> Solution:
@@ -390,16 +320,7 @@ class Solver:
         for total in totals:
             if failed is not None:
                 out.append(
-                    Solution(
-                        False,
-                        f"skipped: a lower force ({failed:.3g} N) failed",
-                        None,
-                        0,
-                        float("nan"),
-                        float("nan"),
-                        0.0,
-                        float(total),
-                    )
+                    Solution.failed(f"skipped: a lower force ({failed:.3g} N) failed", float(total))
                 )
                 continue
             sol = self.solve(force * (total / base), u0=u)
@@ -608,16 +529,13 @@ class Solver:
         return self._newton(np.array(u, dtype=float), f, rtol, floor)
 
     def _fail(self, res, iters, t0, force, substeps) -> Solution:
-        return Solution(
-            False,
+        return Solution.failed(
             res["reason"],
-            None,
+            float(force.sum()),
             iters,
             res["residual"],
-            float("nan"),
-            time.perf_counter() - t0,
-            float(force.sum()),
-            substeps,
+            time=time.perf_counter() - t0,
+            substeps=substeps,
         )
 
     def measures(self, u: np.ndarray) -> tuple[float, float]:
@@ -651,19 +569,7 @@ class Solver:
                 f"thickness (limit {self.options.max_compression})"
             )
         limits = self.material.limits
-        if limits is None:
-            return ""
-        if detF < limits.min_det_F:
-            return (
-                f"not trusted: the tissue keeps {detF:.2f} of its volume at worst "
-                f"(trusted down to {limits.min_det_F:g}; {limits.source})"
-            )
-        if compression > limits.max_compression:
-            return (
-                f"not trusted: the skin moves inward {compression:.2f} x the tissue's depth "
-                f"(trusted up to {limits.max_compression:g}; {limits.source})"
-            )
-        return ""
+        return "" if limits is None else limits.reason(detF, compression)
 
     def _checked_solution(self, res, u, iters, t0, force, substeps) -> Solution:
         detF, comp = self.measures(u)

@@ -15,7 +15,6 @@ import tempfile
 from importlib.metadata import version
 
 import numpy as np
-import torch
 
 from stmpl.body.model import BodyMesh, CachedBodyModel, PartSpec
 
@@ -134,6 +133,8 @@ class AnnyBody(CachedBodyModel):
 
     def _rest_mesh(self, phenotype: dict[str, float]) -> BodyMesh:
         """The whole-body rest mesh of ``phenotype`` (unset values 0.5)."""
+        import torch  # deferred: anny's forward pass (about a second to import)
+
         m = self.anny
         with torch.no_grad():
             out = m(phenotype_kwargs={k: float(v) for k, v in phenotype.items()})

@@ -16,7 +16,6 @@ from dataclasses import dataclass
 from typing import Protocol, runtime_checkable
 
 import numpy as np
-import torch
 
 from stmpl.body.extract import extract_part
 from stmpl.files import atomic_savez
@@ -80,7 +79,7 @@ class BodyModel(Protocol):
     def rest_mesh(self) -> BodyMesh: ...
 
 
-class CachedBodyModel(torch.nn.Module):
+class CachedBodyModel:
     """Shared machinery: part lookup, validation, the on-disk cache. Subclasses define
     ``name``, ``PARTS`` (name -> PartSpec), :meth:`rest_mesh` and :meth:`options`.
     """
@@ -89,7 +88,6 @@ class CachedBodyModel(torch.nn.Module):
     PARTS: dict[str, PartSpec] = {}
 
     def __init__(self, cache_dir: str | os.PathLike | None = None) -> None:
-        super().__init__()
         self.cache_dir = pathlib.Path(cache_dir) if cache_dir else default_cache_dir()
 
     def options(self) -> dict:
