@@ -1,4 +1,4 @@
-"""The FEM's commands on the ``stmpl`` command line (entry-point group ``stmpl.commands``):
+"""The FEM's commands on the ``stmpl`` command line (declared in :mod:`fem.arguments`):
 ``stmpl generate CONFIG`` makes a dataset; ``stmpl solve`` solves one primitive scene and draws
 it with a section through the tissue shell.
 """
@@ -8,28 +8,7 @@ from __future__ import annotations
 from fem.generate import generate
 from fem.pictures import deformation_figure
 from fem.predictor import FEMPredictor
-from stmpl.cli.options import fem_options, phenotype_of, scene_of, scene_options
-
-
-def add_generate(sub) -> None:
-    """Add ``generate`` to the ``stmpl`` subcommands ``sub`` (an argparse subparsers object)."""
-    ge = sub.add_parser("generate", help="generate a FEM dataset from a config (resumable)")
-    ge.add_argument("config", help="dataset config (YAML), e.g. configs/data/small.yaml")
-    ge.add_argument("--out", help="output folder (default data/<config name>)")
-    ge.add_argument("--workers", type=int, help="parallel workers (default from the config)")
-    ge.add_argument("--backend", choices=["serial", "processes", "dask"])
-    ge.add_argument("--scheduler", help="Dask scheduler address (implies --backend dask)")
-    ge.add_argument("--max-shards", type=int, help="stop after this many new shards")
-    ge.add_argument(
-        "--max-bodies", type=int, help="a config of several bodies: stop after the first this many"
-    )
-    ge.add_argument(
-        "--tissue",
-        help="tissue in place of the config's: paper, forearm, upper_arm, abdomen, or a YAML "
-        "file of layers (docs/tissue.md)",
-    )
-    ge.add_argument("--quiet", action="store_true", help="no progress bar")
-    ge.set_defaults(func=generate_command)
+from stmpl.cli.options import phenotype_of, scene_of
 
 
 def generate_command(args) -> int:
@@ -77,18 +56,6 @@ def generate_command(args) -> int:
         )
     print(f"content hash {card['hash']}")
     return 0
-
-
-def add_solve(sub) -> None:
-    """Add ``solve`` to the ``stmpl`` subcommands ``sub``: the FEM on one primitive scene."""
-    si = sub.add_parser("solve", help="solve a primitive load with the FEM and draw its section")
-    scene_options(si)
-    fem_options(si)
-    si.add_argument("--size", type=int, default=256, help="UV image size in the picture, px")
-    si.add_argument("--out", help="PNG picture to write")
-    si.add_argument("--save", help="deformation file to write (.npz)")
-    si.add_argument("--vtu", help="the deformed tissue shell for ParaView (.vtu)")
-    si.set_defaults(func=solve_command)
 
 
 def solve_command(args) -> int:

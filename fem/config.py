@@ -19,7 +19,7 @@ from fem.simulate import resolution
 from fem.solver import SolverOptions
 from stmpl import config as checked
 from stmpl.body.spec import check_spec
-from stmpl.predictor import FIDELITIES
+from stmpl.fidelity import FIDELITIES
 from stmpl.tissue import THICKNESS_RANGE
 
 DEFAULTS = {

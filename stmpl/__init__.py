@@ -11,14 +11,14 @@ found on first use, so ``import stmpl`` stays light: a name below is imported wh
 for, not before.
 """
 
-import importlib
+from stmpl.lazy import exports
 
 __version__ = "0.1.0"
 
 PUBLIC = {
-    "AnnyBody": "stmpl.body",
-    "SMPLBody": "stmpl.body",
-    "default_part": "stmpl.body",
+    "AnnyBody": "stmpl.body.anny_body",
+    "SMPLBody": "stmpl.body.smpl_body",
+    "default_part": "stmpl.body.anny_body",
     "BodyPart": "stmpl.part",
     "Scene": "stmpl.scene",
     "Deformation": "stmpl.scene",
@@ -30,16 +30,4 @@ PUBLIC = {
 name, like ``zoo``, stands for the module itself)."""
 
 __all__ = [*PUBLIC, "__version__"]
-
-
-def __getattr__(name: str):
-    if name not in PUBLIC:
-        raise AttributeError(f"module 'stmpl' has no attribute {name!r}")
-    module = importlib.import_module(PUBLIC[name])
-    value = module if module.__name__.endswith("." + name) else getattr(module, name)
-    globals()[name] = value
-    return value
-
-
-def __dir__() -> list[str]:
-    return sorted(set(globals()) | set(PUBLIC))
+__getattr__, __dir__ = exports(__name__, PUBLIC)

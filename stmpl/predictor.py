@@ -22,6 +22,8 @@ from typing import Protocol, Sequence, runtime_checkable
 import numpy as np
 
 from stmpl.checkpoint import read_sidecar
+from stmpl.failures import ImpossibleAnswer, OutsideEnvelope, PredictionFailed
+from stmpl.fidelity import check_fidelity
 from stmpl.scene import Deformation, Scene
 
 GROUP = "stmpl.predictors"
@@ -37,26 +39,6 @@ class Predictor(Protocol):
     def predict(self, scenes: Scene | Sequence[Scene]) -> Deformation | list[Deformation]:
         """A Deformation for a scene, or a list of them for a sequence of scenes."""
         ...
-
-
-class ImpossibleAnswer(RuntimeWarning):
-    """A prediction moved the skin further inward than the tissue is thick (through the fixed
-    surface beneath): physically impossible, flagged (``Deformation.info["physical"]``) and
-    warned about, never passed off as an answer.
-    """
-
-
-class OutsideEnvelope(RuntimeWarning):
-    """A scene lies outside the data a predictor's answers are backed by (its
-    :class:`~stmpl.envelope.Envelope`): answered, flagged (``Deformation.info["envelope"]``) and
-    warned about once per call; with ``strict=True`` refused instead.
-    """
-
-
-class PredictionFailed(RuntimeError):
-    """A predictor could not answer a scene (e.g. a FEM solve that did not converge); the message
-    says why. Never returned as a result.
-    """
 
 
 REGISTRY: dict[str, type] = {}
@@ -119,18 +101,6 @@ def read(path, device: str = "cpu", **options) -> "BasePredictor":
     if kind not in names():
         raise ValueError(f"checkpoint {path} is of unknown kind {kind!r}; known: {names()}")
     return get(kind).from_checkpoint(path, device=device, **options)
-
-
-FIDELITIES = ("full", "auto")
-"""How much of a part a predictor models for a scene: all of it, or what the scene needs
-(:mod:`stmpl.reach`). The one list of them: the command line's choices come from here."""
-
-
-def check_fidelity(value) -> str:
-    """``value`` if it is one of :data:`FIDELITIES`, else ``ValueError`` naming it."""
-    if value not in FIDELITIES:
-        raise ValueError(f"fidelity must be one of {list(FIDELITIES)}, got {value!r}")
-    return value
 
 
 class BasePredictor:

@@ -1,5 +1,6 @@
 """The house's shape, read from every import statement with ``ast`` (a lazy import inside a
-function counts as much as one at the top of a file).
+function counts as much as one at the top of a file, and so does a module named in a string,
+``"stmpl.cli.simulate:run"``, which is imported when first used).
 
 The core types sit at the root of ``stmpl/``; the wings beside them are stacked in
 :data:`WINGS`, lowest first. A root module imports only root modules; a wing imports the root,
@@ -78,6 +79,12 @@ def _imports(name: str, path: pathlib.Path) -> list[tuple[str, ast.stmt, bool]]:
                 base = ".".join(pkg + ([base] if base else []))
             targets = [f"{base}.{a.name}" for a in node.names]
             targets = [t if t in MODULES else base for t in targets]
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str):
+            named, colon, _ = node.value.partition(":")  # a command: "module:function"
+            if not colon or "." not in named or named not in MODULES or named == name:
+                continue
+            out.append((named, node, True))  # imported by name when first used: an edge
+            continue
         else:
             continue
         out += [(t, node, id(node) in top) for t in targets]
@@ -186,10 +193,13 @@ def test_the_core_knows_neither_the_fem_nor_the_models():
 def test_the_checks_see_lazy_imports_and_circles(tmp_path, monkeypatch):
     """The reader finds an import inside a function, and the search finds a circle."""
     f = tmp_path / "m.py"
-    f.write_text("def g():\n    from fem.simulate import simulate\n    import models.gnn\n")
+    f.write_text(
+        "def g():\n    from fem.simulate import simulate\n    import models.gnn\n"
+        "RUN = 'stmpl.cli.simulate:run'\n"
+    )
     found = {(t, top) for t, _, top in _imports("stmpl.m", f)}
-    assert found == {("fem.simulate", False), ("models.gnn", False)}
-    monkeypatch.setitem(GRAPH, "stmpl.scene", GRAPH["stmpl.scene"] | {"stmpl.cli.main"})
+    assert found == {("fem.simulate", False), ("models.gnn", False), ("stmpl.cli.simulate", True)}
+    monkeypatch.setitem(GRAPH, "stmpl.scene", GRAPH["stmpl.scene"] | {"stmpl.cli.simulate"})
     assert any("stmpl.scene" in c for c in _circles())
 
 

@@ -70,7 +70,7 @@ SETUP_KEYS = {
 }
 """``limit``: evaluate on at most this many samples of each test split (the FEM takes seconds
 per scene); ``fidelity``: ``full`` (the default) or ``auto`` (model no more of the part than the
-scene needs, :data:`stmpl.predictor.FIDELITIES`); ``chart: false`` keeps a set-up that differs
+scene needs, :data:`stmpl.fidelity.FIDELITIES`); ``chart: false`` keeps a set-up that differs
 only in its training data (not in its speed) off the speed-vs-accuracy chart (it stays in the
 tables and in the chart's table)."""
 

@@ -4,30 +4,24 @@
 ``load_body(name)`` resolves a body model by name.
 """
 
-from stmpl.body.anny_body import PHENOTYPES, AnnyBody
-from stmpl.body.extract import extract_part
-from stmpl.body.model import CACHE_VERSION, BodyMesh, BodyModel, PartSpec, default_cache_dir
-from stmpl.body.primitives import sheet, tube
-from stmpl.body.smpl_body import SMPLBody
-from stmpl.part import BodyPart
+from stmpl.lazy import exports
 
-__all__ = [
-    "AnnyBody",
-    "SMPLBody",
-    "BodyModel",
-    "BodyPart",
-    "BodyMesh",
-    "PartSpec",
-    "PHENOTYPES",
-    "CACHE_VERSION",
-    "default_cache_dir",
-    "extract_part",
-    "tube",
-    "sheet",
-    "default_part",
-]
+PUBLIC = {
+    "AnnyBody": "stmpl.body.anny_body",
+    "default_part": "stmpl.body.anny_body",
+    "SMPLBody": "stmpl.body.smpl_body",
+    "BodyModel": "stmpl.body.model",
+    "BodyMesh": "stmpl.body.model",
+    "PartSpec": "stmpl.body.model",
+    "CACHE_VERSION": "stmpl.body.model",
+    "default_cache_dir": "stmpl.body.model",
+    "PHENOTYPES": "stmpl.body.phenotype",
+    "extract_part": "stmpl.body.extract",
+    "tube": "stmpl.body.primitives",
+    "sheet": "stmpl.body.primitives",
+    "BodyPart": "stmpl.part",
+}
+"""The package's names and the module each comes from, imported on first use."""
 
-
-def default_part(name: str = "left_arm", weight: float = 0.5) -> BodyPart:
-    """The named part of the default body (Anny) with the given ``weight`` phenotype."""
-    return AnnyBody(phenotype={"weight": weight}).part(name)
+__all__ = list(PUBLIC)
+__getattr__, __dir__ = exports(__name__, PUBLIC)

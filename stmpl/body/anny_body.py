@@ -17,11 +17,11 @@ from importlib.metadata import version
 import numpy as np
 
 from stmpl.body.model import BodyMesh, CachedBodyModel, PartSpec
+from stmpl.body.phenotype import PHENOTYPES
+from stmpl.part import BodyPart
 
 log = logging.getLogger(__name__)
 
-PHENOTYPES = ("gender", "age", "muscle", "weight", "height", "proportions")
-"""Anny's phenotype parameters, each in [0, 1]; 0.5 is the default."""
 
 _ARM = ("upperarm01", "upperarm02", "lowerarm01", "lowerarm02")
 
@@ -162,3 +162,8 @@ def check_phenotype(phenotype: dict[str, float]) -> dict[str, float]:
             raise ValueError(f"anny phenotype {k} must be in [0, 1], got {v}")
         out[k] = v
     return out
+
+
+def default_part(name: str = "left_arm", weight: float = 0.5) -> BodyPart:
+    """The named part of the default body (Anny) with the given ``weight`` phenotype."""
+    return AnnyBody(phenotype={"weight": weight}).part(name)

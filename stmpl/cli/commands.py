@@ -9,8 +9,8 @@ from __future__ import annotations
 from stmpl.analysis import limits
 from stmpl.analysis.ablation import run as run_ablation
 from stmpl.cli import answers
+from stmpl.cli.arguments import default_model
 from stmpl.cli.options import body_of, scene_of
-from stmpl.cli.simulate import default_model
 from stmpl.data.dataset import open_data
 from stmpl.pipeline import zoo
 from stmpl.pipeline.evaluate import evaluate

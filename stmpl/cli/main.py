@@ -8,6 +8,7 @@ traceback. Anything else is a bug and keeps its traceback.
 from __future__ import annotations
 
 import argparse
+import importlib
 import logging
 import signal
 import sys
@@ -16,17 +17,17 @@ import traceback
 import warnings
 from importlib.metadata import entry_points
 
-from stmpl.cli import commands, simulate
-from stmpl.cli.options import (
+from stmpl.cli.arguments import (
+    DEFAULT_MODEL,
     body_options,
     device_option,
     fidelity_option,
     model_options,
     positive,
     scene_options,
+    simulate_options,
 )
-from stmpl.cli.simulate import DEFAULT_MODEL
-from stmpl.predictor import PredictionFailed
+from stmpl.failures import PredictionFailed
 
 COMMANDS = "stmpl.commands"
 """Entry-point group of commands other packages add: a function taking the subparsers."""
@@ -47,8 +48,8 @@ def parser() -> argparse.ArgumentParser:
         help="the main job: an object (by default anny's right hand) pressed on the body, "
         "predicted (and with --compare solved by the FEM); writes the deformed body and a picture",
     )
-    simulate.add_arguments(sm)
-    sm.set_defaults(func=simulate.run)
+    simulate_options(sm)
+    sm.set_defaults(func="stmpl.cli.simulate:run")
 
     sc = sub.add_parser("scene", help="build a loaded scene on a body part and draw it")
     scene_options(sc)
@@ -56,7 +57,7 @@ def parser() -> argparse.ArgumentParser:
     sc.add_argument("--out", help="PNG picture to write")
     sc.add_argument("--save", help="scene file to write (.npz)")
     sc.add_argument("--export", help="mesh coloured by force to write (.ply/.obj/.glb)")
-    sc.set_defaults(func=commands.scene)
+    sc.set_defaults(func="stmpl.cli.commands:scene")
 
     pr = sub.add_parser(
         "predict",
@@ -67,13 +68,13 @@ def parser() -> argparse.ArgumentParser:
     model_options(pr, DEFAULT_MODEL)
     pr.add_argument("--out", help="PNG picture to write")
     pr.add_argument("--save", help="deformation file to write (.npz)")
-    pr.set_defaults(func=commands.predict)
+    pr.set_defaults(func="stmpl.cli.commands:predict")
 
     tr = sub.add_parser("train", help="train a learned predictor from a config (resumable)")
     tr.add_argument("config", help="training config (YAML), e.g. configs/train/naive.yaml")
     tr.add_argument("--restart", action="store_true", help="ignore a saved state; start over")
     tr.add_argument("--quiet", action="store_true", help="no progress bar")
-    tr.set_defaults(func=commands.train_model)
+    tr.set_defaults(func="stmpl.cli.commands:train_model")
 
     ev = sub.add_parser("evaluate", help="measure predictors on a dataset split")
     ev.add_argument(
@@ -87,7 +88,7 @@ def parser() -> argparse.ArgumentParser:
     device_option(ev)
     fidelity_option(ev)
     ev.add_argument("--out", help="write the table here (.md and .csv)")
-    ev.set_defaults(func=commands.evaluate_models)
+    ev.set_defaults(func="stmpl.cli.commands:evaluate_models")
 
     ab = sub.add_parser(
         "ablate",
@@ -102,7 +103,7 @@ def parser() -> argparse.ArgumentParser:
         help="a dataset made again whose content hash changed: keep the cached "
         "results if a cached set-up measures the same on it",
     )
-    ab.set_defaults(func=commands.ablate)
+    ab.set_defaults(func="stmpl.cli.commands:ablate")
 
     zo = sub.add_parser(
         "zoo", help="the shipped models: list, show, verify, add, measure on more datasets"
@@ -129,11 +130,11 @@ def parser() -> argparse.ArgumentParser:
         help="limit: the stability sweep whose points cap the models' envelopes "
         "where they break their promise (configs/ablation/stability.yaml)",
     )
-    zo.set_defaults(func=commands.zoo_models)
+    zo.set_defaults(func="stmpl.cli.commands:zoo_models")
 
     pa = sub.add_parser("parts", help="list the body model's parts and their sizes")
     body_options(pa)
-    pa.set_defaults(func=commands.parts)
+    pa.set_defaults(func="stmpl.cli.commands:parts")
     for ep in sorted(entry_points(group=COMMANDS), key=lambda e: e.name):
         ep.load()(sub)  # e.g. `generate` and `solve`, from the fem package
     return ap
@@ -182,6 +183,16 @@ def main(argv=None) -> int:
     return _run(args)
 
 
+def command(func):
+    """A command's function: itself, or the one a ``"module:function"`` string names, imported
+    now (the parser names them so, and stays light).
+    """
+    if not isinstance(func, str):
+        return func
+    module, name = func.split(":")
+    return getattr(importlib.import_module(module), name)
+
+
 def _run(args) -> int:
     """Run the parsed command, its expected failures and stops in one line each."""
     logging.basicConfig(
@@ -196,7 +207,7 @@ def _run(args) -> int:
         with warnings.catch_warnings():
             if not args.verbose:
                 warnings.showwarning = one_line
-            return args.func(args)
+            return command(args.func)(args)
     except EXPECTED as exc:
         if args.verbose:
             traceback.print_exc()

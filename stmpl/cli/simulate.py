@@ -21,86 +21,14 @@ import numpy as np
 import stmpl.contact.pressing as contact
 from stmpl.body.spec import part_from_spec
 from stmpl.cli import answers
-from stmpl.cli.options import (
-    body_options,
-    load_options,
-    model_options,
-    phenotype_of,
-    thickness_of,
-    thickness_option,
-)
+from stmpl.cli.arguments import default_model
+from stmpl.cli.options import phenotype_of, thickness_of
 from stmpl.contact import objects
-from stmpl.contact.hand import GRIPS, Hand, grasp, palm_press
+from stmpl.contact.hand import Hand, grasp, palm_press
 from stmpl.files import atomic_write_text
 from stmpl.scene import Scene
 from stmpl.viz.figures import export_mesh, vertex_colors
 from stmpl.viz.render import contact_figure
-
-DEFAULT_MODEL = "zoo:gnn_arm_bodies"
-"""The shipped GNN of the left arm of every anny body (the right arm answered in the mirror)."""
-PART_MODELS = {"belly": "zoo:gnn_belly_bodies"}
-"""The default model of the parts that are not an arm."""
-
-
-def default_model(part: str) -> str:
-    """The zoo model ``stmpl simulate`` and ``predict`` use on ``part`` unless told."""
-    return PART_MODELS.get(part, DEFAULT_MODEL)
-
-
-def add_arguments(sp) -> None:
-    """The options of ``stmpl simulate`` on the argparse (sub)parser ``sp``."""
-    what = sp.add_argument_group(
-        "what presses (default: anny's right hand grasps the limb, or "
-        "lies open on a part that is not one)"
-    )
-    what.add_argument(
-        "--grip",
-        choices=sorted(GRIPS),
-        help="hand grip on a limb: whole hand (default), thumb and two fingers, or a pinch",
-    )
-    what.add_argument(
-        "--around",
-        type=float,
-        default=0.0,
-        help="grasp angle around the limb from the body's front, rad",
-    )
-    what.add_argument(
-        "--hand-height",
-        type=float,
-        default=0.5,
-        help="the hand's body: anny height phenotype 0..1 (hand size)",
-    )
-    what.add_argument("--object", help="a mesh file (OBJ, PLY, STL, GLB; metres) pressed at --at")
-    what.add_argument(
-        "--sphere",
-        type=float,
-        metavar="R",
-        help="a sphere of radius R mm (a fingertip is about 8) pressed at --at",
-    )
-    what.add_argument("--letters", metavar="TEXT", help="extruded block letters pressed at --at")
-    what.add_argument(
-        "--strap", action="store_true", help="a strap closed around the limb at --along"
-    )
-    what.add_argument("--spin", type=float, default=0.0, help="object turn about the normal, rad")
-    what.add_argument(
-        "--pose",
-        type=float,
-        nargs=6,
-        metavar=("X", "Y", "Z", "RX", "RY", "RZ"),
-        help="the object's pose in body coordinates instead of --at/--depth: "
-        "position (mm) and rotation vector (rad)",
-    )
-    what.add_argument(
-        "--depth",
-        type=float,
-        default=2.0,
-        help="how deep the object reaches into the skin, mm (default 2)",
-    )
-    load_options(what)
-    body_options(sp, smpl=False)
-    thickness_option(sp)
-    model_options(sp, f"{DEFAULT_MODEL}; on the belly {PART_MODELS['belly']}")
-    sp.add_argument("--out-dir", default="simulate_out", help="folder for the results")
 
 
 def pressings(args, part) -> list:

@@ -7,6 +7,11 @@ straps) and sets them on the skin, and :mod:`~stmpl.contact.hand` poses anny's o
 grip.
 """
 
-from stmpl.contact.pressing import Contact, Pressing, contact, pose_matrix, read_mesh
+from stmpl.lazy import exports
 
-__all__ = ["Contact", "Pressing", "contact", "pose_matrix", "read_mesh"]
+PUBLIC = {name: "stmpl.contact.pressing" for name in ("Contact", "Pressing", "contact")}
+PUBLIC.update(pose_matrix="stmpl.contact.pressing", read_mesh="stmpl.contact.pressing")
+"""The package's names and the module each comes from, imported on first use."""
+
+__all__ = list(PUBLIC)
+__getattr__, __dir__ = exports(__name__, PUBLIC)

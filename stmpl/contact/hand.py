@@ -24,16 +24,12 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from stmpl.body.anny_body import AnnyBody
+from stmpl.contact.grips import GRIPS
 from stmpl.contact.objects import surface_frame
 from stmpl.contact.pressing import Pressing, rotation_matrix
 from stmpl.part import BodyPart
 
 FINGERS = {"thumb": 1, "index": 2, "middle": 3, "ring": 4, "little": 5}
-GRIPS = {
-    "whole": ("thumb", "index", "middle", "ring", "little"),
-    "tripod": ("thumb", "index", "middle"),
-    "pinch": ("thumb", "index"),
-}
 JOINT_ANGLE = np.deg2rad(85.0)
 """rad: how far each finger joint flexes at curl 1 (three joints: a closed fist)."""
 CURL_RANGE = (-0.6, 1.1)

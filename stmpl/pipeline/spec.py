@@ -24,7 +24,7 @@ def predictor_from_spec(
     """The predictor ``spec`` names (see the module docstring); ``res`` and ``levels`` are the
     FEM's resolution (unless the spec names one) and continuation levels, ``tissue`` its tissue
     preset (its layers shaped by anny's ``phenotype``); ``fidelity``
-    (``full`` or ``auto``, :data:`stmpl.predictor.FIDELITIES`) how much of the part it models;
+    (``full`` or ``auto``, :data:`stmpl.fidelity.FIDELITIES`) how much of the part it models;
     ``options`` go to a learned model's constructor (e.g. ``region_tolerance``).
     """
     predictor.check_fidelity(fidelity)
