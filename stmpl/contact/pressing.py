@@ -280,6 +280,13 @@ def contact(part: BodyPart, objects, tolerance: float = 0.002, split: str = "equ
         cand = np.flatnonzero(box <= tolerance)
         dist = distance_to_surface(mesh, x[cand])
         inside = winding_number(mesh, x[cand]) > 0.5
+        if len(cand) == n and inside.all():
+            across = 1e3 * float(np.linalg.norm(mesh.extents))
+            raise ValueError(
+                f"object {o.name!r} ({across:.0f} mm across) encloses the whole of "
+                f"{part.name!r}: nothing is left to press on (a mesh in millimetres? stmpl "
+                "reads metres)"
+            )
         hit = inside | (dist <= tolerance)
         if not hit.any():
             near = np.argsort(box)[:64]  # the closest lie among the box's closest

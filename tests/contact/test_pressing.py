@@ -132,3 +132,10 @@ def test_pose_matrix_rotation_vector():
     P = C.pose_matrix([1, 2, 3], [0, 0, np.pi / 2])
     np.testing.assert_allclose(P[:3, :3] @ [1, 0, 0], [0, 1, 0], atol=1e-12)
     np.testing.assert_allclose(P[:3, 3], [1, 2, 3])
+
+
+def test_an_object_that_encloses_the_whole_part_is_named(plate):
+    big = objects.sphere(10.0)  # a 1 cm sphere read from millimetres as metres
+    big.apply_translation(-big.bounds.mean(0))  # centred on the plate
+    with pytest.raises(ValueError, match="encloses the whole of 'sheet'.*a mesh in millimetres"):
+        C.contact(plate, [C.Pressing(big, np.eye(4), 0.2, "ball")])
