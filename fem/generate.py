@@ -20,6 +20,7 @@ import os
 import pathlib
 import subprocess
 import time
+from collections import Counter
 
 import numpy as np
 import yaml
@@ -291,6 +292,7 @@ def _solve(out, cfg, p: Plan, chash: str, todo: list, par: dict, runs: list, pro
     started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
     bar = None
     totals = {"samples": 0, "failed": 0}
+    why: Counter = Counter()  # the failures' reasons, as the progress bar sums them up
     if progress:
         bar = tqdm(
             total=p.n_shards,
@@ -316,9 +318,11 @@ def _solve(out, cfg, p: Plan, chash: str, todo: list, par: dict, runs: list, pro
             done += 1
             totals["samples"] += len(result["records"]["task"])
             totals["failed"] += len(result["failures"])
+            why.update(f["reason"].split(":")[0] for f in result["failures"])
             if bar is not None:
                 bar.update(1)
-                bar.set_postfix(totals)  # running totals of this run
+                top = ", ".join(f"{n} {r}" for r, n in why.most_common(2))
+                bar.set_postfix(totals | ({"why": top} if top else {}))  # this run's totals
     finally:
         if bar is not None:
             bar.close()
