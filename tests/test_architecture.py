@@ -27,7 +27,6 @@ PACKAGE_ORDER = ("stmpl", "fem", "models")
 
 HEAVY = {
     "torch": "about a second to import; the core's types do not need it",
-    "torch_geometric": "imports torch._dynamo (1-2 s)",
     "matplotlib": "pictures only",
     "trimesh": "object meshes and closest points only",
     "anny": "the body model's assets (torch, warp)",

@@ -106,3 +106,29 @@ def test_encoded_edges_are_kept_until_the_weights_change(ds, make):
         fresh = p.model.encode_edges(p.edge_attr)
     p.predict(s)
     assert p._edges[0][1] is not kept and torch.equal(p._edges[0][1], fresh)
+
+
+def test_the_gnn_needs_no_graph_library_and_writes_nothing_to_the_temp_folder(tmp_path):
+    """The network is plain torch: a fresh process that builds and runs a GNN imports no graph
+    library (whose import pulls in torch._dynamo) and leaves no generated file behind.
+    """
+    import os
+    import subprocess
+    import sys
+
+    code = (
+        "import sys, torch\n"
+        "from models.gnn.network import MeshGraphNet\n"
+        "net = MeshGraphNet(latent=8, steps=2)\n"
+        "ei = torch.tensor([[0, 1, 2], [1, 2, 0]])\n"
+        "out = net(torch.zeros(3, 5), net.edge_encoder(torch.zeros(3, 4)), ei)\n"
+        "assert out.shape == (3, 3)\n"
+        "heavy = ('torch_geometric', 'torch._dynamo')\n"
+        "print(sorted(m for m in sys.modules if m.startswith(heavy)))\n"
+    )
+    env = {**os.environ, "TMPDIR": str(tmp_path)}
+    done = subprocess.run(
+        [sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True
+    )
+    assert done.stdout.strip() == "[]"
+    assert not list(tmp_path.iterdir())
