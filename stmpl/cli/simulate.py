@@ -24,7 +24,7 @@ from stmpl.cli import answers
 from stmpl.cli.arguments import default_model
 from stmpl.cli.options import phenotype_of, thickness_of
 from stmpl.contact import objects
-from stmpl.contact.hand import Hand, grasp, palm_press
+from stmpl.contact.hand import Hand, cached_grasp, palm_press
 from stmpl.files import atomic_write_text
 from stmpl.scene import Scene
 from stmpl.viz.figures import export_mesh, vertex_colors
@@ -79,15 +79,20 @@ def pressings(args, part) -> list:
             )
         return [contact.Pressing(mesh, pose, args.force, name)]
 
-    hand = Hand(phenotype={"height": args.hand_height})
+    hand = {"height": args.hand_height}
     if part.axis is None:  # nothing to grasp around: the open hand laid on the skin
         return [
             palm_press(
-                part, hand, tuple(args.at), args.depth * mm, np.pi / 2 + args.spin, args.force
+                part,
+                Hand(phenotype=hand),
+                tuple(args.at),
+                args.depth * mm,
+                np.pi / 2 + args.spin,
+                args.force,
             )
         ]
     kind = args.grip or "whole"
-    g = grasp(part, hand, args.along, args.around, kind, args.depth * mm)
+    g = cached_grasp(part, hand, args.along, args.around, kind, args.depth * mm)
     return [g.pressing(args.force, f"right hand ({kind})")]
 
 

@@ -18,15 +18,20 @@ surface (a point's distance to the nearest sample along that sample's outward no
 
 from __future__ import annotations
 
+import hashlib
+import json
 from dataclasses import dataclass, field
+from importlib.metadata import version
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from stmpl.body.anny_body import AnnyBody
+from stmpl.body.model import default_cache_dir
 from stmpl.contact.grips import GRIPS
 from stmpl.contact.objects import surface_frame
 from stmpl.contact.pressing import Pressing, rotation_matrix
+from stmpl.files import atomic_savez
 from stmpl.part import BodyPart
 
 FINGERS = {"thumb": 1, "index": 2, "middle": 3, "ring": 4, "little": 5}
@@ -165,6 +170,49 @@ class Grasp:
         N.
         """
         return Pressing(self.mesh(), np.eye(4), total, name)
+
+
+GRASP_CACHE = 1
+"""The version of :func:`grasp`'s answers kept on disk (:func:`cached_grasp`); a change to what
+``grasp`` returns raises it, and older files are then not read."""
+
+
+def cached_grasp(
+    part: BodyPart,
+    phenotype: dict | None = None,
+    along: float = 0.5,
+    around: float = 0.0,
+    grip: str = "whole",
+    depth: float = 0.002,
+    side: str = "R",
+) -> Grasp:
+    """:func:`grasp` of the ``side`` hand of the anny body of ``phenotype``, kept on disk
+    (``$STMPL_CACHE_DIR/grasps``) under the part's mesh, the hand and the placement: a grasp
+    made before is read back without running anny at all (posing a hand takes about fifty of
+    its forward passes).
+    """
+    if grip not in GRIPS:
+        raise ValueError(f"grip must be one of {sorted(GRIPS)}, got {grip!r}")
+    key = hashlib.sha256()
+    key.update(np.ascontiguousarray(part.vertices, dtype=np.float64).tobytes())
+    key.update(np.ascontiguousarray(part.faces, dtype=np.int64).tobytes())
+    placement = [phenotype or {}, side, float(along), float(around), grip, float(depth)]
+    key.update(json.dumps([GRASP_CACHE, version("anny"), placement], sort_keys=True).encode())
+    f = default_cache_dir() / "grasps" / f"{key.hexdigest()[:24]}.npz"
+    if f.is_file():
+        with np.load(f) as z:
+            curls = dict(zip(FINGERS, z["curls"].tolist()))
+            reached = tuple(str(r) for r in z["reached"])
+            return Grasp(z["vertices"], z["faces"], curls, grip, along, around, depth, reached)
+    g = grasp(part, Hand(phenotype=phenotype, side=side), along, around, grip, depth)
+    arrays = {
+        "vertices": np.asarray(g.vertices, dtype=np.float64),
+        "faces": np.asarray(g.faces, dtype=np.int64),
+        "curls": np.array([g.curls[k] for k in FINGERS], dtype=np.float64),
+        "reached": np.array(g.reached, dtype=str),
+    }
+    atomic_savez(f, arrays)
+    return g
 
 
 def palm_press(

@@ -7,7 +7,8 @@ import pytest
 
 import stmpl.contact.pressing as C
 from stmpl.body import sheet, tube
-from stmpl.contact.hand import FINGERS, Hand, SkinDistance, grasp
+from stmpl.contact import hand as hand_module
+from stmpl.contact.hand import FINGERS, Hand, SkinDistance, cached_grasp, grasp
 
 
 @pytest.fixture(scope="module")
@@ -99,3 +100,24 @@ def test_an_open_hand_lies_on_a_belly(hand, anny_body):
     assert len(set(hand.palm) & set(deep)) > 0 and len(set(hand.finger_of["middle"]) & set(deep))
     with pytest.raises(ValueError, match="depth must lie in"):
         palm_press(belly, hand, depth=0.02)
+
+
+def test_a_grasp_made_before_is_read_back_without_anny(hand, arm, tmp_path, monkeypatch):
+    """The main job's hand: the first grasp is posed and kept, the second read back as it was
+    (anny never runs); another placement is posed afresh.
+    """
+    monkeypatch.setenv("STMPL_CACHE_DIR", str(tmp_path))
+    first = cached_grasp(arm, {}, along=0.5, around=0.5, grip="pinch", depth=0.002)
+    direct = grasp(arm, hand, along=0.5, around=0.5, grip="pinch", depth=0.002)
+    np.testing.assert_array_equal(first.vertices, direct.vertices)
+
+    def no_anny(*args, **kwargs):
+        raise AssertionError("anny ran for a grasp that was kept")
+
+    monkeypatch.setattr(hand_module, "Hand", no_anny)
+    again = cached_grasp(arm, {}, along=0.5, around=0.5, grip="pinch", depth=0.002)
+    np.testing.assert_array_equal(again.vertices, first.vertices)
+    np.testing.assert_array_equal(again.faces, first.faces)
+    assert again.curls == first.curls and again.reached == first.reached
+    with pytest.raises(AssertionError, match="anny ran"):
+        cached_grasp(arm, {}, along=0.6, around=0.5, grip="pinch", depth=0.002)
