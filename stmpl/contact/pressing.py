@@ -22,6 +22,7 @@ import pathlib
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from stmpl.loads import Load, _check_force, _check_total
 from stmpl.part import BodyPart
@@ -232,21 +233,39 @@ def winding_number(mesh, points: np.ndarray, chunk: int = 2_000_000) -> np.ndarr
     return out
 
 
-def distance_to_surface(mesh, points: np.ndarray, chunk: int = 2_000_000) -> np.ndarray:
-    """``(P,)`` distance (m) from each point to the mesh's surface (brute force over its
-    triangles, in chunks).
+def distance_to_surface(mesh, points: np.ndarray, upto: float = np.inf) -> np.ndarray:
+    """``(P,)`` distance (m) from each point to the mesh's surface: exact where it is at most
+    ``upto``, and elsewhere a lower bound above ``upto`` (default: exact everywhere).
+
+    A point's nearest mesh vertex, at ``d``, bounds its distance from above; a triangle whose
+    vertices all lie farther than ``d + L`` (``L`` the longest edge) holds no point nearer than
+    ``d``. So only the triangles at a vertex within ``d + L`` are searched, exactly.
     """
     from trimesh.triangles import closest_point  # deferred: object meshes and closest points only
 
-    tri = np.asarray(mesh.triangles)
-    out = np.empty(len(points))
-    step = max(1, chunk // max(len(tri), 1))
-    for s in range(0, len(points), step):
-        p = points[s : s + step]
-        q = closest_point(np.tile(tri, (len(p), 1, 1)), np.repeat(p, len(tri), 0))
-        out[s : s + step] = (
-            np.linalg.norm(q - np.repeat(p, len(tri), 0), axis=1).reshape(len(p), len(tri)).min(1)
-        )
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    vertices, faces = np.asarray(mesh.vertices), np.asarray(mesh.faces)
+    tri = vertices[faces]
+    longest = float(np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max())
+    tree = cKDTree(vertices)
+    nearest, _ = tree.query(points)
+    out = np.maximum(nearest - longest, 0.0)  # the lower bound
+    need = np.flatnonzero(out <= upto)
+    if not len(need):
+        return out
+    order = np.argsort(faces.ravel(), kind="stable")  # each vertex's faces, in a row
+    start = np.searchsorted(faces.ravel()[order], np.arange(len(vertices) + 1))
+    face_of = order // 3
+    rows, cols = [], []
+    for k, ball in zip(need, tree.query_ball_point(points[need], nearest[need] + longest)):
+        near = np.unique(np.concatenate([face_of[start[v] : start[v + 1]] for v in ball]))
+        rows.append(np.full(len(near), k))
+        cols.append(near)
+    rows, cols = np.concatenate(rows), np.concatenate(cols)
+    q = closest_point(tri[cols], points[rows])
+    d = np.linalg.norm(q - points[rows], axis=1)
+    out[need] = np.inf
+    np.minimum.at(out, rows, d)
     return out
 
 
@@ -278,7 +297,6 @@ def contact(part: BodyPart, objects, tolerance: float = 0.002, split: str = "equ
             np.maximum(0, np.maximum(mesh.bounds[0] - x, x - mesh.bounds[1])), axis=1
         )  # 0 inside the object's bounding box
         cand = np.flatnonzero(box <= tolerance)
-        dist = distance_to_surface(mesh, x[cand])
         inside = winding_number(mesh, x[cand]) > 0.5
         if len(cand) == n and inside.all():
             across = 1e3 * float(np.linalg.norm(mesh.extents))
@@ -287,6 +305,8 @@ def contact(part: BodyPart, objects, tolerance: float = 0.002, split: str = "equ
                 f"{part.name!r}: nothing is left to press on (a mesh in millimetres? stmpl "
                 "reads metres)"
             )
+        dist = distance_to_surface(mesh, x[cand], upto=tolerance)
+        dist[inside] = distance_to_surface(mesh, x[cand][inside])  # depths: exact
         hit = inside | (dist <= tolerance)
         if not hit.any():
             near = np.argsort(box)[:64]  # the closest lie among the box's closest

@@ -139,3 +139,28 @@ def test_an_object_that_encloses_the_whole_part_is_named(plate):
     big.apply_translation(-big.bounds.mean(0))  # centred on the plate
     with pytest.raises(ValueError, match="encloses the whole of 'sheet'.*a mesh in millimetres"):
         C.contact(plate, [C.Pressing(big, np.eye(4), 0.2, "ball")])
+
+
+def test_the_distance_to_a_mesh_is_exact_and_bounded_past_what_is_asked():
+    """Against brute force over every triangle: exact everywhere by default; with ``upto``,
+    exact where it is at most that, and a lower bound above it elsewhere.
+    """
+    from trimesh.triangles import closest_point
+
+    rng = np.random.default_rng(0)
+    for mesh in (objects.sphere(0.01), trimesh.creation.box((0.05, 0.02, 0.01))):
+        points = rng.normal(0, 0.02, (300, 3))
+        tri = mesh.triangles
+        brute = np.array(
+            [
+                np.linalg.norm(
+                    closest_point(tri, np.repeat(p[None], len(tri), 0)) - p, axis=1
+                ).min()
+                for p in points
+            ]
+        )
+        np.testing.assert_allclose(C.distance_to_surface(mesh, points), brute, atol=1e-12)
+        near = C.distance_to_surface(mesh, points, upto=0.003)
+        close = brute <= 0.003
+        np.testing.assert_allclose(near[close], brute[close], atol=1e-12)
+        assert np.all(near[~close] > 0.003) and np.all(near[~close] <= brute[~close] + 1e-12)
