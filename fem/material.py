@@ -486,6 +486,16 @@ def volumetric(K: np.ndarray, J: np.ndarray):
         return U, 0.5 * K * (J - 1 / J), 0.5 * K * (1 + 1 / J**2)
 
 
+def shear_moduli(material, n_elements: int) -> np.ndarray:
+    """``(T,)`` each element's initial shear modulus, Pa (a :class:`Layered` material's by
+    layer).
+    """
+    laws = getattr(material, "laws", None)
+    if laws is None:
+        return np.full(n_elements, float(material.mu))
+    return np.array([law.mu for law in laws], dtype=float)[np.asarray(material.layer)]
+
+
 def bulk_moduli(material, n_elements: int) -> np.ndarray | None:
     """``(T,)`` each element's bulk modulus (Pa) when ``material`` splits into a shape part and
     a volume part ``U(J)`` (the tissue laws), else ``None`` (the compressible neo-Hookean and
@@ -493,6 +503,35 @@ def bulk_moduli(material, n_elements: int) -> np.ndarray | None:
     """
     split = getattr(material, "bulk_moduli", None)
     return None if split is None else split(n_elements)
+
+
+NEARLY_INCOMPRESSIBLE = 100.0
+"""Under ``volume="auto"`` (:class:`~fem.options.SolverOptions`) a layer takes mean dilatation
+where its bulk modulus exceeds this many times its shear modulus (Poisson's ratio above 0.495:
+the fat and the muscle); a more compressible one (the skin, K / mu 13) keeps its volume term at
+every point, which one element through its depth needs to bend as it should (mean dilatation
+there made a fingertip on the forearm 13 % softer with one skin element than with two)."""
+
+
+def volume_split(material, n_elements: int, volume: str = "auto"):
+    """``(bulk, point_bulk)``, each ``(T,)`` (Pa): the bulk modulus each element takes on its
+    mean volume ratio (mean dilatation) and the one it takes at every quadrature point, 0
+    where the other applies. ``volume``: ``"mean"`` for every element, ``"auto"`` where the
+    law is nearly incompressible (:data:`NEARLY_INCOMPRESSIBLE`). ``None`` for a material
+    without a bulk modulus under ``"auto"``; ``"mean"`` then raises.
+    """
+    K = bulk_moduli(material, n_elements)
+    if K is None:
+        if volume == "mean":
+            raise ValueError(
+                f"mean dilatation needs laws with a bulk modulus (the tissue laws); "
+                f"{type(material).__name__} has none"
+            )
+        return None
+    mean = np.ones(len(K), bool)
+    if volume == "auto":
+        mean = K > NEARLY_INCOMPRESSIBLE * shear_moduli(material, len(K))
+    return np.where(mean, K, 0.0), np.where(mean, 0.0, K)
 
 
 def uniaxial(law, stretch: float) -> tuple[float, float]:

@@ -40,7 +40,7 @@ import scipy.sparse as sp
 from fem.elements import ELEMENTS, quadratic
 from fem.kernel import element_data, full_kernel, kernel, outer_data, outer_kernel
 from fem.linear_solvers import IndefiniteTangent, make_linear_solver
-from fem.material import NeoHookean, bulk_moduli, det3, inv3, volumetric
+from fem.material import NeoHookean, det3, inv3, volume_split, volumetric
 from fem.mesh import ShellMesh
 from fem.options import SolverOptions
 from fem.pattern import Pattern
@@ -109,15 +109,13 @@ class Solver:
         self.GG = np.matmul(self.G, self.G.transpose(0, 1, 3, 2))  # (T, Q, n, n)
         self.GW = self.G * self.W[:, :, None, None]  # weighted gradients
         self._force_idx = (3 * self.conn[:, :, None] + np.arange(3)).ravel()
-        self.bulk = None
-        """``(T,)`` the elements' bulk moduli (Pa) under mean dilatation, else ``None``."""
+        self.bulk = self.point_bulk = None
+        """``(T,)`` each element's bulk modulus (Pa) taken on its mean volume ratio, and on
+        its points (0 where the other applies); ``None`` where the law has no bulk modulus or
+        the options ask for the volume at every point."""
         if self.options.volume != "point":
-            self.bulk = bulk_moduli(self.material, len(mesh.tets))
-            if self.bulk is None and self.options.volume == "mean":
-                raise ValueError(
-                    f"mean dilatation needs laws with a bulk modulus (the tissue laws); "
-                    f"{type(self.material).__name__} has none"
-                )
+            split = volume_split(self.material, len(mesh.tets), self.options.volume)
+            self.bulk, self.point_bulk = split or (None, None)
         self.linear = make_linear_solver(self.options.linear_solver)
         self.pattern = Pattern.of(self.conn, self.n_all, self.free, upper=self.linear.upper)
         self.potentials: list = []
@@ -152,27 +150,31 @@ class Solver:
             stored = self.W.ravel() @ self.material.energy(F)
         else:
             T, Q = self.W.shape
-            theta = det3(F).reshape(T, Q) @ self.element.weights
+            J = det3(F).reshape(T, Q)
             shape = self.material.shape_energy(F)
-            stored = self.W.ravel() @ shape + self.V @ volumetric(self.bulk, theta)[0]
+            at_points = volumetric(np.repeat(self.point_bulk, Q), J.ravel())[0]
+            mean = volumetric(self.bulk, J @ self.element.weights)[0]
+            stored = self.W.ravel() @ (shape + at_points) + self.V @ mean
         return float(stored - np.vdot(f, u) + extra)
 
     def _pressure(self, F: np.ndarray):
-        """Mean dilatation's point data at ``F`` ``(T Q, 3, 3)``: ``(F^-T (T Q, 3, 3),
-        J (T, Q), U'(theta) (T,), U''(theta) (T,))``.
+        """The volume terms' data at ``F`` ``(T Q, 3, 3)``: ``(F^-T (T Q, 3, 3), J (T, Q),
+        U'(theta) (T,), U''(theta) (T,), U'(J) (T Q,), U''(J) (T Q,))``, the mean volume
+        ratio's (``bulk``) and the points' own (``point_bulk``).
         """
         T, Q = self.W.shape
         Finv, J = inv3(F)
+        _, dUp, d2Up = volumetric(np.repeat(self.point_bulk, Q), J)
         J = J.reshape(T, Q)
         _, dU, d2U = volumetric(self.bulk, J @ self.element.weights)
-        return Finv.transpose(0, 2, 1), J, dU, d2U
+        return Finv.transpose(0, 2, 1), J, dU, d2U, dUp, d2Up
 
     def _stress(self, F: np.ndarray) -> np.ndarray:
         """``(T Q, 3, 3)`` first Piola-Kirchhoff stress, Pa (mean dilatation's pressure in)."""
         if self.bulk is None:
             return self.material.stress(F)
-        FinvT, J, dU, _ = self._pressure(F)
-        pJ = (dU[:, None] * J).reshape(-1)
+        FinvT, J, dU, _, dUp, _ = self._pressure(F)
+        pJ = (dU[:, None] * J).reshape(-1) + dUp * J.reshape(-1)
         return self.material.shape_parts(F)[0] + pJ[:, None, None] * FinvT
 
     def residual(self, u: np.ndarray, f: np.ndarray) -> np.ndarray:
@@ -208,14 +210,16 @@ class Solver:
             P, parts = self.material.tangent_parts(F)
         else:  # the shape part at the points, the pressure p_t J F^-T of each element
             P, parts = self.material.shape_parts(F)
-            FinvT, J, dU, d2U = self._pressure(F)
-            pJ = (dU[:, None] * J).reshape(-1)
-            P = P + pJ[:, None, None] * FinvT
+            FinvT, J, dU, d2U, dUp, d2Up = self._pressure(F)
+            pJ = (dU[:, None] * J).reshape(-1)  # the elements' mean pressure, at each point
+            Jq = J.reshape(-1)
+            P = P + (pJ + dUp * Jq)[:, None, None] * FinvT
             if definite:  # b (tr A)^2 + c tr(A A) + s tr(A A^T), positive semi-definite
                 m, push = np.abs(pJ), pJ < 0
                 db, dc = np.where(push, -m / 3, 2 * m / 3), np.where(push, m / 2, -m / 2)
             else:
                 db, dc = pJ, -pJ
+            db, dc = db + Jq * dUp + Jq**2 * d2Up, dc - Jq * dUp  # the points' own volume
             parts = (parts[0], parts[1] + db, parts[2] + dc, *parts[3:])
         a, b, c, H = parts[:4]
         r = self._scatter_force(P)
@@ -544,10 +548,11 @@ class Solver:
         far the skin moves inward as a share of the tissue's depth under it (the largest over
         the skin).
         """
-        if self.bulk is None:
-            detF = float(det3(self._F(u)).min())
-        else:
-            detF = float(self.volume_ratios(u).min())
+        J = det3(self._F(u)).reshape(self.W.shape)
+        if self.bulk is not None:  # an element under mean dilatation: its mean volume ratio
+            mean = (self.bulk > 0)[:, None]
+            J = np.where(mean, (J @ self.element.weights)[:, None], J)
+        detF = float(J.min())
         m = self.mesh
         inward = -np.einsum("si,si->s", u[: m.n_skin], m.skin_normals) / m.thickness
         return detF, float(inward.max())
