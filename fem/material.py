@@ -416,26 +416,36 @@ class Layered(Law):
         of = np.repeat(np.asarray(self.layer), q)
         return [(law, np.flatnonzero(of == k)) for k, law in enumerate(self.laws)]
 
-    def energy(self, F: np.ndarray) -> np.ndarray:
-        """``(T Q,)`` energy density, J/m^3."""
+    def _densities(self, F: np.ndarray, method: str) -> np.ndarray:
+        """``(T Q,)``: each layer's ``method`` (an energy density) on its own points."""
         W = np.empty(len(F))
         for law, at in self._groups(F):
-            W[at] = law.energy(F[at])
+            W[at] = getattr(law, method)(F[at])
         return W
 
-    def tangent_parts(self, F: np.ndarray):
-        """The layers' stresses and tangent parts, element by element (the long form)."""
+    def _parts(self, F: np.ndarray, method: str):
+        """Each layer's ``method`` (stress and tangent parts) on its own points, in the long
+        form (a law of the short form adds no ``d``, ``e`` terms).
+        """
         P = np.empty_like(F)
         parts = [np.zeros(len(F)) for _ in range(3)] + [np.empty_like(F)]
         parts += [np.zeros(len(F)), np.zeros(len(F)), F]
         for law, at in self._groups(F):
-            Pk, pk = law.tangent_parts(F[at])
+            Pk, pk = getattr(law, method)(F[at])
             P[at] = Pk
             for j, value in enumerate(pk[:4]):
                 parts[j][at] = value
             if len(pk) == 7:
                 parts[4][at], parts[5][at] = pk[4], pk[5]
         return P, tuple(parts)
+
+    def energy(self, F: np.ndarray) -> np.ndarray:
+        """``(T Q,)`` energy density, J/m^3."""
+        return self._densities(F, "energy")
+
+    def tangent_parts(self, F: np.ndarray):
+        """The layers' stresses and tangent parts, element by element (the long form)."""
+        return self._parts(F, "tangent_parts")
 
     def stress(self, F: np.ndarray) -> np.ndarray:
         """``(T Q, 3, 3)`` first Piola-Kirchhoff stress, Pa."""
@@ -456,24 +466,13 @@ class Layered(Law):
 
     def shape_energy(self, F: np.ndarray) -> np.ndarray:
         """``(T Q,)`` the layers' shape parts alone, J/m^3 (:meth:`IsochoricLaw.shape_energy`)."""
-        W = np.empty(len(F))
-        for law, at in self._groups(F):
-            W[at] = law.shape_energy(F[at])
-        return W
+        return self._densities(F, "shape_energy")
 
     def shape_parts(self, F: np.ndarray):
         """The stresses and tangent parts of the layers' shape parts alone
         (:meth:`IsochoricLaw.shape_parts`).
         """
-        P = np.empty_like(F)
-        parts = [np.empty(len(F)) for _ in range(3)] + [np.empty_like(F)]
-        parts += [np.empty(len(F)), np.empty(len(F)), F]
-        for law, at in self._groups(F):
-            Pk, pk = law.shape_parts(F[at])
-            P[at] = Pk
-            for j in range(6):
-                parts[j][at] = pk[j]
-        return P, tuple(parts)
+        return self._parts(F, "shape_parts")
 
 
 def volumetric(K: np.ndarray, J: np.ndarray):
