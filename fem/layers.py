@@ -39,11 +39,11 @@ INCOMPRESSIBLE = 2000 * KPA
 """The bulk modulus of the fat and the muscle, Pa. Soft tissue is nearly incompressible: its
 own bulk modulus follows from the speed of sound, ``K = rho c^2`` (fat 950 kg/m^3 at 1450 m/s:
 2.0 GPa; muscle 1060 kg/m^3 at 1580 m/s: 2.6 GPa; Duck 1990, Physical Properties of Tissue,
-ch. 4). 2 MPa (Poisson's ratio 0.4994-0.49996 for these layers at rest) keeps them within 3 %
+ch. 4). 2 MPa (Poisson's ratio 0.4994-0.49996 for these layers at rest) keeps them within 5 %
 of their volume under an 8 mm fingertip at 8 N while the Newton solves stay well conditioned;
 mean dilatation (:mod:`fem.solver`) keeps the quadratic elements free of locking. The fits'
-own bulk moduli (fat 36 kPa, Tran et al. 2007) let the relaxed muscle lose a third of its
-volume under that fingertip (``docs/tissue.md``)."""
+own bulk moduli (fat 36 kPa, Tran et al. 2007) left the relaxed muscle 0.85 of its volume
+under that fingertip (``docs/tissue.md``)."""
 
 
 @dataclass(frozen=True)
