@@ -407,16 +407,16 @@ class Solver:
             if np.isfinite(Et) and (Et <= E + 1e-4 * alpha * slope or (Et - E) <= 1e-12 * abs(E)):
                 return alpha, trial, Et
             alpha *= 0.5
-        if self.potentials:
-            # Near equilibrium the energy's change falls below its round-off (W sums terms of
-            # order mu to get mu eps^2): a full step that lowers the residual is taken instead.
-            trial = u + step
-            Et = self.energy(trial, f)
-            if np.isfinite(Et) and abs(Et - E) <= 1e-6 * abs(E):
-                r0 = np.linalg.norm(self.residual(u, f).reshape(-1)[self.free])
-                r1 = np.linalg.norm(self.residual(trial, f).reshape(-1)[self.free])
-                if r1 < r0:
-                    return 1.0, trial, Et
+        # Near equilibrium the energy's change falls below its round-off (W sums terms of order
+        # mu, or K, to get mu eps^2; a contact's too): a full step that lowers the residual is
+        # taken instead.
+        trial = u + step
+        Et = self.energy(trial, f)
+        if np.isfinite(Et) and abs(Et - E) <= 1e-6 * abs(E):
+            r0 = np.linalg.norm(self.residual(u, f).reshape(-1)[self.free])
+            r1 = np.linalg.norm(self.residual(trial, f).reshape(-1)[self.free])
+            if r1 < r0:
+                return 1.0, trial, Et
         return alpha, None, None
 
     def _newton(
