@@ -297,7 +297,9 @@ def test_a_layered_tissue_dataset_holds_the_presets_answers(tmp_path):
         placements={"disk": {"centres": 1, "radii": [0.02]}},
     )
     card = generate(cfg, tmp_path / "d", progress=False, tissue="forearm")
-    assert card["config"]["tissue"] == "forearm" and card["samples"] == 2, card["failures_by_reason"]
+    assert card["config"]["tissue"] == "forearm" and card["samples"] == 2, card[
+        "failures_by_reason"
+    ]
     ds = Dataset(tmp_path / "d")
     a = ds.arrays()
     from fem.placements import make_load

@@ -169,7 +169,7 @@ def test_an_edited_dataset_is_refused_before_training(tiny_dataset, tmp_path):
     shard = sorted(data.glob("shard-*.h5"))[1]
     with h5py.File(shard, "r+") as h:
         h["force"][0, :] = 0.0
-    with pytest.raises(ValueError, match=f"{shard.name} does not match card.json"):
+    with pytest.raises(ValueError, match=f"{shard.name} was changed after it was written"):
         train(_cfg(data, tmp_path / "run", epochs=1), progress=False)
 
 
