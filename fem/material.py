@@ -516,8 +516,9 @@ def volume_split(material, n_elements: int, volume: str = "auto"):
     """``(bulk, point_bulk)``, each ``(T,)`` (Pa): the bulk modulus each element takes on its
     mean volume ratio (mean dilatation) and the one it takes at every quadrature point, 0
     where the other applies. ``volume``: ``"mean"`` for every element, ``"auto"`` where the
-    law is nearly incompressible (:data:`NEARLY_INCOMPRESSIBLE`). ``None`` for a material
-    without a bulk modulus under ``"auto"``; ``"mean"`` then raises.
+    law is nearly incompressible (:data:`NEARLY_INCOMPRESSIBLE`). ``None`` under ``"auto"`` for
+    a material without a bulk modulus or with no nearly incompressible layer (the law is then
+    evaluated as it stands); ``"mean"`` then raises or applies everywhere.
     """
     K = bulk_moduli(material, n_elements)
     if K is None:
@@ -530,6 +531,8 @@ def volume_split(material, n_elements: int, volume: str = "auto"):
     mean = np.ones(len(K), bool)
     if volume == "auto":
         mean = K > NEARLY_INCOMPRESSIBLE * shear_moduli(material, len(K))
+        if not mean.any():  # every element's volume at its points: the law as it stands
+            return None
     return np.where(mean, K, 0.0), np.where(mean, 0.0, K)
 
 

@@ -137,11 +137,6 @@ class Solver:
     def _F(self, u: np.ndarray) -> np.ndarray:
         return self.deformation_gradient(u).reshape(-1, 3, 3)
 
-    def volume_ratios(self, u: np.ndarray) -> np.ndarray:
-        """``(T,)`` each element's mean volume ratio ``theta_t = sum_q w_q det F_q``."""
-        T, Q = self.W.shape
-        return det3(self._F(u)).reshape(T, Q) @ self.element.weights
-
     def energy(self, u: np.ndarray, f: np.ndarray) -> float:
         """Total potential energy, J (``inf`` if an element inverts)."""
         F = self._F(u)
