@@ -1,7 +1,8 @@
 """Sparse linear solvers for the Newton steps, one interface (``factor(K)``, ``solve(b)``,
-``upper``: whether it wants only the upper triangle): MKL PARDISO (Cholesky, fastest), SciPy's
-SuperLU (always there) and AMG-preconditioned conjugate gradients. A factorisation that meets a
-non-positive pivot raises :class:`IndefiniteTangent`.
+``upper``: whether it wants only the upper triangle; ``direct``: whether ``solve`` applies a
+fixed factorisation, which can then precondition later tangents): MKL PARDISO (Cholesky,
+fastest), SciPy's SuperLU (always there) and AMG-preconditioned conjugate gradients. A
+factorisation that meets a non-positive pivot raises :class:`IndefiniteTangent`.
 """
 
 from __future__ import annotations
@@ -22,7 +23,7 @@ class IndefiniteTangent(ArithmeticError):
 class _SuperLU:
     """SciPy's SuperLU with a minimum-degree ordering on ``A^T + A`` (always available)."""
 
-    name, upper = "superlu", False
+    name, upper, direct = "superlu", False, True
 
     def factor(self, K):
 
@@ -60,7 +61,7 @@ class _Pardiso:
     indefinite tangent. The symbolic analysis is done once per pattern and reused.
     """
 
-    name, upper = "pardiso", True
+    name, upper, direct = "pardiso", True, True
 
     def __init__(self):
         _find_mkl()
@@ -108,7 +109,7 @@ class _Pardiso:
 class _AMGCG:
     """Conjugate gradients preconditioned by smoothed-aggregation AMG (pyamg)."""
 
-    name, upper = "cg", False
+    name, upper, direct = "cg", False, False
 
     def factor(self, K):
         import pyamg  # deferred: an optional linear solver

@@ -254,7 +254,7 @@ def test_a_mesh_presses_as_the_shape_it_approximates():
     (closed,) = press(solver, closing, None, [depth])
     assert exact.ok and meshed.ok and closed.ok, (exact.reason, meshed.reason, closed.reason)
     assert meshed.reaction == pytest.approx(exact.reaction, rel=0.02)
-    assert closed.total == pytest.approx(meshed.total, rel=1e-9)
+    assert closed.total == pytest.approx(meshed.total, rel=1e-6)  # the solves' own tolerance
     assert closed.reaction == closed.total
     assert meshed.total == pytest.approx(meshed.reaction, rel=0.01)  # nearly all along the push
     # the state's own measures: the skin under the ball moves in by the depth, and the
