@@ -365,15 +365,17 @@ class Solver:
         return out.reshape(-1, 3)
 
     def _factorise(
-        self, u: np.ndarray, f: np.ndarray, definite: bool = False
+        self, u: np.ndarray, f: np.ndarray, definite: bool = False, K=None
     ) -> tuple[str, int] | None:
         """Assemble and factorise the tangent at ``u``; ``None``, or why it failed and whether
         the iteration counts (``(reason, 1)`` when the tangent itself was built).
-        ``definite``: the tangent without the pressure stiffness (:meth:`assemble`).
+        ``definite``: the tangent without the pressure stiffness (:meth:`assemble`); ``K``: the
+        full tangent at ``u`` where it is at hand.
         """
         self.factored = None
         try:
-            _, K = self.assemble(u, f, definite)
+            if K is None or definite:
+                _, K = self.assemble(u, f, definite)
             self.linear.factor(K)
         except IndefiniteTangent:
             return "indefinite tangent: the layer buckles", 1
@@ -384,11 +386,11 @@ class Solver:
 
     def _krylov_step(self, u: np.ndarray, f: np.ndarray, rf: np.ndarray):
         """The Newton step ``du`` (free DOFs) for residual ``rf`` at ``u``: conjugate gradients
-        on the tangent at ``u`` (of the kind :attr:`factored` holds) preconditioned by the kept
-        factorisation; ``(du or None, CG iterations)``.
+        on the full tangent at ``u`` preconditioned by the kept factorisation; ``(du or None,
+        CG iterations, the tangent)``.
         """
+        _, K = self.assemble(u, f)
         try:
-            _, K = self.assemble(u, f, self.factored == "definite")
             out = pcg(
                 symmetric_matvec(K, self.linear.upper),
                 self.linear.solve,
@@ -397,14 +399,17 @@ class Solver:
                 KRYLOV_ITERATIONS[1],
             )
         except (RuntimeError, ValueError):
-            return None, KRYLOV_ITERATIONS[1]
-        return out.x, out.iterations
+            return None, KRYLOV_ITERATIONS[1], K
+        return out.x, out.iterations, K
 
-    def _refactorise(self, u: np.ndarray, f: np.ndarray) -> tuple[tuple[str, int] | None, bool]:
-        """:meth:`_factorise` at ``u``; under mean dilatation an indefinite tangent is tried
-        again without its pressure stiffness: ``(failure or None, whether it was left out)``.
+    def _refactorise(
+        self, u: np.ndarray, f: np.ndarray, K=None
+    ) -> tuple[tuple[str, int] | None, bool]:
+        """:meth:`_factorise` at ``u`` (``K``: the full tangent there, where at hand); under mean
+        dilatation an indefinite tangent is tried again without its pressure stiffness:
+        ``(failure or None, whether it was left out)``.
         """
-        failed = self._factorise(u, f)
+        failed = self._factorise(u, f, K=K)
         if failed is not None and failed[1] and self.bulk is not None:
             return self._factorise(u, f, definite=True), True
         return failed, False
@@ -461,12 +466,12 @@ class Solver:
         was factorised, whether CG was slow)``; a failure's ``iterations`` counts the tangent
         assembled for it.
         """
-        du, slow = None, False
+        du, slow, K = None, False, None
         if cg and not refresh:
-            du, spent = self._krylov_step(u, f, rf)
+            du, spent, K = self._krylov_step(u, f, rf)
             refresh, slow = du is None, spent >= KRYLOV_ITERATIONS[0]
         if refresh:
-            failed, _ = self._refactorise(u, f)
+            failed, _ = self._refactorise(u, f, K)
             if failed is not None:
                 return (
                     None,
