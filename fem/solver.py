@@ -24,10 +24,8 @@ every point (``p_t = U'(theta_t)``, the element's pressure) and its tangent the 
 rank-one matrix ``V_t U''(theta_t) beta beta^T``, ``beta_ai = sum_q w_q J_q (F_q^-T grad N_a)_i``.
 The compressible neo-Hookean law (the paper's) keeps its volume term at every point.
 
-Each Newton step solves the current tangent. With a direct linear solver the last
-factorisation is kept, across solves too, as the preconditioner of conjugate gradients on the
-current tangent (a back-substitution costs a thirtieth of a factorisation), and the tangent is
-factorised afresh only where that no longer converges in a few iterations.
+Each Newton step solves the current tangent; with a direct linear solver, by conjugate gradients
+preconditioned with a kept factorisation (:mod:`fem.tangent`).
 
 A solve that does not converge, or would need an inverted element, returns a :class:`Solution`
 with ``ok = False`` and a reason, never a displacement. So does a converged state that pushes the
@@ -44,22 +42,13 @@ import scipy.sparse as sp
 
 from fem.elements import ELEMENTS, quadratic
 from fem.kernel import element_data, full_kernel, kernel, outer_data, outer_kernel
-from fem.krylov import pcg, symmetric_matvec
-from fem.linear_solvers import IndefiniteTangent, make_linear_solver
+from fem.linear_solvers import make_linear_solver
 from fem.material import NeoHookean, det3, inv3, volume_split, volumetric
 from fem.mesh import ShellMesh
 from fem.options import SolverOptions
 from fem.pattern import Pattern
 from fem.solution import Solution
-
-KRYLOV_RTOL = 1e-3
-"""A Newton step solved by preconditioned CG leaves this share of the residual's linear part
-(an inexact Newton method: the residual still falls a thousandfold per step near an answer)."""
-
-KRYLOV_ITERATIONS = (10, 20)
-"""Preconditioned CG iterations after which the tangent is factorised afresh for the next step,
-and at which a step gives up on CG and factorises now (a factorisation of the reference arm
-costs some thirty back-substitutions and a tangent's assembly)."""
+from fem.tangent import Tangent
 
 
 class Solver:
@@ -133,9 +122,8 @@ class Solver:
             self.bulk, self.point_bulk = split or (None, None)
         self.linear = make_linear_solver(self.options.linear_solver)
         self.pattern = Pattern.of(self.conn, self.n_all, self.free, upper=self.linear.upper)
-        self.factored: str | None = None
-        """What the linear solver holds: ``"full"`` (the tangent), ``"definite"`` (the tangent
-        less its pressure stiffness, :meth:`assemble`) or ``None``."""
+        self.tangent = Tangent(self.linear, self.assemble, self.bulk is not None)
+        """The tangent's factorisation Newton's steps keep."""
         self.potentials: list = []
         """Further energies on the nodes (a rigid object's contact, :mod:`fem.contact`), each
         with ``energy(u)``, ``gradient(u)`` and ``hessian(u, upper)``."""
@@ -364,61 +352,11 @@ class Solver:
         out[self.free] = r[self.free]
         return out.reshape(-1, 3)
 
-    def _factorise(
-        self, u: np.ndarray, f: np.ndarray, definite: bool = False, K=None
-    ) -> tuple[str, int] | None:
-        """Assemble and factorise the tangent at ``u``; ``None``, or why it failed and whether
-        the iteration counts (``(reason, 1)`` when the tangent itself was built).
-        ``definite``: the tangent without the pressure stiffness (:meth:`assemble`); ``K``: the
-        full tangent at ``u`` where it is at hand.
-        """
-        self.factored = None
-        try:
-            if K is None or definite:
-                _, K = self.assemble(u, f, definite)
-            self.linear.factor(K)
-        except IndefiniteTangent:
-            return "indefinite tangent: the layer buckles", 1
-        except (RuntimeError, ValueError) as e:
-            return f"linear solve failed: {e}", 0
-        self.factored = "definite" if definite else "full"
-        return None
-
-    def _krylov_step(self, u: np.ndarray, f: np.ndarray, rf: np.ndarray):
-        """The Newton step ``du`` (free DOFs) for residual ``rf`` at ``u``: conjugate gradients
-        on the full tangent at ``u`` preconditioned by the kept factorisation; ``(du or None,
-        CG iterations, the tangent)``.
-        """
-        _, K = self.assemble(u, f)
-        try:
-            out = pcg(
-                symmetric_matvec(K, self.linear.upper),
-                self.linear.solve,
-                -rf,
-                KRYLOV_RTOL,
-                KRYLOV_ITERATIONS[1],
-            )
-        except (RuntimeError, ValueError):
-            return None, KRYLOV_ITERATIONS[1], K
-        return out.x, out.iterations, K
-
-    def _refactorise(
-        self, u: np.ndarray, f: np.ndarray, K=None
-    ) -> tuple[tuple[str, int] | None, bool]:
-        """:meth:`_factorise` at ``u`` (``K``: the full tangent there, where at hand); under mean
-        dilatation an indefinite tangent is tried again without its pressure stiffness:
-        ``(failure or None, whether it was left out)``.
-        """
-        failed = self._factorise(u, f, K=K)
-        if failed is not None and failed[1] and self.bulk is not None:
-            return self._factorise(u, f, definite=True), True
-        return failed, False
-
     def _converged(self, u, f, it: int, rel: float, factorisations: int, definite: bool) -> dict:
         """Newton's answer at ``u``; when steps were taken without the pressure stiffness, the
         full tangent must be positive definite there (a stable state), else the layer buckles.
         """
-        if definite and self._factorise(u, f) is not None:
+        if definite and self.tangent.factorise(u, f) is not None:
             return {
                 "ok": False,
                 "reason": "indefinite tangent at the answer: the layer buckles",
@@ -457,46 +395,16 @@ class Solver:
                 return 1.0, trial, Et
         return alpha, None, None
 
-    def _direction(self, u: np.ndarray, f: np.ndarray, rf: np.ndarray, refresh: bool, cg: bool):
-        """Newton's step at ``u`` for the free residual ``rf``: by conjugate gradients on the
-        current tangent (``cg``: the full tangent is factorised, and ``refresh`` is not asked
-        for; CG on the tangent less its pressure stiffness would not pay, that tangent changes
-        too much from step to step), else with the kept factorisation, or with a fresh one
-        (``refresh``, or where CG fails). Returns ``(du, failure or None, whether the tangent
-        was factorised, whether CG was slow)``; a failure's ``iterations`` counts the tangent
-        assembled for it.
-        """
-        du, slow, K = None, False, None
-        if cg and not refresh:
-            du, spent, K = self._krylov_step(u, f, rf)
-            refresh, slow = du is None, spent >= KRYLOV_ITERATIONS[0]
-        if refresh:
-            failed, _ = self._refactorise(u, f, K)
-            if failed is not None:
-                return (
-                    None,
-                    {"ok": False, "reason": failed[0], "iterations": failed[1]},
-                    True,
-                    False,
-                )
-        if du is None:
-            try:
-                du = self.linear.solve(-rf)
-            except RuntimeError as e:
-                failure = {"ok": False, "reason": f"linear solve failed: {e}", "iterations": 0}
-                return None, failure, refresh, False
-        return du, None, refresh, slow
-
     def _newton(
         self, u: np.ndarray, f: np.ndarray, rtol: float | None = None, floor: float = 0.0
     ) -> dict:
         """Newton iterations from ``u`` under nodal forces ``f``. With a direct linear solver
         (and ``options.reuse`` above 0) and a factorised full tangent, each step solves the
         current tangent by conjugate gradients preconditioned with the kept factorisation
-        (:meth:`_krylov_step`; kept from solve to solve), renewed where CG slows
-        (:data:`KRYLOV_ITERATIONS`). Otherwise the factorised tangent is kept while the residual
-        still contracts by ``options.reuse`` per step; when a kept factorisation gives no usable
-        step, the tangent is assembled and factorised afresh.
+        (:class:`~fem.tangent.Tangent`; kept from solve to solve), renewed where CG slows.
+        Otherwise the factorised tangent is kept while the residual still contracts by
+        ``options.reuse`` per step; when a kept factorisation gives no usable step, the tangent
+        is assembled and factorised afresh.
         """
         opt = self.options
         free = self.free
@@ -507,7 +415,8 @@ class Solver:
         E = self.energy(u, f)
         history: list[float] = []
         rel, factorisations = float("nan"), 0
-        refresh = not (krylov and self.factored == "full")
+        tangent = self.tangent
+        refresh = not (krylov and tangent.factored == "full")
         definite = False  # steps taken with the tangent less its pressure stiffness
         r = self.residual(u, f)
         for it in range(opt.max_iter + 1):
@@ -526,14 +435,14 @@ class Solver:
                     "iterations": it,
                     "residual": rel,
                 }
-            conjugate = krylov and self.factored == "full"
+            conjugate = krylov and tangent.factored == "full"
             if not conjugate and len(history) > 1 and rel > opt.reuse * history[-2]:
                 refresh = True
-            du, failed, refresh, slow = self._direction(u, f, rf, refresh, conjugate)
+            du, failed, refresh, slow = tangent.direction(u, f, rf, refresh, conjugate)
             if failed is not None:
                 return {**failed, "iterations": it + failed["iterations"], "residual": rel}
             factorisations += refresh
-            definite |= self.factored == "definite"
+            definite |= tangent.factored == "definite"
             fresh, refresh = refresh, False
             slope = float(rf @ du)
             if not np.all(np.isfinite(du)) or slope >= 0:

@@ -1,0 +1,119 @@
+"""The tangent's factorisation that Newton's steps keep, and the steps solved with it.
+
+Each Newton step solves the current tangent ``K du = -r``. With a direct linear solver the last
+factorisation is kept, from step to step and from solve to solve, as the preconditioner of
+conjugate gradients on the current tangent (a back-substitution costs a thirtieth of a
+factorisation on the reference arm), and the tangent is factorised afresh only where that no
+longer converges within a few iterations. Under mean dilatation a tangent that is not positive
+definite is factorised without its pressure stiffness (``definite``, see
+:meth:`fem.solver.Solver.assemble`); CG is not tried on that one, which changes too much from
+step to step for an earlier one to precondition it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+
+from fem.krylov import pcg, symmetric_matvec
+from fem.linear_solvers import IndefiniteTangent
+
+KRYLOV_RTOL = 1e-3
+"""A Newton step solved by preconditioned CG leaves this share of the residual's linear part
+(an inexact Newton method: the residual still falls a thousandfold per step near an answer)."""
+
+KRYLOV_ITERATIONS = (10, 20)
+"""Preconditioned CG iterations after which the tangent is factorised afresh for the next step,
+and at which a step gives up on CG and factorises now (a factorisation of the reference arm
+costs some thirty back-substitutions and a tangent's assembly)."""
+
+
+class Tangent:
+    """A solver's linear solver and what its factorisation holds.
+
+    Args:
+        linear: a linear solver (:mod:`fem.linear_solvers`).
+        assemble: ``(u, f, definite) -> (r, K)``, the solver's :meth:`~fem.solver.Solver.assemble`.
+        can_leave_out: whether the tangent has a pressure stiffness to leave out (mean
+            dilatation).
+    """
+
+    def __init__(self, linear, assemble: Callable, can_leave_out: bool):
+        self.linear = linear
+        self.assemble = assemble
+        self.can_leave_out = can_leave_out
+        self.factored: str | None = None
+        """``"full"`` (the tangent), ``"definite"`` (less its pressure stiffness) or ``None``."""
+
+    def factorise(
+        self, u: np.ndarray, f: np.ndarray, definite: bool = False, K=None
+    ) -> tuple[str, int] | None:
+        """Assemble and factorise the tangent at ``u``; ``None``, or why it failed and whether
+        the iteration counts (``(reason, 1)`` when the tangent itself was built).
+        ``definite``: the tangent without the pressure stiffness; ``K``: the full tangent at
+        ``u`` where it is at hand.
+        """
+        self.factored = None
+        try:
+            if K is None or definite:
+                _, K = self.assemble(u, f, definite)
+            self.linear.factor(K)
+        except IndefiniteTangent:
+            return "indefinite tangent: the layer buckles", 1
+        except (RuntimeError, ValueError) as e:
+            return f"linear solve failed: {e}", 0
+        self.factored = "definite" if definite else "full"
+        return None
+
+    def refactorise(self, u: np.ndarray, f: np.ndarray, K=None) -> tuple[str, int] | None:
+        """:meth:`factorise` at ``u`` (``K``: the full tangent there, where at hand); an
+        indefinite tangent is tried again without its pressure stiffness where it has one
+        (:attr:`factored` then says ``"definite"``).
+        """
+        failed = self.factorise(u, f, K=K)
+        if failed is not None and failed[1] and self.can_leave_out:
+            return self.factorise(u, f, definite=True)
+        return failed
+
+    def krylov_step(self, u: np.ndarray, f: np.ndarray, rf: np.ndarray):
+        """The Newton step ``du`` (free DOFs) for residual ``rf`` at ``u``: conjugate gradients
+        on the full tangent at ``u`` preconditioned by the kept factorisation; ``(du or None,
+        CG iterations, the tangent)``.
+        """
+        _, K = self.assemble(u, f, False)
+        try:
+            out = pcg(
+                symmetric_matvec(K, self.linear.upper),
+                self.linear.solve,
+                -rf,
+                KRYLOV_RTOL,
+                KRYLOV_ITERATIONS[1],
+            )
+        except (RuntimeError, ValueError):
+            return None, KRYLOV_ITERATIONS[1], K
+        return out.x, out.iterations, K
+
+    def direction(self, u: np.ndarray, f: np.ndarray, rf: np.ndarray, refresh: bool, cg: bool):
+        """Newton's step at ``u`` for the free residual ``rf``: by conjugate gradients on the
+        current tangent (``cg``, where the full tangent is factorised and ``refresh`` is not
+        asked for), else with the kept factorisation, or with a fresh one (``refresh``, or where
+        CG fails). Returns ``(du, failure or None, whether the tangent was factorised, whether
+        CG was slow)``; a failure's ``iterations`` counts the tangent assembled for it.
+        """
+        du, slow, K = None, False, None
+        if cg and not refresh:
+            du, spent, K = self.krylov_step(u, f, rf)
+            refresh, slow = du is None, spent >= KRYLOV_ITERATIONS[0]
+        if refresh:
+            failed = self.refactorise(u, f, K)
+            if failed is not None:
+                failure = {"ok": False, "reason": failed[0], "iterations": failed[1]}
+                return None, failure, True, False
+        if du is None:
+            try:
+                du = self.linear.solve(-rf)
+            except RuntimeError as e:
+                failure = {"ok": False, "reason": f"linear solve failed: {e}", "iterations": 0}
+                return None, failure, refresh, False
+        return du, None, refresh, slow
