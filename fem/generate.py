@@ -121,6 +121,10 @@ def write_card(out: pathlib.Path, p: Plan, chash: str, runs: list) -> dict:
         "attempted": int(len(p.tasks) * len(p.cfg["forces"])),
         "failures": len(failures),
         "failures_by_reason": _count(failures, lambda f: f["reason"].split(":")[0]),
+        "failures_per_split": {
+            s: sum(int(p.split[f["placement"]]) == i for f in failures)
+            for i, s in enumerate(SPLITS)
+        },
         "failures_by_thickness_and_force": _count(
             failures, lambda f: f"{f['thickness_mm']:g} mm @ {f['total']:g} N"
         ),
@@ -314,6 +318,7 @@ def _solve(out, cfg, p: Plan, chash: str, todo: list, par: dict, runs: list, pro
                     "failures": result["failures"],
                     "wall": float(result["wall"]),
                 },
+                result.get("failed"),
             )
             done += 1
             totals["samples"] += len(result["records"]["task"])

@@ -23,8 +23,8 @@ from stmpl.part import BodyPart
 
 
 def solve_shard(payload: dict) -> dict:
-    """Solve the tasks of one shard (runs in a worker). Returns per-sample arrays, failures and
-    timings; plain NumPy and JSON types only.
+    """Solve the tasks of one shard (runs in a worker). Returns per-sample arrays, failures (and
+    in ``failed`` each one's inputs) and timings; plain NumPy and JSON types only.
     """
     threads = payload.get("threads")
     if threads:
@@ -45,23 +45,18 @@ def solve_shard(payload: dict) -> dict:
     if cfg.get("linear"):
         rec["linear"] = []
     failures = []
+    failed = {"thickness": [], "force": []}  # the inputs of each failure, in its order
+
     for task, (pi, ti), placement, split in payload["tasks"]:
         th_mm = cfg["thickness_mm"][ti]
+        where = (task, pi, split, th_mm)  # what a failure records
         load = make_load(part, placement)
         thickness = np.full(part.n_vertices, th_mm * 1e-3)
         pressure = forces / load.area
         levels = forces[pressure <= cfg["max_pressure"]]
         for f in forces[pressure > cfg["max_pressure"]]:
-            failures.append(
-                {
-                    "task": task,
-                    "placement": pi,
-                    "thickness_mm": th_mm,
-                    "total": float(f),
-                    "reason": f"over max_pressure: "
-                    f"{f / load.area:.0f} Pa > {cfg['max_pressure']:.0f} Pa",
-                }
-            )
+            why = f"over max_pressure: {f / load.area:.0f} Pa > {cfg['max_pressure']:.0f} Pa"
+            _failure(failures, failed, where, thickness, load.force * f, f, why)
         if len(levels) == 0:
             continue
         lift = None
@@ -74,30 +69,14 @@ def solve_shard(payload: dict) -> dict:
                 mesh, sols = simulate(*setup, tissue, phenotype)
         except ValueError as e:  # a shell that cannot be meshed (folds) is a failure too
             for f in levels:
-                failures.append(
-                    {
-                        "task": task,
-                        "placement": pi,
-                        "thickness_mm": th_mm,
-                        "total": float(f),
-                        "reason": f"mesh: {e}",
-                    }
-                )
+                _failure(failures, failed, where, thickness, load.force * f, f, f"mesh: {e}")
             continue
         unit = None  # the linear FEM's answer to 1 N of the pattern
         for f, s in zip(levels, sols):
             if s.ok and "linear" in rec and unit is None:
                 unit = linear_answer(part, th_mm * 1e-3, load.force, cfg, mat, opts)
             if not s.ok:
-                failures.append(
-                    {
-                        "task": task,
-                        "placement": pi,
-                        "thickness_mm": th_mm,
-                        "total": float(f),
-                        "reason": s.reason,
-                    }
-                )
+                _failure(failures, failed, where, thickness, load.force * f, f, s.reason)
                 continue
             rec["task"].append(task)
             rec["placement"].append(pi)
@@ -123,10 +102,30 @@ def solve_shard(payload: dict) -> dict:
         "shard": payload["shard"],
         "records": rec,
         "failures": failures,
+        "failed": failed,
         "tasks": [t[0] for t in payload["tasks"]],
         "wall": time.perf_counter() - t0,
         "pid": os.getpid(),
     }
+
+
+def _failure(failures: list, failed: dict, where: tuple, thickness, force, total, reason) -> None:
+    """Record one planned sample that was not solved: its record (``where`` is its task,
+    placement, split and thickness in mm) and its inputs, ``(N,)`` m and N.
+    """
+    task, pi, split, th_mm = where
+    failures.append(
+        {
+            "task": task,
+            "placement": pi,
+            "split": int(split),
+            "thickness_mm": th_mm,
+            "total": float(total),
+            "reason": reason,
+        }
+    )
+    failed["thickness"].append(np.asarray(thickness, dtype=np.float32))
+    failed["force"].append(np.asarray(force, dtype=np.float32))
 
 
 def linear_answer(

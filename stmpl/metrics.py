@@ -113,13 +113,20 @@ COLUMNS = (
 )
 
 
+COUNTS = ("unsolved", "unsolved_flagged", "unsolved_silent", "inside_broken")
+"""Counts an evaluation adds (:func:`stmpl.pipeline.evaluate.evaluate_dataset`): the CSV's last
+columns, empty where not known."""
+
+
 def table(results: dict[str, dict], fmt: str = "markdown") -> str:
     """A table of summaries ``{predictor name: summarise(...)}`` as markdown or CSV."""
     if fmt == "csv":
         head = ["predictor", "samples"] + [f"{k}_{s}" for k, _ in COLUMNS for s in ("mean", "std")]
+        head += list(COUNTS)
         rows = [
             [name, str(s["samples"])]
             + [f"{x:.6g}" for k, _ in COLUMNS for x in s.get(k, (np.nan, np.nan))]
+            + ["" if s.get(k) is None else f"{s[k]:.6g}" for k in COUNTS]
             for name, s in results.items()
         ]
         return csv(head, rows)
@@ -140,3 +147,45 @@ def table(results: dict[str, dict], fmt: str = "markdown") -> str:
         ]
         rows.append([name, str(s["samples"]), *cells])
     return markdown(head, rows, "lr" + "r" * len(COLUMNS))
+
+
+def honesty(results: dict[str, dict]) -> str:
+    """What each row's answers say about themselves, as markdown: the planned scenes, the ones
+    the FEM did not solve when the set was made (with why) and how the predictor answered those
+    (flagged: outside its envelope, impossible or refused; silent: as if trusted), the share of
+    answers said inside its envelope, and how many of those break the per-scene promise
+    (:data:`stmpl.envelope.SCENE_PROMISE`). ``results``: ``{row: evaluate_dataset(...)}``.
+    """
+    head = [
+        "set-up",
+        "planned",
+        "solved",
+        "not solved (why)",
+        "flagged on those",
+        "silent on those",
+        "said inside %",
+        "inside, promise broken",
+    ]
+    rows = []
+    for name, s in results.items():
+        n, un = int(s["samples"]), s.get("unsolved")
+        why = ", ".join(f"{c} {r}" for r, c in sorted((s.get("unsolved_why") or {}).items()))
+        inside = s.get("inside_envelope", (np.nan, np.nan))
+        inside = inside[0] if isinstance(inside, (list, tuple)) else inside
+        broken = s.get("inside_broken", np.nan)
+        said_in = int(round(n * inside / 100)) if np.isfinite(inside) else 0
+        rows.append(
+            [
+                name,
+                "–" if un is None else str(n + un),
+                str(n),
+                "not recorded" if un is None else f"{un}" + (f" ({why})" if why else ""),
+                str(s.get("unsolved_flagged", "–")),
+                str(s.get("unsolved_silent", "–")),
+                "–" if not np.isfinite(inside) else f"{inside:.0f}",
+                "–"
+                if broken is None or not np.isfinite(broken)
+                else f"{int(broken)}" + (f" of {said_in}" if said_in else ""),
+            ]
+        )
+    return markdown(head, rows, "lrrlrrrr")

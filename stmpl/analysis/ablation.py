@@ -32,9 +32,10 @@ from tqdm import tqdm
 from stmpl import config as checked
 from stmpl.analysis import stability
 from stmpl.analysis.ablation_sets import Remade, datasets, ready
-from stmpl.analysis.tables import PAPER, TITLES, table
+from stmpl.analysis.tables import HONESTY, PAPER, TITLES, table
 from stmpl.files import atomic_write_text
 from stmpl.machine import describe
+from stmpl.metrics import honesty
 from stmpl.pipeline.evaluate import evaluate_dataset, scenes_of
 from stmpl.pipeline.spec import key as spec_key
 from stmpl.pipeline.spec import predictor_from_spec
@@ -288,7 +289,7 @@ def run(config, progress: bool = True, accept_remade: bool = False) -> dict:
         for _, d, thick, tab, row in [j for j in jobs if j[0] is s]:
             ds = sets[d]
             key = _job_key(setup_key, ds, thick, cfg, s)
-            if key not in cache:
+            if key not in cache or "inside_broken" not in cache[key]:  # older: no honesty counts
                 t0 = time.perf_counter()
                 res = evaluate_dataset(
                     p,
@@ -451,6 +452,9 @@ def _write(
         atomic_write_text(out / f"{k}.md", table(rows, paper))
         atomic_write_text(out / f"{k}.csv", table(rows, paper, "csv"))
         parts.append(f"## {TITLES[k]}\n\n" + table(rows, paper))
+    judged = {**tables.get("table1", {}), **tables.get("table2", {})}
+    if judged:
+        parts.append(HONESTY + honesty(judged))
     if points:
         speed_accuracy(
             [p for p in points if p.get("chart", True)],

@@ -1,6 +1,6 @@
 """Caps on a predictor's envelope from a stability sweep: where the sweep
 (:mod:`stmpl.analysis.stability`) measured a model breaking its per-scene promise
-(:data:`stmpl.pipeline.zoo.SCENE_PROMISE`) inside the support of its data, the cap on one load axis
+(:data:`stmpl.envelope.SCENE_PROMISE`) inside the support of its data, the cap on one load axis
 that puts those points outside and keeps the most of the points where it held. ``stmpl zoo limit
 --sweep CONFIG`` applies it to zoo models.
 """
@@ -12,15 +12,14 @@ import pathlib
 
 from stmpl.analysis.stability import read_config, scene_at
 from stmpl.body.spec import part_from_spec
-from stmpl.envelope import AXES, SLACK, _values, features
+from stmpl.envelope import AXES, SLACK, _values, breaks_promise, features
 from stmpl.files import atomic_write_text
 from stmpl.pipeline import zoo
-from stmpl.pipeline.zoo import SCENE_PROMISE
 
 
 def broke(rec: dict, name: str) -> bool:
     """Whether predictor ``name`` broke its per-scene promise
-    (:data:`stmpl.pipeline.zoo.SCENE_PROMISE`) at point ``rec``: an answer where the FEM failed, a
+    (:data:`stmpl.envelope.SCENE_PROMISE`) at point ``rec``: an answer where the FEM failed, a
     physically impossible answer, or one off by more than the promise. A refused scene was not
     answered and did not.
     """
@@ -29,7 +28,7 @@ def broke(rec: dict, name: str) -> bool:
         return False
     if not rec["fem"]["ok"] or not r["physical"]:
         return True
-    return r["rel_mee"] > SCENE_PROMISE["rel_mee"] or abs(r["peak_err"]) > SCENE_PROMISE["peak_err"]
+    return breaks_promise(r["rel_mee"], r["peak_err"])
 
 
 def measured(cfg: dict, part) -> list[tuple[object, list[dict]]]:
@@ -111,7 +110,7 @@ def limit(cfg: dict, part, name: str, envelope, axes=LIMIT_AXES) -> dict | None:
 def cap_zoo(names: list[str] | None, config, path=None, progress=print) -> dict:
     """Cap the envelopes of zoo models (default: the learned ones a stability sweep measured)
     where the sweep of ``config`` (its cached points; run it first) found them breaking
-    :data:`stmpl.pipeline.zoo.SCENE_PROMISE` inside their data's support (:func:`limit`: one cap, on
+    :data:`stmpl.envelope.SCENE_PROMISE` inside their data's support (:func:`limit`: one cap, on
     the axis that keeps the most of the points where they held); the caps are kept in the
     manifest entries (``limits``) and applied by :func:`stmpl.pipeline.zoo.read`. Returns ``{name:
     cap or None}``.

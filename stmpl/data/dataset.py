@@ -9,7 +9,17 @@ import pathlib
 
 import numpy as np
 
-from stmpl.data.format import FORMATS, SPLITS, ARRAYS, STRINGS, OPTIONAL, part_hash, content_hash, read_shard
+from stmpl.data.format import (
+    ARRAYS,
+    FORMATS,
+    OPTIONAL,
+    SPLITS,
+    STRINGS,
+    content_hash,
+    part_hash,
+    read_failed,
+    read_shard,
+)
 from stmpl.part import BodyPart
 from stmpl.body.spec import SHAPE_KEYS
 
@@ -79,6 +89,42 @@ class Dataset:
         if "all" not in self._cache:
             self._cache["all"] = self._read_all()
         return _of_split(self._cache["all"], split)
+
+    def failed(self, split: str | None = None) -> dict | None:
+        """The planned samples of ``split`` (all for ``None``) whose solve failed, or that
+        were not attempted: ``thickness``, ``force`` ``(F, N)`` (m, N), ``total`` ``(F,)`` N,
+        ``split`` and ``body`` ``(F,)``, and ``reason`` (one sentence each); ``None`` for a
+        dataset written before failures kept their inputs (its card still counts them)."""
+        _check_split(split)
+        if "failed" not in self._cache:
+            self._cache["failed"] = self._read_failed()
+        got = self._cache["failed"]
+        return None if got is None else _of_split(got, split)
+
+    def _read_failed(self) -> dict | None:
+        records, thickness, force = [], [], []
+        for s in self.shards:
+            got = read_failed(s)
+            if got is None:
+                return None
+            records += got[0]
+            n = self.part.n_vertices
+            for k, out in (("thickness", thickness), ("force", force)):
+                if len(got[0]):
+                    if got[1][k].shape != (len(got[0]), n):
+                        raise ValueError(f"dataset {self.folder}: {s.name} holds failed "
+                                         f"{k} of shape {got[1][k].shape}, the part has {n} "
+                                         "vertices")
+                    out.append(got[1][k])
+        n = self.part.n_vertices
+        return {
+            "thickness": np.concatenate(thickness) if thickness else np.zeros((0, n), np.float32),
+            "force": np.concatenate(force) if force else np.zeros((0, n), np.float32),
+            "total": np.array([float(r["total"]) for r in records]),
+            "split": np.array([int(r["split"]) for r in records], dtype=np.int64),
+            "body": np.zeros(len(records), np.int32),
+            "reason": [str(r["reason"]) for r in records],
+        }
 
     def _read_all(self) -> dict:
         v1 = self.card["format"] == "stmpl-dataset/1"
@@ -236,6 +282,15 @@ class Datasets:
                              else [x for a in parts for x in a[k]])
                          for k in list(ARRAYS) + list(STRINGS) + ["body"] + have}
         return _of_split(self._all, split)
+
+    def failed(self, split: str | None = None) -> dict | None:
+        """As :meth:`Dataset.failed`, over every member in turn (``None`` if one predates)."""
+        got = [ds.failed(split) for ds in self.members]
+        if any(g is None for g in got):
+            return None
+        got = [{**g, "body": np.full(len(g["total"]), b, np.int32)} for g, b in zip(got, self._body)]
+        return {k: (np.concatenate([g[k] for g in got]) if k != "reason"
+                    else [r for g in got for r in g[k]]) for k in got[0]}
 
 
 def _check_split(split: str | None) -> None:

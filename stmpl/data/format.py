@@ -7,6 +7,13 @@ arrays: ``thickness`` ``(S, N)`` m, ``force`` ``(S, N)`` N, ``displacement`` ``(
 (float32), with per-sample ``total`` force (N), ``split`` (0 train, 1 val, 2 test),
 ``placement``, ``thickness_level``, ``task``, ``kind``, ``params`` and solver diagnostics.
 
+A planned sample whose solve failed (or was not attempted: over ``max_pressure``) is not a
+sample, but it is not lost: the shard's ``failures`` attribute lists each one (task, placement,
+split, thickness, total force, reason) and its arrays ``failed_thickness`` and ``failed_force``
+``(F, N)`` hold its inputs, so that a predictor's answer on it can be judged (flagged or silent).
+They have their own hash (``failed_written``) and are outside the content hash: a dataset's hash
+is of its samples alone.
+
 The card's ``hash`` is of the content: the part and every sample's arrays (:data:`CONTENT`), not
 the files' bytes nor the timings, so the same samples give the same hash however and whenever
 they were computed (a killed and resumed run included). Each shard's own content hash is in the
@@ -86,10 +93,14 @@ def content_hash(part_digest: str, shard_digests: list[str]) -> str:
     return h.hexdigest()[:16]
 
 
-def write_shard(folder, shard: int, records: dict, attrs: dict) -> pathlib.Path:
+def write_shard(
+    folder, shard: int, records: dict, attrs: dict, failed: dict | None = None
+) -> pathlib.Path:
     """Write one shard atomically: ``records`` maps every name of :data:`FLOATS`, :data:`INTS`,
     :data:`DOUBLES` and :data:`STRINGS` to one value per sample; ``attrs`` (JSON-ready) go to
-    the file's attributes with the format, the shard number and the sample count."""
+    the file's attributes with the format, the shard number and the sample count; ``failed``
+    (``{"thickness": [...], "force": [...]}``, one ``(N,)`` array per entry of
+    ``attrs["failures"]``) the inputs of the planned samples that failed."""
     import h5py  # deferred: dataset shards only
 
 
@@ -114,10 +125,57 @@ def write_shard(folder, shard: int, records: dict, attrs: dict) -> pathlib.Path:
             for k in STRINGS:
                 h.create_dataset(k, data=np.asarray(records[k], dtype=object),
                                  dtype=h5py.string_dtype())
+            if failed is not None:
+                for k in FAILED:
+                    rows = failed[k]
+                    arr = np.stack(rows) if rows else np.zeros((0, 0), np.float32)
+                    h.create_dataset(f"failed_{k}", data=arr.astype(np.float32),
+                                     compression="gzip", compression_opts=4, shuffle=True)
         content = read_shard(tmp)[1]["content"]  # as a reader will see it
         with h5py.File(tmp, "a") as h:
             h.attrs["written"] = content
+            if failed is not None:
+                h.attrs["failed_written"] = _failed_hash({k: h[f"failed_{k}"][()]
+                                                          for k in FAILED})
     return path
+
+
+FAILED = ("thickness", "force")
+"""The inputs of a failed planned sample a shard keeps (``failed_<name>``, ``(F, N)``)."""
+
+
+def _failed_hash(arrays: dict) -> str:
+    h = hashlib.sha256()
+    for k in FAILED:
+        v = np.ascontiguousarray(arrays[k])
+        h.update(f"{k}{v.dtype.str}{v.shape}".encode())
+        h.update(v.tobytes())
+    return h.hexdigest()
+
+
+def read_failed(path) -> tuple[list, dict] | None:
+    """``(failures, {"thickness": (F, N), "force": (F, N)})`` of a shard: each failed planned
+    sample's record (task, placement, split, thickness_mm, total, reason) and inputs; ``None``
+    for a shard written before failures kept their inputs. ``ValueError`` names a shard whose
+    failures were changed after it was written."""
+    import h5py  # deferred: dataset shards only
+
+    try:
+        with h5py.File(path, "r") as h:
+            if "failed_written" not in h.attrs:
+                return None
+            failures = json.loads(h.attrs["failures"])
+            arrays = {k: h[f"failed_{k}"][()] for k in FAILED}
+            written = h.attrs["failed_written"]
+    except (OSError, KeyError, ValueError) as e:
+        raise ValueError(f"dataset shard {path} is corrupt: {e}") from e
+    if _failed_hash(arrays) != written or len(arrays["force"]) != len(failures):
+        raise ValueError(
+            f"dataset shard {path}: its failed samples were changed after it was written"
+        )
+    if any("split" not in f for f in failures):
+        return None
+    return failures, arrays
 
 
 def read_shard(path, keys=ARRAYS + STRINGS) -> tuple[dict, dict]:

@@ -6,12 +6,15 @@ from __future__ import annotations
 
 import pathlib
 import warnings
+from collections import Counter
 
 import numpy as np
 
 from stmpl.data.dataset import Dataset, Datasets, open_data
 from stmpl.data.format import at_levels
-from stmpl.metrics import sample_metrics, seam_gap, summarise, table
+from stmpl.envelope import breaks_promise
+from stmpl.failures import ImpossibleAnswer
+from stmpl.metrics import honesty, sample_metrics, seam_gap, summarise, table
 from stmpl.predictor import OutsideEnvelope, PredictionFailed
 from stmpl.scene import Scene
 
@@ -55,6 +58,11 @@ def evaluate_dataset(
     A predictor that is not ``batched`` (the FEM) answers one scene at a time; a scene it fails
     on is left out of the measures and counted (``failed``, the first reason in
     ``failed_first``).
+
+    Honesty: ``inside_broken`` counts the answers said inside the envelope that break the
+    per-scene promise (:data:`~stmpl.envelope.SCENE_PROMISE`; NaN without an envelope), and
+    :func:`on_unsolved` adds the planned samples of the split the FEM did not solve when the
+    set was made, and how the predictor answered them (flagged or silent).
     """
     import torch  # deferred: about a second to import; the core's types do not need it
 
@@ -64,6 +72,7 @@ def evaluate_dataset(
     part = ds.part
     seam = part.seam_vertices
     rows, seconds, failed = [], [], []
+    inside_broken, enveloped = 0, False
     if not getattr(predictor, "batched", True):
         batch = 1  # the FEM: seconds a scene, and a solve may fail alone
     for i in range(0, len(scenes), batch):
@@ -96,9 +105,13 @@ def evaluate_dataset(
             corners = [d.displacement[part.uv_vertex] for d in out]
         for d, u, c in zip(out, truth[i : i + batch], corners):
             env = d.info.get("envelope")
+            m = sample_metrics(u, d.displacement, seam)
+            enveloped |= env is not None
+            if env is not None and env["inside"] and np.isfinite(m["rel_mee"]):
+                inside_broken += breaks_promise(m["rel_mee"], m["peak_err"])
             rows.append(
                 {
-                    **sample_metrics(u, d.displacement, seam),
+                    **m,
                     "seam_gap": seam_gap(part, c),
                     "inside_envelope": np.nan if env is None else 100.0 * env["inside"],
                 }
@@ -114,7 +127,59 @@ def evaluate_dataset(
     if failed:
         s["failed"] = len(failed)
         s["failed_first"] = failed[0]
+    s["inside_broken"] = inside_broken if enveloped else float("nan")
+    s.update(on_unsolved(predictor, ds, split, thickness_mm, batch))
     return {k: (list(v) if isinstance(v, tuple) else v) for k, v in s.items()}
+
+
+def on_unsolved(predictor, ds, split: str = "test", thickness_mm=None, batch: int = 64) -> dict:
+    """The planned samples of a split that the FEM did not solve when the set was made (a failed
+    solve, or a load past the set's ``max_pressure``), counted and never dropped: ``unsolved``
+    (``None`` for a set made before failures kept their inputs), ``unsolved_why`` (count per
+    reason) and the predictor's answers on them: ``unsolved_flagged`` (outside its envelope,
+    physically impossible, or refused) and ``unsolved_silent`` (answered as if trusted). A
+    predictor that is not ``batched`` (the FEM) is not asked again.
+    """
+    got = ds.failed(split) if hasattr(ds, "failed") else None
+    if got is None:
+        return {"unsolved": None}
+    keep = np.arange(len(got["total"]))
+    if thickness_mm is not None:
+        keep = keep[at_levels(got, thickness_mm)]
+    out = {
+        "unsolved": int(len(keep)),
+        "unsolved_why": dict(Counter(got["reason"][i].split(":")[0] for i in keep)),
+    }
+    if not getattr(predictor, "batched", True) or len(keep) == 0:
+        return out
+    parts = getattr(ds, "parts", [ds.part])
+    scenes = [
+        Scene(
+            parts[got["body"][i]],
+            got["thickness"][i].astype(float),
+            got["force"][i].astype(float),
+            meta={"total": float(got["total"][i]), "unsolved": got["reason"][i]},
+        )
+        for i in keep
+    ]
+    flagged = silent = 0
+    for i in range(0, len(scenes), batch):
+        chunk = scenes[i : i + batch]
+        with warnings.catch_warnings():  # counted, not warned
+            warnings.simplefilter("ignore", OutsideEnvelope)
+            warnings.simplefilter("ignore", ImpossibleAnswer)
+            try:
+                answers = predictor.predict(chunk)
+            except PredictionFailed:  # refused (a strict predictor): flagged, not silent
+                flagged += len(chunk)
+                continue
+        for d in answers:
+            env = d.info.get("envelope")
+            if (env is not None and not env["inside"]) or not d.info.get("physical", True):
+                flagged += 1
+            else:
+                silent += 1
+    return {**out, "unsolved_flagged": flagged, "unsolved_silent": silent}
 
 
 def evaluate(
@@ -129,7 +194,7 @@ def evaluate(
     for name, p in predictors.items():
         s = evaluate_dataset(p, ds, split, limit=limit)
         results[name] = {k: tuple(v) if isinstance(v, list) else v for k, v in s.items()}
-    md = table(results)
+    md = table(results) + "\nWhat the answers say about themselves:\n\n" + honesty(results)
     if out is not None:
         out = pathlib.Path(out)
         base = out.with_suffix("") if out.suffix in (".md", ".csv") else out

@@ -28,7 +28,7 @@ from stmpl import predictor
 from stmpl.checkpoint import read as read_checkpoint
 from stmpl.checkpoint import read_sidecar, sha256, sidecar_path
 from stmpl.data.dataset import open_data
-from stmpl.envelope import SHAPE_AXES, Envelope
+from stmpl.envelope import PROMISE, SHAPE_AXES, Envelope
 from stmpl.files import atomic_write_text
 from stmpl.metrics import sample_metrics
 from stmpl.pipeline.evaluate import evaluate_dataset, scenes_of
@@ -124,18 +124,6 @@ def verify(name: str, path=None) -> pathlib.Path:
             "manifest (an edited or replaced sidecar)"
         )
     return f
-
-
-PROMISE = {"rel_mee": 1.0, "peak_err": 5.0}
-"""What a learned model promises inside its envelope on a test set: relative MEE <= 1 % and the
-mean peak error within +-5 % (the targets of the tables)."""
-SCENE_PROMISE = {"rel_mee": 1.5, "peak_err": 10.0}
-"""What it promises for one scene inside its envelope: relative MEE <= 1.5 % and the peak within
-+-10 %. A test set's mean keeps :data:`PROMISE`; single scenes scatter about it (the shipped
-fine-arm models' peak errors have a standard deviation of 3-4 % on their test sets), so a scene's
-bound is wider. The stability sweep's points (reports/stability_fine) hold the envelopes to it:
-every point where a model breaks it, or the FEM fails, lies outside that model's envelope
-(tests/test_stability.py)."""
 
 
 def read(name: str, device: str = "cpu", path=None, **options):

@@ -62,6 +62,12 @@ def test_tables_rows_and_the_cache(config, tmp_path, monkeypatch):
     assert seen + unseen == naive["samples"]
     md = (tmp_path / "report" / "ablation.md").read_text()
     assert "Table 1" in md and "*STMPL (paper)*" in md and "| Naive / bands |" in md
+    # every planned test scene is counted, solved or not
+    card = json.loads((tmp_path / "data" / "bands" / "card.json").read_text())
+    bands = t["table2"]["Naive / bands"]
+    planned = card["samples_per_split"]["test"] + card["failures_per_split"]["test"]
+    assert bands["samples"] + bands["unsolved"] == planned
+    assert "What the answers say about themselves" in md
     assert (tmp_path / "report" / "speed_accuracy.png").stat().st_size > 20_000
     assert (tmp_path / "report" / "speed_accuracy.svg").is_file()
     pts = {(p["label"], p["batch"]): p for p in res["points"]}

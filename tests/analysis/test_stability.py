@@ -128,9 +128,9 @@ def test_bad_sweeps_are_named():
 def test_the_shipped_envelopes_flag_every_sweep_point_where_a_model_breaks_its_promise(arm, config):
     """The committed sweeps of the shipped models, driven through today's envelopes (with the
     caps `stmpl zoo limit` set from them): at every point where the FEM failed, or where a
-    learned model's answer broke the per-scene promise (zoo.SCENE_PROMISE) or was physically
-    impossible, in any record of that point, the model flags the scene as outside (or refuses
-    it).
+    learned model's answer broke the per-scene promise (stmpl.envelope.SCENE_PROMISE) or was
+    physically impossible, in any record of that point, the model flags the scene as outside (or
+    refuses it).
     """
     from stmpl.analysis import limits
     from stmpl.pipeline import zoo

@@ -104,7 +104,7 @@ def test_serial_run_card_and_samples(tmp_path):
     assert json.loads((tmp_path / "d" / "card.json").read_text())["hash"] == card["hash"]
 
 
-def test_failures_are_counted_not_stored(tmp_path):
+def test_failures_are_counted_and_kept_apart_from_the_samples(tmp_path):
     cfg = _cfg(
         thickness_mm=[5.0],
         forces=[0.1, 3.0, 4.0],
@@ -114,9 +114,48 @@ def test_failures_are_counted_not_stored(tmp_path):
     card = generate(cfg, tmp_path / "f", progress=False)
     assert card["failures"] > 0 and card["samples"] + card["failures"] == card["attempted"]
     assert card["failures_by_reason"]
-    a = Dataset(tmp_path / "f").arrays()
+    assert sum(card["failures_per_split"].values()) == card["failures"]
+    ds = Dataset(tmp_path / "f")
+    a = ds.arrays()
     assert np.all(a["max_compression"] <= 1.0)
     assert np.all(np.isfinite(a["displacement"]))
+    # every failure keeps its inputs: the load the sample would have had, on its split
+    f = ds.failed()
+    assert len(f["total"]) == card["failures"] == len(f["reason"])
+    np.testing.assert_allclose(f["force"].sum(1), f["total"], rtol=1e-5)
+    np.testing.assert_allclose(f["thickness"], 5e-3, rtol=1e-6)
+    for s, n in card["failures_per_split"].items():
+        assert len(ds.failed(s)["total"]) == n
+    placed = {int(t): int(s) for t, s in zip(a["task"], a["split"])}
+    assert all(placed.get(r["task"], r["split"]) == r["split"] for r in _failure_records(ds))
+
+
+def _failure_records(ds):
+    import h5py
+
+    out = []
+    for s in ds.shards:
+        with h5py.File(s, "r") as h:
+            out += json.loads(h.attrs["failures"])
+    return out
+
+
+def test_an_edited_failure_is_refused(tmp_path):
+    import h5py
+
+    cfg = _cfg(
+        thickness_mm=[5.0],
+        forces=[0.1, 4.0],
+        max_pressure=3000.0,
+        placements={"disk": {"centres": 2, "radii": [0.02]}},
+    )
+    generate(cfg, tmp_path / "f", progress=False)
+    ds = Dataset(tmp_path / "f")
+    shard = ds.shards[_failure_records(ds)[0]["task"] // cfg["shard_tasks"]]
+    with h5py.File(shard, "a") as h:
+        h["failed_force"][0, 0] += 1.0
+    with pytest.raises(ValueError, match="failed samples were changed after it was written"):
+        Dataset(tmp_path / "f").failed()
 
 
 def test_a_killed_run_resumes_without_loss_or_duplicates(tmp_path):

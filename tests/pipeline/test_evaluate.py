@@ -63,3 +63,54 @@ def test_a_scene_the_fem_fails_on_is_counted_and_left_out(ds, make):
     fem.predict_batch = broken
     with pytest.raises(PredictionFailed, match="failed on all 2 scenes"):
         evaluate_dataset(fem, ds, "test", limit=2)
+
+
+def test_scenes_the_fem_did_not_solve_are_counted_with_the_answers_given_on_them(
+    tiny_config, tmp_path, make
+):
+    """A planned sample the FEM could not solve (here: loads past the set's max_pressure) is
+    never dropped: the evaluation counts it with its reason and judges the predictor's answer on
+    it, flagged (outside its envelope, or impossible) or silent; an answer said inside that
+    breaks the per-scene promise is counted too.
+    """
+    from fem.generate import generate
+    from stmpl.data.dataset import Dataset
+    from stmpl.envelope import Envelope
+    from stmpl.pipeline.evaluate import evaluate_dataset
+
+    cfg = tiny_config(
+        thickness_mm=[5.0],
+        forces=[0.05, 0.1, 2.0],
+        max_pressure=1000.0,
+        placements={"disk": {"centres": 5, "radii": [0.02]}},
+    )
+    card = generate(cfg, tmp_path / "d", progress=False)
+    ds = Dataset(tmp_path / "d")
+    n_test = card["failures_per_split"]["test"]
+    assert n_test >= 1
+    naive = make("naive", ds)
+    train = ds.arrays("train")
+    naive.envelope = Envelope.of(ds.part, train["thickness"], train["force"])
+    res = evaluate_dataset(naive, ds, "test")
+    assert res["unsolved"] == n_test
+    assert res["unsolved_why"] == {"over max_pressure": n_test}
+    # 2 N is 20x the training's heaviest load: every such answer is flagged
+    assert res["unsolved_flagged"] == n_test and res["unsolved_silent"] == 0
+    assert 0 <= res["inside_broken"] <= res["samples"]
+    # without an envelope, an answer that looks possible is silent
+    naive.envelope = None
+    res = evaluate_dataset(naive, ds, "test")
+    physical = [d.info["physical"] for d in naive.predict(_unsolved_scenes(ds))]
+    assert res["unsolved_silent"] == sum(physical) and np.isnan(res["inside_broken"])
+    # the FEM is not asked again where it failed
+    assert evaluate_dataset(make("fem", ds), ds, "test", limit=1)["unsolved"] == n_test
+    assert "unsolved_silent" not in evaluate_dataset(make("fem", ds), ds, "test", limit=1)
+
+
+def _unsolved_scenes(ds):
+    from stmpl.scene import Scene
+
+    f = ds.failed("test")
+    return [
+        Scene(ds.part, t.astype(float), x.astype(float)) for t, x in zip(f["thickness"], f["force"])
+    ]
