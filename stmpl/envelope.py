@@ -20,6 +20,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from stmpl.part import BodyPart
+from stmpl.support import Support, coordinates
 
 FORMAT = "stmpl-envelope/1"
 
@@ -63,8 +64,11 @@ every point where a model breaks it, or the FEM fails, lies outside that model's
 (tests/test_stability.py)."""
 
 
-def breaks_promise(rel_mee: float, peak_err: float, promise: dict = SCENE_PROMISE) -> bool:
-    """Whether one answer's relative MEE and signed peak error (both %) break ``promise``."""
+def breaks_promise(rel_mee: float, peak_err: float, promise: dict | None = None) -> bool:
+    """Whether one answer's relative MEE and signed peak error (both %) break ``promise``
+    (default :data:`SCENE_PROMISE`).
+    """
+    promise = SCENE_PROMISE if promise is None else promise
     return bool(rel_mee > promise["rel_mee"] or abs(peak_err) > promise["peak_err"])
 
 
@@ -157,6 +161,11 @@ class Envelope:
     limits: dict = field(default_factory=dict)
     """Bounds over every box, set where a model was measured to break its promise inside its
     data's support (the stability sweep): ``{axis: {"max": value, "source": str}}`` (SI)."""
+    support: Support | None = None
+    """The training scenes' joint support and the out-of-sample evidence of the predictor's
+    errors (:mod:`stmpl.support`): a scene inside a box must also lie near scenes of the data
+    and nearest a measured scene where the promise was kept. ``None`` in envelopes written
+    before it (boxes and limits alone)."""
 
     def limit(self, axis: str, hi: float, source: str = "") -> None:
         """Cap ``axis`` (a ``max`` or ``range`` axis of :data:`AXES`) at ``hi`` (SI) for every
@@ -203,14 +212,48 @@ class Envelope:
             raise ValueError(f"an envelope box ({name!r}) needs at least one scene")
         lo = {a: np.inf for a in AXES}
         hi = {a: -np.inf for a in AXES}
+        coords = []
         for ts, fs, b in zip(t, f, body):
             feat = features(parts[b], ts, fs)
+            coords.append(coordinates(feat))
             for a in AXES:
                 vals = _values(feat, a)
                 if vals:
                     lo[a], hi[a] = min(lo[a], min(vals)), max(hi[a], max(vals))
         self.boxes[name] = {a: [float(lo[a]), float(hi[a])] for a in AXES if np.isfinite(lo[a])}
         self.info[name] = {"scenes": int(len(t)), "source": source, **notes}
+        if name == "training":
+            self.support = Support.of(np.array(coords))
+
+    def measure(
+        self, part, thickness, force, rel_mee, peak_err, source: str = "", body=None
+    ) -> np.ndarray:
+        """Add out-of-sample evidence to the support: ``S`` scenes (``(S, N)`` arrays on
+        ``part``, or several bodies as in :meth:`add`) and the predictor's relative MEE and
+        signed peak error on each ``(S,)`` (%; NaN for a planned scene the FEM could not solve,
+        where no answer is backed). Returns ``(S,)``: whether each kept
+        :data:`SCENE_PROMISE`. Needs a ``training`` box (its support) first.
+        """
+        if self.support is None:
+            raise ValueError("an envelope takes evidence only after its training box")
+        t = np.asarray(thickness, dtype=float)
+        f = np.asarray(force, dtype=float)
+        parts = list(part) if isinstance(part, (list, tuple)) else [part]
+        body = np.zeros(len(t), int) if body is None else np.asarray(body, dtype=int)
+        rel = np.asarray(rel_mee, dtype=float)
+        peak = np.asarray(peak_err, dtype=float)
+        if not (len(t) == len(f) == len(body) == len(rel) == len(peak)) or len(t) == 0:
+            raise ValueError(
+                f"evidence needs one thickness, force, body, relative MEE and peak error per "
+                f"scene, got {len(t)}, {len(f)}, {len(body)}, {len(rel)}, {len(peak)}"
+            )
+        coords = np.array(
+            [coordinates(features(parts[b], ts, fs)) for ts, fs, b in zip(t, f, body)]
+        )
+        kept = np.array([not breaks_promise(r, p) for r, p in zip(rel, peak)])
+        kept &= np.isfinite(rel) & np.isfinite(peak)
+        self.support.measure(coords, kept, np.stack([rel, peak], 1), source)
+        return kept
 
     def widen(
         self,
@@ -289,6 +332,8 @@ class Envelope:
                 break
             if best is None or len(why) < len(best):
                 best = why
+        if not best and self.support is not None:  # inside a box: are the values seen together?
+            best = self.support.reasons(coordinates(feat))
         return capped + best  # a cap first, then the data's own bounds the scene leaves
 
     def to_dict(self) -> dict:
@@ -297,6 +342,7 @@ class Envelope:
             "boxes": self.boxes,
             "info": self.info,
             **({"limits": self.limits} if self.limits else {}),
+            **({"support": self.support.to_dict()} if self.support is not None else {}),
         }
 
     @classmethod
@@ -327,6 +373,8 @@ class Envelope:
             if not isinstance(lim, dict) or not isinstance(lim.get("max"), (int, float)):
                 raise ValueError(f"envelope limit {a!r}: need {{max: value}}, got {lim!r}")
             env.limit(a, lim["max"], str(lim.get("source", "")))
+        if d.get("support") is not None:
+            env.support = Support.from_dict(d["support"])
         return env
 
     def summary(self, box: str = "training") -> str:

@@ -168,8 +168,13 @@ def test_training_records_the_envelope_and_the_checkpoint_keeps_it(tiny_dataset,
 
     ds = Dataset(tiny_dataset)
     assert p.envelope.info["training"]["scenes"] == ds.card["samples_per_split"]["train"]
+    # measured on its validation split (never trained on): the evidence of where it keeps
+    # the per-scene promise; this Naive keeps it nowhere, and says so on the test split
+    kept = p.envelope.support.kept
+    assert len(kept) == ds.card["samples_per_split"]["val"] and not kept.any()
+    assert "validation split" in p.envelope.support.sources[0]["source"]
     r = evaluate_dataset(p, ds, "test")
-    assert r["inside_envelope"][0] == pytest.approx(100.0)
+    assert r["inside_envelope"][0] == pytest.approx(0.0) and r["inside_broken"] == 0
 
 
 def test_a_contact_nearer_the_rims_than_any_in_training_is_outside(ds):

@@ -19,6 +19,7 @@ import json
 import pathlib
 import re
 import time
+import warnings
 
 import numpy as np
 from tqdm import tqdm
@@ -28,8 +29,11 @@ from stmpl import predictor
 from stmpl.data.dataset import open_data
 from stmpl.data.format import at_levels
 from stmpl.envelope import Envelope
+from stmpl.failures import ImpossibleAnswer, OutsideEnvelope
 from stmpl.files import atomic_path
+from stmpl.metrics import sample_metrics
 from stmpl.pipeline.evaluate import evaluate_dataset
+from stmpl.scene import Scene
 
 DEFAULTS = {
     "name": None,
@@ -192,6 +196,59 @@ def envelope(ds, cfg):
         source=f"{ds.card['name']} ({ds.card['hash']}), train split",
         body=a["body"][keep],
     )
+
+
+def evidence(p, ds, cfg) -> dict:
+    """Measure predictor ``p`` on the validation scenes the config selects (never trained on)
+    and add each to its envelope's support as evidence (:meth:`Envelope.measure`), the planned
+    validation scenes the FEM could not solve too (no answer is backed there). Returns
+    ``{"scenes": measured, "kept": of them the promise kept, "unsolved": added unsolved}``.
+    """
+    if p.envelope is None:
+        return {}
+    a, keep = _selection(ds, "val", cfg)
+    source = f"{ds.card['name']} ({ds.card['hash']}), validation split"
+    rel, peak = [], []
+    for i in range(0, len(keep), 64):
+        at = keep[i : i + 64]
+        scenes = [
+            Scene(
+                ds.parts[a["body"][k]], a["thickness"][k].astype(float), a["force"][k].astype(float)
+            )
+            for k in at
+        ]
+        with warnings.catch_warnings():  # measured, not warned
+            warnings.simplefilter("ignore", OutsideEnvelope)
+            warnings.simplefilter("ignore", ImpossibleAnswer)
+            out = p.predict(scenes)
+        for d, u in zip(out, a["displacement"][at]):
+            m = sample_metrics(u.astype(float), d.displacement)
+            rel.append(m["rel_mee"])
+            peak.append(m["peak_err"])
+    got = {"scenes": int(len(keep)), "kept": 0, "unsolved": 0}
+    if len(keep):
+        kept = p.envelope.measure(
+            ds.parts, a["thickness"][keep], a["force"][keep], rel, peak, source, a["body"][keep]
+        )
+        got["kept"] = int(kept.sum())
+    failed = ds.failed("val")
+    if failed is not None:
+        sel = np.arange(len(failed["total"]))
+        if cfg["thickness_mm"] is not None:
+            sel = sel[at_levels(failed, cfg["thickness_mm"])]
+        if len(sel):
+            nan = np.full(len(sel), np.nan)
+            p.envelope.measure(
+                ds.parts,
+                failed["thickness"][sel],
+                failed["force"][sel],
+                nan,
+                nan,
+                source + ", not solved by the FEM",
+                failed["body"][sel],
+            )
+            got["unsolved"] = int(len(sel))
+    return got
 
 
 def train(config, resume: bool = True, progress: bool = True):
@@ -377,7 +434,10 @@ def _validation_loss(p, va: tuple, batch: int = 256) -> float:
 
 
 def _write_checkpoint(p, cfg, ds, out, history, best, extra) -> pathlib.Path:
-    """Evaluate the final model on val and test and write its checkpoint and history."""
+    """Measure the final model on val (its envelope's evidence) and test and write its
+    checkpoint and history.
+    """
+    extra = {**extra, "evidence": evidence(p, ds, cfg)}
     metrics = {
         s: evaluate_dataset(p, ds, s, thickness_mm=None)
         for s in ("val", "test")

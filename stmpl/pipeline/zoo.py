@@ -28,11 +28,12 @@ from stmpl import predictor
 from stmpl.checkpoint import read as read_checkpoint
 from stmpl.checkpoint import read_sidecar, sha256, sidecar_path
 from stmpl.data.dataset import open_data
-from stmpl.envelope import PROMISE, SHAPE_AXES, Envelope
+from stmpl.envelope import PROMISE, SHAPE_AXES, Envelope, breaks_promise, features
 from stmpl.files import atomic_write_text
 from stmpl.metrics import sample_metrics
 from stmpl.pipeline.evaluate import evaluate_dataset, scenes_of
 from stmpl.predictor import OutsideEnvelope
+from stmpl.support import coordinates
 from stmpl.table import markdown
 
 MANIFEST = "manifest.json"
@@ -133,11 +134,16 @@ def read(name: str, device: str = "cpu", path=None, **options):
     """
     p = predictor.read(verify(name, path), device=device, **options)
     e = entry(name, path)
-    kept = {k: v for k, v in (e.get("envelope") or {}).items() if v["kept"]}
+    measured = e.get("envelope") or {}
     if p.envelope is not None:
-        for k, v in kept.items():
-            p.envelope.boxes[k] = v["box"]
-            p.envelope.info[k] = v["info"]
+        for k, v in measured.items():
+            if v["kept"]:
+                p.envelope.boxes[k] = v["box"]
+                p.envelope.info[k] = v["info"]
+            if p.envelope.support is not None and v.get("evidence", {}).get("coords"):
+                ev = v["evidence"]
+                errors = [[np.nan if x is None else x for x in r] for r in ev["errors"]]
+                p.envelope.support.measure(ev["coords"], ev["kept"], errors, f"{k}, test split")
         for axis, lim in (e.get("limits") or {}).items():
             p.envelope.limit(axis, lim["max"], lim.get("source", ""))
     return p
@@ -281,6 +287,33 @@ def _validate(p, ds) -> dict | None:
         "rel_mee": rel,
         "peak_err": [float(peak.mean()), float(peak.std())],
         "kept": bool(kept),
+        "evidence": _evidence([scenes[k] for k in idx], rows, ds),
+    }
+
+
+def _evidence(scenes: list, rows: list, ds) -> dict:
+    """Per scene of a measured test set (and per planned test scene the FEM could not solve):
+    its coordinates (:func:`stmpl.support.coordinates`), whether the answer kept the per-scene
+    promise and its relative MEE and peak error (%, ``None`` where unsolved): the evidence
+    ``zoo.read`` adds to the model's support, so that the tails count, not the set's means.
+    """
+    coords, kept, errors = [], [], []
+    for s, r in zip(scenes, rows):
+        coords.append(coordinates(features(s.part, s.thickness, s.force)))
+        ok = np.isfinite(r["rel_mee"]) and np.isfinite(r["peak_err"])
+        kept.append(bool(ok and not breaks_promise(r["rel_mee"], r["peak_err"])))
+        errors.append([float(r["rel_mee"]), float(r["peak_err"])] if ok else [None, None])
+    failed = ds.failed("test") if hasattr(ds, "failed") else None
+    parts = getattr(ds, "parts", [ds.part])
+    if failed is not None:
+        for t, f, b in zip(failed["thickness"], failed["force"], failed["body"]):
+            coords.append(coordinates(features(parts[b], t.astype(float), f.astype(float))))
+            kept.append(False)
+            errors.append([None, None])
+    return {
+        "coords": np.round(np.array(coords), 5).tolist(),
+        "kept": kept,
+        "errors": errors,
     }
 
 

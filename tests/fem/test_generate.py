@@ -279,6 +279,7 @@ def test_workers_leave_when_the_generator_is_killed(tmp_path):
 def test_sigterm_stops_generate_in_one_line_and_leaves_no_temporary_file(tmp_path):
     psutil = pytest.importorskip("psutil")
     cfg = _cfg(shard_tasks=1, parallel={"backend": "processes", "workers": 2})
+    cfg["placements"]["disk"]["centres"] = 24  # far more work than the first shard's time
     path = tmp_path / "cfg.yaml"
     path.write_text(yaml.safe_dump(cfg))
     out = tmp_path / "stopped"

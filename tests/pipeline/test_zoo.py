@@ -6,7 +6,7 @@ import pathlib
 import numpy as np
 import pytest
 
-from stmpl import predictor
+from stmpl import envelope, predictor
 from stmpl.pipeline import zoo
 from stmpl.pipeline.evaluate import scenes_of
 from stmpl.pipeline.spec import predictor_from_spec
@@ -280,6 +280,7 @@ def test_a_test_set_widens_the_envelope_only_where_the_promise_holds(
         ({"rel_mee": 1e9, "peak_err": 1e9}, True),
     ):
         monkeypatch.setattr(zoo, "PROMISE", promise)
+        monkeypatch.setattr(envelope, "SCENE_PROMISE", promise)  # and per scene
         folder = tmp_path / f"zoo{kept}"
         e = zoo.add(ckpt, "naive_tiny", path=folder, evaluate_on=[tiny_dataset])
         box = e["envelope"]["tiny"]
@@ -322,6 +323,7 @@ def test_a_set_of_bodies_widens_the_body_size(tmp_path, monkeypatch):
     big = scenes[int(np.flatnonzero(~mine & (a["total"] < 0.15))[0])]
     assert any("skin area" in r for r in p.envelope.reasons(big))
     monkeypatch.setattr(zoo, "PROMISE", {"rel_mee": 1e9, "peak_err": 1e9})
+    monkeypatch.setattr(envelope, "SCENE_PROMISE", {"rel_mee": 1e9, "peak_err": 1e9})
     e = zoo.add(ckpt, "naive_two", path=tmp_path / "zoo", evaluate_on=[tmp_path / "two"])
     box = e["envelope"]["two"]["box"]["skin_area"]
     assert box[1] > p.envelope.boxes["training"]["skin_area"][1]
