@@ -107,14 +107,16 @@ class Contact:
     def update(self, u: np.ndarray) -> tuple[float, float]:
         """Uzawa's step at the equilibrium ``u``: the multipliers become the contact pressures
         that hold it (and what :meth:`pressures` and :meth:`force` report). Returns the deepest
-        penetration (m) and the share of the contact force the remaining penetration would
-        still add (the next update's, ``k`` times each node's penetration).
+        penetration (m) and the share of the contact force the next update would still change:
+        ``k`` times each pressed node's penetration, and the pressure left on nodes that have
+        come away from the object (an object that retracts leaves them).
         """
         phi, grad, _, p = self._state(u)
         self.multipliers = p
         self._normals = grad
         inside = np.maximum(-phi, 0.0) * (p > 0)
-        held = float(np.sum(self.weights * self.stiffness * inside))
+        following = np.maximum(p - self.stiffness * phi, 0.0)
+        held = float(np.sum(self.weights * np.abs(following - p)))
         total = float(np.sum(self.weights * p))
         return float(inside.max(initial=0.0)), held / total if total > 0 else 0.0
 
@@ -144,6 +146,14 @@ FLOOR = 1e-4
 """Where Newton's line search can no longer lower the energy under contact (a hand's many
 contact nodes, each on the edge of touching), a residual this small of the contact force is
 converged: a tenth of :data:`FORCE_TOLERANCE`."""
+
+AIM_STEPS = 4
+"""Force control aims at most this many marching steps beyond its last answer."""
+
+STEP_RTOL = 1e-4
+"""Newton's relative residual on the way to a pose (the steps before its last), with one
+multiplier update each: a start for the next step, not an answer. ``None``: every step solved
+as an answer."""
 
 FORCE_TOLERANCE = 1e-3
 """Multiplier updates go on until the penetration left would add less than this share to the
@@ -210,19 +220,26 @@ class Pressed:
     multipliers: np.ndarray | None = field(default=None, repr=False)
 
 
-def _relax(solver, contact, u, tolerance: float, max_updates: int) -> dict:
+def _relax(solver, contact, u, tolerance: float, max_updates: int, on_the_way=False) -> dict:
     """Equilibrium at the contact's current pose, the multipliers updated until the deepest
     penetration is within ``tolerance`` (m) and the pressure the penetration still holds back
-    is within :data:`FORCE_TOLERANCE` of the contact force.
+    is within :data:`FORCE_TOLERANCE` of the contact force. ``on_the_way``: a step towards a
+    deeper pose, solved to :data:`STEP_RTOL` with one multiplier update (what it leaves, the
+    next step's solve removes).
     """
     iters = 0
+    rtol = max(solver.options.rtol, RTOL)
+    if on_the_way and STEP_RTOL is not None:
+        rtol, max_updates = max(rtol, STEP_RTOL), 0
     for k in range(max_updates + 1):
-        res = solver.equilibrium(u, np.zeros_like(u), max(solver.options.rtol, RTOL), FLOOR)
+        res = solver.equilibrium(u, np.zeros_like(u), rtol, FLOOR)
         iters += res["iterations"]
         if not res["ok"]:
             return {**res, "iterations": iters, "updates": k}
         u = res["u"]
         gap, left = contact.update(u)
+        if on_the_way and STEP_RTOL is not None:
+            return {**res, "u": u, "iterations": iters, "updates": 1, "penetration": gap}
         if gap <= tolerance and left <= FORCE_TOLERANCE:
             return {**res, "u": u, "iterations": iters, "updates": k + 1, "penetration": gap}
     return {
@@ -306,9 +323,24 @@ def press_to_force(
     return replace(answer, time=time.perf_counter() - t0)
 
 
+def _aim(a: Pressed, b: Pressed, force: float) -> float:
+    """The depth (m) at which ``force`` (N) lies on the power law ``F = c d^p`` through answers
+    ``a`` and ``b`` (the force-depth curve of an indenter on soft tissue: ``p`` 1 for a flat
+    punch on a thin layer, 1.5 for a sphere (Hertz), more as the tissue stiffens), ``p`` kept
+    within [1, 4]; from rest (``a`` at 0) Hertz's 1.5.
+    """
+    if a.depth > 0 and a.reaction > 0 and b.reaction > 0 and b.reaction != a.reaction:
+        p = np.log(b.reaction / a.reaction) / np.log(b.depth / a.depth)
+    else:
+        p = 1.5
+    p = min(max(float(p), 1.0), 4.0)
+    return float(b.depth * (force / b.reaction) ** (1.0 / p))
+
+
 def _force_control(solver, shape, direction, force, rtol, step, stiffness, max_updates, start):
     """:func:`press_to_force`'s search, its arguments checked."""
     deepest = float(solver.mesh.thickness.max())
+    reach = AIM_STEPS * step  # how far ahead of the last answer a try may aim
     with _Pressing(solver, shape, direction, stiffness, 2e-3, max_updates, step) as go:
         lo, hi = start or Pressed(True, "", 0.0, reaction=0.0), None
         depth = min(lo.depth + step, deepest)
@@ -330,10 +362,8 @@ def _force_control(solver, shape, direction, force, rtol, step, stiffness, max_u
             if answer.reaction > force:
                 hi = answer
                 break
-            slope = (answer.reaction - lo.reaction) / (answer.depth - lo.depth)
-            lo = answer
-            aim = lo.depth + (force - lo.reaction) / max(slope, 1e-12)
-            depth = min(aim, lo.depth + 2 * step, deepest)
+            lo, before = answer, lo
+            depth = min(_aim(before, lo, force), lo.depth + reach, deepest)
             if depth <= lo.depth * (1 + 1e-9):
                 return replace(
                     lo,
@@ -343,9 +373,13 @@ def _force_control(solver, shape, direction, force, rtol, step, stiffness, max_u
                     f"({1e3 * deepest:.1f} mm) at {lo.reaction:.3g} N",
                 )
         for _ in range(30):
-            w = (force - lo.reaction) / (hi.reaction - lo.reaction)
-            depth = lo.depth + min(max(w, 0.1), 0.9) * (hi.depth - lo.depth)
-            answer = go.to(depth, lo if lo.depth > 0 else None)
+            aim = _aim(lo, hi, force) if lo.depth > 0 else 0.5 * hi.depth
+            w = (aim - lo.depth) / (hi.depth - lo.depth)
+            depth = lo.depth + min(max(w, 0.05), 0.95) * (hi.depth - lo.depth)
+            # from the nearer answer: the tissue's answer does not depend on the path (elastic,
+            # frictionless), and the shorter march is the cheaper
+            near = lo if (depth - lo.depth <= hi.depth - depth and lo.depth > 0) else hi
+            answer = go.to(depth, near)
             if not answer.ok:
                 return replace(answer, reason=f"cannot carry {force:g} N: {answer.reason}")
             if abs(answer.reaction - force) <= rtol * force:
@@ -403,19 +437,22 @@ class _Pressing:
 def _march(
     solver, contact, shape, direction, u, start, depth, tolerance, max_updates, max_step
 ) -> dict:
-    """From ``u`` at depth ``start`` to ``depth`` in steps of at most ``max_step``, halving the
-    step when one fails.
+    """From ``u`` at depth ``start`` to ``depth`` (deeper or shallower) in steps of at most
+    ``max_step``, halving the step when one fails.
     """
-    s, step, iters, updates, substeps, res = start, depth - start, 0, 0, 0, None
-    while s < depth or res is None:
-        step = min(step, depth - s, max_step)
-        contact.shape = shape.pushed(s + step, direction)
+    sign = 1.0 if depth >= start else -1.0
+    s, step, iters, updates, substeps, res = start, abs(depth - start), 0, 0, 0, None
+    while sign * (depth - s) > 0 or res is None:
+        step = min(step, abs(depth - s), max_step)
+        last = step >= abs(depth - s) * (1 - 1e-12)
+        to = depth if last else s + sign * step
+        contact.shape = shape.pushed(to, direction)
         keep = contact.multipliers.copy()
-        res = _relax(solver, contact, u, tolerance * (s + step), max_updates)
+        res = _relax(solver, contact, u, tolerance * to, max_updates, not last)
         iters += res["iterations"]
         updates += res.get("updates", 0)
         if res["ok"]:
-            u, s = res["u"], s + step
+            u, s = res["u"], to
             continue
         contact.multipliers = keep
         if substeps >= solver.options.max_substeps:

@@ -410,8 +410,9 @@ class Solver:
         free = self.free
         krylov = self.linear.direct and opt.reuse > 0
         fnorm = max(np.linalg.norm(f.reshape(-1)[free]), 1e-30)
-        if self.potentials:  # pressed by an object: the contact forces set the scale
-            fnorm = max(fnorm, *(np.linalg.norm(p.gradient(u)) for p in self.potentials))
+        scale = self.potentials  # pressed by an object: the contact forces set the scale
+        if scale:  # (an object that retracts touches nothing at first: the largest so far)
+            fnorm = max(fnorm, *(np.linalg.norm(p.gradient(u)) for p in scale))
         E = self.energy(u, f)
         history: list[float] = []
         rel, factorisations = float("nan"), 0
@@ -421,6 +422,8 @@ class Solver:
         r = self.residual(u, f)
         for it in range(opt.max_iter + 1):
             rf = r.reshape(-1)[free]
+            if scale and it:
+                fnorm = max(fnorm, *(np.linalg.norm(p.gradient(u)) for p in scale))
             rel = float(np.linalg.norm(rf) / fnorm)
             history.append(rel)
             if rel <= (rtol or opt.rtol):

@@ -64,6 +64,11 @@ every point where a model breaks it, or the FEM fails, lies outside that model's
 (tests/test_stability.py)."""
 
 
+def scene_promise() -> tuple[float, float]:
+    """:data:`SCENE_PROMISE` as ``(relative MEE, peak error)``, both %."""
+    return float(SCENE_PROMISE["rel_mee"]), float(SCENE_PROMISE["peak_err"])
+
+
 def breaks_promise(rel_mee: float, peak_err: float, promise: dict | None = None) -> bool:
     """Whether one answer's relative MEE and signed peak error (both %) break ``promise``
     (default :data:`SCENE_PROMISE`).
@@ -252,7 +257,7 @@ class Envelope:
         )
         kept = np.array([not breaks_promise(r, p) for r, p in zip(rel, peak)])
         kept &= np.isfinite(rel) & np.isfinite(peak)
-        self.support.measure(coords, kept, np.stack([rel, peak], 1), source)
+        self.support.measure(coords, kept, np.stack([rel, peak], 1), source, scene_promise())
         return kept
 
     def widen(

@@ -11,10 +11,11 @@ its neighbours:
   out of sample that kept the promise (the reach: the distance within which 95 % of the training
   scenes find another);
 - **evidence**: among the scenes the predictor was measured on out of sample (its validation
-  split, and test sets measured later), the nearest within :attr:`Support.evidence_reach` kept
-  the per-scene promise (:data:`stmpl.envelope.SCENE_PROMISE`). A scene whose nearest measured
-  neighbour broke it, or that has none near, lies outside: a promise is backed by measurement,
-  not by data alone.
+  split, and test sets measured later), the :data:`NEIGHBOURS` nearest within
+  :attr:`Support.evidence_reach` kept the per-scene promise
+  (:data:`stmpl.envelope.SCENE_PROMISE`) with room to spare: their errors at most
+  :data:`MARGIN` of it. A scene whose measured neighbours came closer to breaking it, or that
+  has none near, lies outside: a promise is backed by measurement, not by data alone.
 
 >>> s = Support.of(points)                    # (S, D) training scenes' coordinates
 >>> s.measure(points_val, kept, errors)        # out-of-sample evidence
@@ -39,6 +40,16 @@ bounds these axes at the top only. Thickness and area count both ways."""
 QUANTILE = 0.95
 """The share of training scenes that find a neighbour within :attr:`Support.reach`, and of them
 that find a measured scene within :attr:`Support.evidence_reach`."""
+NEIGHBOURS = 2
+"""How many measured scenes (the nearest, within the evidence reach) must back an answer."""
+MARGIN = 0.5
+"""The share of the per-scene promise the backing scenes' errors may reach (relative MEE and
+peak error each). An answer's error is not its neighbours': on the small ablation (a GNN, a
+UV-UNet and the linear FEM trained on 27 disk and ellipse placements of the arm), scenes whose
+nearest measured neighbour kept the promise still broke it in 14 of 65 test scenes, since the
+place a load presses is not among the coordinates; with two neighbours within half the
+promise, none of the 65 answers then said inside broke it (37, 17 and 11 of 102 test scenes
+inside). Chosen there, it is to be measured again on scenes no envelope was fitted on."""
 MAX_POINTS = 4096
 """Support points kept (farthest-point thinning above it: a checkpoint stays small)."""
 
@@ -90,6 +101,7 @@ class Support:
     errors: np.ndarray = field(default_factory=lambda: np.zeros((0, 2)))  # rel. MEE, peak err %
     evidence_reach: float = float("nan")
     sources: list = field(default_factory=list)
+    promise: tuple = (1.5, 10.0)  # what the evidence was judged by: rel. MEE %, peak %
     _trees: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def _tree(self, which: str) -> cKDTree:
@@ -134,11 +146,20 @@ class Support:
             reach = 0.0
         return cls(scale, pts, max(reach, 1e-6))
 
-    def measure(self, coords, kept, errors, source: str = "") -> None:
+    def measure(self, coords, kept, errors, source: str = "", promise=None) -> None:
         """Add out-of-sample evidence: scenes ``coords`` ``(S, D)``, whether each kept the
         promise ``(S,)`` and its relative MEE and peak error ``(S, 2)`` (%); the evidence
-        reach is set again over all measured scenes.
+        reach is set again over all measured scenes. ``promise``: ``(relative MEE, peak)`` %,
+        the per-scene promise they were judged by (kept from the first evidence on).
         """
+        if promise is not None:
+            promise = (float(promise[0]), float(promise[1]))
+            if len(self.measured) and promise != tuple(self.promise):
+                raise ValueError(
+                    f"evidence judged by promise {promise} cannot join evidence judged by "
+                    f"{tuple(self.promise)}"
+                )
+            self.promise = promise
         c = np.asarray(coords, dtype=float) / self.scale
         kept = np.asarray(kept, dtype=bool)
         errors = np.asarray(errors, dtype=float).reshape(-1, 2)
@@ -169,19 +190,27 @@ class Support:
             ]
         if not len(self.measured):
             return []
-        e, i = self._tree("measured").query(q, k=1)
-        if e > self.evidence_reach * (1 + 1e-9):
+        k = min(NEIGHBOURS, len(self.measured))
+        e, i = self._tree("measured").query(q, k=k)
+        e, i = np.atleast_1d(e), np.atleast_1d(i)
+        if e[0] > self.evidence_reach * (1 + 1e-9):
             return [
                 f"no scene measured out of sample lies near (the nearest "
-                f"{e / self.evidence_reach:.2f} x the evidence's reach away)"
+                f"{e[0] / self.evidence_reach:.2f} x the evidence's reach away)"
             ]
-        if not self.kept[i]:
-            rel, peak = self.errors[i]
-            if not (np.isfinite(rel) and np.isfinite(peak)):
-                return ["the nearest scene measured out of sample is one the FEM could not solve"]
+        near = i[e <= self.evidence_reach * (1 + 1e-9)]
+        rel, peak = self.errors[near, 0], self.errors[near, 1]
+        if not np.all(np.isfinite(rel) & np.isfinite(peak)):
+            return ["a scene measured out of sample near it is one the FEM could not solve"]
+        shares = np.maximum(rel / self.promise[0], np.abs(peak) / self.promise[1])
+        worst = int(np.argmax(shares))
+        share = float(shares[worst])
+        if share > MARGIN:
+            verb = "broke the promise" if share > 1 else "came near breaking the promise"
             return [
-                f"the nearest scene measured out of sample broke the promise "
-                f"(relative MEE {rel:.2f} %, peak {peak:+.1f} %)"
+                f"a scene measured out of sample near it {verb} (relative MEE "
+                f"{rel[worst]:.2f} %, peak {peak[worst]:+.1f} %; answers are backed where "
+                f"measured errors stay within {MARGIN:g} of it)"
             ]
         return []
 
@@ -197,6 +226,7 @@ class Support:
             "errors": [[_num(x, 3) for x in e] for e in self.errors],
             "evidence_reach": None if not np.isfinite(self.evidence_reach) else self.evidence_reach,
             "sources": list(self.sources),
+            "promise": list(self.promise),
         }
 
     @classmethod
@@ -218,6 +248,7 @@ class Support:
                 ).reshape(-1, 2),
                 float(d["evidence_reach"]) if d.get("evidence_reach") is not None else np.nan,
                 list(d.get("sources") or []),
+                tuple(float(x) for x in d.get("promise", (1.5, 10.0))),
             )
         except (KeyError, TypeError, ValueError) as e:
             raise ValueError(f"an envelope's support is unreadable: {e}") from e

@@ -51,12 +51,25 @@ def test_measured_scenes_decide_near_them_and_survive_the_round_trip(ds):
     assert why and "broke the promise" in why[0] and "relative MEE 3.00 %, peak +9.0 %" in why[0], (
         why
     )
+    # 0.25 N lies between 0.2 N (errors 0.4 of the promise) and 0.3 N (0.8 of it): kept, but
+    # with too little room for a scene nearby to be trusted
+    t2, f2 = _scenes(part, [(0.02, 0.25)])
+    why = env.reasons(part=part, thickness=t2[0], force=f2[0])
+    assert why and "came near breaking the promise" in why[0] and "1.20 %" in why[0], why
     back = Envelope.from_dict(env.to_dict())
+    assert back.support.promise == (1.5, 10.0)
     for a, b in zip(t, f):
         assert back.reasons(part=part, thickness=a, force=b) == env.reasons(
             part=part, thickness=a, force=b
         )
     assert back.support.sources == [{"source": "val", "scenes": 5}]
+
+
+def test_evidence_judged_by_another_promise_is_refused():
+    s = Support.of(np.random.default_rng(0).random((5, len(COORDS))))
+    s.measure(np.zeros((1, len(COORDS))), [True], [[0.1, 1.0]], "val", promise=(1.5, 10.0))
+    with pytest.raises(ValueError, match="judged by promise"):
+        s.measure(np.zeros((1, len(COORDS))), [True], [[0.1, 1.0]], "test", promise=(3.0, 10.0))
 
 
 def test_a_bad_support_is_named():

@@ -28,7 +28,14 @@ from stmpl import predictor
 from stmpl.checkpoint import read as read_checkpoint
 from stmpl.checkpoint import read_sidecar, sha256, sidecar_path
 from stmpl.data.dataset import open_data
-from stmpl.envelope import PROMISE, SHAPE_AXES, Envelope, breaks_promise, features
+from stmpl.envelope import (
+    PROMISE,
+    SHAPE_AXES,
+    Envelope,
+    breaks_promise,
+    features,
+    scene_promise,
+)
 from stmpl.files import atomic_write_text
 from stmpl.metrics import sample_metrics
 from stmpl.pipeline.evaluate import evaluate_dataset, scenes_of
@@ -143,7 +150,9 @@ def read(name: str, device: str = "cpu", path=None, **options):
             if p.envelope.support is not None and v.get("evidence", {}).get("coords"):
                 ev = v["evidence"]
                 errors = [[np.nan if x is None else x for x in r] for r in ev["errors"]]
-                p.envelope.support.measure(ev["coords"], ev["kept"], errors, f"{k}, test split")
+                p.envelope.support.measure(
+                    ev["coords"], ev["kept"], errors, f"{k}, test split", ev.get("promise")
+                )
         for axis, lim in (e.get("limits") or {}).items():
             p.envelope.limit(axis, lim["max"], lim.get("source", ""))
     return p
@@ -314,6 +323,7 @@ def _evidence(scenes: list, rows: list, ds) -> dict:
         "coords": np.round(np.array(coords), 5).tolist(),
         "kept": kept,
         "errors": errors,
+        "promise": list(scene_promise()),
     }
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from fem.contact import Contact, press, press_to_force
+from fem.contact import Contact, Pressed, _aim, _Pressing, press, press_to_force
 from fem.material import Layered, Limits, NeoHookean, Yeoh, lame
 from fem.shapes import Punch, Sphere, Surface
 from fem.solver import Solver, SolverOptions
@@ -123,6 +123,35 @@ def test_force_control_finds_the_depth_that_carries_a_force():
     failed = press_to_force(solver, punch, [0, 0, -1], 1e3, step=0.2 * h)
     assert not failed.ok and failed.reason.startswith("cannot carry 1000 N")
     assert failed.displacement is None
+
+
+def test_force_control_aims_by_the_power_law_through_its_last_two_answers():
+    """On an exact power law F = c d^p (p in [1, 4]) the aim is the depth itself; from rest,
+    Hertz's exponent 1.5; a steeper law is aimed at as p = 4.
+    """
+    for p in (1.0, 1.5, 2.7):
+        a, b = (Pressed(True, "", d, reaction=3.0 * d**p) for d in (1e-3, 2e-3))
+        assert _aim(a, b, 3.0 * 5e-3**p) == pytest.approx(5e-3, rel=1e-9)
+    rest, b = Pressed(True, "", 0.0, reaction=0.0), Pressed(True, "", 1e-3, reaction=0.2)
+    assert _aim(rest, b, 0.2 * 8**1.5) == pytest.approx(8e-3, rel=1e-9)
+    a, b = (Pressed(True, "", d, reaction=d**6) for d in (1.0, 2.0))
+    assert _aim(a, b, 3.0**6) == pytest.approx(2.0 * (3**6 / 2**6) ** 0.25)
+
+
+def test_a_press_answered_from_a_deeper_state_is_the_same_answer():
+    """The tissue is elastic and the contact frictionless: marching back from a deeper answer
+    (what force control does when it overshoots) lands where pressing from rest does.
+    """
+    solver, a, h = _slab(2.0, spacing=0.25, order=1)
+    punch = Punch([0, 0, 0], [0, 0, -1], a)
+    shallow, deep = press(solver, punch, [0, 0, -1], [0.006 * h, 0.01 * h])
+    assert shallow.ok and deep.ok, (shallow.reason, deep.reason)
+    with _Pressing(solver, punch, np.array([0, 0, -1.0]), None, 2e-3, 20, 0.001) as go:
+        back = go.to(0.006 * h, deep)
+    assert back.ok, back.reason
+    assert back.reaction == pytest.approx(shallow.reaction, rel=2e-3)
+    gap = np.abs(back.displacement - shallow.displacement).max()
+    assert gap <= 2e-3 * np.abs(shallow.displacement).max()
 
 
 def test_force_control_steps_back_inside_the_trust_bounds():
