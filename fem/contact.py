@@ -152,8 +152,7 @@ AIM_STEPS = 4
 
 STEP_RTOL = 1e-4
 """Newton's relative residual on the way to a pose (the steps before its last), with one
-multiplier update each: a start for the next step, not an answer. ``None``: every step solved
-as an answer."""
+multiplier update each: a start for the next step, not an answer."""
 
 FORCE_TOLERANCE = 1e-3
 """Multiplier updates go on until the penetration left would add less than this share to the
@@ -228,9 +227,7 @@ def _relax(solver, contact, u, tolerance: float, max_updates: int, on_the_way=Fa
     next step's solve removes).
     """
     iters = 0
-    rtol = max(solver.options.rtol, RTOL)
-    if on_the_way and STEP_RTOL is not None:
-        rtol, max_updates = max(rtol, STEP_RTOL), 0
+    rtol = max(solver.options.rtol, RTOL, STEP_RTOL if on_the_way else 0.0)
     for k in range(max_updates + 1):
         res = solver.equilibrium(u, np.zeros_like(u), rtol, FLOOR)
         iters += res["iterations"]
@@ -238,7 +235,7 @@ def _relax(solver, contact, u, tolerance: float, max_updates: int, on_the_way=Fa
             return {**res, "iterations": iters, "updates": k}
         u = res["u"]
         gap, left = contact.update(u)
-        if on_the_way and STEP_RTOL is not None:
+        if on_the_way:
             return {**res, "u": u, "iterations": iters, "updates": 1, "penetration": gap}
         if gap <= tolerance and left <= FORCE_TOLERANCE:
             return {**res, "u": u, "iterations": iters, "updates": k + 1, "penetration": gap}
