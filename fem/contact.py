@@ -154,6 +154,10 @@ STEP_RTOL = 1e-4
 """Newton's relative residual on the way to a pose (the steps before its last), with one
 multiplier update each: a start for the next step, not an answer."""
 
+SHORTENINGS = 6
+"""Force control halves a try that failed (past the trust bounds, or a march that could not
+go on) toward its last answer up to this many times before it fails."""
+
 FORCE_TOLERANCE = 1e-3
 """Multiplier updates go on until the penetration left would add less than this share to the
 contact force."""
@@ -301,12 +305,15 @@ def press_to_force(
 ) -> Pressed:
     """Push ``shape`` along ``direction`` until the reaction is ``force`` (N) within ``rtol``:
     the depth rises from the placed pose, or from ``start`` (an answer of the same object and
-    solver carrying less than ``force``), in steps of at most ``step`` (m), each aimed at the
-    force by the last two answers' slope, until the reaction passes the force; then the depth
-    is found between the last two by the secant method (each try from the shallower state). A
-    step that lands past the tissue's trust bounds (:class:`~fem.material.Limits`) is shortened
-    up to six times; a press that fails first, or runs through the whole tissue, fails and says
-    at what force. The answer's ``time`` is the whole search's.
+    solver carrying less than ``force``), each try aimed at the force by the power law through
+    the last two answers and at most :data:`AIM_STEPS` steps of ``step`` (m) ahead, until the
+    reaction passes the force; then the depth is found between the last two answers (each try
+    marched from the nearer one). A try that fails, past the tissue's trust bounds
+    (:class:`~fem.material.Limits`) or in a march that cannot go on, is halved toward the last
+    answer up to :data:`SHORTENINGS` times, and the aim reaches no further than the try that
+    was shortened; inside the bracket a failed try is replaced by its middle and quarters. A
+    press that still fails, or runs through the whole tissue, fails and says at what force.
+    The answer's ``time`` is the whole search's.
     """
     force = positive(force, "target force")
     if not 0 < rtol < 0.5:
@@ -343,11 +350,13 @@ def _force_control(solver, shape, direction, force, rtol, step, stiffness, max_u
         depth = min(lo.depth + step, deepest)
         while hi is None:
             answer = go.to(depth, lo if lo.depth > 0 else None)
-            for _ in range(6):  # a step past the tissue's trust bounds: try a shorter one
-                if answer.ok or not answer.reason.startswith("not trusted"):
+            for _ in range(SHORTENINGS):  # a try that failed: a shorter one from the last answer
+                if answer.ok:
                     break
                 depth = 0.5 * (lo.depth + depth)
                 answer = go.to(depth, lo if lo.depth > 0 else None)
+                # a failed march says that the way ahead is hard: aim no further than this
+                reach = max(step, depth - lo.depth)
             if not answer.ok:
                 return replace(
                     answer,
@@ -369,18 +378,25 @@ def _force_control(solver, shape, direction, force, rtol, step, stiffness, max_u
                     reason=f"cannot carry {force:g} N: the object reached the bone "
                     f"({1e3 * deepest:.1f} mm) at {lo.reaction:.3g} N",
                 )
+        failed = []  # shares of the bracket whose tries failed
         for _ in range(30):
             aim = _aim(lo, hi, force) if lo.depth > 0 else 0.5 * hi.depth
-            w = (aim - lo.depth) / (hi.depth - lo.depth)
-            depth = lo.depth + min(max(w, 0.05), 0.95) * (hi.depth - lo.depth)
+            w = min(max((aim - lo.depth) / (hi.depth - lo.depth), 0.05), 0.95)
+            if failed:  # a try inside the bracket failed: another share of it
+                w = next((x for x in (0.5, 0.25, 0.75) if x not in failed), None)
+                if w is None:
+                    return replace(answer, reason=f"cannot carry {force:g} N: {answer.reason}")
+            depth = lo.depth + w * (hi.depth - lo.depth)
             # from the nearer answer: the tissue's answer does not depend on the path (elastic,
             # frictionless), and the shorter march is the cheaper
             near = lo if (depth - lo.depth <= hi.depth - depth and lo.depth > 0) else hi
             answer = go.to(depth, near)
             if not answer.ok:
-                return replace(answer, reason=f"cannot carry {force:g} N: {answer.reason}")
+                failed.append(w)
+                continue
             if abs(answer.reaction - force) <= rtol * force:
                 return answer
+            failed = []
             lo, hi = (answer, hi) if answer.reaction < force else (lo, answer)
         return replace(answer, ok=False, displacement=None, reason="force control did not settle")
 

@@ -44,6 +44,8 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import brentq
 
+from stmpl.tissue import GEL_TRUSTED_COMPRESSION
+
 _I = np.eye(3)
 
 
@@ -116,6 +118,16 @@ class Limits:
         return ""
 
 
+GEL = Limits(
+    0.0,
+    GEL_TRUSTED_COMPRESSION,
+    "the paper's gel buckles from about a third of its depth: of 9 answers measured past 0.4, "
+    "8 were the last before it did",
+)
+"""The compressible neo-Hookean gel's trust bounds (:data:`stmpl.tissue.GEL_TRUSTED_COMPRESSION`,
+measured by ``benchmarks/gel_failure.py``)."""
+
+
 class Law:
     """What every material gives from its ``tangent_parts``: the stress and the full tangent.
     ``limits`` (a :class:`Limits`, or ``None``) bound where its answers are trusted.
@@ -157,9 +169,13 @@ class Material(Law):
 
 @dataclass(frozen=True)
 class NeoHookean(Material):
-    """Compressible Neo-Hookean solid. ``E`` in Pa, ``nu`` dimensionless; needs ``det F > 0``."""
+    """Compressible Neo-Hookean solid. ``E`` in Pa, ``nu`` dimensionless; needs ``det F > 0``.
+    Trusted up to :data:`GEL` (where the paper's gel was measured to buckle); as a layer of a
+    tissue file, the tissue's bounds apply instead.
+    """
 
     name = "neo_hookean"
+    limits = GEL
 
     def energy(self, F: np.ndarray) -> np.ndarray:
         """``(T,)`` energy density, J/m^3; ``inf`` where ``det F <= 0``."""

@@ -4,9 +4,10 @@ the command line names them before anything heavy is imported).
 
 
 class ImpossibleAnswer(RuntimeWarning):
-    """A prediction moved the skin further inward than the tissue is thick (through the fixed
-    surface beneath): physically impossible, flagged (``Deformation.info["physical"]``) and
-    warned about, never passed off as an answer.
+    """A prediction moved the skin further inward than the FEM itself answers on the gel
+    (:data:`stmpl.tissue.GEL_TRUSTED_COMPRESSION` of the tissue's thickness, where the gel
+    buckles; through the fixed surface beneath at worst): flagged
+    (``Deformation.info["physical"]``) and warned about, never passed off as an answer.
     """
 
 

@@ -21,6 +21,7 @@ from typing import Protocol, Sequence, runtime_checkable
 
 import numpy as np
 
+from stmpl import tissue
 from stmpl.checkpoint import read_sidecar
 from stmpl.failures import ImpossibleAnswer, OutsideEnvelope, PredictionFailed
 from stmpl.fidelity import check_fidelity
@@ -178,13 +179,13 @@ class BasePredictor:
             if not np.all(np.isfinite(u)):
                 raise PredictionFailed(f"{self.name} predicted non-finite displacements")
             compression = float((-np.einsum("ij,ij->i", u, s.part.normals) / s.thickness).max())
-            physical = compression <= 1.0
+            physical = compression <= tissue.GEL_TRUSTED_COMPRESSION
             if not physical:
                 warnings.warn(
                     f"{self.name}: the skin moves inward {compression:.2f} x the "
-                    "tissue's thickness (through the fixed surface beneath): a "
-                    "physically impossible answer; the scene lies outside what it "
-                    "can answer",
+                    f"tissue's thickness, past {tissue.GEL_TRUSTED_COMPRESSION:g}, where the "
+                    "gel buckles and the FEM itself gives no answer: no answer to trust; the "
+                    "scene lies outside what it can answer",
                     ImpossibleAnswer,
                     stacklevel=2,
                 )

@@ -7,6 +7,7 @@ from stmpl import predictor
 from stmpl.body.primitives import tube
 from stmpl.pipeline.evaluate import scenes_of
 from stmpl.scene import Deformation, Scene
+from stmpl.tissue import GEL_TRUSTED_COMPRESSION
 
 LEARNED = [
     "naive",
@@ -134,17 +135,23 @@ def test_reference_outputs(name):
 
 
 def test_an_impossible_answer_is_flagged(ds, make):
-    """A prediction that pushes the skin through the fixed surface beneath is flagged and
-    warned about (here a Naive model with an absurd alpha pushing along the inward normals).
+    """A prediction that pushes the skin past where the gel buckles (and the FEM gives no
+    answer) is flagged and warned about (here a Naive model with an absurd alpha pushing along
+    the inward normals).
     """
     import torch
 
     p = make("naive", ds)
     s = scenes_of(ds, "train", limit=1)[0][0]
     ok = p.predict(s)
-    assert ok.info["physical"] and ok.info["max_compression"] <= 1.0
+    assert ok.info["physical"] and ok.info["max_compression"] <= GEL_TRUSTED_COMPRESSION
     with torch.no_grad():
         p.model.alpha.copy_(torch.tensor([-5e4, 0.0, 0.0]))
-    with pytest.warns(predictor.ImpossibleAnswer, match="physically impossible"):
+    with pytest.warns(predictor.ImpossibleAnswer, match="past 0.4, where the gel buckles"):
         bad = p.predict(s)
-    assert not bad.info["physical"] and bad.info["max_compression"] > 1.0
+    assert not bad.info["physical"] and bad.info["max_compression"] > GEL_TRUSTED_COMPRESSION
+    with torch.no_grad():  # just past the bound: flagged too, though it is not through the bone
+        p.model.alpha.mul_(0.5 * GEL_TRUSTED_COMPRESSION / bad.info["max_compression"] * 2.1)
+    with pytest.warns(predictor.ImpossibleAnswer):
+        near = p.predict(s)
+    assert 0.4 < near.info["max_compression"] < 1.0 and not near.info["physical"]

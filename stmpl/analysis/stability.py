@@ -501,7 +501,8 @@ def report(cfg, points: list, out: pathlib.Path) -> pathlib.Path:
         f"{cfg['base']['total']:g} N, {cfg['base']['thickness_mm']:g} mm of tissue at "
         f"chart {tuple(cfg['base']['uv'])}; FEM {cfg['fem']}. Cells: relative MEE / peak "
         "error (%) against the FEM; `out` = outside the predictor's envelope (it warned), "
-        "`IMPOSSIBLE` = the skin through the fixed surface.\n",
+        "`IMPOSSIBLE` = the skin moved in past where the gel buckles (and the FEM gives no "
+        "answer).\n",
         "![envelope map](envelope_map.png)\n",
     ]
     for axis in cfg["axes"]:

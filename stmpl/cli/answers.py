@@ -14,6 +14,7 @@ from stmpl.cli.options import phenotype_of
 from stmpl.metrics import sample_metrics
 from stmpl.pipeline.spec import label, predictor_from_spec
 from stmpl.predictor import ImpossibleAnswer, OutsideEnvelope, PredictionFailed
+from stmpl.tissue import GEL_TRUSTED_COMPRESSION
 from stmpl.viz.render import duration
 
 WIDTH = 20
@@ -77,8 +78,9 @@ def answer(scene, specs: list[str], preds: list, strict: bool = False) -> dict:
             out[label(spec)] = d = p.predict(scene)
         if strict and not d.info.get("physical", True):
             raise PredictionFailed(
-                f"{label(spec)} pushes the skin {d.info['max_compression']:.1f} x the tissue's "
-                "thickness inward, which is impossible; --strict refuses the answer"
+                f"{label(spec)} pushes the skin {d.info['max_compression']:.2f} x the tissue's "
+                f"thickness inward, past {GEL_TRUSTED_COMPRESSION:g} where the gel buckles and "
+                "the FEM gives no answer; --strict refuses the answer"
             )
         _say(label(spec), p, d, first)
     return out
@@ -104,8 +106,9 @@ def _say(name: str, p, d, first: float | None) -> None:
         )
     if not d.info.get("physical", True):
         print(
-            f"  WARNING: {name} pushes the skin {d.info['max_compression']:.1f} x the tissue's "
-            "thickness inward: impossible; do not use this answer"
+            f"  WARNING: {name} pushes the skin {d.info['max_compression']:.2f} x the tissue's "
+            f"thickness inward, past {GEL_TRUSTED_COMPRESSION:g} where the gel buckles and the "
+            "FEM gives no answer: do not use this answer"
         )
 
 

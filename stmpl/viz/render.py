@@ -114,7 +114,7 @@ def _warning(d) -> str | None:
     """The line a panel adds in red when its answer is impossible or outside its envelope."""
     env = d.info.get("envelope")
     if not d.info.get("physical", True):
-        return "physically impossible answer: do not use"
+        return "past where the gel buckles: do not use"
     if env and not env["inside"]:
         return "outside its envelope: " + env["outside"][0].split(" (")[0]
     return None

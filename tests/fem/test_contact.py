@@ -296,3 +296,27 @@ def test_a_mesh_presses_as_the_shape_it_approximates():
     with pytest.raises(ValueError, match="a direction is needed"):
         press(solver, surface, None, [depth])
     assert solver.options.stagnation == SolverOptions().stagnation  # patience only while pressing
+
+
+def test_force_control_shortens_a_try_whose_march_fails(monkeypatch):
+    """A march that cannot go further than 1.5 steps past its start (as a closing grip's line
+    search may stall): force control halves the failed try, aims no further than that, and
+    still meets the force.
+    """
+    solver, a, h = _slab(2.0, spacing=0.25, order=1)
+    punch = Punch([0, 0, 0], [0, 0, -1], a)
+    (known,) = press(solver, punch, [0, 0, -1], [0.008 * h])
+    assert known.ok, known.reason
+    step, to, tries = 0.001 * h, _Pressing.to, []
+
+    def stalling(self, depth, start):
+        tries.append(depth)
+        if abs(depth - (start.depth if start else 0.0)) > 1.5 * step:
+            return Pressed(False, "line search failed (test)", depth)
+        return to(self, depth, start)
+
+    monkeypatch.setattr(_Pressing, "to", stalling)
+    found = press_to_force(solver, punch, [0, 0, -1], known.reaction, step=step)
+    assert found.ok, found.reason
+    assert found.reaction == pytest.approx(known.reaction, rel=0.01)
+    assert any(t > 1.5 * step for t in tries)  # the aim first reached further, and was shortened

@@ -19,6 +19,7 @@ from fem.material import (
 from fem.mesh import shell_mesh
 from fem.solver import Solver, SolverOptions
 from stmpl.body.primitives import sheet, tube
+from stmpl.tissue import GEL_TRUSTED_COMPRESSION
 
 
 def _lame(n_around, layers, p=1.0, b=0.05, t=0.01, material=None, order=1):
@@ -287,6 +288,26 @@ def test_non_physical_states_are_rejected():
     strict = Solver(mesh, options=SolverOptions(max_compression=0.5 * ok.max_compression))
     bad = strict.solve(force)
     assert not bad.ok and "non-physical" in bad.reason and bad.displacement is None
+
+
+def test_the_gel_is_trusted_up_to_where_it_was_measured_to_buckle():
+    """The paper's gel carries its own bound (:data:`stmpl.tissue.GEL_TRUSTED_COMPRESSION`):
+    a point load that moves the skin in under it is an answer, one that moves it further is
+    failed as not trusted, with the bound named; a solver whose own limit is looser changes
+    nothing.
+    """
+    part = sheet(0.1, 0.1, 9, 9)
+    mesh = shell_mesh(part, np.full(part.n_vertices, 0.01), layers=2)
+    force = np.zeros(part.n_vertices)
+    force[40] = 0.1
+    ok = Solver(mesh).solve(force)
+    assert ok.ok and 0 < ok.max_compression < GEL_TRUSTED_COMPRESSION
+    for f in (0.2, 0.4, 0.8):
+        s = Solver(mesh).solve(force * f / 0.1)
+        if not s.ok:
+            break
+    assert not s.ok and s.reason.startswith("not trusted: the skin moves inward")
+    assert f"trusted up to {GEL_TRUSTED_COMPRESSION:g}" in s.reason and "gel" in s.reason
 
 
 def test_a_tissue_s_trust_bounds_reject_an_answer_past_them():

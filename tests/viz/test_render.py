@@ -46,7 +46,7 @@ def test_contact_figure(tmp_path, arm):
     assert ax.title.get_color() == "#a00000"
     d.info["physical"] = False
     fig = contact_figure({"linear": d}, None, [], tmp_path / "c.png")
-    assert "physically impossible" in fig.axes[0].get_title()
+    assert "past where the gel buckles" in fig.axes[0].get_title()
     with pytest.raises(ValueError, match="no deformations"):
         contact_figure({})
 
