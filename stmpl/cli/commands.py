@@ -6,11 +6,13 @@ The main job, ``stmpl simulate``, has its own module (:mod:`stmpl.cli.simulate`)
 
 from __future__ import annotations
 
+import time
+
 from stmpl.analysis import limits
 from stmpl.analysis.ablation import run as run_ablation
 from stmpl.cli import answers
 from stmpl.cli.arguments import default_model
-from stmpl.cli.options import body_of, scene_of
+from stmpl.cli.options import body_of, phenotype_of, scene_of
 from stmpl.data.dataset import open_data
 from stmpl.pipeline import zoo
 from stmpl.pipeline.evaluate import evaluate
@@ -53,6 +55,39 @@ def predict(args) -> int:
             raise ValueError("--save takes one --model")
         next(iter(out.values())).save(args.save)
         print(f"wrote {args.save}")
+    return 0
+
+
+def view(args) -> int:
+    """``stmpl view``: serve the viewer until Ctrl-C."""
+    from stmpl.viewer.app import Viewer  # deferred: viser is needed for the viewer only
+
+    models = args.model or [
+        default_model(args.part),
+        *(["zoo:linear_arm_fine", "zoo:naive_arm_fine"] if args.part.endswith("_arm") else []),
+    ]
+    phenotype = phenotype_of(args)
+    print(f"loading {', '.join(models)} and anny's {args.part}...")
+    v = Viewer(
+        models,
+        args.part,
+        phenotype,
+        args.thickness,
+        host=args.host,
+        port=args.port,
+        device=args.device,
+        fidelity=args.fidelity,
+    )
+    print(
+        f"stmpl view: open http://{args.host}:{v.server.get_port()} in your browser (Ctrl-C ends)"
+    )
+    try:
+        while True:
+            time.sleep(3600)
+    except KeyboardInterrupt:
+        print("stopped")
+    finally:
+        v.close()
     return 0
 
 

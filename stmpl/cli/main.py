@@ -51,6 +51,27 @@ def parser() -> argparse.ArgumentParser:
     simulate_options(sm)
     sm.set_defaults(func="stmpl.cli.simulate:run")
 
+    vw = sub.add_parser(
+        "view",
+        help="press and see: a page in your browser where you drag an object over the body and "
+        "watch the tissue answer (local only)",
+    )
+    vw.add_argument(
+        "--model",
+        action="append",
+        help="zoo:<name> or a .safetensors checkpoint; repeat to choose between them on the page "
+        f"(default {DEFAULT_MODEL}, then the linear FEM and Naive of the fine arm)",
+    )
+    body_options(vw, smpl=False)
+    vw.add_argument("--thickness", type=float, help="tissue thickness, mm (default: from --weight)")
+    vw.add_argument(
+        "--host", default="127.0.0.1", help="address to serve on (default: this machine only)"
+    )
+    vw.add_argument("--port", type=int, default=8080, help="port (default 8080)")
+    fidelity_option(vw)
+    device_option(vw)
+    vw.set_defaults(func="stmpl.cli.commands:view", fidelity="auto")
+
     sc = sub.add_parser("scene", help="build a loaded scene on a body part and draw it")
     scene_options(sc)
     sc.add_argument("--size", type=int, default=256, help="UV image size in the picture, px")

@@ -1,0 +1,357 @@
+"""The viewer's web app: a body part drawn in a browser page, an object that follows the pointer
+over the skin, and a predictor's answer, its time and its verdict after each move.
+
+Every pointer event leaves a request in a one-slot mailbox (:class:`~stmpl.viewer.mailbox.Latest`):
+only the latest is answered, so a slow answer never builds a queue; each answer sends only the
+surface tiles that changed (:class:`~stmpl.viewer.tiles.Tiles`).
+"""
+
+from __future__ import annotations
+
+import html
+import io
+import threading
+import time
+import warnings
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from stmpl import tissue
+from stmpl.body.spec import part_from_spec
+from stmpl.contact.hand import GRIPS
+from stmpl.failures import ImpossibleAnswer, OutsideEnvelope
+from stmpl.metrics import sample_metrics
+from stmpl.pipeline.spec import label, predictor_from_spec
+from stmpl.viewer import legend
+from stmpl.viewer.mailbox import Latest
+from stmpl.viewer.press import OBJECTS, Choice, pressed
+from stmpl.viewer.tiles import Tiles
+from stmpl.viz.figures import vertex_colors
+from stmpl.viz.render import duration
+
+OBJECT_COLOUR = (150, 190, 255)
+
+
+def ray_hit(vertices: np.ndarray, faces: np.ndarray, origin, direction) -> int | None:
+    """The vertex nearest to where the ray first meets the mesh (Moller-Trumbore over every
+    face), or ``None`` if it misses.
+    """
+    o, d = np.asarray(origin, float), np.asarray(direction, float)
+    a, b, c = (vertices[faces[:, k]] for k in range(3))
+    e1, e2 = b - a, c - a
+    p = np.cross(d, e2)
+    det = np.einsum("ij,ij->i", e1, p)
+    ok = np.abs(det) > 1e-14
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+    s = o - a
+    u = np.einsum("ij,ij->i", s, p) * inv
+    q = np.cross(s, e1)
+    v = (q @ d) * inv
+    t = np.einsum("ij,ij->i", e2, q) * inv
+    hit = ok & (u >= 0) & (v >= 0) & (u + v <= 1) & (t > 0)
+    if not hit.any():
+        return None
+    f = int(np.flatnonzero(hit)[np.argmin(t[hit])])
+    point = o + t[f] * d
+    corners = faces[f]
+    return int(corners[np.argmin(np.linalg.norm(vertices[corners] - point, axis=1))])
+
+
+def camera_ray(camera, screen) -> tuple[np.ndarray, np.ndarray]:
+    """``(origin, direction)`` of the ray through screen point ``screen`` (OpenCV, 0..1 from
+    the upper left) of a viser ``camera`` (``wxyz`` orientation: x right, y down, z ahead;
+    ``fov`` vertical, rad; ``aspect`` width / height).
+    """
+    w, x, y, z = camera.wxyz
+    r = np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+    h = np.tan(0.5 * camera.fov)
+    ahead = np.array([(2 * screen[0] - 1) * h * camera.aspect, (2 * screen[1] - 1) * h, 1.0])
+    d = r @ ahead
+    return np.asarray(camera.position, float), d / np.linalg.norm(d)
+
+
+class Viewer:
+    """``stmpl view``: serve the app on ``host``:``port`` (127.0.0.1: this machine only).
+
+    ``models``: predictor specs (``zoo:gnn_arm_bodies``, a checkpoint, ``linear``...), the
+    first answering first; ``part``: the body part; ``phenotype``: anny's; ``thickness_mm``:
+    the tissue (``None``: the paper's heuristic from the weight).
+    """
+
+    def __init__(
+        self,
+        models: list[str],
+        part: str = "left_arm",
+        phenotype: dict | None = None,
+        thickness_mm: float | None = None,
+        host: str = "127.0.0.1",
+        port: int = 8080,
+        device: str = "cpu",
+        fidelity: str = "auto",
+    ):
+        import viser  # deferred: the viewer only
+
+        if not models:
+            raise ValueError("the viewer needs at least one model to answer with")
+        self.specs = list(models)
+        self.predictors = {
+            label(s): predictor_from_spec(s, device, fidelity=fidelity) for s in self.specs
+        }
+        first = next(iter(self.predictors.values()))
+        skin = int(getattr(first, "part", None) and first.part.source.get("subdivisions", 0) or 0)
+        self.part_name, self.phenotype, self.skin = part, dict(phenotype or {}), skin
+        self.thickness_mm = thickness_mm
+        self._build_part()
+        self.latencies: list[float] = []  # s, from the pointer event to the tiles sent
+        self.last = None  # (choice, scene, deformation, meshes) of the last answer shown
+        self.server = viser.ViserServer(host=host, port=port, label="stmpl", verbose=False)
+        self.server.scene.configure_environment_map(hdri=None)  # no download of a map
+        self.server.scene.set_up_direction("+z")
+        self.server.scene.add_light_hemisphere("/light/sky", intensity=1.2)
+        self.server.scene.add_light_directional(
+            "/light/key", intensity=1.5, position=(0.5, -1.0, 1.0)
+        )
+        self._gui()
+        self._draw_body()
+        self.mailbox = Latest(self._answer, self._show)
+        self.server.on_client_connect(self._welcome)
+        self.request()
+
+    # -- the body ---------------------------------------------------------------------------
+    def _build_part(self) -> None:
+        spec = {"model": "anny", "subdivisions": self.skin, "phenotype": self.phenotype}
+        self.part = part_from_spec(spec, self.part_name)
+        if self.thickness_mm is None:
+            self.thickness = tissue.from_weight(self.part, self.phenotype.get("weight", 0.5))
+        else:
+            self.thickness = tissue.constant(self.part, self.thickness_mm * 1e-3)
+        self.tree = cKDTree(self.part.vertices)
+        self.tiles = Tiles(self.part.vertices, self.part.faces, 16)
+        self.vertex = int(
+            np.argmin(
+                np.linalg.norm(
+                    self.part.vertices - self.part.vertices.mean(0) + [0.0, 0.05, 0.0], axis=1
+                )
+            )
+        )
+
+    def _draw_body(self) -> None:
+        centre = self.part.vertices.mean(axis=0)
+        size = float(np.ptp(self.part.vertices, axis=0).max())
+        cam = self.server.initial_camera
+        cam.look_at = tuple(centre)
+        cam.position = tuple(centre + np.array([0.0, -1.1 * size, 0.2 * size]))
+        self.handles: dict = {}
+        self.tiles.forget()
+        rest = vertex_colors(np.zeros(self.part.n_vertices), legend.CMAP, 0.0, 1.0)
+        self._send_tiles(self.part.vertices, rest)
+
+    def _send_tiles(self, vertices: np.ndarray, colours: np.ndarray) -> int:
+        import trimesh  # deferred: the viewer only
+
+        changed = self.tiles.changed(vertices, colours)
+        for k in changed:
+            used, faces = self.tiles.groups[k]
+            mesh = trimesh.Trimesh(
+                vertices[used], faces, vertex_colors=colours[used], process=False
+            )
+            h = self.server.scene.add_mesh_trimesh(f"/body/tile{k:02d}", mesh)
+            if k not in self.handles:  # a fresh node: give it the pointer's callbacks
+                h.on_click(self._clicked)
+                h.on_drag(self._dragged)
+            self.handles[k] = h
+        return len(changed)
+
+    # -- the page -----------------------------------------------------------------------------
+    def _gui(self) -> None:
+        g = self.server.gui
+        g.configure_theme(control_width="large", dark_mode=False, show_logo=False)
+        g.add_markdown(
+            "**stmpl: press and see.** Click the skin, or drag on it, to move the object; "
+            "the colours show how far the skin moves."
+        )
+        self.model = g.add_dropdown("predictor", list(self.predictors))
+        self.kind = g.add_dropdown("object", list(OBJECTS), initial_value="disk")
+        self.force = g.add_slider("force, N", 0.05, 5.0, 0.05, 0.3)
+        self.radius = g.add_slider("radius, mm", 2.0, 40.0, 1.0, 20.0)
+        self.grip = g.add_dropdown("grip", sorted(GRIPS), initial_value="whole", visible=False)
+        self.upload = g.add_upload_button(
+            "press your own mesh", hint="STL, OBJ, PLY or GLB, in mm or m"
+        )
+        self.verdict = g.add_html(legend.verdict_html("inside", "answering..."))
+        self.scale = g.add_html(legend.colour_bar(1.0))
+        self.status = g.add_html("")
+        with g.add_folder("compare with the FEM", expand_by_default=False):
+            self.compare = g.add_button("solve this press with the FEM")
+            self.progress = g.add_progress_bar(0.0, visible=False, animated=True)
+            self.compared = g.add_markdown("")
+        with g.add_folder("save"):
+            self.shot = g.add_button("screenshot (PNG)")
+            self.save_glb = g.add_button("deformed mesh (GLB)")
+            self.save_ply = g.add_button("deformed mesh (PLY)")
+        self.mesh = None
+        for h in (self.model, self.force, self.radius, self.grip):
+            h.on_update(lambda _: self.request())
+        self.kind.on_update(self._kind_changed)
+        self.upload.on_upload(self._uploaded)
+        self.compare.on_click(lambda e: self._compare())
+        self.shot.on_click(self._screenshot)
+        self.save_glb.on_click(lambda e: self._save(e, "glb"))
+        self.save_ply.on_click(lambda e: self._save(e, "ply"))
+
+    def _welcome(self, client) -> None:
+        client.add_notification(
+            "stmpl", "Click or drag on the skin to press.", auto_close_seconds=4.0
+        )
+
+    def _kind_changed(self, _) -> None:
+        k = self.kind.value
+        self.radius.visible = k in ("disk", "fingertip")
+        self.grip.visible = k == "hand"
+        if k == "fingertip" and self.radius.value > 15:
+            self.radius.value = 8.0  # also requests
+        elif k != "mesh" or self.mesh is not None:
+            self.request()
+
+    def _uploaded(self, event) -> None:
+        import trimesh  # deferred: the viewer only
+
+        f = event.target.value
+        try:
+            mesh = trimesh.load(
+                io.BytesIO(f.content), file_type=f.name.rsplit(".", 1)[-1], force="mesh"
+            )
+            if len(mesh.faces) == 0:
+                raise ValueError("it has no faces")
+        except Exception as e:  # a file that is not a mesh: say so on the page
+            self._say_error(f"{f.name} could not be read as a mesh: {e}")
+            return
+        if np.ptp(mesh.vertices, axis=0).max() > 1.0:  # mm, as most CAD files are
+            mesh.apply_scale(1e-3)
+        self.mesh = mesh
+        if self.kind.value != "mesh":
+            self.kind.value = "mesh"  # asks for an answer
+        else:
+            self.request()
+
+    # -- pointer events -----------------------------------------------------------------------
+    def _clicked(self, event) -> None:
+        v = ray_hit(self.part.vertices, self.part.faces, event.ray_origin, event.ray_direction)
+        if v is not None:
+            self.vertex = v
+            self.request()
+
+    def _dragged(self, event) -> None:
+        origin, direction = camera_ray(event.client.camera, event.end_screen_pos)
+        v = ray_hit(self.part.vertices, self.part.faces, origin, direction)
+        if v is None:  # off the skin: the nearest skin to the drag plane's point
+            v = int(self.tree.query(np.asarray(event.end_position, float))[1])
+        self.vertex = v
+        self.request()
+
+    def request(self) -> None:
+        """Ask for an answer to the page's current choice (only the latest is answered)."""
+        k = self.kind.value
+        choice = dict(
+            kind=k,
+            vertex=self.vertex,
+            force=float(self.force.value),
+            radius_mm=float(self.radius.value),
+            grip=self.grip.value,
+            mesh=self.mesh,
+        )
+        self.mailbox.put((time.perf_counter(), self.model.value, choice))
+
+    # -- answers ------------------------------------------------------------------------------
+    def _answer(self, request):
+        t0, name, kw = request
+        choice = Choice(**kw)
+        scene, meshes = pressed(self.part, self.thickness, choice, self.phenotype)
+        with warnings.catch_warnings():  # said on the page instead
+            warnings.simplefilter("ignore", OutsideEnvelope)
+            warnings.simplefilter("ignore", ImpossibleAnswer)
+            d = self.predictors[name].predict(scene)
+        return choice, scene, d, meshes
+
+    def _show(self, request, result) -> None:
+        if isinstance(result, Exception):
+            self._say_error(str(result).splitlines()[0] if str(result) else type(result).__name__)
+            return
+        t0, name, _ = request
+        choice, scene, d, meshes = result
+        self.last = (choice, scene, d, meshes, name)
+        mag = d.magnitude * 1e3
+        top = legend.scale_mm(float(mag.max()))
+        colours = vertex_colors(mag, legend.CMAP, 0.0, top)
+        sent = self._send_tiles(d.vertices, colours)
+        for k, m in enumerate(meshes):
+            self.server.scene.add_mesh_simple(
+                f"/object/{k}", m.vertices, m.faces, color=OBJECT_COLOUR, opacity=0.45
+            )
+        kind, words = legend.verdict(d.info)
+        self.verdict.content = legend.verdict_html(kind, words)
+        self.scale.content = legend.colour_bar(top)
+        self.latencies.append(time.perf_counter() - t0)
+        self.status.content = (
+            f'<div id="stmpl-answer" data-n="{len(self.latencies)}" style="font-size:0.9em">'
+            f"<b>{html.escape(name)}</b>: deepest {mag.max():.2f} mm, answered in "
+            f"{duration(d.info['seconds'])}; {choice.force:g} N; {sent} of {len(self.tiles)} "
+            "surface tiles sent</div>"
+        )
+
+    def _say_error(self, text: str) -> None:
+        self.verdict.content = legend.verdict_html("impossible", text)
+
+    # -- the FEM, in the background -----------------------------------------------------------
+    def _compare(self) -> None:
+        if self.last is None:
+            return
+        choice, scene, d, _, name = self.last
+        self.compare.disabled, self.progress.visible = True, True
+        self.compared.content = "the FEM is solving this press (the page stays live)..."
+
+        def solve() -> None:
+            t0 = time.perf_counter()
+            try:
+                fem = predictor_from_spec("fem", "cpu", fidelity="auto").predict(scene)
+                m = sample_metrics(fem.displacement, d.displacement)
+                self.compared.content = (
+                    f"FEM: deepest {fem.magnitude.max() * 1e3:.2f} mm in "
+                    f"{duration(time.perf_counter() - t0)}; **{name}** against it: relative "
+                    f"MEE {m['rel_mee']:.2f} %, peak {m['peak_err']:+.1f} %"
+                )
+            except Exception as e:  # a failed solve says why, and nothing is shown as truth
+                self.compared.content = f"the FEM could not solve this press: {e}"
+            finally:
+                self.compare.disabled, self.progress.visible = False, False
+
+        threading.Thread(target=solve, name="stmpl-fem", daemon=True).start()
+
+    # -- saving -------------------------------------------------------------------------------
+    def _screenshot(self, event) -> None:
+        import imageio.v3 as iio  # deferred: the viewer only (viser depends on it)
+
+        image = event.client.get_render(height=720, width=1280, transport_format="png")
+        png = iio.imwrite("<bytes>", image, extension=".png")
+        event.client.send_file_download("stmpl_view.png", png, save_immediately=True)
+
+    def _save(self, event, fmt: str) -> None:
+        if self.last is None:
+            return
+        _, scene, d, _, _ = self.last
+        mesh = scene.part.mesh(d.vertices)
+        mesh.visual.vertex_colors = vertex_colors(d.magnitude, legend.CMAP)
+        event.client.send_file_download(
+            f"stmpl_pressed.{fmt}", mesh.export(file_type=fmt), save_immediately=True
+        )
+
+    def close(self) -> None:
+        self.mailbox.close()
+        self.server.stop()

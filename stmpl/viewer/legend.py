@@ -1,0 +1,84 @@
+"""What the page says beside the surface: the colour scale in millimetres and the verdict on
+the answer (inside its data, outside with the reason, or past where the gel buckles).
+"""
+
+from __future__ import annotations
+
+import html
+import math
+
+import numpy as np
+
+from stmpl.tissue import GEL_TRUSTED_COMPRESSION
+
+CMAP = "OrRd"
+"""The displacement colour map: pale, skin-like where the skin stays at rest, dark red where it
+moves most."""
+
+VERDICT_COLOURS = {"inside": "#1b7d2f", "outside": "#b35900", "impossible": "#a00000"}
+
+
+def scale_mm(deepest_mm: float) -> float:
+    """The colour scale's top (mm): the next of 1, 2, 5 x 10^k at or above ``deepest_mm``
+    (0.1 mm at least), so that the legend reads in round numbers and holds still while an
+    answer changes a little.
+    """
+    if not np.isfinite(deepest_mm) or deepest_mm < 0:
+        raise ValueError(f"the deepest displacement must be finite and >= 0, got {deepest_mm!r}")
+    x = max(float(deepest_mm), 0.1)
+    k = math.floor(math.log10(x))
+    for m in (1.0, 2.0, 5.0, 10.0):
+        if m * 10**k >= x * (1 - 1e-9):
+            return m * 10**k
+    return 10.0 ** (k + 1)
+
+
+def colour_bar(top_mm: float, stops: int = 9) -> str:
+    """HTML of a horizontal colour bar from 0 to ``top_mm`` with its ticks, in mm."""
+    import matplotlib  # deferred: the colour map's samples
+
+    cmap = matplotlib.colormaps[CMAP]
+    cols = [
+        "#%02x%02x%02x" % tuple(int(255 * c) for c in cmap(i / (stops - 1))[:3])
+        for i in range(stops)
+    ]
+    ticks = "".join(
+        f'<span style="flex:1;text-align:{a}">{top_mm * f:g}</span>'
+        for f, a in ((0, "left"), (0.5, "center"), (1, "right"))
+    )
+    return (
+        '<div style="font-size:0.85em">displacement, mm'
+        f'<div id="stmpl-colour-bar" style="height:12px;border-radius:3px;'
+        f'background:linear-gradient(to right,{",".join(cols)})"></div>'
+        f'<div style="display:flex">{ticks}</div></div>'
+    )
+
+
+def verdict(info: dict) -> tuple[str, str]:
+    """``(kind, words)`` of a :class:`~stmpl.scene.Deformation`'s ``info``: ``impossible``
+    (past where the gel buckles), ``outside`` (the envelope's first reason) or ``inside``.
+    """
+    if not info.get("physical", True):
+        c = info.get("max_compression", float("nan"))
+        return "impossible", (
+            f"the skin moves in {c:.2f} x the tissue's depth, past {GEL_TRUSTED_COMPRESSION:g} "
+            "where the gel buckles and the FEM gives no answer: do not use"
+        )
+    env = info.get("envelope")
+    if env and not env.get("inside", True):
+        return "outside", "outside the data it was trained and checked on: " + "; ".join(
+            env.get("outside", [])[:2]
+        )
+    if env is None:
+        return "inside", "no envelope: this predictor's answers are the reference"
+    return "inside", "inside the data it was trained and checked on"
+
+
+def verdict_html(kind: str, words: str) -> str:
+    """The verdict in its colour, for the page."""
+    colour = VERDICT_COLOURS[kind]
+    title = {"inside": "inside", "outside": "OUTSIDE", "impossible": "NOT AN ANSWER"}[kind]
+    return (
+        f'<div id="stmpl-verdict" data-kind="{kind}" style="color:{colour};font-weight:600">'
+        f'{title}</div><div style="color:{colour};font-size:0.85em">{html.escape(words)}</div>'
+    )

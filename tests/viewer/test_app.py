@@ -1,0 +1,139 @@
+"""The viewer in a real browser: Debian's chromium, driven headless by Playwright. A person
+loads the page, clicks the arm, drags the object, asks for 5 N and saves the mesh; the page
+must follow each step and nothing may leave this machine.
+"""
+
+import shutil
+import socket
+import time
+
+import numpy as np
+import pytest
+import trimesh
+
+from stmpl.viewer.app import Viewer, ray_hit
+
+CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
+ARGS = ["--enable-unsafe-swiftshader", "--use-angle=swiftshader"]  # WebGL without a GPU
+
+
+def test_a_ray_meets_the_nearest_face_first():
+    tri = trimesh.creation.box((1.0, 1.0, 1.0))
+    v = ray_hit(tri.vertices, tri.faces, (0.2, 0.2, 5.0), (0.0, 0.0, -1.0))
+    assert tri.vertices[v][2] == pytest.approx(0.5)  # the top, not the bottom
+    assert ray_hit(tri.vertices, tri.faces, (3.0, 3.0, 5.0), (0.0, 0.0, -1.0)) is None
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def _pixel(camera, point, width, height) -> tuple[float, float]:
+    """Where ``point`` (m) shows on a page of ``width`` x ``height`` px, through viser's
+    camera (OpenCV convention: x right, y down, z ahead; ``fov`` vertical).
+    """
+    w, x, y, z = camera.wxyz
+    r = np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+    p = r.T @ (np.asarray(point) - np.asarray(camera.position))
+    f = 0.5 * height / np.tan(0.5 * camera.fov)
+    return 0.5 * width + f * p[0] / p[2], 0.5 * height + f * p[1] / p[2]
+
+
+def _facing(part, along: float) -> int:
+    """The vertex at fraction ``along`` the arm that faces the camera most (lowest y)."""
+    s = part.axial
+    ring = np.flatnonzero(np.abs(s - s.min() - along * np.ptp(s)) < 0.005)
+    return int(ring[np.argmin(part.vertices[ring, 1])])
+
+
+def _settle(viewer, page, seconds=1.0):
+    time.sleep(seconds)
+    assert viewer.mailbox.idle(60)
+    time.sleep(0.5)  # the page's last update
+
+
+@pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (apt install chromium)")
+def test_a_person_presses_the_arm_in_a_real_browser(tmp_path):
+    from playwright.sync_api import sync_playwright
+
+    viewer = Viewer(["zoo:naive_arm_fine"], port=_free_port())
+    url = f"http://127.0.0.1:{viewer.server.get_port()}"
+    left = []
+    try:
+        assert viewer.mailbox.idle(60)
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=CHROMIUM, args=ARGS)
+            page = browser.new_page(viewport={"width": 1280, "height": 800})
+
+            def local_only(route):
+                if route.request.url.startswith((url, url.replace("http", "ws"), "data:", "blob:")):
+                    route.continue_()
+                else:
+                    left.append(route.request.url)
+                    route.abort()
+
+            page.route("**/*", local_only)
+            page.goto(url)
+            page.wait_for_selector("#stmpl-verdict", timeout=60_000)
+            _settle(viewer, page, 2.0)
+            verdict = page.locator("#stmpl-verdict")
+            status = page.locator("#stmpl-answer")
+            assert verdict.get_attribute("data-kind") == "inside"
+            first = status.inner_text()
+
+            # a click on the skin moves the disk there
+            camera = next(iter(viewer.server.get_clients().values())).camera
+            part = viewer.part
+            targets = [_facing(part, f) for f in (0.3, 0.6)]
+            x, y = _pixel(camera, part.vertices[targets[0]], 1280, 800)
+            page.mouse.click(x, y)
+            _settle(viewer, page)
+            assert np.linalg.norm(part.vertices[viewer.vertex] - part.vertices[targets[0]]) < 0.01
+            clicked = status.inner_text()
+            assert clicked != first and "deepest" in clicked
+
+            # a drag carries it along the arm, answering as it goes
+            answered = viewer.mailbox.answered
+            x2, y2 = _pixel(camera, part.vertices[targets[1]], 1280, 800)
+            page.mouse.move(x, y)
+            page.mouse.down()
+            for k in range(1, 13):
+                page.mouse.move(x + (x2 - x) * k / 12, y + (y2 - y) * k / 12)
+                time.sleep(0.06)
+            page.mouse.up()
+            _settle(viewer, page)
+            assert viewer.mailbox.answered > answered
+            assert np.linalg.norm(part.vertices[viewer.vertex] - part.vertices[targets[1]]) < 0.03
+            assert status.inner_text() != clicked
+
+            # 5 N lies far outside what the model learned: the page says so, in its colour
+            force = page.locator(
+                "xpath=//*[normalize-space(text())='force, N']/ancestor::div"
+                "[.//input[@type='text']][1]//input[@type='text']"
+            )
+            force.fill("5")
+            force.press("Enter")
+            _settle(viewer, page)
+            assert verdict.get_attribute("data-kind") == "outside"
+            assert "force of a contact 5 N" in page.locator("#stmpl-verdict + div").inner_text()
+            page.screenshot(path=str(tmp_path / "pressed.png"))
+
+            # the deformed mesh comes down as a file
+            with page.expect_download() as d:
+                page.get_by_text("deformed mesh (PLY)").click()
+            mesh = trimesh.load(d.value.path(), file_type="ply", process=False)
+            assert len(mesh.vertices) == part.n_vertices
+            assert np.abs(mesh.vertices - part.vertices).max() > 1e-3  # deformed, 5 N
+            browser.close()
+    finally:
+        viewer.close()
+    assert not left, f"the page reached beyond this machine: {left[:3]}"
+    assert (tmp_path / "pressed.png").stat().st_size > 20_000

@@ -1,0 +1,47 @@
+"""The page's words: the colour scale in round millimetres and the verdict in its colour."""
+
+import pytest
+
+from stmpl.viewer.legend import colour_bar, scale_mm, verdict, verdict_html
+
+
+@pytest.mark.parametrize(
+    "deepest, top",
+    [(0.0, 0.1), (0.13, 0.2), (0.2, 0.2), (0.43, 0.5), (0.51, 1.0), (3.02, 5.0), (7.0, 10.0)],
+)
+def test_the_scale_tops_at_the_next_round_number(deepest, top):
+    assert scale_mm(deepest) == pytest.approx(top)
+
+
+def test_a_bad_depth_is_refused():
+    with pytest.raises(ValueError, match="finite and >= 0"):
+        scale_mm(float("nan"))
+
+
+def test_the_verdict_names_what_it_finds_first():
+    assert verdict({"physical": True, "envelope": {"inside": True, "outside": []}})[0] == "inside"
+    kind, words = verdict(
+        {"physical": True, "envelope": {"inside": False, "outside": ["force 5 N > 0.5 N"]}}
+    )
+    assert kind == "outside" and "force 5 N > 0.5 N" in words
+    kind, words = verdict(
+        {
+            "physical": False,
+            "max_compression": 0.62,
+            "envelope": {"inside": False, "outside": ["x"]},
+        }
+    )
+    assert kind == "impossible" and "0.62" in words and "buckles" in words
+    assert verdict({"physical": True, "envelope": None})[0] == "inside"
+    html = verdict_html("outside", "a < b")
+    assert 'data-kind="outside"' in html and "a &lt; b" in html
+
+
+def test_the_colour_bar_reads_in_millimetres():
+    bar = colour_bar(0.5)
+    assert (
+        "displacement, mm" in bar
+        and ">0.25<" in bar
+        and ">0.5<" in bar
+        and "linear-gradient" in bar
+    )
