@@ -121,8 +121,8 @@ class Limits:
 GEL = Limits(
     0.0,
     GEL_TRUSTED_COMPRESSION,
-    "the paper's gel buckles from about a third of its depth: of 9 answers measured past 0.4, "
-    "8 were the last before it did",
+    "the paper's gel buckles from about a third of its depth: past 0.4, all but one measured "
+    "answer were the last before it did",
 )
 """The compressible neo-Hookean gel's trust bounds (:data:`stmpl.tissue.GEL_TRUSTED_COMPRESSION`,
 measured by ``benchmarks/gel_failure.py``)."""

@@ -163,9 +163,8 @@ class Viewer:
                 vertices[used], faces, vertex_colors=colours[used], process=False
             )
             h = self.server.scene.add_mesh_trimesh(f"/body/tile{k:02d}", mesh)
-            if k not in self.handles:  # a fresh node: give it the pointer's callbacks
-                h.on_click(self._clicked)
-                h.on_drag(self._dragged)
+            h.on_click(self._clicked)  # a node sent again is a new node: its callbacks too
+            h.on_drag(self._dragged)
             self.handles[k] = h
         return len(changed)
 

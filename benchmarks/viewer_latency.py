@@ -1,0 +1,158 @@
+"""How long a person waits in ``stmpl view``: from a pointer event in the browser to the updated
+surface on screen, in Debian's chromium driven headless by Playwright (software WebGL).
+
+    python benchmarks/viewer_latency.py [--model zoo:gnn_arm_bodies] [--places 24]
+        [--shots docs]
+
+The viewer serves the fine left arm with the model at fidelity auto; the browser clicks the
+front of the arm at ``--places`` places along it, twice: the first pass meets each place new
+(a model on the linear FEM prior computes that place's columns then), the second finds them
+cached. Each latency runs from just before the click is dispatched to the second animation
+frame after the page shows the new answer (the answer's stamp in the page; the surface tiles
+arrive in the same message batch, before it). Then a drag along the arm: each pointer move to
+the next answer shown (viser sends drag updates at most about 20 times a second). Prints the
+median and 95th percentile of each, and the server's own share (event received to tiles sent).
+``--shots``: also write the docs' screenshots (``viewer.png``, ``viewer_outside.png``) there.
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import socket
+import time
+from pathlib import Path
+
+import numpy as np
+
+from stmpl.machine import describe
+from stmpl.viewer.app import Viewer
+
+ARGS = ["--enable-unsafe-swiftshader", "--use-angle=swiftshader"]
+W, H = 1280, 800
+
+
+def pixel(camera, point) -> tuple[float, float]:
+    """Where ``point`` shows on the page, through viser's camera (OpenCV convention)."""
+    w, x, y, z = camera.wxyz
+    r = np.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+        ]
+    )
+    p = r.T @ (np.asarray(point) - np.asarray(camera.position))
+    f = 0.5 * H / np.tan(0.5 * camera.fov)
+    return 0.5 * W + f * p[0] / p[2], 0.5 * H + f * p[1] / p[2]
+
+
+def facing(part, along: float) -> int:
+    """The vertex at fraction ``along`` the arm that faces the camera most (lowest y)."""
+    s = part.axial
+    ring = np.flatnonzero(np.abs(s - s.min() - along * np.ptp(s)) < 0.005)
+    return int(ring[np.argmin(part.vertices[ring, 1])])
+
+
+def shown(page) -> int:
+    """How many answers the page has shown."""
+    return int(page.locator("#stmpl-answer").get_attribute("data-n") or 0)
+
+
+def wait_shown(page, n: int, timeout: float = 120.0) -> None:
+    """Until the page shows answer ``n``, then two animation frames (the frame that draws it)."""
+    page.wait_for_function(
+        f"(document.getElementById('stmpl-answer')?.dataset.n | 0) >= {n}",
+        timeout=timeout * 1e3,
+        polling=2,  # ms
+    )
+    page.evaluate("new Promise(r => requestAnimationFrame(() => requestAnimationFrame(r)))")
+
+
+def stats(x: list) -> str:
+    a = 1e3 * np.asarray(x)
+    return f"median {np.median(a):.1f} ms, p95 {np.percentile(a, 95):.1f} ms (n = {len(a)})"
+
+
+def main(argv=None) -> None:
+    from playwright.sync_api import sync_playwright  # deferred: the benchmark's browser
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--model", default="zoo:gnn_arm_bodies")
+    ap.add_argument("--places", type=int, default=24)
+    ap.add_argument("--shots", type=Path, help="folder for the docs' screenshots")
+    args = ap.parse_args(argv)
+    chromium = shutil.which("chromium")
+    if chromium is None:
+        raise SystemExit("chromium is not installed: apt install chromium")
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    t0 = time.perf_counter()
+    viewer = Viewer([args.model], port=port)
+    viewer.mailbox.idle(600)
+    print(f"{describe()}; viewer up with {args.model} (auto) in {time.perf_counter() - t0:.1f} s")
+    part = viewer.part
+    places = [facing(part, f) for f in np.linspace(0.15, 0.85, args.places)]
+    out: dict = {"first": [], "cached": [], "drag": []}
+    try:
+        with sync_playwright() as p:
+            browser = p.chromium.launch(executable_path=chromium, args=ARGS)
+            page = browser.new_page(viewport={"width": W, "height": H})
+            page.goto(f"http://127.0.0.1:{port}")
+            page.wait_for_selector("#stmpl-answer", timeout=120_000)
+            time.sleep(2.0)
+            camera = next(iter(viewer.server.get_clients().values())).camera
+            for name in ("first", "cached"):
+                for v in places:
+                    n = shown(page)
+                    x, y = pixel(camera, part.vertices[v])
+                    t = time.perf_counter()
+                    page.mouse.click(x, y)
+                    wait_shown(page, n + 1)
+                    out[name].append(time.perf_counter() - t)
+            server = list(viewer.latencies[-len(places) :])
+            a, b = pixel(camera, part.vertices[places[0]]), pixel(camera, part.vertices[places[-1]])
+            page.mouse.move(*a)
+            page.mouse.down()
+            for k in range(1, 41):
+                n = shown(page)
+                t = time.perf_counter()
+                page.mouse.move(a[0] + (b[0] - a[0]) * k / 40, a[1] + (b[1] - a[1]) * k / 40)
+                try:
+                    wait_shown(page, n + 1, timeout=2.0)
+                    out["drag"].append(time.perf_counter() - t)
+                except Exception:  # no drag update for this move (throttled): not an answer
+                    pass
+            page.mouse.up()
+            if args.shots:
+                args.shots.mkdir(parents=True, exist_ok=True)
+                x, y = pixel(camera, part.vertices[facing(part, 0.45)])
+                n = shown(page)
+                page.mouse.click(x, y)
+                wait_shown(page, n + 1)
+                time.sleep(1.0)
+                page.screenshot(path=str(args.shots / "viewer.png"))
+                force = page.locator(
+                    "xpath=//*[normalize-space(text())='force, N']/ancestor::div"
+                    "[.//input[@type='text']][1]//input[@type='text']"
+                )
+                n = shown(page)
+                force.fill("3")
+                force.press("Enter")
+                wait_shown(page, n + 1)
+                time.sleep(1.0)
+                page.screenshot(path=str(args.shots / "viewer_outside.png"))
+            browser.close()
+    finally:
+        viewer.close()
+    print(f"click at a new place (first touch): {stats(out['first'])}")
+    print(f"click at a place seen before:       {stats(out['cached'])}")
+    print(f"  of which the server (event to tiles sent): {stats(server)}")
+    if out["drag"]:
+        print(f"drag, pointer move to answer shown:  {stats(out['drag'])}")
+    print(f"answers dropped while busy: {viewer.mailbox.dropped}")
+
+
+if __name__ == "__main__":
+    main()
