@@ -127,10 +127,14 @@ def main(argv=None) -> None:
             page.mouse.up()
             if args.shots:
                 args.shots.mkdir(parents=True, exist_ok=True)
+                close = page.locator("button.mantine-Notification-closeButton")
+                for k in range(close.count()):  # the headless browser's software-WebGL note
+                    close.nth(k).click()
                 x, y = pixel(camera, part.vertices[facing(part, 0.45)])
                 n = shown(page)
                 page.mouse.click(x, y)
                 wait_shown(page, n + 1)
+                page.mouse.move(40, H - 40)  # no hover outline on the skin
                 time.sleep(1.0)
                 page.screenshot(path=str(args.shots / "viewer.png"))
                 force = page.locator(

@@ -27,7 +27,6 @@ from stmpl.viewer import legend
 from stmpl.viewer.mailbox import Latest
 from stmpl.viewer.press import OBJECTS, Choice, pressed
 from stmpl.viewer.tiles import Tiles
-from stmpl.viz.figures import vertex_colors
 from stmpl.viz.render import duration
 
 OBJECT_COLOUR = (150, 190, 255)
@@ -110,14 +109,13 @@ class Viewer:
         self.thickness_mm = thickness_mm
         self._build_part()
         self.latencies: list[float] = []  # s, from the pointer event to the tiles sent
-        self.last = None  # (choice, scene, deformation, meshes) of the last answer shown
+        self.last = None  # (choice, scene, deformation, meshes, model) of the last answer shown
+        self._sending = threading.Lock()
         self.server = viser.ViserServer(host=host, port=port, label="stmpl", verbose=False)
-        self.server.scene.configure_environment_map(hdri=None)  # no download of a map
+        # soft studio light from a map that ships in viser's wheel; no shadows to speckle the skin
+        self.server.scene.configure_environment_map(hdri="studio", environment_intensity=0.5)
+        self.server.scene.configure_default_lights(enabled=True, cast_shadow=False)
         self.server.scene.set_up_direction("+z")
-        self.server.scene.add_light_hemisphere("/light/sky", intensity=1.2)
-        self.server.scene.add_light_directional(
-            "/light/key", intensity=1.5, position=(0.5, -1.0, 1.0)
-        )
         self._gui()
         self._draw_body()
         self.mailbox = Latest(self._answer, self._show)
@@ -147,13 +145,17 @@ class Viewer:
         size = float(np.ptp(self.part.vertices, axis=0).max())
         cam = self.server.initial_camera
         cam.look_at = tuple(centre)
-        cam.position = tuple(centre + np.array([0.0, -1.1 * size, 0.2 * size]))
+        cam.position = tuple(centre + np.array([0.0, -0.85 * size, 0.15 * size]))
         self.handles: dict = {}
         self.tiles.forget()
-        rest = vertex_colors(np.zeros(self.part.n_vertices), legend.CMAP, 0.0, 1.0)
+        rest = legend.colours(np.zeros(self.part.n_vertices), 1.0)
         self._send_tiles(self.part.vertices, rest)
 
     def _send_tiles(self, vertices: np.ndarray, colours: np.ndarray) -> int:
+        with self._sending:  # the answers' thread and the FEM's both draw
+            return self._send_changed(vertices, colours)
+
+    def _send_changed(self, vertices: np.ndarray, colours: np.ndarray) -> int:
         import trimesh  # deferred: the viewer only
 
         changed = self.tiles.changed(vertices, colours)
@@ -288,11 +290,11 @@ class Viewer:
         self.last = (choice, scene, d, meshes, name)
         mag = d.magnitude * 1e3
         top = legend.scale_mm(float(mag.max()))
-        colours = vertex_colors(mag, legend.CMAP, 0.0, top)
+        colours = legend.colours(mag, top)
         sent = self._send_tiles(d.vertices, colours)
         for k, m in enumerate(meshes):
             self.server.scene.add_mesh_simple(
-                f"/object/{k}", m.vertices, m.faces, color=OBJECT_COLOUR, opacity=0.45
+                f"/object/{k}", m.vertices, m.faces, color=OBJECT_COLOUR, opacity=0.25
             )
         kind, words = legend.verdict(d.info)
         self.verdict.content = legend.verdict_html(kind, words)
@@ -304,6 +306,7 @@ class Viewer:
             f"{duration(d.info['seconds'])}; {choice.force:g} N; {sent} of {len(self.tiles)} "
             "surface tiles sent</div>"
         )
+        self.server.flush()  # now, not at the next batch: the person is waiting
 
     def _say_error(self, text: str) -> None:
         self.verdict.content = legend.verdict_html("impossible", text)
@@ -324,8 +327,16 @@ class Viewer:
                 self.compared.content = (
                     f"FEM: deepest {fem.magnitude.max() * 1e3:.2f} mm in "
                     f"{duration(time.perf_counter() - t0)}; **{name}** against it: relative "
-                    f"MEE {m['rel_mee']:.2f} %, peak {m['peak_err']:+.1f} %"
+                    f"MEE {m['rel_mee']:.2f} %, peak {m['peak_err']:+.1f} %. The colours show "
+                    "the error until the next press."
                 )
+                if self.last is not None and self.last[1] is scene:  # nothing pressed since
+                    err = np.linalg.norm(d.displacement - fem.displacement, axis=1) * 1e3
+                    top = legend.scale_mm(float(err.max()))
+                    self._send_tiles(d.vertices, legend.colours(err, top))
+                    self.scale.content = legend.colour_bar(
+                        top, f"{name}'s error against the FEM, mm"
+                    )
             except Exception as e:  # a failed solve says why, and nothing is shown as truth
                 self.compared.content = f"the FEM could not solve this press: {e}"
             finally:
@@ -346,7 +357,9 @@ class Viewer:
             return
         _, scene, d, _, _ = self.last
         mesh = scene.part.mesh(d.vertices)
-        mesh.visual.vertex_colors = vertex_colors(d.magnitude, legend.CMAP)
+        mesh.visual.vertex_colors = legend.colours(
+            d.magnitude * 1e3, legend.scale_mm(d.magnitude.max() * 1e3)
+        )
         event.client.send_file_download(
             f"stmpl_pressed.{fmt}", mesh.export(file_type=fmt), save_immediately=True
         )

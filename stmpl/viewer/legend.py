@@ -11,9 +11,19 @@ import numpy as np
 
 from stmpl.tissue import GEL_TRUSTED_COMPRESSION
 
-CMAP = "OrRd"
-"""The displacement colour map: pale, skin-like where the skin stays at rest, dark red where it
-moves most."""
+ANCHORS = np.array([[226, 192, 170], [240, 160, 110], [215, 60, 40], [120, 0, 20]], dtype=float)
+"""The displacement colours from rest to the scale's top: the skin's own tone where it does not
+move, through orange and red to dark red where it moves most (RGB)."""
+
+
+def colours(values_mm: np.ndarray, top_mm: float) -> np.ndarray:
+    """``(N, 4)`` uint8 RGBA of displacements ``values_mm`` on a scale from 0 to ``top_mm``."""
+    t = np.clip(np.asarray(values_mm, float) / top_mm, 0.0, 1.0) * (len(ANCHORS) - 1)
+    k = np.minimum(t.astype(int), len(ANCHORS) - 2)
+    f = (t - k)[:, None]
+    rgb = (1 - f) * ANCHORS[k] + f * ANCHORS[k + 1]
+    return np.column_stack([rgb.round(), np.full(len(rgb), 255.0)]).astype(np.uint8)
+
 
 VERDICT_COLOURS = {"inside": "#1b7d2f", "outside": "#b35900", "impossible": "#a00000"}
 
@@ -33,23 +43,17 @@ def scale_mm(deepest_mm: float) -> float:
     return 10.0 ** (k + 1)
 
 
-def colour_bar(top_mm: float, stops: int = 9) -> str:
+def colour_bar(top_mm: float, title: str = "displacement, mm") -> str:
     """HTML of a horizontal colour bar from 0 to ``top_mm`` with its ticks, in mm."""
-    import matplotlib  # deferred: the colour map's samples
-
-    cmap = matplotlib.colormaps[CMAP]
-    cols = [
-        "#%02x%02x%02x" % tuple(int(255 * c) for c in cmap(i / (stops - 1))[:3])
-        for i in range(stops)
-    ]
+    cols = ",".join("#%02x%02x%02x" % tuple(int(c) for c in a) for a in ANCHORS)
     ticks = "".join(
         f'<span style="flex:1;text-align:{a}">{top_mm * f:g}</span>'
         for f, a in ((0, "left"), (0.5, "center"), (1, "right"))
     )
     return (
-        '<div style="font-size:0.85em">displacement, mm'
+        f'<div style="font-size:0.85em">{html.escape(title)}'
         f'<div id="stmpl-colour-bar" style="height:12px;border-radius:3px;'
-        f'background:linear-gradient(to right,{",".join(cols)})"></div>'
+        f'background:linear-gradient(to right,{cols})"></div>'
         f'<div style="display:flex">{ticks}</div></div>'
     )
 

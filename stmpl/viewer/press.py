@@ -70,10 +70,20 @@ def along_around(part: BodyPart, vertex: int) -> tuple[float, float]:
     return along, float(np.arctan2(np.cross(ref, d) @ z, ref @ d))
 
 
-def pressed(part: BodyPart, thickness: np.ndarray, choice: Choice, phenotype: dict | None = None):
-    """``(scene, object meshes posed in body coordinates)`` of ``choice`` on ``part``."""
+def patch(part: BodyPart, vertices: np.ndarray, lift: float = 0.0015):
+    """The skin a load covers, drawn as its own surface ``lift`` m above the skin: the faces whose
+    corners are all loaded (the paper's load is a force shared over skin, not a rigid object).
+    """
     import trimesh  # deferred: object meshes only
 
+    loaded = np.zeros(part.n_vertices, bool)
+    loaded[vertices] = True
+    faces = part.faces[loaded[part.faces].all(axis=1)]
+    return trimesh.Trimesh(part.vertices + lift * part.normals, faces, process=False)
+
+
+def pressed(part: BodyPart, thickness: np.ndarray, choice: Choice, phenotype: dict | None = None):
+    """``(scene, object meshes posed in body coordinates)`` of ``choice`` on ``part``."""
     if not 0 <= choice.vertex < part.n_vertices:
         raise ValueError(
             f"vertex {choice.vertex} is not on the {part.name} (0..{part.n_vertices - 1})"
@@ -81,10 +91,7 @@ def pressed(part: BodyPart, thickness: np.ndarray, choice: Choice, phenotype: di
     v, mm = int(choice.vertex), 1e-3
     if choice.kind == "disk":
         load = loads.disk(part, v, choice.radius_mm * mm, choice.force)
-        frame = objects.surface_frame(part, v, spin=choice.spin)
-        puck = trimesh.creation.cylinder(radius=choice.radius_mm * mm, height=0.003)
-        puck.apply_translation([0.0, 0.0, 0.0015]).apply_transform(frame)
-        return Scene.from_load(part, thickness, load), [puck]
+        return Scene.from_load(part, thickness, load), [patch(part, load.vertices)]
     if choice.kind in ("hand", "strap") and part.axis is None:
         raise ValueError(
             f"the {part.name} has no limb to {'grasp' if choice.kind == 'hand' else 'strap'}"

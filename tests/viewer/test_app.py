@@ -1,5 +1,6 @@
 """The viewer in a real browser: Debian's chromium, driven headless by Playwright. A person
-loads the page, clicks the arm, drags the object, asks for 5 N and saves the mesh; the page
+loads the page, clicks the arm, drags the object, asks for 5 N, compares with the FEM and saves
+the mesh; the page
 must follow each step and nothing may leave this machine.
 """
 
@@ -55,9 +56,13 @@ def _facing(part, along: float) -> int:
 
 
 def _settle(viewer, page, seconds=1.0):
+    """Until the viewer has answered everything asked and the page shows its last answer."""
     time.sleep(seconds)
     assert viewer.mailbox.idle(60)
-    time.sleep(0.5)  # the page's last update
+    n = len(viewer.latencies)
+    page.wait_for_function(
+        f"(document.getElementById('stmpl-answer')?.dataset.n | 0) >= {n}", timeout=60_000
+    )
 
 
 @pytest.mark.skipif(CHROMIUM is None, reason="chromium is not installed (apt install chromium)")
@@ -87,7 +92,7 @@ def test_a_person_presses_the_arm_in_a_real_browser(tmp_path):
             verdict = page.locator("#stmpl-verdict")
             status = page.locator("#stmpl-answer")
             assert verdict.get_attribute("data-kind") == "inside"
-            first = status.inner_text()
+            first = status.get_attribute("data-n")
 
             # a click on the skin moves the disk there
             camera = next(iter(viewer.server.get_clients().values())).camera
@@ -97,8 +102,8 @@ def test_a_person_presses_the_arm_in_a_real_browser(tmp_path):
             page.mouse.click(x, y)
             _settle(viewer, page)
             assert np.linalg.norm(part.vertices[viewer.vertex] - part.vertices[targets[0]]) < 0.01
-            clicked = status.inner_text()
-            assert clicked != first and "deepest" in clicked
+            clicked = int(status.get_attribute("data-n"))
+            assert clicked > int(first) and "deepest" in status.inner_text()
 
             # a drag carries it along the arm, answering as it goes
             answered = viewer.mailbox.answered
@@ -112,7 +117,14 @@ def test_a_person_presses_the_arm_in_a_real_browser(tmp_path):
             _settle(viewer, page)
             assert viewer.mailbox.answered > answered
             assert np.linalg.norm(part.vertices[viewer.vertex] - part.vertices[targets[1]]) < 0.03
-            assert status.inner_text() != clicked
+            assert int(status.get_attribute("data-n")) > clicked
+
+            # the FEM solves the same press in the background; its error map replaces the colours
+            page.get_by_text("compare with the FEM", exact=True).click()
+            page.get_by_text("solve this press with the FEM").click()
+            page.get_by_text("FEM: deepest").wait_for(timeout=600_000)  # 0.3 N: it solves
+            assert "relative MEE" in page.get_by_text("FEM: deepest").inner_text()
+            page.get_by_text("error against the FEM, mm").wait_for(timeout=10_000)
 
             # 5 N lies far outside what the model learned: the page says so, in its colour
             force = page.locator(
