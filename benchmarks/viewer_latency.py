@@ -26,25 +26,10 @@ from pathlib import Path
 import numpy as np
 
 from stmpl.machine import describe
-from stmpl.viewer.app import Viewer
+from stmpl.viewer.app import Viewer, project
 
 ARGS = ["--enable-unsafe-swiftshader", "--use-angle=swiftshader"]
 W, H = 1280, 800
-
-
-def pixel(camera, point) -> tuple[float, float]:
-    """Where ``point`` shows on the page, through viser's camera (OpenCV convention)."""
-    w, x, y, z = camera.wxyz
-    r = np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-    p = r.T @ (np.asarray(point) - np.asarray(camera.position))
-    f = 0.5 * H / np.tan(0.5 * camera.fov)
-    return 0.5 * W + f * p[0] / p[2], 0.5 * H + f * p[1] / p[2]
 
 
 def facing(part, along: float) -> int:
@@ -106,13 +91,16 @@ def main(argv=None) -> None:
             for name in ("first", "cached"):
                 for v in places:
                     n = shown(page)
-                    x, y = pixel(camera, part.vertices[v])
+                    x, y = project(camera, part.vertices[v], W, H)
                     t = time.perf_counter()
                     page.mouse.click(x, y)
                     wait_shown(page, n + 1)
                     out[name].append(time.perf_counter() - t)
             server = list(viewer.latencies[-len(places) :])
-            a, b = pixel(camera, part.vertices[places[0]]), pixel(camera, part.vertices[places[-1]])
+            a, b = (
+                project(camera, W, H, part.vertices[places[0]]),
+                project(camera, W, H, part.vertices[places[-1]]),
+            )
             page.mouse.move(*a)
             page.mouse.down()
             for k in range(1, 41):
@@ -130,7 +118,7 @@ def main(argv=None) -> None:
                 close = page.locator("button.mantine-Notification-closeButton")
                 for k in range(close.count()):  # the headless browser's software-WebGL note
                     close.nth(k).click()
-                x, y = pixel(camera, part.vertices[facing(part, 0.45)])
+                x, y = project(camera, part.vertices[facing(part, 0.45)], W, H)
                 n = shown(page)
                 page.mouse.click(x, y)
                 wait_shown(page, n + 1)

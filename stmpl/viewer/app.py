@@ -57,23 +57,36 @@ def ray_hit(vertices: np.ndarray, faces: np.ndarray, origin, direction) -> int |
     return int(corners[np.argmin(np.linalg.norm(vertices[corners] - point, axis=1))])
 
 
-def camera_ray(camera, screen) -> tuple[np.ndarray, np.ndarray]:
-    """``(origin, direction)`` of the ray through screen point ``screen`` (OpenCV, 0..1 from
-    the upper left) of a viser ``camera`` (``wxyz`` orientation: x right, y down, z ahead;
-    ``fov`` vertical, rad; ``aspect`` width / height).
-    """
-    w, x, y, z = camera.wxyz
-    r = np.array(
+def rotation(wxyz) -> np.ndarray:
+    """``(3, 3)`` rotation matrix of a unit quaternion ``(w, x, y, z)``."""
+    w, x, y, z = wxyz
+    return np.array(
         [
             [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
             [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
             [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
         ]
     )
+
+
+def camera_ray(camera, screen) -> tuple[np.ndarray, np.ndarray]:
+    """``(origin, direction)`` of the ray through screen point ``screen`` (OpenCV, 0..1 from
+    the upper left) of a viser ``camera`` (``wxyz`` orientation: x right, y down, z ahead;
+    ``fov`` vertical, rad; ``aspect`` width / height).
+    """
     h = np.tan(0.5 * camera.fov)
     ahead = np.array([(2 * screen[0] - 1) * h * camera.aspect, (2 * screen[1] - 1) * h, 1.0])
-    d = r @ ahead
+    d = rotation(camera.wxyz) @ ahead
     return np.asarray(camera.position, float), d / np.linalg.norm(d)
+
+
+def project(camera, point, width: int, height: int) -> tuple[float, float]:
+    """Where ``point`` (m) shows on a page of ``width`` x ``height`` px through a viser
+    ``camera``: the inverse of :func:`camera_ray` (a browser test's and a benchmark's aim).
+    """
+    p = rotation(camera.wxyz).T @ (np.asarray(point, float) - np.asarray(camera.position))
+    f = 0.5 * height / np.tan(0.5 * camera.fov)
+    return 0.5 * width + f * p[0] / p[2], 0.5 * height + f * p[1] / p[2]
 
 
 class Viewer:

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from stmpl.viewer.app import Viewer, ray_hit
+from stmpl.viewer.app import Viewer, camera_ray, project, ray_hit
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 ARGS = ["--enable-unsafe-swiftshader", "--use-angle=swiftshader"]  # WebGL without a GPU
@@ -25,27 +25,22 @@ def test_a_ray_meets_the_nearest_face_first():
     assert ray_hit(tri.vertices, tri.faces, (3.0, 3.0, 5.0), (0.0, 0.0, -1.0)) is None
 
 
+def test_a_point_projected_to_the_screen_lies_on_the_ray_back_through_it():
+    class Camera:
+        wxyz = np.array([0.9, -0.3, 0.2, 0.25]) / np.linalg.norm([0.9, -0.3, 0.2, 0.25])
+        position, fov, aspect = np.array([0.1, -0.5, 0.3]), 1.2, 1.6
+
+    point = np.array([0.05, 0.1, 0.2])
+    x, y = project(Camera, point, 1280, 800)
+    origin, direction = camera_ray(Camera, (x / 1280, y / 800))
+    off = point - origin
+    assert np.linalg.norm(off - (off @ direction) * direction) < 1e-9
+
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
-
-
-def _pixel(camera, point, width, height) -> tuple[float, float]:
-    """Where ``point`` (m) shows on a page of ``width`` x ``height`` px, through viser's
-    camera (OpenCV convention: x right, y down, z ahead; ``fov`` vertical).
-    """
-    w, x, y, z = camera.wxyz
-    r = np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
-    p = r.T @ (np.asarray(point) - np.asarray(camera.position))
-    f = 0.5 * height / np.tan(0.5 * camera.fov)
-    return 0.5 * width + f * p[0] / p[2], 0.5 * height + f * p[1] / p[2]
 
 
 def _facing(part, along: float) -> int:
@@ -98,7 +93,7 @@ def test_a_person_presses_the_arm_in_a_real_browser(tmp_path):
             camera = next(iter(viewer.server.get_clients().values())).camera
             part = viewer.part
             targets = [_facing(part, f) for f in (0.3, 0.6)]
-            x, y = _pixel(camera, part.vertices[targets[0]], 1280, 800)
+            x, y = project(camera, part.vertices[targets[0]], 1280, 800)
             page.mouse.click(x, y)
             _settle(viewer, page)
             assert np.linalg.norm(part.vertices[viewer.vertex] - part.vertices[targets[0]]) < 0.01
@@ -107,7 +102,7 @@ def test_a_person_presses_the_arm_in_a_real_browser(tmp_path):
 
             # a drag carries it along the arm, answering as it goes
             answered = viewer.mailbox.answered
-            x2, y2 = _pixel(camera, part.vertices[targets[1]], 1280, 800)
+            x2, y2 = project(camera, part.vertices[targets[1]], 1280, 800)
             page.mouse.move(x, y)
             page.mouse.down()
             for k in range(1, 13):
