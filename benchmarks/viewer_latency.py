@@ -98,8 +98,8 @@ def main(argv=None) -> None:
                     out[name].append(time.perf_counter() - t)
             server = list(viewer.latencies[-len(places) :])
             a, b = (
-                project(camera, W, H, part.vertices[places[0]]),
-                project(camera, W, H, part.vertices[places[-1]]),
+                project(camera, part.vertices[places[0]], W, H),
+                project(camera, part.vertices[places[-1]], W, H),
             )
             page.mouse.move(*a)
             page.mouse.down()
