@@ -368,6 +368,15 @@ def _force_control(solver, shape, direction, force, rtol, step, stiffness, max_u
             if answer.reaction > force:
                 hi = answer
                 break
+            if lo.depth > 0 and answer.reaction < lo.reaction * (1 - FORCE_TOLERANCE):
+                return replace(  # e.g. a hand's fingers slipping round the limb as it closes
+                    answer,
+                    ok=False,
+                    displacement=None,
+                    reason=f"cannot carry {force:g} N: the force falls as the object goes "
+                    f"deeper ({lo.reaction:.3g} N at {1e3 * lo.depth:.2f} mm, "
+                    f"{answer.reaction:.3g} N at {1e3 * answer.depth:.2f} mm)",
+                )
             lo, before = answer, lo
             depth = min(_aim(before, lo, force), lo.depth + reach, deepest)
             if depth <= lo.depth * (1 + 1e-9):

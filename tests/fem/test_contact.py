@@ -320,3 +320,20 @@ def test_force_control_shortens_a_try_whose_march_fails(monkeypatch):
     assert found.ok, found.reason
     assert found.reaction == pytest.approx(known.reaction, rel=0.01)
     assert any(t > 1.5 * step for t in tries)  # the aim first reached further, and was shortened
+
+
+def test_force_control_says_when_the_force_falls_as_the_object_goes_deeper(monkeypatch):
+    """A grip whose fingers slip round the limb squeezes less as it closes further: force
+    control stops there and says so, instead of chasing the force through the whole tissue.
+    """
+    solver, a, h = _slab(2.0, spacing=0.25, order=1)
+
+    def slipping(self, depth, start):
+        squeeze = 1.0 * depth / h if depth < 0.3 * h else 0.3 - 0.5 * (depth / h - 0.3)
+        return Pressed(True, "", depth, reaction=squeeze)
+
+    monkeypatch.setattr(_Pressing, "to", slipping)
+    punch = Punch([0, 0, 0], [0, 0, -1], a)
+    failed = press_to_force(solver, punch, [0, 0, -1], 0.5, step=0.1 * h)
+    assert not failed.ok and failed.displacement is None
+    assert "the force falls as the object goes deeper" in failed.reason
