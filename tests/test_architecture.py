@@ -19,7 +19,7 @@ import pytest
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 PACKAGES = ("stmpl", "fem", "models")
 
-WINGS = ("body", "contact", "data", "viz", "pipeline", "analysis", "cli")
+WINGS = ("body", "contact", "data", "viz", "pipeline", "analysis", "viewer", "cli")
 """The wings of ``stmpl``, lowest first: each imports only the root and the wings before it."""
 
 PACKAGE_ORDER = ("stmpl", "fem", "models")
