@@ -38,6 +38,8 @@ HEAVY = {
     "numba": "compiles the FEM's kernels",
     "pyamg": "an optional linear solver",
     "pypardiso": "an optional linear solver (MKL)",
+    "viser": "the browser viewer only (its server and client)",
+    "imageio": "the viewer's screenshots",
     "meshio": "the .vtu export only",
     "skfem": "the reference assembly only",
 }

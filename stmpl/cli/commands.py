@@ -18,6 +18,7 @@ from stmpl.pipeline import zoo
 from stmpl.pipeline.evaluate import evaluate
 from stmpl.pipeline.spec import predictor_from_spec
 from stmpl.pipeline.train import train
+from stmpl.viewer.app import Viewer
 from stmpl.viz.figures import export_mesh, prediction_figure, scene_figure
 
 
@@ -60,8 +61,6 @@ def predict(args) -> int:
 
 def view(args) -> int:
     """``stmpl view``: serve the viewer until Ctrl-C."""
-    from stmpl.viewer.app import Viewer  # deferred: viser is needed for the viewer only
-
     models = args.model or [
         default_model(args.part),
         *(["zoo:linear_arm_fine", "zoo:naive_arm_fine"] if args.part.endswith("_arm") else []),

@@ -108,7 +108,7 @@ class Viewer:
         device: str = "cpu",
         fidelity: str = "auto",
     ):
-        import viser  # deferred: the viewer only
+        import viser  # deferred: the browser viewer only (its server and client)
 
         if not models:
             raise ValueError("the viewer needs at least one model to answer with")
@@ -359,7 +359,7 @@ class Viewer:
 
     # -- saving -------------------------------------------------------------------------------
     def _screenshot(self, event) -> None:
-        import imageio.v3 as iio  # deferred: the viewer only (viser depends on it)
+        import imageio.v3 as iio  # deferred: the viewer's screenshots
 
         image = event.client.get_render(height=720, width=1280, transport_format="png")
         png = iio.imwrite("<bytes>", image, extension=".png")
