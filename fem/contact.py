@@ -154,9 +154,15 @@ STEP_RTOL = 1e-4
 """Newton's relative residual on the way to a pose (the steps before its last), with one
 multiplier update each: a start for the next step, not an answer."""
 
-SHORTENINGS = 6
+GAP = 0.02
 """Force control halves a try that failed (past the trust bounds, or a march that could not
-go on) toward its last answer up to this many times before it fails."""
+go on) toward its last answer, and aims no deeper than the shallowest failure after; it fails
+when the last answer lies within this share of that depth of it."""
+
+STATE_FAILURES = ("not trusted", "indefinite tangent", "inverted", "non-physical")
+"""Failures of the state at a depth, whatever the way there (past the trust bounds, a layer
+that buckles): force control does not try that depth again. Others (a line search that stalls
+on the way) may pass on a shorter march."""
 
 FORCE_TOLERANCE = 1e-3
 """Multiplier updates go on until the penetration left would add less than this share to the
@@ -310,9 +316,11 @@ def press_to_force(
     reaction passes the force; then the depth is found between the last two answers (each try
     marched from the nearer one). A try that fails, past the tissue's trust bounds
     (:class:`~fem.material.Limits`) or in a march that cannot go on, is halved toward the last
-    answer up to :data:`SHORTENINGS` times, and the aim reaches no further than the try that
-    was shortened; inside the bracket a failed try is replaced by its middle and quarters. A
-    press that still fails, or runs through the whole tissue, fails and says at what force.
+    answer, and no later try aims at or past the shallowest failure: the search fails, saying
+    why and after what force, once its last answer lies within :data:`GAP` of that depth, or
+    when the force falls as the object goes deeper (a grip slipping). Inside the bracket a failed
+    try is replaced by its middle and quarters. A press that runs through the whole tissue
+    fails too.
     The answer's ``time`` is the whole search's.
     """
     force = positive(force, "target force")
@@ -343,71 +351,98 @@ def _aim(a: Pressed, b: Pressed, force: float) -> float:
 
 def _force_control(solver, shape, direction, force, rtol, step, stiffness, max_updates, start):
     """:func:`press_to_force`'s search, its arguments checked."""
-    deepest = float(solver.mesh.thickness.max())
-    reach = AIM_STEPS * step  # how far ahead of the last answer a try may aim
     with _Pressing(solver, shape, direction, stiffness, 2e-3, max_updates, step) as go:
-        lo, hi = start or Pressed(True, "", 0.0, reaction=0.0), None
-        depth = min(lo.depth + step, deepest)
-        while hi is None:
-            answer = go.to(depth, lo if lo.depth > 0 else None)
-            for _ in range(SHORTENINGS):  # a try that failed: a shorter one from the last answer
-                if answer.ok:
-                    break
-                depth = 0.5 * (lo.depth + depth)
-                answer = go.to(depth, lo if lo.depth > 0 else None)
-                # a failed march says that the way ahead is hard: aim no further than this
-                reach = max(step, depth - lo.depth)
-            if not answer.ok:
-                return replace(
-                    answer,
-                    reason=f"cannot carry {force:g} N: {answer.reason} at depth "
-                    f"{1e3 * depth:.2f} mm, after {lo.reaction:.3g} N",
-                )
-            if abs(answer.reaction - force) <= rtol * force:
-                return answer
-            if answer.reaction > force:
-                hi = answer
-                break
-            if lo.depth > 0 and answer.reaction < lo.reaction * (1 - FORCE_TOLERANCE):
-                return replace(  # e.g. a hand's fingers slipping round the limb as it closes
-                    answer,
-                    ok=False,
-                    displacement=None,
-                    reason=f"cannot carry {force:g} N: the force falls as the object goes "
-                    f"deeper ({lo.reaction:.3g} N at {1e3 * lo.depth:.2f} mm, "
-                    f"{answer.reaction:.3g} N at {1e3 * answer.depth:.2f} mm)",
-                )
-            lo, before = answer, lo
-            depth = min(_aim(before, lo, force), lo.depth + reach, deepest)
-            if depth <= lo.depth * (1 + 1e-9):
-                return replace(
-                    lo,
-                    ok=False,
-                    displacement=None,
-                    reason=f"cannot carry {force:g} N: the object reached the bone "
-                    f"({1e3 * deepest:.1f} mm) at {lo.reaction:.3g} N",
-                )
-        failed = []  # shares of the bracket whose tries failed
-        for _ in range(30):
-            aim = _aim(lo, hi, force) if lo.depth > 0 else 0.5 * hi.depth
-            w = min(max((aim - lo.depth) / (hi.depth - lo.depth), 0.05), 0.95)
-            if failed:  # a try inside the bracket failed: another share of it
-                w = next((x for x in (0.5, 0.25, 0.75) if x not in failed), None)
-                if w is None:
-                    return replace(answer, reason=f"cannot carry {force:g} N: {answer.reason}")
-            depth = lo.depth + w * (hi.depth - lo.depth)
-            # from the nearer answer: the tissue's answer does not depend on the path (elastic,
-            # frictionless), and the shorter march is the cheaper
-            near = lo if (depth - lo.depth <= hi.depth - depth and lo.depth > 0) else hi
-            answer = go.to(depth, near)
-            if not answer.ok:
-                failed.append(w)
-                continue
-            if abs(answer.reaction - force) <= rtol * force:
-                return answer
-            failed = []
-            lo, hi = (answer, hi) if answer.reaction < force else (lo, answer)
-        return replace(answer, ok=False, displacement=None, reason="force control did not settle")
+        got = _bracket(go, force, rtol, step, start)
+        return _between(go, force, rtol, *got) if isinstance(got, tuple) else got
+
+
+def _bracket(go, force: float, rtol: float, step: float, start: Pressed | None):
+    """Force control's first phase: deeper from ``start`` (or rest) until an answer carries
+    more than ``force``. Returns ``(below, above)``, or the answer that meets the force, or the
+    failure that ends the search.
+    """
+    deepest = float(go.solver.mesh.thickness.max())
+    reach = AIM_STEPS * step  # how far ahead of the last answer a try may aim
+    lo = start or Pressed(True, "", 0.0, reaction=0.0)
+    depth = min(lo.depth + step, deepest)
+    # the shallowest failed try, the start it failed from, and whether a nearer start may pass
+    ceiling, since, path, failure = np.inf, 0.0, False, None
+    while True:
+        answer = go.to(depth, lo if lo.depth > 0 else None)
+        if not answer.ok:  # past the trust bounds, or a march that could not go on
+            ceiling, since, failure = depth, lo.depth, answer
+            path = not answer.reason.startswith(STATE_FAILURES)
+            if ceiling - lo.depth <= GAP * ceiling:
+                return _stuck(force, failure, ceiling, lo)
+            depth = 0.5 * (lo.depth + ceiling)  # halve the way toward the last answer
+            continue
+        if path and ceiling - answer.depth <= GAP * ceiling and since < answer.depth:
+            # close below a march that failed from farther away: a short one may pass
+            ceiling, since, path, failure = np.inf, answer.depth, False, None
+        if abs(answer.reaction - force) <= rtol * force:
+            return answer
+        if answer.reaction > force:
+            return lo, answer
+        if lo.depth > 0 and answer.reaction < lo.reaction * (1 - FORCE_TOLERANCE):
+            return replace(  # e.g. a hand's fingers slipping round the limb as it closes
+                answer,
+                ok=False,
+                displacement=None,
+                reason=f"cannot carry {force:g} N: the force falls as the object goes deeper "
+                f"({lo.reaction:.3g} N at {1e3 * lo.depth:.2f} mm, {answer.reaction:.3g} N at "
+                f"{1e3 * answer.depth:.2f} mm)",
+            )
+        lo, before = answer, lo
+        if failure is not None and ceiling - lo.depth <= GAP * ceiling:
+            return _stuck(force, failure, ceiling, lo)  # as close to the failure as it gets
+        depth = min(_aim(before, lo, force), lo.depth + reach, deepest, ceiling)
+        if depth >= ceiling:  # not again where a try failed: halfway to it
+            depth = 0.5 * (lo.depth + ceiling)
+        if depth <= lo.depth * (1 + 1e-9):
+            return replace(
+                lo,
+                ok=False,
+                displacement=None,
+                reason=f"cannot carry {force:g} N: the object reached the bone "
+                f"({1e3 * deepest:.1f} mm) at {lo.reaction:.3g} N",
+            )
+
+
+def _between(go, force: float, rtol: float, lo: Pressed, hi: Pressed) -> Pressed:
+    """Force control's second phase: the depth between answers ``lo`` and ``hi`` that carries
+    ``force``, aimed by the power law through them; a try that fails is replaced by the
+    bracket's middle and quarters.
+    """
+    failed, answer = [], hi  # shares of the bracket whose tries failed
+    for _ in range(30):
+        aim = _aim(lo, hi, force) if lo.depth > 0 else 0.5 * hi.depth
+        w = min(max((aim - lo.depth) / (hi.depth - lo.depth), 0.05), 0.95)
+        if failed:  # a try inside the bracket failed: another share of it
+            w = next((x for x in (0.5, 0.25, 0.75) if x not in failed), None)
+            if w is None:
+                return replace(answer, reason=f"cannot carry {force:g} N: {answer.reason}")
+        depth = lo.depth + w * (hi.depth - lo.depth)
+        # from the nearer answer: the tissue's answer does not depend on the path (elastic,
+        # frictionless), and the shorter march is the cheaper
+        near = lo if (depth - lo.depth <= hi.depth - depth and lo.depth > 0) else hi
+        answer = go.to(depth, near)
+        if not answer.ok:
+            failed.append(w)
+            continue
+        if abs(answer.reaction - force) <= rtol * force:
+            return answer
+        failed = []
+        lo, hi = (answer, hi) if answer.reaction < force else (lo, answer)
+    return replace(answer, ok=False, displacement=None, reason="force control did not settle")
+
+
+def _stuck(force: float, failure: Pressed, depth: float, last: Pressed) -> Pressed:
+    """Force control's failure where it cannot get past ``failure`` at ``depth`` (m)."""
+    return replace(
+        failure,
+        reason=f"cannot carry {force:g} N: {failure.reason} at depth {1e3 * depth:.2f} mm, "
+        f"after {last.reaction:.3g} N",
+    )
 
 
 class _Pressing:

@@ -109,8 +109,7 @@ def test_depths_must_rise_and_a_failure_skips_the_rest():
 
 def test_force_control_finds_the_depth_that_carries_a_force():
     """A target reaction met within 1 % (the slab's response is nearly linear here: the depth
-    found lies within 2 % of the one that gave that force); a force past what the gel carries
-    fails and says how far it got.
+    found lies within 2 % of the one that gave that force).
     """
     solver, a, h = _slab(2.0, spacing=0.12)
     punch = Punch([0, 0, 0], [0, 0, -1], a)
@@ -120,9 +119,18 @@ def test_force_control_finds_the_depth_that_carries_a_force():
     assert found.ok, found.reason
     assert found.reaction == pytest.approx(known.reaction, rel=0.01)
     assert found.depth == pytest.approx(0.008 * h, rel=0.02)
+
+
+@pytest.mark.slow
+def test_a_force_past_what_the_gel_carries_fails_where_it_stops():
+    """1 kN on the gel slab: the search closes in on where the gel stops answering (its
+    trust bound, nine tries) and says how far it got.
+    """
+    solver, a, h = _slab(2.0, spacing=0.12)
+    punch = Punch([0, 0, 0], [0, 0, -1], a)
     failed = press_to_force(solver, punch, [0, 0, -1], 1e3, step=0.2 * h)
-    assert not failed.ok and failed.reason.startswith("cannot carry 1000 N")
-    assert failed.displacement is None
+    assert not failed.ok and failed.reason.startswith("cannot carry 1000 N: not trusted")
+    assert "after 0.4" in failed.reason and failed.displacement is None
 
 
 def test_force_control_aims_by_the_power_law_through_its_last_two_answers():
