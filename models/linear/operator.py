@@ -123,7 +123,7 @@ class ComplianceOperator(nn.Module):
         tmin, tmax = float(thickness.min()), float(thickness.max())
         tol = 1e-6 * hi
         if self.on_demand and self.extend and (tmin < lo - tol or tmax > hi + tol):
-            new = [t for t in (tmin, tmax) if t < lo - tol or t > hi + tol]
+            new = sorted({t for t in (tmin, tmax) if t < lo - tol or t > hi + tol})  # once
             self.levels = torch.sort(
                 torch.cat([lv, torch.tensor(new, dtype=lv.dtype, device=lv.device)])
             )[0]

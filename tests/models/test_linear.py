@@ -128,8 +128,9 @@ def test_on_demand_operator_agrees_with_the_stored_one(ds, lin, tmp_path, monkey
 
 
 def test_on_demand_takes_a_new_thickness_as_a_new_level(ds, tmp_path, monkeypatch):
-    """On demand, a thickness beyond the levels is solved there (a new level), not refused,
-    and agrees with an operator computed at that thickness from the start.
+    """On demand, a thickness beyond the levels, thicker or thinner, is solved there (a new
+    level, once), not refused, and agrees with an operator computed at that thickness from the
+    start.
     """
     monkeypatch.setenv("STMPL_CACHE_DIR", str(tmp_path))
     lazy = predictor.create("linear", ds.part, {"operator": "on_demand"})
@@ -144,3 +145,7 @@ def test_on_demand_takes_a_new_thickness_as_a_new_level(ds, tmp_path, monkeypatc
     np.testing.assert_allclose(u, 0.1 * G, rtol=1e-5, atol=1e-12)
     thicker = lazy.predict(Scene(ds.part, np.full(n, 0.011), s.force)).displacement
     assert 0 < np.abs(thicker).max()  # between 10 and 12 mm: interpolated
+    thinner = lazy.predict(Scene(ds.part, np.full(n, 0.004), s.force)).displacement
+    assert np.isfinite(thinner).all() and 0 < np.abs(thinner).max() < np.abs(u).max()
+    levels = lazy.model.levels.numpy()
+    assert len(np.unique(levels)) == len(levels)  # each new thickness a level once
