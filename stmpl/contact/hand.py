@@ -289,6 +289,15 @@ class SkinDistance:
         return s, np.sqrt(np.maximum(d**2 - s**2, 0.0)) < reach
 
 
+def front_across(axis: np.ndarray) -> np.ndarray:
+    """The unit direction across a limb of ``axis`` ``(3,)`` that faces the body's front (anny
+    faces -y): where the angle ``around`` the limb counts from.
+    """
+    front = np.array([0.0, -1.0, 0.0])
+    ref = front - axis * (front @ axis)
+    return ref / np.linalg.norm(ref)
+
+
 def limb_point(part: BodyPart, along: float, around: float) -> tuple:
     """``(skin point, outward direction, limb axis direction)`` at fraction ``along`` the limb
     and angle ``around`` (rad, from the body's front, right-handed about the axis).
@@ -299,9 +308,7 @@ def limb_point(part: BodyPart, along: float, around: float) -> tuple:
         raise ValueError(f"around must be finite, got {around}")
     centre, z, s0 = part.limb_frame(along)
     s = part.axial
-    front = np.array([0.0, -1.0, 0.0])  # anny faces -y
-    ref = front - z * (front @ z)
-    ref /= np.linalg.norm(ref)
+    ref = front_across(z)
     d = np.cos(around) * ref + np.sin(around) * np.cross(z, ref)
     off = part.vertices - centre
     radial = off - np.outer(off @ z, z)

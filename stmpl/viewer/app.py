@@ -159,7 +159,6 @@ class Viewer:
         cam = self.server.initial_camera
         cam.look_at = tuple(centre)
         cam.position = tuple(centre + np.array([0.0, -0.85 * size, 0.15 * size]))
-        self.handles: dict = {}
         self.tiles.forget()
         rest = legend.colours(np.zeros(self.part.n_vertices), 1.0)
         self._send_tiles(self.part.vertices, rest)
@@ -180,7 +179,6 @@ class Viewer:
             h = self.server.scene.add_mesh_trimesh(f"/body/tile{k:02d}", mesh)
             h.on_click(self._clicked)  # a node sent again is a new node: its callbacks too
             h.on_drag(self._dragged)
-            self.handles[k] = h
         return len(changed)
 
     # -- the page -----------------------------------------------------------------------------

@@ -11,7 +11,7 @@ import numpy as np
 import stmpl.contact.pressing as contact
 from stmpl import loads
 from stmpl.contact import objects
-from stmpl.contact.hand import GRIPS, cached_grasp
+from stmpl.contact.hand import GRIPS, cached_grasp, front_across
 from stmpl.part import BodyPart
 from stmpl.scene import Scene
 
@@ -63,9 +63,7 @@ def along_around(part: BodyPart, vertex: int) -> tuple[float, float]:
     s = part.axial
     along = float((s[vertex] - s.min()) / (s.max() - s.min()))
     centre, z, _ = part.limb_frame(along)
-    front = np.array([0.0, -1.0, 0.0])  # anny faces -y
-    ref = front - z * (front @ z)
-    ref /= np.linalg.norm(ref)
+    ref = front_across(z)
     d = part.vertices[vertex] - centre
     return along, float(np.arctan2(np.cross(ref, d) @ z, ref @ d))
 
