@@ -121,7 +121,7 @@ def evaluate_models(args) -> int:
 
 
 def zoo_models(args) -> int:
-    """``stmpl zoo list|show|verify|add|measure|limit``."""
+    """``stmpl zoo list|show|verify|add|measure|limit|support``."""
     if args.action == "list":
         print(zoo.brief(args.zoo), end="")
         print("every figure of a model: stmpl zoo show NAME")
@@ -145,6 +145,10 @@ def zoo_models(args) -> int:
         if not args.sweep:
             raise ValueError("zoo limit needs --sweep CONFIG (a stability sweep that has run)")
         limits.cap_zoo(args.names, args.sweep, path=args.zoo)
+    elif args.action == "support":
+        if not args.trained_on:
+            raise ValueError("zoo support needs --trained-on DATA [DATA ...]")
+        zoo.support(args.names, args.trained_on, args.zoo)
     elif args.action == "measure":
         if not args.evaluate_on:
             raise ValueError("zoo measure needs --evaluate-on DATA [DATA ...]")

@@ -127,9 +127,12 @@ def parser() -> argparse.ArgumentParser:
     ab.set_defaults(func="stmpl.cli.commands:ablate")
 
     zo = sub.add_parser(
-        "zoo", help="the shipped models: list, show, verify, add, measure on more datasets"
+        "zoo",
+        help="the shipped models: list, show, verify, add, measure on more datasets, support",
     )
-    zo.add_argument("action", choices=["list", "show", "verify", "add", "measure", "limit"])
+    zo.add_argument(
+        "action", choices=["list", "show", "verify", "add", "measure", "limit", "support"]
+    )
     zo.add_argument(
         "names", nargs="*", help="model names (verify, measure: default all; show, add: one)"
     )
@@ -144,6 +147,13 @@ def parser() -> argparse.ArgumentParser:
         nargs="+",
         metavar="DATA",
         help="add, measure: measure these datasets' test splits (e.g. data/ood_grasps)",
+    )
+    zo.add_argument(
+        "--trained-on",
+        nargs="+",
+        metavar="DATA",
+        help="support: the datasets the models were trained on (all of them), whose training "
+        "scenes become the models' support and whose validation split its first evidence",
     )
     zo.add_argument(
         "--sweep",

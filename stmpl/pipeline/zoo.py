@@ -40,7 +40,7 @@ from stmpl.files import atomic_write_text
 from stmpl.metrics import sample_metrics
 from stmpl.pipeline.evaluate import evaluate_dataset, scenes_of
 from stmpl.predictor import OutsideEnvelope
-from stmpl.support import coordinates
+from stmpl.support import Support, coordinates
 from stmpl.table import markdown
 
 MANIFEST = "manifest.json"
@@ -142,6 +142,8 @@ def read(name: str, device: str = "cpu", path=None, **options):
     p = predictor.read(verify(name, path), device=device, **options)
     e = entry(name, path)
     measured = e.get("envelope") or {}
+    if p.envelope is not None and p.envelope.support is None and e.get("support"):
+        p.envelope.support = Support.from_dict(e["support"]["support"])
     if p.envelope is not None:
         for k, v in measured.items():
             if v["kept"]:
@@ -236,6 +238,65 @@ def measure(names: list[str] | None, datasets: list, path=None, progress=print) 
                     f"rel. {res['rel_mee'][0]:.2f} %, peak {res['peak_err'][0]:+.1f} "
                     f"+- {res['peak_err'][1]:.1f} %"
                 )
+    atomic_write_text(root(path) / MANIFEST, json.dumps(m, indent=1, sort_keys=True))
+    return out
+
+
+def support(names: list[str], data: list, path=None, progress=print) -> dict:
+    """Give zoo models trained before envelopes carried a joint support one, from the datasets
+    they were trained on (``data``: their folders, all of them): the support of the training
+    split's scenes (:class:`~stmpl.support.Support`) and, as its first evidence, each model
+    measured on the validation split (its unsolved planned scenes too), kept in the manifest
+    entry beside the file (which stays as it is). The datasets must carry the names the model's
+    card gives; a set made again (another hash) is accepted and both hashes are kept. Returns
+    ``{name: {"training": training scenes, "scenes": validation scenes measured, "kept": of
+    them the promise kept, "unsolved": unsolved validation scenes}}``.
+    """
+    from stmpl.pipeline.train import envelope, evidence  # the training run's own measures
+
+    if not names:
+        raise ValueError("zoo support needs the names of the models to give a support")
+    ds = open_data(data[0] if len(data) == 1 else data)
+    given = [m.card["name"] for m in getattr(ds, "members", [ds])]
+    m = manifest(path)
+    out = {}
+    for name in names:
+        e = entry(name, path)
+        card = e.get("dataset") or {}
+        wanted = [d["name"] for d in card.get("datasets", [card])]
+        if sorted(given) != sorted(wanted):
+            raise ValueError(
+                f"zoo model {name!r} was trained on {' + '.join(wanted)}; "
+                f"got {' + '.join(given)}"
+            )
+        p = predictor.read(verify(name, path))
+        if p.envelope is None:
+            raise ValueError(f"zoo model {name!r} has no envelope to give a support to")
+        cfg = {
+            "data": data,
+            "thickness_mm": (e.get("config") or {}).get("thickness_mm"),
+            "train_fraction": 1.0,
+            "max_train": None,
+        }
+        trained = envelope(ds, cfg)
+        p.envelope.support = trained.support
+        got = {"training": trained.info["training"]["scenes"], **evidence(p, ds, cfg)}
+        m["models"][name]["support"] = {
+            "support": p.envelope.support.to_dict(),
+            "dataset": ds.card["name"],
+            "dataset_hash": ds.card["hash"],
+            "trained_on_hash": card.get("hash"),
+            "training_scenes": got["training"],
+            "validation": {k: v for k, v in got.items() if k != "training"},
+        }
+        out[name] = got
+        if progress:
+            progress(
+                f"{name}: support of {got['training']} training scenes of "
+                f"{ds.card['name']} ({ds.card['hash']}); validation: {got.get('kept', 0)} of "
+                f"{got.get('scenes', 0)} kept the per-scene promise, "
+                f"{got.get('unsolved', 0)} unsolved"
+            )
     atomic_write_text(root(path) / MANIFEST, json.dumps(m, indent=1, sort_keys=True))
     return out
 

@@ -328,3 +328,39 @@ def test_a_set_of_bodies_widens_the_body_size(tmp_path, monkeypatch):
     box = e["envelope"]["two"]["box"]["skin_area"]
     assert box[1] > p.envelope.boxes["training"]["skin_area"][1]
     assert zoo.read("naive_two", path=tmp_path / "zoo").envelope.reasons(big) == []
+
+
+def test_a_model_shipped_without_a_support_gets_one_from_its_training_set(
+    tiny_dataset, tmp_path
+):
+    """A Naive model whose envelope has boxes only (as the zoo's first models): `zoo support`
+    builds the joint support of its training scenes and measures it on the validation split,
+    and zoo.read then judges scenes by their neighbours; a set of another name is refused.
+    """
+    from stmpl.data.dataset import Dataset
+    from stmpl.envelope import Envelope
+
+    ds = Dataset(tiny_dataset)
+    a = ds.arrays("train")
+    p = predictor.create("naive", ds.part)
+    p.envelope = Envelope.of(ds.part, a["thickness"], a["force"])
+    p.envelope.support = None  # boxes only
+    card = {"name": ds.card["name"], "hash": ds.card["hash"]}
+    ckpt = p.save(tmp_path / "run" / "m.safetensors", {"dataset": card})
+    folder = tmp_path / "zoo"
+    zoo.add(ckpt, "naive_tiny", path=folder)
+    assert zoo.read("naive_tiny", path=folder).envelope.support is None
+    with pytest.raises(ValueError, match="was trained on"):
+        zoo.support(["naive_tiny"], [tiny_dataset, tiny_dataset], folder, progress=None)
+    got = zoo.support(["naive_tiny"], [tiny_dataset], folder, progress=None)
+    n_val = len(ds.arrays("val")["total"])
+    assert got["naive_tiny"]["scenes"] == n_val > 0
+    assert got["naive_tiny"]["training"] == len(a["total"])
+    q = zoo.read("naive_tiny", path=folder)
+    s = q.envelope.support
+    assert s is not None and 0 < len(s.points) <= len(a["total"])
+    assert len(s.measured) >= n_val  # the validation split (and the test split's evidence)
+    assert zoo.verify("naive_tiny", folder)  # the file is untouched
+    # Naive keeps no per-scene promise on this set: a training-like scene is not backed
+    scenes, _ = scenes_of(ds, "test")
+    assert any("measured" in r or "promise" in r for r in q.envelope.reasons(scenes[0]))
