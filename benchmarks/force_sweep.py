@@ -2,7 +2,7 @@
 to 20 N, on the layered arm and belly; how many solves succeed, and why the others fail.
 
     python benchmarks/force_sweep.py [--out runs/force_sweep.jsonl] [--res medium]
-        [--parts arm belly] [--objects disk fingertip grip] [--report]
+        [--parts arm belly] [--objects disk fingertip grip] [--report] [--redo CASE ...]
 
 Each case (part, object, placement) is one mesh and one solver; its forces are met one after
 the other by force control (``fem.contact.press_to_force``, within 1 %), each from the last
@@ -150,6 +150,14 @@ def main() -> None:
     ap.add_argument("--objects", nargs="+", default=list(FORCES), choices=list(FORCES))
     ap.add_argument("--weight", type=float, default=0.5, help="anny weight phenotype")
     ap.add_argument("--report", action="store_true", help="only print the table of --out")
+    ap.add_argument(
+        "--redo",
+        nargs="+",
+        default=[],
+        metavar="CASE",
+        help="solve these cases again (their records in --out are replaced), e.g. "
+        "'arm/pinch grip at 0.6'",
+    )
     args = ap.parse_args()
     path = Path(args.out)
     if args.report:
@@ -159,7 +167,14 @@ def main() -> None:
     path.parent.mkdir(parents=True, exist_ok=True)
     done = set()
     if path.exists():
-        done = {json.loads(line)["case"] for line in path.read_text().splitlines() if line.strip()}
+        records = [json.loads(line) for line in path.read_text().splitlines() if line.strip()]
+        unknown = set(args.redo) - {r["case"] for r in records}
+        if unknown:
+            raise SystemExit(f"--redo: no such case in {path}: {', '.join(sorted(unknown))}")
+        kept = [r for r in records if r["case"] not in args.redo]
+        if len(kept) < len(records):
+            path.write_text("".join(json.dumps(r) + "\n" for r in kept))
+        done = {r["case"] for r in kept}
     body = AnnyBody(phenotype={"weight": args.weight})
     print(f"force sweep, {args.res} resolution; {describe()}", flush=True)
     for key, part_name, obj, where in cases(args.parts, args.objects):

@@ -278,7 +278,9 @@ def run(config, progress: bool = True, accept_remade: bool = False) -> dict:
         atomic_write_text(cache_path, json.dumps(cache, indent=1, sort_keys=True))
 
     for s in cfg["setups"]:  # one set-up at a time: trained, measured, its report out
-        spec = _trained(s, cfg, ind)
+        if bar is not None:
+            bar.set_postfix_str(s["name"])
+        spec = _trained(s, cfg, ind, progress)
         fidelity = s.get("fidelity", "full")
         p = _open(spec, fidelity)
         setup_key = _setup_key(spec, fidelity)
@@ -342,9 +344,10 @@ def _jobs(cfg: dict, sets: dict) -> list[tuple]:
     return jobs
 
 
-def _trained(s: dict, cfg: dict, ind) -> str:
+def _trained(s: dict, cfg: dict, ind, progress: bool = False) -> str:
     """The predictor spec of set-up ``s``: its own, or the checkpoint its training recipe writes
-    (trained on the in-distribution set ``ind`` unless it is there already).
+    (trained on the in-distribution set ``ind`` unless it is there already; with ``progress``,
+    the training's own bar of epochs shows under the ablation's).
     """
     if "train" not in s:
         return s["predictor"]
@@ -352,7 +355,7 @@ def _trained(s: dict, cfg: dict, ind) -> str:
     ckpt = pathlib.Path(t["out"]) / f"{t['name']}.safetensors"
     if not ckpt.is_file():
         ready(ind)
-        ckpt = train(t, progress=False)
+        ckpt = train(t, progress=progress)
     return str(ckpt)
 
 

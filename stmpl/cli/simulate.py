@@ -27,8 +27,9 @@ from stmpl.contact import objects
 from stmpl.contact.hand import Hand, cached_grasp, palm_press
 from stmpl.files import atomic_write_text
 from stmpl.scene import Scene
-from stmpl.viz.figures import export_mesh, vertex_colors
+from stmpl.viz.figures import export_mesh, mesh_bytes, vertex_colors
 from stmpl.viz.render import contact_figure
+from stmpl.viz.verdict import facts
 
 
 def pressings(args, part) -> list:
@@ -120,8 +121,8 @@ def run(args) -> int:
         answers.errors(out, fem)
     folder = pathlib.Path(args.out_dir)
     folder.mkdir(parents=True, exist_ok=True)
-    first = next(iter(out.values()))
-    write_meshes(first, [o.posed() for o in objs], folder / "pressed")
+    name, first = next(iter(out.items()))
+    write_meshes(first, [o.posed() for o in objs], folder / "pressed", facts(first, name))
     contact_figure(out, fem, [o.posed() for o in objs], folder / "simulate.png", failed=failures)
     atomic_write_text(
         folder / "simulate.json", json.dumps(answers.record(out, fem, failures), indent=1)
@@ -133,14 +134,16 @@ def run(args) -> int:
     return 0
 
 
-def write_meshes(deformation, objects, base) -> None:
+def write_meshes(deformation, objects, base, about: dict | None = None) -> None:
     """``base.glb``: the deformed part coloured by |u| with the objects in place; ``base.ply``:
-    the deformed part alone.
+    the deformed part alone; both carry ``about`` (:func:`stmpl.viz.verdict.facts`).
     """
     import trimesh  # deferred: object meshes and closest points only
 
     part, mag = deformation.scene.part, deformation.magnitude
-    export_mesh(part, pathlib.Path(base).with_suffix(".ply"), mag, deformation.vertices)
+    export_mesh(
+        part, pathlib.Path(base).with_suffix(".ply"), mag, deformation.vertices, facts=about
+    )
     body = part.mesh(deformation.vertices)
     body.visual.vertex_colors = vertex_colors(mag, "inferno")
     world = trimesh.Scene()
@@ -149,4 +152,4 @@ def write_meshes(deformation, objects, base) -> None:
         m = m.copy()
         m.visual.face_colors = [150, 190, 255, 120]
         world.add_geometry(m, node_name=f"object{k}")
-    world.export(pathlib.Path(base).with_suffix(".glb"))
+    pathlib.Path(base).with_suffix(".glb").write_bytes(mesh_bytes(world, "glb", about))

@@ -266,8 +266,7 @@ def support(names: list[str], data: list, path=None, progress=print) -> dict:
         wanted = [d["name"] for d in card.get("datasets", [card])]
         if sorted(given) != sorted(wanted):
             raise ValueError(
-                f"zoo model {name!r} was trained on {' + '.join(wanted)}; "
-                f"got {' + '.join(given)}"
+                f"zoo model {name!r} was trained on {' + '.join(wanted)}; got {' + '.join(given)}"
             )
         p = predictor.read(verify(name, path))
         if p.envelope is None:

@@ -27,7 +27,9 @@ from stmpl.viewer import legend
 from stmpl.viewer.mailbox import Latest
 from stmpl.viewer.press import OBJECTS, Choice, pressed
 from stmpl.viewer.tiles import Tiles
+from stmpl.viz.figures import mesh_bytes
 from stmpl.viz.render import duration
+from stmpl.viz.verdict import facts, verdict
 
 OBJECT_COLOUR = (150, 190, 255)
 
@@ -123,6 +125,7 @@ class Viewer:
         self._build_part()
         self.latencies: list[float] = []  # s, from the pointer event to the tiles sent
         self.last = None  # (choice, scene, deformation, meshes, model) of the last answer shown
+        self.objects: list = []  # (key of the mesh, its handle) per object mesh shown
         self._sending = threading.Lock()
         self.server = viser.ViserServer(host=host, port=port, label="stmpl", verbose=False)
         # soft studio light from a map that ships in viser's wheel; no shadows to speckle the skin
@@ -303,11 +306,8 @@ class Viewer:
         top = legend.scale_mm(float(mag.max()))
         colours = legend.colours(mag, top)
         sent = self._send_tiles(d.vertices, colours)
-        for k, m in enumerate(meshes):
-            self.server.scene.add_mesh_simple(
-                f"/object/{k}", m.vertices, m.faces, color=OBJECT_COLOUR, opacity=0.25
-            )
-        kind, words = legend.verdict(d.info)
+        self._send_objects(meshes)
+        kind, words = verdict(d.info)
         self.verdict.content = legend.verdict_html(kind, words)
         self.scale.content = legend.colour_bar(top)
         self.latencies.append(time.perf_counter() - t0)
@@ -318,6 +318,25 @@ class Viewer:
             "surface tiles sent</div>"
         )
         self.server.flush()  # now, not at the next batch: the person is waiting
+
+    def _send_objects(self, meshes: list) -> None:
+        """Show the object's meshes, sending only those that moved or changed (a force slider
+        moves nothing) and removing those no longer there (a hand's fingers, then a disk).
+        """
+        for k, m in enumerate(meshes):
+            key = hash((np.asarray(m.vertices).tobytes(), np.asarray(m.faces).tobytes()))
+            if k < len(self.objects) and self.objects[k][0] == key:
+                continue
+            h = self.server.scene.add_mesh_simple(
+                f"/object/{k}", m.vertices, m.faces, color=OBJECT_COLOUR, opacity=0.25
+            )
+            if k < len(self.objects):
+                self.objects[k] = (key, h)
+            else:
+                self.objects.append((key, h))
+        for _, h in self.objects[len(meshes) :]:
+            h.remove()
+        del self.objects[len(meshes) :]
 
     def _say_error(self, text: str) -> None:
         self.verdict.content = legend.verdict_html("impossible", text)
@@ -366,14 +385,13 @@ class Viewer:
     def _save(self, event, fmt: str) -> None:
         if self.last is None:
             return
-        _, scene, d, _, _ = self.last
+        _, scene, d, _, name = self.last
         mesh = scene.part.mesh(d.vertices)
         mesh.visual.vertex_colors = legend.colours(
             d.magnitude * 1e3, legend.scale_mm(d.magnitude.max() * 1e3)
         )
-        event.client.send_file_download(
-            f"stmpl_pressed.{fmt}", mesh.export(file_type=fmt), save_immediately=True
-        )
+        data = mesh_bytes(mesh, fmt, facts(d, name))  # the verdict travels with the mesh
+        event.client.send_file_download(f"stmpl_pressed.{fmt}", data, save_immediately=True)
 
     def close(self) -> None:
         self.mailbox.close()

@@ -9,8 +9,6 @@ import math
 
 import numpy as np
 
-from stmpl.tissue import GEL_TRUSTED_COMPRESSION
-
 ANCHORS = np.array([[226, 192, 170], [240, 160, 110], [215, 60, 40], [120, 0, 20]], dtype=float)
 """The displacement colours from rest to the scale's top: the skin's own tone where it does not
 move, through orange and red to dark red where it moves most (RGB)."""
@@ -56,26 +54,6 @@ def colour_bar(top_mm: float, title: str = "displacement, mm") -> str:
         f'background:linear-gradient(to right,{cols})"></div>'
         f'<div style="display:flex">{ticks}</div></div>'
     )
-
-
-def verdict(info: dict) -> tuple[str, str]:
-    """``(kind, words)`` of a :class:`~stmpl.scene.Deformation`'s ``info``: ``impossible``
-    (past where the gel buckles), ``outside`` (the envelope's first reason) or ``inside``.
-    """
-    if not info.get("physical", True):
-        c = info.get("max_compression", float("nan"))
-        return "impossible", (
-            f"the skin moves in {c:.2f} x the tissue's depth, past {GEL_TRUSTED_COMPRESSION:g} "
-            "where the gel buckles and the FEM gives no answer: do not use"
-        )
-    env = info.get("envelope")
-    if env and not env.get("inside", True):
-        return "outside", "outside the data it was trained and checked on: " + "; ".join(
-            env.get("outside", [])[:2]
-        )
-    if env is None:
-        return "inside", "no envelope: this predictor's answers are the reference"
-    return "inside", "inside the data it was trained and checked on"
 
 
 def verdict_html(kind: str, words: str) -> str:

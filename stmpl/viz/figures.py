@@ -150,15 +150,43 @@ def vertex_colors(values: np.ndarray, cmap="inferno", vmin=None, vmax=None) -> n
     return (matplotlib.colormaps[cmap](norm(values)) * 255).round().astype(np.uint8)
 
 
+def mesh_bytes(mesh, fmt: str, facts: dict | None = None) -> bytes:
+    """``mesh`` (a trimesh mesh or scene) as a ``ply``, ``obj`` or ``glb`` file, carrying
+    ``facts`` (what the answer is and whether it can be trusted: ``{key: text or number}``):
+    in a GLB as the ``stmpl`` entry of the scene's extras (glTF's own place for application
+    data); in a PLY as ``comment stmpl KEY: VALUE`` header lines;
+    in an OBJ as ``# stmpl`` lines.
+    """
+    facts = {str(k): v for k, v in (facts or {}).items()}
+    if fmt == "glb":
+        import trimesh  # deferred: mesh files only
+
+        scene = mesh if isinstance(mesh, trimesh.Scene) else trimesh.Scene(mesh)
+        scene.metadata["stmpl"] = facts
+        return scene.export(file_type="glb")
+    lines = [f"stmpl {k}: {' '.join(str(v).split())}" for k, v in facts.items()]
+    data = mesh.export(file_type=fmt)
+    data = data.encode() if isinstance(data, str) else data
+    if fmt == "ply":  # comments go right after the format line
+        head, rest = data.split(b"\n", 2)[:2], data.split(b"\n", 2)[2]
+        notes = b"".join(f"comment {c}\n".encode() for c in lines)
+        return b"\n".join(head) + b"\n" + notes + rest
+    if fmt == "obj":
+        return "".join(f"# {c}\n" for c in lines).encode() + data
+    raise ValueError(f"mesh export supports ply, obj, glb; got {fmt!r}")
+
+
 def export_mesh(
     part: BodyPart,
     path,
     values: np.ndarray | None = None,
     vertices: np.ndarray | None = None,
     cmap="inferno",
+    facts: dict | None = None,
 ) -> pathlib.Path:
     """Write the part (optionally moved to ``vertices`` ``(N, 3)``) with per-vertex colours of
-    ``values`` ``(N,)`` to ``.ply``, ``.obj`` or ``.glb``.
+    ``values`` ``(N,)`` to ``.ply``, ``.obj`` or ``.glb``, carrying ``facts``
+    (:func:`mesh_bytes`).
     """
     path = pathlib.Path(path)
     if path.suffix.lower() not in (".ply", ".obj", ".glb"):
@@ -170,7 +198,7 @@ def export_mesh(
             raise ValueError(f"values must have shape ({part.n_vertices},), got {values.shape}")
         mesh.visual.vertex_colors = vertex_colors(values, cmap)
     path.parent.mkdir(parents=True, exist_ok=True)
-    mesh.export(path)
+    path.write_bytes(mesh_bytes(mesh, path.suffix.lower()[1:], facts))
     return path
 
 

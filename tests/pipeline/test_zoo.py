@@ -330,9 +330,7 @@ def test_a_set_of_bodies_widens_the_body_size(tmp_path, monkeypatch):
     assert zoo.read("naive_two", path=tmp_path / "zoo").envelope.reasons(big) == []
 
 
-def test_a_model_shipped_without_a_support_gets_one_from_its_training_set(
-    tiny_dataset, tmp_path
-):
+def test_a_model_shipped_without_a_support_gets_one_from_its_training_set(tiny_dataset, tmp_path):
     """A Naive model whose envelope has boxes only (as the zoo's first models): `zoo support`
     builds the joint support of its training scenes and measures it on the validation split,
     and zoo.read then judges scenes by their neighbours; a set of another name is refused.

@@ -1,9 +1,10 @@
 """The viewer in a real browser: Debian's chromium, driven headless by Playwright. A person
-loads the page, clicks the arm, drags the object, asks for 5 N, compares with the FEM and saves
-the mesh; the page
-must follow each step and nothing may leave this machine.
+loads the page, clicks the arm, drags the object, compares with the FEM, asks for 5 N and saves
+the mesh (which carries the verdict); the page must follow each step and nothing may leave this
+machine.
 """
 
+import pathlib
 import shutil
 import socket
 import time
@@ -126,9 +127,11 @@ def test_a_person_presses_the_arm_in_a_real_browser(tmp_path):
                 "xpath=//*[normalize-space(text())='force, N']/ancestor::div"
                 "[.//input[@type='text']][1]//input[@type='text']"
             )
+            shown_objects = [h for _, h in viewer.objects]
             force.fill("5")
             force.press("Enter")
             _settle(viewer, page)
+            assert [h for _, h in viewer.objects] == shown_objects  # a force moves no object
             assert verdict.get_attribute("data-kind") == "outside"
             assert "force of a contact 5 N" in page.locator("#stmpl-verdict + div").inner_text()
             page.screenshot(path=str(tmp_path / "pressed.png"))
@@ -136,6 +139,8 @@ def test_a_person_presses_the_arm_in_a_real_browser(tmp_path):
             # the deformed mesh comes down as a file
             with page.expect_download() as d:
                 page.get_by_text("deformed mesh (PLY)").click()
+            saved = pathlib.Path(d.value.path()).read_bytes()
+            assert b"comment stmpl verdict: outside" in saved[: saved.index(b"end_header")]
             mesh = trimesh.load(d.value.path(), file_type="ply", process=False)
             assert len(mesh.vertices) == part.n_vertices
             assert np.abs(mesh.vertices - part.vertices).max() > 1e-3  # deformed, 5 N

@@ -1,0 +1,41 @@
+"""What an answer is worth, in words: past where the gel buckles, outside the data behind it (with
+the reason), or inside it; and the facts a saved mesh carries about the answer it shows.
+"""
+
+from __future__ import annotations
+
+from stmpl.tissue import GEL_TRUSTED_COMPRESSION
+
+
+def verdict(info: dict) -> tuple[str, str]:
+    """``(kind, words)`` of a :class:`~stmpl.scene.Deformation`'s ``info``: ``impossible``
+    (past where the gel buckles), ``outside`` (the envelope's first reasons) or ``inside``.
+    """
+    if not info.get("physical", True):
+        c = info.get("max_compression", float("nan"))
+        return "impossible", (
+            f"the skin moves in {c:.2f} x the tissue's depth, past {GEL_TRUSTED_COMPRESSION:g} "
+            "where the gel buckles and the FEM gives no answer: do not use"
+        )
+    env = info.get("envelope")
+    if env and not env.get("inside", True):
+        return "outside", "outside the data it was trained and checked on: " + "; ".join(
+            env.get("outside", [])[:2]
+        )
+    if env is None:
+        return "inside", "no envelope: this predictor's answers are the reference"
+    return "inside", "inside the data it was trained and checked on"
+
+
+def facts(deformation, predictor: str) -> dict:
+    """What a saved mesh of ``deformation`` says about itself: the predictor, the deepest
+    displacement (mm), the verdict and its words (:func:`verdict`), the total force (N).
+    """
+    kind, words = verdict(deformation.info)
+    return {
+        "predictor": predictor,
+        "deepest_mm": round(1e3 * float(deformation.magnitude.max()), 4),
+        "force_N": round(float(deformation.scene.force.sum()), 6),
+        "verdict": kind,
+        "why": words,
+    }
