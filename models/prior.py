@@ -5,6 +5,8 @@ input (:data:`models.features.PRIOR_SCALE`) and learns only the correction to it
 
 from __future__ import annotations
 
+import numpy as np
+
 from fem.compliance import ColumnStore
 from models.linear.operator import (
     ComplianceOperator,
@@ -13,6 +15,7 @@ from models.linear.operator import (
     fit_operator,
     install,
     reattach,
+    solve_needed,
 )
 
 PRIORS = ("none", "linear")
@@ -71,6 +74,14 @@ class LinearPrior:
             return self.normalised(base, force)
         return self.normalised(on_bodies(self, self.model.prior, thickness, force, body), force)
 
+    def prepare(self, part, thickness, progress: bool = True) -> int:
+        """Solve the prior's columns at every vertex of ``part`` for tissue ``thickness``
+        (:func:`prepare_operator`); 0 without the prior or with a stored operator.
+        """
+        if not self.prior:
+            return 0
+        return prepare_operator(self, self.model.prior, part, thickness, progress)
+
     def body_prior(self, k: int):
         """The linear FEM of body slot ``k`` (the model's own: ``model.prior``), on demand: a
         :class:`~fem.compliance.ColumnStore` for that body and the recorded FEM set-up, whose
@@ -85,6 +96,26 @@ class LinearPrior:
         output alone without a prior); any ``(..., 3)`` shapes that broadcast.
         """
         return out if base is None else base + CORRECTION_SCALE * out
+
+
+def prepare_operator(predictor, own, part, thickness, progress: bool = True) -> int:
+    """Solve into the disk cache every column of the on-demand linear FEM that a scene on
+    ``part`` (the predictor's own body, operator ``own``, or another:
+    :func:`body_operator`) with tissue ``thickness`` ``(N,)`` m can load: every vertex, at each
+    level the thickness needs (one factorisation per level, with a progress bar). Returns how
+    many columns were solved (0: all cached, or a stored operator that carries them all).
+    """
+    import torch  # deferred: about a second to import; the core's types do not need it
+
+    k = predictor.slot(part)
+    op = own if k == 0 else body_operator(predictor, k)
+    if not op.on_demand:
+        return 0
+    t = np.asarray(thickness, dtype=np.float32)[None]
+    if t.shape != (1, part.n_vertices) or not np.all(np.isfinite(t)):
+        raise ValueError(f"thickness must be ({part.n_vertices},) finite values in m")
+    with torch.no_grad():
+        return solve_needed(op.store, op, t, np.ones_like(t), progress)
 
 
 def on_bodies(predictor, own, thickness, force, body=None):

@@ -219,5 +219,13 @@ class BasePredictor:
     def info(self, scene: Scene) -> dict:
         return {}
 
+    def prepare(self, part, thickness, progress: bool = True) -> int:
+        """Do, once and ahead, whatever a scene on ``part`` (a body part) with tissue
+        ``thickness`` ``(N,)`` m needs before its first answer, so that no press waits for it
+        (a linear FEM prior: its columns at every vertex, solved and cached on disk). Returns how
+        many pieces it computed (0: nothing to do, or all cached). Nothing here by default.
+        """
+        return 0
+
     def predict_batch(self, scenes: list[Scene]) -> list[np.ndarray]:
         raise NotImplementedError

@@ -294,10 +294,10 @@ def _needed(op: ComplianceOperator, thickness: np.ndarray, force: np.ndarray) ->
 
 def solve_needed(
     store, op: ComplianceOperator, thickness: np.ndarray, force: np.ndarray, progress: bool = True
-) -> None:
+) -> int:
     """Compute (and save) every column the samples ``thickness``, ``force`` ``(S, N)`` need:
     one solve per level over all of them (the union of many loads is most of the part, where
-    one factorisation beats a patch per load).
+    one factorisation beats a patch per load). Returns how many were computed.
     """
     need = _needed(op, thickness, force)
     bar = None
@@ -306,12 +306,15 @@ def solve_needed(
             len(store.missing(store.level(float(op.levels[lv])), c)) for lv, c in enumerate(need)
         )
         bar = tqdm(total=total, unit="col", desc="linear FEM columns", dynamic_ncols=True)
+    solved = 0
     for lv, cols in enumerate(need):
         done = store.ensure(store.level(float(op.levels[lv])), cols, save=True)
+        solved += done
         if bar is not None:
             bar.update(done)
     if bar is not None:
         bar.close()
+    return solved
 
 
 def fit_on_demand(

@@ -22,7 +22,7 @@ from models.linear.operator import (
     install,
     reattach,
 )
-from models.prior import on_bodies
+from models.prior import on_bodies, prepare_operator
 
 
 class LinearPredictor(LearnedPredictor):
@@ -77,3 +77,9 @@ class LinearPredictor(LearnedPredictor):
 
     def restored(self) -> None:
         reattach(self, self.model)
+
+    def prepare(self, part, thickness, progress: bool = True) -> int:
+        """Solve the operator's columns at every vertex of ``part`` for tissue ``thickness``
+        (:func:`~models.prior.prepare_operator`); 0 when stored (all carried).
+        """
+        return prepare_operator(self, self.model, part, thickness, progress)

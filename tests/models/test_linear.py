@@ -149,3 +149,33 @@ def test_on_demand_takes_a_new_thickness_as_a_new_level(ds, tmp_path, monkeypatc
     assert np.isfinite(thinner).all() and 0 < np.abs(thinner).max() < np.abs(u).max()
     levels = lazy.model.levels.numpy()
     assert len(np.unique(levels)) == len(levels)  # each new thickness a level once
+
+
+def test_a_prepared_body_answers_a_press_anywhere_without_solving(ds, tmp_path, monkeypatch):
+    """``prepare`` solves every vertex's column at the levels a thickness needs, once (the disk
+    cache then holds them): a press at any place afterwards solves nothing, and its answer is
+    the one solved on demand.
+    """
+    monkeypatch.setenv("STMPL_CACHE_DIR", str(tmp_path))
+    lazy = predictor.create("linear", ds.part, {"operator": "on_demand"})
+    lazy.fit(ds, progress=False)
+    n = ds.part.n_vertices
+    t = np.full(n, 0.0075)  # between two levels: both are needed
+    solved = lazy.prepare(ds.part, t, progress=False)
+    store = lazy.model.store
+    assert solved > 0 and all(store.missing(lv, np.arange(n)).size == 0 for lv in (0, 1))
+    assert lazy.prepare(ds.part, t, progress=False) == 0  # once
+    calls = len(store.log)
+    places = [3, n // 2, n - 5]
+    answers = [
+        lazy.predict(Scene(ds.part, t, np.where(np.arange(n) == k, 0.1, 0.0))) for k in places
+    ]
+    assert len(store.log) == calls  # nothing solved at a press
+    fresh = predictor.create("linear", ds.part, {"operator": "on_demand"})
+    fresh.fit(ds, progress=False)
+    monkeypatch.setenv("STMPL_CACHE_DIR", str(tmp_path / "cold"))  # solved on demand instead
+    for k, a in zip(places, answers):
+        s = Scene(ds.part, t, np.where(np.arange(n) == k, 0.1, 0.0))
+        np.testing.assert_allclose(a.displacement, fresh.predict(s).displacement, atol=1e-12)
+    with pytest.raises(ValueError, match="thickness must be"):
+        lazy.prepare(ds.part, t[:-1], progress=False)
