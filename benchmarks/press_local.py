@@ -2,11 +2,14 @@
 time of each, and how far the two answers lie apart.
 
     python benchmarks/press_local.py [--force 10] [--tissue forearm] [--res reference]
-        [--radius-mm 10] [--repeats 2]
+        [--radius-mm 10] [--repeats 2] [--ramp 10]
 
 The disk (a rigid flat punch) starts touching the skin at chart point (0.35, 0.5) of anny's
 left arm and is pushed along the inward normal until it carries the force (within 1 %), from
 rest each time. Run it alone: the times are wall-clock, each the best of ``--repeats``.
+
+``--ramp K``: instead, the force met in K equal steps on the whole arm, each from the last
+answer, as a dataset's force levels are made: the time of each sample of the ramp.
 """
 
 from __future__ import annotations
@@ -34,6 +37,7 @@ def main() -> None:
     ap.add_argument("--res", default="reference")
     ap.add_argument("--radius-mm", type=float, default=10.0)
     ap.add_argument("--repeats", type=int, default=2)
+    ap.add_argument("--ramp", type=int, default=0, help="K steps to the force, each from the last")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     part = AnnyBody(phenotype={"weight": 0.5}).part("left_arm")
@@ -48,6 +52,10 @@ def main() -> None:
         f"{args.force:g} N, {args.radius_mm:g} mm disk on the {args.tissue} preset of anny's left "
         f"arm ({part.n_vertices} vertices), {args.res} resolution; {describe()}"
     )
+
+    if args.ramp:
+        ramp(part, thickness, shape, p, n, args)
+        return
 
     def whole():
         mesh, material = tissue_mesh(part, thickness, args.res, args.tissue, near=p[None])
@@ -102,6 +110,28 @@ def main() -> None:
         f"\nlocal vs whole: largest displacement gap {100 * gap:.2f} % of the deepest "
         f"({1e3 * peak:.2f} mm); {min(times['whole']) / min(times['local']):.1f}x faster"
     )
+
+
+def ramp(part, thickness, shape, p, n, args) -> None:
+    """The force in ``args.ramp`` equal steps, each from the last answer, on the whole arm."""
+    t0 = time.perf_counter()
+    mesh, material = tissue_mesh(part, thickness, args.res, args.tissue, near=p[None])
+    solver = Solver(mesh, material, order=resolution(args.res).order)
+    print(f"mesh and solver: {time.perf_counter() - t0:.1f} s, {len(solver.free)} DOFs\n")
+    print(header(["force N", "depth mm", "reaction N", "s", "note"], "rrrrl"))
+    last, total = None, 0.0
+    for force in np.linspace(args.force / args.ramp, args.force, args.ramp):
+        t0 = time.perf_counter()
+        answer = press_to_force(solver, shape, -n, float(force), start=last)
+        dt = time.perf_counter() - t0
+        total += dt
+        if not answer.ok:
+            print(row([f"{force:g}", "", "", f"{dt:.1f}", answer.reason]))
+            return
+        last = answer
+        cells = [f"{force:g}", f"{1e3 * answer.depth:.3f}", f"{answer.reaction:.3f}", f"{dt:.1f}"]
+        print(row([*cells, ""]), flush=True)
+    print(f"\n{args.ramp} samples in {total:.0f} s: {total / args.ramp:.1f} s a sample")
 
 
 if __name__ == "__main__":

@@ -158,15 +158,16 @@ PAPER = Layer(
 
 TRUSTED = Limits(
     0.8,
-    0.6,
-    "an 8 mm fingertip on an arm-sized tube converges within 1 % up to 0.69 compression, "
-    "deeper is not measured; the tissue keeps 0.9 of its volume or more",
+    0.65,
+    "an 8 mm fingertip on an arm-sized tube converges within 1 % up to 0.69 compression, and "
+    "the finer mesh finds no answer at 0.75; the tissue keeps 0.9 of its volume or more",
 )
 """The layered presets' trust bounds. An 8 mm fingertip pressed into the forearm preset of an
 arm-sized tube converges under mesh refinement (within 1 % from 6 mm on) up to 0.69 of the
-tissue's depth, the deepest measured: past 0.6 compression an answer is failed. The nearly
-incompressible fat and muscle keep 0.9 of their volume or more there; a volume ratio under
-0.8 (a tissue file with softer bulk moduli) is failed too (``docs/tissue.md``)."""
+tissue's depth, and one step deeper (0.75) the finer mesh finds no answer: past 0.65
+compression an answer is failed. The nearly incompressible fat and muscle keep 0.9 of their
+volume or more there; a volume ratio under 0.8 (a tissue file with softer bulk moduli) is
+failed too (``docs/tissue.md``)."""
 
 LAYERS = (SKIN, FAT, MUSCLE)
 PRESETS = {
