@@ -129,6 +129,7 @@ def local_compliance(
     margin: float | None = None,
     tolerance: float = COLUMN_TOLERANCE,
     grow: float | None = None,
+    progress=None,
 ) -> tuple[np.ndarray, dict]:
     """The columns ``(N, k, 3)`` (m/N) of :func:`compliance` for the vertices ``columns``
     ``(k,)`` of a uniform layer ``thickness`` (m), solved on the patch within ``margin`` of them
@@ -136,7 +137,7 @@ def local_compliance(
     ``grow`` (default :data:`stmpl.reach.GROW`) until every column moves the ring next to its cut
     by at most ``tolerance`` of its own largest displacement, up to the whole part. Rows outside
     the patch are zero. Returns the columns and a summary (margin, patch vertices, attempts,
-    seconds).
+    seconds). ``progress``: a callable taking the number of columns solved, on each attempt.
     """
     n = part.n_vertices
     cols = np.unique(np.asarray(columns, dtype=np.int64))
@@ -158,7 +159,9 @@ def local_compliance(
         t0 = time.perf_counter()
         where = np.full(n, -1)
         where[p.vertices] = np.arange(len(p.vertices))
-        g = compliance(p.part, t[p.vertices], res, material, options, columns=where[cols])
+        g = compliance(
+            p.part, t[p.vertices], res, material, options, columns=where[cols], progress=progress
+        )
         mag = np.linalg.norm(g, axis=-1)  # (n_p, k)
         moved = (
             0.0
@@ -281,9 +284,10 @@ class ColumnStore:
         cols = np.unique(np.asarray(columns, dtype=np.int64))
         return cols[~done[cols]]
 
-    def ensure(self, level: int, columns, save: bool = True) -> int:
+    def ensure(self, level: int, columns, save: bool = True, progress=None) -> int:
         """Compute the missing ``columns`` at ``level`` (one patch around all of them); with
         ``save``, write the level's cache file if anything was computed. Returns how many.
+        ``progress``: a callable taking the number of columns solved (:func:`local_compliance`).
         """
         G, done = self._level(level)
         todo = self.missing(level, columns)
@@ -291,7 +295,13 @@ class ColumnStore:
             return 0
         t0 = time.perf_counter()
         g, info = local_compliance(
-            self.part, self.levels[level], todo, self.res, self.material, self.options
+            self.part,
+            self.levels[level],
+            todo,
+            self.res,
+            self.material,
+            self.options,
+            progress=progress,
         )
         if not np.all(np.isfinite(g)):
             raise ArithmeticError("the compliance operator has non-finite entries")

@@ -308,10 +308,16 @@ def solve_needed(
         bar = tqdm(total=total, unit="col", desc="linear FEM columns", dynamic_ncols=True)
     solved = 0
     for lv, cols in enumerate(need):
-        done = store.ensure(store.level(float(op.levels[lv])), cols, save=True)
+        done = store.ensure(
+            store.level(float(op.levels[lv])),
+            cols,
+            save=True,
+            progress=None if bar is None else bar.update,  # moves as columns are solved
+        )
         solved += done
-        if bar is not None:
-            bar.update(done)
+        if bar is not None:  # a patch that grew solved some columns twice: count each once
+            bar.n = solved
+            bar.refresh()
     if bar is not None:
         bar.close()
     return solved
