@@ -37,3 +37,18 @@ def test_a_local_change_sends_only_the_tiles_it_touches():
     assert 1 <= len(sent) <= 3
     t.forget()
     assert len(t.changed(moved, grey)) == 8
+
+
+def test_a_change_no_one_sees_is_not_sent_nor_lost():
+    """Moves under a twelfth of a pixel and colour steps of 3 are not sent; they are measured
+    against what was sent, so two of them that add up to a visible change are.
+    """
+    part = tube(0.04, 0.3, 24, 40)
+    t = Tiles(part.vertices, part.faces, 8)
+    grey = np.full((part.n_vertices, 4), 200, np.uint8)
+    t.changed(part.vertices, grey)
+    step = 3e-5 * part.normals
+    assert t.changed(part.vertices - step, grey) == []
+    assert t.changed(part.vertices, grey + 3) == []
+    assert t.changed(part.vertices - 2 * step, grey) == list(range(8))  # 60 um from what was sent
+    assert t.changed(part.vertices - 2 * step, grey + 4) == list(range(8))
