@@ -76,6 +76,7 @@ def view(args) -> int:
         port=args.port,
         device=args.device,
         fidelity=args.fidelity,
+        prepare=args.prepare,
     )
     print(
         f"stmpl view: open http://{args.host}:{v.server.get_port()} in your browser (Ctrl-C ends)"

@@ -68,6 +68,12 @@ def parser() -> argparse.ArgumentParser:
         "--host", default="127.0.0.1", help="address to serve on (default: this machine only)"
     )
     vw.add_argument("--port", type=int, default=8080, help="port (default 8080)")
+    vw.add_argument(
+        "--prepare",
+        action="store_true",
+        help="solve the linear FEM columns of the whole body before serving (once per body, "
+        "cached; minutes the first time), so that no press at a new place waits",
+    )
     fidelity_option(vw)
     device_option(vw)
     vw.set_defaults(func="stmpl.cli.commands:view", fidelity="auto")

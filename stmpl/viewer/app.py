@@ -96,9 +96,11 @@ class Viewer:
 
     ``models``: predictor specs (``zoo:gnn_arm_bodies``, a checkpoint, ``linear``...), the
     first answering first; ``part``: the body part; ``phenotype``: anny's; ``thickness_mm``:
-    the tissue (``None``: the paper's heuristic from the weight). Before it serves, each
-    predictor prepares the body (``Predictor.prepare``: a linear FEM prior's columns at every
-    vertex, once per body and cached), with a progress bar unless ``progress`` is false.
+    the tissue (``None``: the paper's heuristic from the weight). With ``prepare``, before it
+    serves, each predictor prepares the body (``Predictor.prepare``: a linear FEM prior's
+    columns at every vertex, once per body and cached on disk; minutes the first time), with a
+    progress bar unless ``progress`` is false; without, a press at a new place waits for its
+    columns (seconds) the first time.
     """
 
     def __init__(
@@ -111,6 +113,7 @@ class Viewer:
         port: int = 8080,
         device: str = "cpu",
         fidelity: str = "auto",
+        prepare: bool = False,
         progress: bool = True,
     ):
         import viser  # deferred: the browser viewer only (its server and client)
@@ -126,8 +129,9 @@ class Viewer:
         self.part_name, self.phenotype, self.skin = part, dict(phenotype or {}), skin
         self.thickness_mm = thickness_mm
         self._build_part()
-        for p in self.predictors.values():  # columns ahead: no press waits for the linear FEM
-            p.prepare(self.part, self.thickness, progress=progress)
+        if prepare:  # columns ahead: no press waits for the linear FEM
+            for p in self.predictors.values():
+                p.prepare(self.part, self.thickness, progress=progress)
         self.latencies: list[float] = []  # s, from the pointer event to the tiles sent
         self.last = None  # (choice, scene, deformation, meshes, model) of the last answer shown
         self.objects: list = []  # (key of the mesh, its handle) per object mesh shown
