@@ -21,6 +21,8 @@ def test_sample_metrics_by_hand():
     assert m["rel_mee"] == pytest.approx(100 * 0.175 / 2.0)
     assert m["max_err"] == pytest.approx(0.3)
     assert m["ee<=0.1"] == 50.0 and m["ee<=0.5"] == 100.0
+    # relative to the 2 mm peak: 0.05 mm lies within 5 % (0.1 mm), not within 2 % (0.04 mm)
+    assert m["ee<=1%peak"] == m["ee<=2%peak"] == 0.0 and m["ee<=5%peak"] == 50.0
     # the peak counts wherever it is: the inactive vertex's 9 mm against the true 2 mm
     assert m["peak_err"] == pytest.approx(100 * (9.0 / 2.0 - 1))
     pred[3] = 0.0
