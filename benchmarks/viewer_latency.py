@@ -10,8 +10,11 @@ front of the arm at ``--places`` places along it, twice: the first pass meets ea
 cached. Each latency runs from just before the click is dispatched to the second animation
 frame after the page shows the new answer (the answer's stamp in the page; the surface tiles
 arrive in the same message batch, before it). Then a drag along the arm: each pointer move to
-the next answer shown (viser sends drag updates at most about 20 times a second). Prints the
-median and 95th percentile of each, and the server's own share (event received to tiles sent).
+the next answer shown (viser sends drag updates at most about 20 times a second). Then each
+place clicked twice more: the second answer redraws no tile, which leaves the page's own share
+(the event's round trip, the page's text, two frames). Prints the median and 95th percentile of
+each, and the server's own share (event received to tiles sent). ``--prepare``: the viewer
+solves the body's linear FEM columns before it serves (the first touch then waits for none).
 ``--shots``: also write the docs' screenshots (``viewer.png``, ``viewer_outside.png``) there.
 """
 
@@ -66,6 +69,9 @@ def main(argv=None) -> None:
     ap.add_argument("--model", default="zoo:gnn_arm_bodies")
     ap.add_argument("--places", type=int, default=24)
     ap.add_argument("--shots", type=Path, help="folder for the docs' screenshots")
+    ap.add_argument(
+        "--prepare", action="store_true", help="the viewer prepares the body first (--prepare)"
+    )
     args = ap.parse_args(argv)
     chromium = shutil.which("chromium")
     if chromium is None:
@@ -74,12 +80,12 @@ def main(argv=None) -> None:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     t0 = time.perf_counter()
-    viewer = Viewer([args.model], port=port)
+    viewer = Viewer([args.model], port=port, prepare=args.prepare)
     viewer.mailbox.idle(600)
     print(f"{describe()}; viewer up with {args.model} (auto) in {time.perf_counter() - t0:.1f} s")
     part = viewer.part
     places = [facing(part, f) for f in np.linspace(0.15, 0.85, args.places)]
-    out: dict = {"first": [], "cached": [], "drag": []}
+    out: dict = {"first": [], "cached": [], "same": [], "drag": []}
     try:
         with sync_playwright() as p:
             browser = p.chromium.launch(executable_path=chromium, args=ARGS)
@@ -97,6 +103,17 @@ def main(argv=None) -> None:
                     wait_shown(page, n + 1)
                     out[name].append(time.perf_counter() - t)
             server = list(viewer.latencies[-len(places) :])
+            sent_before = viewer.tiles_sent
+            for v in places:  # the place just pressed again: an answer with nothing to redraw
+                x, y = project(camera, part.vertices[v], W, H)
+                page.mouse.click(x, y)
+                wait_shown(page, shown(page))
+                n = shown(page)
+                t = time.perf_counter()
+                page.mouse.click(x, y)
+                wait_shown(page, n + 1)
+                out["same"].append(time.perf_counter() - t)
+            redrawn = viewer.tiles_sent - sent_before
             a, b = (
                 project(camera, part.vertices[places[0]], W, H),
                 project(camera, part.vertices[places[-1]], W, H),
@@ -141,6 +158,8 @@ def main(argv=None) -> None:
     print(f"click at a new place (first touch): {stats(out['first'])}")
     print(f"click at a place seen before:       {stats(out['cached'])}")
     print(f"  of which the server (event to tiles sent): {stats(server)}")
+    print(f"click again where it pressed (no tile): {stats(out['same'])}")
+    print(f"  tiles sent over those {2 * len(places)} clicks: {redrawn}")
     if out["drag"]:
         print(f"drag, pointer move to answer shown:  {stats(out['drag'])}")
     print(f"answers dropped while busy: {viewer.mailbox.dropped}")

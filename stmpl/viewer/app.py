@@ -133,6 +133,7 @@ class Viewer:
             for p in self.predictors.values():
                 p.prepare(self.part, self.thickness, progress=progress)
         self.latencies: list[float] = []  # s, from the pointer event to the tiles sent
+        self.tiles_sent = 0  # surface tiles sent since the start
         self.last = None  # (choice, scene, deformation, meshes, model) of the last answer shown
         self.objects: list = []  # (key of the mesh, its handle) per object mesh shown
         self._sending = threading.Lock()
@@ -183,6 +184,7 @@ class Viewer:
         import trimesh  # deferred: the viewer only
 
         changed = self.tiles.changed(vertices, colours)
+        self.tiles_sent += len(changed)
         for k in changed:
             used, faces = self.tiles.groups[k]
             mesh = trimesh.Trimesh(
