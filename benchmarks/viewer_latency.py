@@ -106,8 +106,9 @@ def main(argv=None) -> None:
             sent_before = viewer.tiles_sent
             for v in places:  # the place just pressed again: an answer with nothing to redraw
                 x, y = project(camera, part.vertices[v], W, H)
+                n = shown(page)
                 page.mouse.click(x, y)
-                wait_shown(page, shown(page))
+                wait_shown(page, n + 1)
                 n = shown(page)
                 t = time.perf_counter()
                 page.mouse.click(x, y)
