@@ -9,7 +9,7 @@ import math
 
 import numpy as np
 
-ANCHORS = np.array([[226, 192, 170], [240, 160, 110], [215, 60, 40], [120, 0, 20]], dtype=float)
+ANCHORS = np.array([[205, 160, 135], [240, 150, 95], [215, 60, 40], [120, 0, 20]], dtype=float)
 """The displacement colours from rest to the scale's top: the skin's own tone where it does not
 move, through orange and red to dark red where it moves most (RGB)."""
 
