@@ -4,7 +4,9 @@ to 20 N, on the layered arm and belly; how many solves succeed, and why the othe
     python benchmarks/force_sweep.py [--out runs/force_sweep.jsonl] [--res medium]
         [--parts arm belly] [--objects disk fingertip grip] [--report] [--redo CASE ...]
 
-Each case (part, object, placement) is one mesh and one solver; its forces are met one after
+Each case (part, object, placement) is one mesh and one solver; a disk or a fingertip is set
+on the skin at first contact (``fem.shapes.touching``: where the skin is hollow, a flat disk set
+on its middle vertex would start pressed into the skin around it); its forces are met one after
 the other by force control (``fem.contact.press_to_force``, within 1 %), each from the last
 one's state. Every answer is a line of ``--out``; a case already there is not solved again (the
 run resumes where it stopped). ``--report`` prints the success table and the force-depth curves'
@@ -24,7 +26,7 @@ import numpy as np
 
 from fem.contact import press_to_force
 from fem.objects import grip
-from fem.shapes import Punch, Sphere
+from fem.shapes import Punch, Sphere, touching
 from fem.simulate import resolution, tissue_mesh
 from fem.solver import Solver
 from stmpl import AnnyBody, loads, tissue
@@ -45,6 +47,17 @@ FORCES = {
     "grip": [2.0, 5.0, 10.0, 20.0],
 }
 DISK_RADIUS, FINGERTIP_RADIUS = 0.01, 0.008
+
+
+def skin_near(part, p: np.ndarray, radius: float, k: int = 8) -> np.ndarray:
+    """``(K, 3)`` the skin within ``radius`` (m) of ``p``: points of its (flat) faces on a
+    barycentric grid of ``k`` steps, where the FEM's refined skin puts its nodes.
+    """
+    i, j = np.meshgrid(np.arange(k + 1), np.arange(k + 1))
+    keep = i + j <= k
+    w = np.column_stack([i[keep], j[keep], k - i[keep] - j[keep]]) / k  # (P, 3)
+    x = np.einsum("pc,fcd->fpd", w, part.vertices[part.faces]).reshape(-1, 3)
+    return x[np.linalg.norm(x - p, axis=1) < radius]
 
 
 def cases(parts, objects):
@@ -81,6 +94,7 @@ def solve_case(part_name, obj, where, res, body) -> list[dict]:
             shape = Punch(p, -n, DISK_RADIUS)
         else:
             shape = Sphere(p + FINGERTIP_RADIUS * n, FINGERTIP_RADIUS)
+        shape = touching(shape, -n, skin_near(part, p, 3 * DISK_RADIUS))  # depth from contact
     mesh, material = tissue_mesh(part, thickness, res, preset, near=near)
     solver = Solver(mesh, material, order=resolution(res).order)
     setup = time.perf_counter() - t0

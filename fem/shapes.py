@@ -166,6 +166,32 @@ NEAREST = 8
 they do not settle is checked against every triangle within reach."""
 
 
+def touching(shape, direction: np.ndarray, points: np.ndarray, tolerance: float = 1e-6):
+    """``shape`` moved back against ``direction`` ``(3,)`` (the way it presses) just far enough
+    that none of ``points`` ``(K, 3)`` (m; the skin around where it presses) lies inside it:
+    placed at first contact, from where a press's depth counts. A flat punch set on a vertex in
+    a hollow of the skin would otherwise start pressed into the skin around that vertex, and
+    carry a force at depth 0. Found by bisection to ``tolerance`` (m); the shape itself if
+    nothing lies inside it.
+    """
+    d = unit(direction)
+    x = np.asarray(points, dtype=float).reshape(-1, 3)
+
+    def inside(back: float) -> bool:
+        return bool(shape.moved(-back * d).distance(x)[0].min() < 0.0)
+
+    if len(x) == 0 or not inside(0.0):
+        return shape
+    hi = float(np.ptp(x @ d)) + tolerance
+    if inside(hi):
+        raise ValueError("the points lie inside the shape however far it moves back")
+    lo = 0.0
+    while hi - lo > tolerance:
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if inside(mid) else (lo, mid)
+    return shape.moved(-hi * d)
+
+
 def closest_points(tri: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(c (K, 3), weights (K, 3))``: the point of each triangle ``tri`` ``(K, 3, 3)``
     closest to ``x`` ``(K, 3)`` and its barycentric weights: the projection on the plane if it

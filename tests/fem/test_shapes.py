@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from fem.shapes import BAND, Box, Punch, Sphere, Surface, closest_points
+from fem.shapes import BAND, Box, Punch, Sphere, Surface, closest_points, touching
 
 
 def test_signed_distances_of_the_shapes():
@@ -126,3 +126,27 @@ def test_a_mesh_moves_or_closes_along_its_path():
 def test_bad_shapes_are_named(make, message):
     with pytest.raises(ValueError, match=message):
         make()
+
+
+def test_a_punch_in_a_hollow_is_set_back_to_first_contact():
+    """A flat punch set on the bottom of a hollow (a bowl of radius 50 mm) starts with the
+    hollow's sides inside it; moved back to first contact, its face stands the bowl's rise at
+    its rim (r^2 / 2R = 1 mm for r = 10 mm) above the bottom and just touches. A ball over a
+    flat plane is left where it is.
+    """
+    g = np.linspace(-0.03, 0.03, 61)
+    x, y = np.meshgrid(g, g)
+    R = 0.05
+    bowl = np.column_stack(
+        [x.ravel(), y.ravel(), R - np.sqrt(R**2 - x.ravel() ** 2 - y.ravel() ** 2)]
+    )
+    down = np.array([0.0, 0.0, -1.0])
+    punch = Punch(np.zeros(3), down, 0.01)
+    assert punch.distance(bowl)[0].min() < -5e-4  # the rim is inside it
+    set_back = touching(punch, down, bowl)
+    rise = R - np.sqrt(R**2 - 0.01**2)  # 1.0 mm at the punch's rim
+    assert set_back.centre[2] == pytest.approx(rise, abs=2e-6)
+    assert -1e-6 <= set_back.distance(bowl)[0].min() <= 2e-6
+    plane = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+    ball = Sphere(np.array([0.0, 0.0, 0.008]), 0.008)
+    assert touching(ball, down, plane) is ball
