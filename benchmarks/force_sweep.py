@@ -26,7 +26,7 @@ import numpy as np
 
 from fem.contact import press_to_force
 from fem.objects import grip
-from fem.shapes import Punch, Sphere, touching
+from fem.shapes import Punch, Sphere, skin_near, touching
 from fem.simulate import resolution, tissue_mesh
 from fem.solver import Solver
 from stmpl import AnnyBody, loads, tissue
@@ -47,17 +47,6 @@ FORCES = {
     "grip": [2.0, 5.0, 10.0, 20.0],
 }
 DISK_RADIUS, FINGERTIP_RADIUS = 0.01, 0.008
-
-
-def skin_near(part, p: np.ndarray, radius: float, k: int = 8) -> np.ndarray:
-    """``(K, 3)`` the skin within ``radius`` (m) of ``p``: points of its (flat) faces on a
-    barycentric grid of ``k`` steps, where the FEM's refined skin puts its nodes.
-    """
-    i, j = np.meshgrid(np.arange(k + 1), np.arange(k + 1))
-    keep = i + j <= k
-    w = np.column_stack([i[keep], j[keep], k - i[keep] - j[keep]]) / k  # (P, 3)
-    x = np.einsum("pc,fcd->fpd", w, part.vertices[part.faces]).reshape(-1, 3)
-    return x[np.linalg.norm(x - p, axis=1) < radius]
 
 
 def cases(parts, objects):

@@ -192,6 +192,18 @@ def touching(shape, direction: np.ndarray, points: np.ndarray, tolerance: float 
     return shape.moved(-hi * d)
 
 
+def skin_near(part, p: np.ndarray, radius: float, k: int = 8) -> np.ndarray:
+    """``(K, 3)`` points of a body part's skin within ``radius`` (m) of ``p`` ``(3,)``: its
+    (flat) faces sampled on a barycentric grid of ``k`` steps, where the FEM's refined skin puts
+    its nodes (the points :func:`touching` keeps clear of).
+    """
+    i, j = np.meshgrid(np.arange(k + 1), np.arange(k + 1))
+    keep = i + j <= k
+    w = np.column_stack([i[keep], j[keep], k - i[keep] - j[keep]]) / k  # (P, 3)
+    x = np.einsum("pc,fcd->fpd", w, part.vertices[part.faces]).reshape(-1, 3)
+    return x[np.linalg.norm(x - p, axis=1) < radius]
+
+
 def closest_points(tri: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """``(c (K, 3), weights (K, 3))``: the point of each triangle ``tri`` ``(K, 3, 3)``
     closest to ``x`` ``(K, 3)`` and its barycentric weights: the projection on the plane if it
