@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from fem.shapes import BAND, Box, Punch, Sphere, Surface, closest_points, touching
+from fem.shapes import BAND, Box, Punch, Sphere, Surface, closest_points, skin_near, touching
 
 
 def test_signed_distances_of_the_shapes():
@@ -150,3 +150,19 @@ def test_a_punch_in_a_hollow_is_set_back_to_first_contact():
     plane = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
     ball = Sphere(np.array([0.0, 0.0, 0.008]), 0.008)
     assert touching(ball, down, plane) is ball
+
+
+def test_the_skin_near_a_point_samples_its_faces():
+    """The points lie on the part's faces within the radius, the vertices among them, and
+    faces are sampled between their vertices (a flat punch on a hollow meets those first).
+    """
+    from stmpl.body.primitives import tube
+
+    part = tube(0.04, 0.3, 24, 30)
+    p = part.vertices[100]
+    x = skin_near(part, p, 0.02)
+    assert np.linalg.norm(x - p, axis=1).max() < 0.02
+    near = part.vertices[np.linalg.norm(part.vertices - p, axis=1) < 0.02]
+    assert all(np.isclose(x, v).all(1).any() for v in near)
+    radius = np.linalg.norm(x[:, :2], axis=1)  # chords of the tube lie inside its radius
+    assert radius.min() < 0.04 * np.cos(np.pi / 24) + 1e-6 and radius.max() <= 0.04 + 1e-9
