@@ -171,7 +171,7 @@ class Viewer:
         size = float(np.ptp(self.part.vertices, axis=0).max())
         cam = self.server.initial_camera
         cam.look_at = tuple(centre)
-        cam.position = tuple(centre + np.array([0.0, -0.72 * size, 0.13 * size]))
+        cam.position = tuple(centre + np.array([0.0, -0.85 * size, 0.15 * size]))
         self.tiles.forget()
         rest = legend.colours(np.zeros(self.part.n_vertices), 1.0)
         self._send_tiles(self.part.vertices, rest)
