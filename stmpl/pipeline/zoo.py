@@ -39,6 +39,7 @@ from stmpl.envelope import (
 from stmpl.files import atomic_write_text
 from stmpl.metrics import sample_metrics
 from stmpl.pipeline.evaluate import evaluate_dataset, scenes_of
+from stmpl.pipeline.train import envelope, evidence
 from stmpl.predictor import OutsideEnvelope
 from stmpl.support import Support, coordinates
 from stmpl.table import markdown
@@ -252,8 +253,6 @@ def support(names: list[str], data: list, path=None, progress=print) -> dict:
     ``{name: {"training": training scenes, "scenes": validation scenes measured, "kept": of
     them the promise kept, "unsolved": unsolved validation scenes}}``.
     """
-    from stmpl.pipeline.train import envelope, evidence  # the training run's own measures
-
     if not names:
         raise ValueError("zoo support needs the names of the models to give a support")
     ds = open_data(data[0] if len(data) == 1 else data)
