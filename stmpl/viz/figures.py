@@ -168,9 +168,9 @@ def mesh_bytes(mesh, fmt: str, facts: dict | None = None) -> bytes:
     data = mesh.export(file_type=fmt)
     data = data.encode() if isinstance(data, str) else data
     if fmt == "ply":  # comments go right after the format line
-        head, rest = data.split(b"\n", 2)[:2], data.split(b"\n", 2)[2]
+        magic, form, rest = data.split(b"\n", 2)
         notes = b"".join(f"comment {c}\n".encode() for c in lines)
-        return b"\n".join(head) + b"\n" + notes + rest
+        return magic + b"\n" + form + b"\n" + notes + rest
     if fmt == "obj":
         return "".join(f"# {c}\n" for c in lines).encode() + data
     raise ValueError(f"mesh export supports ply, obj, glb; got {fmt!r}")
