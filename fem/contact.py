@@ -317,7 +317,8 @@ def press_to_force(
     marched from the nearer one). A try that fails, past the tissue's trust bounds
     (:class:`~fem.material.Limits`) or in a march that cannot go on, is halved toward the last
     answer, and no later try aims at or past the shallowest failure: the search fails, saying
-    why and after what force, once its last answer lies within :data:`GAP` of that depth, or
+    why and after what force, once its last answer lies within :data:`GAP` of that depth (a
+    march that stalled there is first tried once more with one step past it), or
     when the force falls as the object goes deeper (a grip slipping). Inside the bracket a failed
     try is replaced by its middle and quarters. A press that runs through the whole tissue
     fails too.
@@ -365,17 +366,29 @@ def _bracket(go, force: float, rtol: float, step: float, start: Pressed | None):
     reach = AIM_STEPS * step  # how far ahead of the last answer a try may aim
     lo = start or Pressed(True, "", 0.0, reaction=0.0)
     depth = min(lo.depth + step, deepest)
+    jumped = False
     # the shallowest failed try, the start it failed from, and whether a nearer start may pass
     ceiling, since, path, failure = np.inf, 0.0, False, None
+    stuck = None  # a march failure force control tries to jump past, once
     while True:
         answer = go.to(depth, lo if lo.depth > 0 else None)
+        if not answer.ok and stuck is not None:  # the jump failed too
+            return stuck
         if not answer.ok:  # past the trust bounds, or a march that could not go on
             ceiling, since, failure = depth, lo.depth, answer
             path = not answer.reason.startswith(STATE_FAILURES)
-            if ceiling - lo.depth <= GAP * ceiling:
+            if ceiling - lo.depth > GAP * ceiling:
+                depth = 0.5 * (lo.depth + ceiling)  # halve the way toward the last answer
+                continue
+            if not path or jumped:
                 return _stuck(force, failure, ceiling, lo)
-            depth = 0.5 * (lo.depth + ceiling)  # halve the way toward the last answer
+            # a march stalled just past the last answer: one step from it that lands beyond
+            # (a contact whose nodes come and go may stall a Newton solve at one depth only)
+            stuck, jumped = _stuck(force, failure, ceiling, lo), True
+            depth = min(max(lo.depth + step, (1 + 2 * GAP) * ceiling), deepest)
+            ceiling, path, failure = np.inf, False, None
             continue
+        stuck = None
         if path and ceiling - answer.depth <= GAP * ceiling and since < answer.depth:
             # close below a march that failed from farther away: a short one may pass
             ceiling, since, path, failure = np.inf, answer.depth, False, None

@@ -345,3 +345,31 @@ def test_force_control_says_when_the_force_falls_as_the_object_goes_deeper(monke
     failed = press_to_force(solver, punch, [0, 0, -1], 0.5, step=0.1 * h)
     assert not failed.ok and failed.displacement is None
     assert "the force falls as the object goes deeper" in failed.reason
+
+
+def test_force_control_steps_past_a_depth_where_the_march_stalls(monkeypatch):
+    """A Newton solve that stalls at one band of depths only (as a contact whose nodes come and
+    go may): force control closes in on the band, then tries once a step that lands past it,
+    and meets the force beyond; a band it cannot step past still ends the search, saying where.
+    """
+    solver, a, h = _slab(2.0, spacing=0.25, order=1)
+    band, tries = (0.245 * h, 0.255 * h), []
+
+    def stalling(self, depth, start):
+        tries.append(depth)
+        if band[0] <= depth <= band[1]:
+            return Pressed(False, "line search failed to lower the energy (test)", depth)
+        return Pressed(True, "", depth, reaction=(depth / h) ** 1.5)
+
+    monkeypatch.setattr(_Pressing, "to", stalling)
+    punch = Punch([0, 0, 0], [0, 0, -1], a)
+    found = press_to_force(solver, punch, [0, 0, -1], 0.4**1.5, step=0.05 * h)
+    assert found.ok, found.reason
+    assert found.depth == pytest.approx(0.4 * h, rel=0.01)
+    assert any(band[0] <= t <= band[1] for t in tries)  # it met the band on the way
+
+    band = (0.245 * h, 0.5 * h)  # too wide to step past
+    failed = press_to_force(solver, punch, [0, 0, -1], 0.25, step=0.05 * h)
+    assert not failed.ok and failed.reason.startswith("cannot carry 0.25 N: line search failed")
+    stalled = float(failed.reason.split("at depth ")[1].split(" mm")[0])
+    assert 0.245 * h <= 1e-3 * stalled <= 0.25 * h  # where it stalled, not where it jumped
