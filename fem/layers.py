@@ -159,8 +159,10 @@ PAPER = Layer(
 TRUSTED = Limits(
     0.8,
     0.65,
-    "an 8 mm fingertip on an arm-sized tube converges within 1 % up to 0.69 compression, and "
-    "the finer mesh finds no answer at 0.75; the tissue keeps 0.9 of its volume or more",
+    compression_source="an 8 mm fingertip on an arm-sized tube converges within 1 % up to "
+    "0.69 compression, and the finer mesh finds no answer at 0.75",
+    volume_source="the nearly incompressible fat and muscle keep 0.9 of their volume or more "
+    "wherever the compression is trusted; less means a bulk modulus too soft for the tissue",
 )
 """The layered presets' trust bounds. An 8 mm fingertip pressed into the forearm preset of an
 arm-sized tube converges under mesh refinement (within 1 % from 6 mm on) up to 0.69 of the

@@ -87,12 +87,14 @@ def lame(E: float, nu: float) -> tuple[float, float]:
 class Limits:
     """Where a tissue's answers are trusted: the smallest volume ratio ``min_det_F`` anywhere in
     it and the largest ``max_compression`` (how far the skin moves inward as a share of the
-    tissue's depth under it). ``source`` says where the bounds come from.
+    tissue's depth under it). ``compression_source`` and ``volume_source`` say where each
+    bound comes from.
     """
 
     min_det_F: float
     max_compression: float
-    source: str = ""
+    compression_source: str = ""
+    volume_source: str = ""
 
     def __post_init__(self) -> None:
         if not (0.0 <= self.min_det_F < 1.0 and 0.0 < self.max_compression <= 1.0):
@@ -108,21 +110,25 @@ class Limits:
         if detF < self.min_det_F:
             return (
                 f"not trusted: the tissue keeps {detF:.2f} of its volume at worst "
-                f"(trusted down to {self.min_det_F:g}; {self.source})"
+                f"(trusted down to {self.min_det_F:g}{_why(self.volume_source)})"
             )
         if compression > self.max_compression:
             return (
                 f"not trusted: the skin moves inward {compression:.2f} x the tissue's depth "
-                f"(trusted up to {self.max_compression:g}; {self.source})"
+                f"(trusted up to {self.max_compression:g}{_why(self.compression_source)})"
             )
         return ""
+
+
+def _why(source: str) -> str:
+    return f"; {source}" if source else ""
 
 
 GEL = Limits(
     0.0,
     GEL_TRUSTED_COMPRESSION,
-    "the paper's gel buckles from about a third of its depth: past 0.4, all but one measured "
-    "answer were the last before it did",
+    compression_source="the paper's gel buckles from about a third of its depth: past 0.4, "
+    "all but one measured answer were the last before it did",
 )
 """The compressible neo-Hookean gel's trust bounds (:data:`stmpl.tissue.GEL_TRUSTED_COMPRESSION`,
 measured by ``benchmarks/gel_failure.py``)."""
