@@ -210,27 +210,80 @@ class Contact:
         )
 
 
-def winding_number(mesh, points: np.ndarray, chunk: int = 2_000_000) -> np.ndarray:
+def solid_angles(tri: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """``(P,)`` the summed signed solid angle (sr) of triangles ``(P, 3, 3)`` seen from
+    ``points`` ``(P, 3)``, each its own (Van Oosterom and Strackee's formula).
+    """
+    d = tri - points[:, None]
+    a, b, c = d[:, 0], d[:, 1], d[:, 2]
+    la, lb, lc = (np.linalg.norm(x, axis=-1) for x in (a, b, c))
+    det = np.einsum("pi,pi->p", a, np.cross(b, c))
+    den = (
+        la * lb * lc
+        + np.einsum("pi,pi->p", a, b) * lc
+        + np.einsum("pi,pi->p", b, c) * la
+        + np.einsum("pi,pi->p", c, a) * lb
+    )
+    return 2 * np.arctan2(det, den)
+
+
+FAR = 3.0
+"""A cluster of triangles seen from farther than this many times its radius counts as its
+dipole (the first term of its far field: the solid angle's error under about 1 % of what the
+cluster subtends)."""
+LEAF = 48
+"""Triangles per cluster of :func:`winding_number`."""
+
+
+def clusters(tri: np.ndarray, leaf: int = LEAF) -> list[np.ndarray]:
+    """Triangles ``(M, 3, 3)`` split at the median of their centroids along the longest side
+    of each box until a part holds at most ``leaf``: a list of index arrays.
+    """
+    centroid = tri.mean(1)
+    todo, out = [np.arange(len(tri))], []
+    while todo:
+        idx = todo.pop()
+        if len(idx) <= leaf:
+            out.append(idx)
+            continue
+        c = centroid[idx]
+        axis = int(np.argmax(c.max(0) - c.min(0)))
+        order = idx[np.argsort(c[:, axis], kind="stable")]
+        todo += [order[: len(order) // 2], order[len(order) // 2 :]]
+    return out
+
+
+def winding_number(mesh, points: np.ndarray, far: float = FAR) -> np.ndarray:
     """``(P,)`` generalized winding number of a triangle mesh at ``points`` ``(P, 3)``: the sum
     of the signed solid angles of its triangles over ``4 pi`` (1 inside a closed outward-facing
-    mesh, 0 outside).
+    mesh, 0 outside). Triangles are grouped in clusters; a cluster seen from farther than
+    ``far`` times its radius counts as its dipole, the others triangle by triangle (Barill et
+    al. 2018, "Fast winding numbers for soups and clouds", to first order).
     """
-    tri = np.asarray(mesh.triangles)  # (M, 3, 3)
-    out = np.zeros(len(points))
-    step = max(1, chunk // max(len(tri), 1))
-    for s in range(0, len(points), step):
-        d = tri[None] - points[s : s + step, None, None]  # (p, M, 3, 3)
-        a, b, c = d[:, :, 0], d[:, :, 1], d[:, :, 2]
-        la, lb, lc = (np.linalg.norm(x, axis=-1) for x in (a, b, c))
-        det = np.einsum("pmi,pmi->pm", a, np.cross(b, c))
-        den = (
-            la * lb * lc
-            + np.einsum("pmi,pmi->pm", a, b) * lc
-            + np.einsum("pmi,pmi->pm", b, c) * la
-            + np.einsum("pmi,pmi->pm", c, a) * lb
-        )
-        out[s : s + step] = 2 * np.arctan2(det, den).sum(1) / (4 * np.pi)
-    return out
+    tri = np.asarray(mesh.triangles, dtype=float)  # (M, 3, 3)
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    if not len(points) or not len(tri):
+        return np.zeros(len(points))
+    groups = clusters(tri)
+    area = 0.5 * np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # (M, 3)
+    size = np.linalg.norm(area, axis=1)
+    dipole = np.stack([area[g].sum(0) for g in groups])  # (K, 3)
+    centre = np.stack([(size[g] @ tri[g].mean(1)) / max(size[g].sum(), 1e-300) for g in groups])
+    radius = np.array(
+        [np.linalg.norm(tri[g].reshape(-1, 3) - c, axis=1).max() for g, c in zip(groups, centre)]
+    )
+    away = centre[None] - points[:, None]  # (P, K, 3)
+    dist = np.linalg.norm(away, axis=2)
+    near = dist <= far * radius[None]
+    flux = np.einsum("pki,ki->pk", away, dipole)  # the dipoles' solid angles, times dist^3
+    angle = np.divide(flux, dist**3, out=np.zeros_like(flux), where=~near).sum(1)
+    pk = np.argwhere(near)
+    if len(pk):
+        counts = np.array([len(g) for g in groups])[pk[:, 1]]
+        rows = np.repeat(pk[:, 0], counts)
+        cols = np.concatenate([groups[k] for k in pk[:, 1]])
+        np.add.at(angle, rows, solid_angles(tri[cols], points[rows]))
+    return angle / (4 * np.pi)
 
 
 def distance_to_surface(mesh, points: np.ndarray, upto: float = np.inf) -> np.ndarray:

@@ -87,11 +87,15 @@ def draw_meshes(ax, basis: np.ndarray, meshes: list) -> None:
         colours.append(c[keep])
         depth.append(tri[keep, :, 2].mean(1))
     order = np.argsort(np.concatenate(depth))
+    colours = np.concatenate(colours)[order]
     ax.add_collection(
         PolyCollection(
             np.concatenate(polys)[order],
-            facecolors=np.concatenate(colours)[order],
+            facecolors=colours,
             edgecolors="none",
+            # smoothed edges of abutting opaque triangles leave hairline seams; see-through
+            # ones unsmoothed would draw their shared edges twice
+            antialiaseds=colours[:, 3] < 1,
         )
     )
     ax.set_aspect("equal")
@@ -108,6 +112,42 @@ def contact_camera(deformation) -> tuple[np.ndarray, np.ndarray, float]:
     loaded = part.vertices[w > 0]
     reach = max(0.05, 1.6 * float(np.linalg.norm(loaded - centre, axis=1).max(initial=0.0)))
     return basis, centre, reach
+
+
+def in_window(triangles: np.ndarray, basis: np.ndarray, window) -> np.ndarray:
+    """``(T,)`` which triangles ``(T, 3, 3)`` seen through ``basis`` reach into ``window``
+    ``(x0, x1, y0, y1)`` (m, camera coordinates).
+    """
+    xy = np.asarray(triangles) @ basis[:2].T
+    x0, x1, y0, y1 = window
+    return (
+        (xy[..., 0].max(1) >= x0)
+        & (xy[..., 0].min(1) <= x1)
+        & (xy[..., 1].max(1) >= y0)
+        & (xy[..., 1].min(1) <= y1)
+    )
+
+
+def fitted_window(triangles: list, basis: np.ndarray, centre, reach: float):
+    """``(x0, x1, y0, y1)``: ``reach`` (m) either side of ``centre`` across, and up and down
+    only as far as the ``triangles`` (a list of ``(T, 3, 3)``) inside that span reach, so that
+    a long limb seen from its side leaves no empty band.
+    """
+    cx, cy = (np.asarray(centre) @ basis.T)[:2]
+    window = (cx - reach, cx + reach, cy - reach, cy + reach)
+    ys = [
+        (np.asarray(t)[in_window(t, basis, window)] @ basis[1]).ravel() for t in triangles if len(t)
+    ]
+    ys = np.concatenate(ys) if ys else np.zeros(0)
+    if not ys.size:
+        return window
+    pad = 0.04 * reach
+    return (
+        cx - reach,
+        cx + reach,
+        max(ys.min() - pad, cy - reach),
+        min(ys.max() + pad, cy + reach),
+    )
 
 
 def _warning(d) -> str | None:
@@ -152,43 +192,48 @@ def contact_figure(
     depth = 1e3 * float(np.median(first.scene.thickness))
     scale = EXAGGERATION if EXAGGERATION * top <= depth else 1.0
     cmap = matplotlib.colormaps["YlOrRd"]  # light where still: the shading shows shape
-    width = 4.4 * len(rows) + 1.6
-    fig = plt.figure(figsize=(width, 5.2))
-    warned = any(isinstance(d, str) or _warning(d) for _, d in rows)  # lower the panels
+    shapes = [np.asarray(m.vertices)[np.asarray(m.faces)] for m in objects]
+    skins = {
+        name: part.vertices[part.faces]
+        if isinstance(d, str)
+        else (part.vertices + scale * d.displacement)[part.faces]
+        for name, d in rows
+    }
+    window = fitted_window([*skins.values(), *shapes], basis, centre, reach)
+    x0, x1, y0, y1 = window
+    panel = 4.4  # inches across a panel
+    warned = any(isinstance(d, str) or _warning(d) for _, d in rows)
+    above, foot = (1.45 if warned else 1.25), 0.15  # inches for the titles, and below
+    width = panel * len(rows) + 1.6
+    height = panel * (y1 - y0) / (x1 - x0) + above + foot
+    fig = plt.figure(figsize=(width, height))
     grid = fig.add_gridspec(
         1,
         len(rows) + 1,
         width_ratios=[1] * len(rows) + [0.05],
         left=0.01,
         right=1 - 0.8 / width,  # room for the colour bar's label
-        bottom=0.03,
-        top=0.72 if warned else 0.76,
+        bottom=foot / height,
+        top=1 - above / height,
         wspace=0.05,
     )
     axes = [fig.add_subplot(grid[0, k]) for k in range(len(rows))]
-    cx, cy = (centre @ basis.T)[:2]
+    seen = [(m[in_window(m, basis, window)], (0.6, 0.8, 1.0, 0.3), True) for m in shapes]
     for (name, d), ax in zip(rows, axes):
+        skin = skins[name]
+        near = in_window(skin, basis, window)  # refined only where it is seen
         if isinstance(d, str):  # a solve that failed: the skin at rest, and why
-            tri = part.vertices[part.faces]
-            meshes = [(tri, (0.85, 0.85, 0.85, 1.0), True)]
-            for m in objects:
-                v = np.asarray(m.vertices)[np.asarray(m.faces)]
-                meshes.append((v, (0.6, 0.8, 1.0, 0.3), True))
-            draw_meshes(ax, basis, meshes)
-            ax.set_xlim(cx - reach, cx + reach)
-            ax.set_ylim(cy - reach, cy + reach)
+            draw_meshes(ax, basis, [(skin[near], (0.85, 0.85, 0.85, 1.0), True), *seen])
+            ax.set_xlim(x0, x1)
+            ax.set_ylim(y0, y1)
             why = textwrap.fill(d, 44, max_lines=3, placeholder=" ...")
             ax.set_title(f"{name}: failed, no answer\n{why}", fontsize=10, color="#a00000")
             continue
-        drawn = part.vertices + scale * d.displacement
-        tri, val = refine(drawn[part.faces], d.magnitude[part.faces] * 1e3)
-        meshes = [(tri, cmap(val.mean(1) / top), True)]  # the far side hidden
-        for m in objects:
-            meshes.append((np.asarray(m.vertices)[np.asarray(m.faces)], (0.6, 0.8, 1.0, 0.3), True))
-        draw_meshes(ax, basis, meshes)
+        tri, val = refine(skin[near], d.magnitude[part.faces][near] * 1e3)
+        draw_meshes(ax, basis, [(tri, cmap(val.mean(1) / top), True), *seen])  # far side hidden
         mag = d.magnitude * 1e3
-        ax.set_xlim(cx - reach, cx + reach)
-        ax.set_ylim(cy - reach, cy + reach)
+        ax.set_xlim(x0, x1)
+        ax.set_ylim(y0, y1)
         ms = d.info.get("seconds")
         head = (
             f"{name}"

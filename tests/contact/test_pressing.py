@@ -88,6 +88,28 @@ def test_winding_number_of_a_closed_mesh():
     np.testing.assert_allclose(w, [1, 1, 0, 0], atol=1e-9)
 
 
+def test_the_far_field_winding_number_meets_the_exact_sum():
+    """Clusters seen from afar count as dipoles: within 1 % of the exact sum of every
+    triangle's solid angle, and the same side of every point, on and off a sphere's skin.
+    """
+    sphere = trimesh.creation.icosphere(3)  # 1280 triangles, radius 1
+    rng = np.random.default_rng(0)
+    x = rng.normal(size=(400, 3))
+    x /= np.linalg.norm(x, axis=1, keepdims=True)
+    points = x * rng.uniform(0.0, 2.0, (400, 1))  # inside, near the skin and outside
+    tri = np.asarray(sphere.triangles)
+    exact = np.array(
+        [C.solid_angles(tri, np.repeat(q[None], len(tri), 0)).sum() for q in points]
+    ) / (4 * np.pi)
+    fast = C.winding_number(sphere, points)
+    assert np.abs(fast - exact).max() < 0.01
+    np.testing.assert_array_equal(fast > 0.5, exact > 0.5)
+    inside = np.linalg.norm(points, axis=1) < 0.95  # clear of the facets
+    assert (fast[inside] > 0.99).all() and (
+        fast[np.linalg.norm(points, axis=1) > 1.05] < 0.01
+    ).all()
+
+
 @pytest.mark.parametrize(
     "make,message",
     [
