@@ -5,6 +5,10 @@ without Numba and to check the kernel.
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
+from typing import NamedTuple
+
 import numpy as np
 
 
@@ -151,9 +155,22 @@ def make_outer_kernel():
     return kernel
 
 
-kernel = make_kernel()
-"""The compiled kernel, or ``None`` without Numba (the solver then uses its NumPy path)."""
-full_kernel = make_full_kernel()
-"""The compiled kernel of the long form, or ``None`` without Numba."""
-outer_kernel = make_outer_kernel()
-"""The compiled kernel of the elements' rank-one terms (mean dilatation), or ``None``."""
+class Kernels(NamedTuple):
+    """The compiled kernels (each ``None`` without Numba: the NumPy path instead)."""
+
+    element: Callable | None
+    full: Callable | None
+    outer: Callable | None
+
+
+@functools.cache
+def compiled() -> Kernels:
+    """The compiled kernels, made at a process's first assembly: importing Numba and loading
+    the kernels from its cache take a quarter of a second that a process which never
+    assembles a tangent (a learned model answering from cached columns) does not pay.
+    """
+    return Kernels(make_kernel(), make_full_kernel(), make_outer_kernel())
+
+
+NUMPY = Kernels(None, None, None)
+"""No compiled kernel: the NumPy path everywhere (what the kernels are checked against)."""

@@ -41,7 +41,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from fem.elements import ELEMENTS, quadratic
-from fem.kernel import element_data, full_kernel, kernel, outer_data, outer_kernel
+from fem.kernel import compiled, element_data, outer_data
 from fem.linear_solvers import make_linear_solver
 from fem.material import NeoHookean, det3, inv3, volume_split, volumetric
 from fem.mesh import ShellMesh
@@ -238,22 +238,23 @@ class Solver:
             Fq = np.asarray(parts[6]).reshape(T, Q, 3, 3)
             fg = np.ascontiguousarray(np.matmul(self.G, Fq.transpose(0, 1, 3, 2)))  # F grad N
             full = (fg, *(np.asarray(x).reshape(T, Q) * self.W for x in parts[4:6]))
-        if kernel is not None and (full is None or full_kernel is not None):
+        kernels = compiled()
+        if kernels.element is not None and (full is None or kernels.full is not None):
             data = np.zeros(self.pattern.nnz)
             for pos in self.pattern.places:
                 if full is None:
-                    kernel(g, GG, aW, bW, cW, pos, data)
+                    kernels.element(g, GG, aW, bW, cW, pos, data)
                 else:
-                    full_kernel(g, full[0], GG, aW, bW, cW, full[1], full[2], pos, data)
+                    kernels.full(g, full[0], GG, aW, bW, cW, full[1], full[2], pos, data)
         else:
             pat = self.pattern
             data = element_data(g, GG, aW, bW, cW, pat.local, *pat.gather, pat.nnz, full=full)
         if self.bulk is not None:  # each element's rank-one volume term V U'' beta beta^T
             beta = np.einsum("q,tq,tqai->tai", self.element.weights, J, g).reshape(T, -1)
             coef = self.V * d2U
-            if outer_kernel is not None:
+            if kernels.outer is not None:
                 for pos in self.pattern.places:
-                    outer_kernel(np.ascontiguousarray(beta), coef, pos, data)
+                    kernels.outer(np.ascontiguousarray(beta), coef, pos, data)
             else:
                 pat = self.pattern
                 data += outer_data(beta, coef, *pat.gather, pat.local, pat.nnz)

@@ -5,6 +5,8 @@ from dataclasses import replace
 import numpy as np
 import pytest
 
+import fem.solver as fs
+from fem.kernel import NUMPY
 from fem.linear_solvers import available_linear_solvers
 from fem.material import (
     Demiray,
@@ -365,12 +367,11 @@ def test_compiled_and_numpy_assembly_agree(monkeypatch):
     """The Numba kernel against the NumPy path (numba is a dependency: without it this test
     would compare NumPy with NumPy, so it fails instead).
     """
-    import fem.solver as fs
-
-    assert fs.kernel is not None, "numba is missing: the compiled kernel cannot be checked"
+    kernels = fs.compiled()
+    assert kernels.element is not None, "numba is missing: the compiled kernel cannot be checked"
     part, mesh = _small_shell(layers=1)
     rng = np.random.default_rng(3)
-    assert fs.full_kernel is not None and fs.outer_kernel is not None
+    assert kernels.full is not None and kernels.outer is not None
     cases = [("superlu", 1, None), ("pardiso", 1, None), ("superlu", 2, None)]
     cases += [("superlu", 1, "layered"), ("pardiso", 2, "layered"), ("pardiso", 2, "tissue")]
     cases += [("superlu", 2, "tissue")]
@@ -386,8 +387,7 @@ def test_compiled_and_numpy_assembly_agree(monkeypatch):
         u = np.zeros((S.n_all, 3))
         u.reshape(-1)[S.free] = rng.normal(0, 5e-4, len(S.free))
         K1 = S.assemble(u, u)[1]
-        monkeypatch.setattr(fs, "kernel", None)
-        monkeypatch.setattr(fs, "outer_kernel", None)
+        monkeypatch.setattr(fs, "compiled", lambda: NUMPY)
         K2 = S.assemble(u, u)[1]
         monkeypatch.undo()
         assert abs(K1 - K2).max() <= 1e-12 * abs(K2).max()
