@@ -218,6 +218,12 @@ def contact_figure(
         wspace=0.05,
     )
     axes = [fig.add_subplot(grid[0, k]) for k in range(len(rows))]
+    # a panel's width as laid out (less than ``panel``: the gaps and the colour bar): the
+    # figure as tall as the window's shape needs at that width, the bar as tall as the panels
+    drawn = axes[0].get_position().width * width
+    height = drawn * (y1 - y0) / (x1 - x0) + above + foot
+    fig.set_size_inches(width, height)
+    grid.update(bottom=foot / height, top=1 - above / height)
     seen = [(m[in_window(m, basis, window)], (0.6, 0.8, 1.0, 0.3), True) for m in shapes]
     for (name, d), ax in zip(rows, axes):
         skin = skins[name]
