@@ -68,12 +68,14 @@ SETUP_KEYS = {
     "limit",
     "fidelity",
     "chart",
+    "truth",
 }
 """``limit``: evaluate on at most this many samples of each test split (the FEM takes seconds
 per scene); ``fidelity``: ``full`` (the default) or ``auto`` (model no more of the part than the
 scene needs, :data:`stmpl.fidelity.FIDELITIES`); ``chart: false`` keeps a set-up that differs
 only in its training data (not in its speed) off the speed-vs-accuracy chart (it stays in the
-tables and in the chart's table)."""
+tables and in the chart's table); ``truth: true`` marks the FEM at the mesh the data was made
+at: the truth itself, timed only and drawn on the chart's floor (no error to measure)."""
 
 
 def read_config(source) -> dict:
@@ -114,10 +116,11 @@ def read_config(source) -> dict:
             raise ValueError(
                 f"setup {s['name']!r}: fidelity must be full or auto, got {s['fidelity']!r}"
             )
-        if not isinstance(s.get("chart", True), bool):
-            raise ValueError(
-                f"setup {s['name']!r}: chart must be true or false, got {s['chart']!r}"
-            )
+        for flag in ("chart", "truth"):
+            if not isinstance(s.get(flag, flag == "chart"), bool):
+                raise ValueError(
+                    f"setup {s['name']!r}: {flag} must be true or false, got {s[flag]!r}"
+                )
         if s["name"] in names:
             raise ValueError(f"setup name {s['name']!r} is used twice")
         names.add(s["name"])
@@ -307,7 +310,7 @@ def run(config, progress: bool = True, accept_remade: bool = False) -> dict:
             cost["evaluate"] += cache[key].get("evaluated_seconds", 0.0)
             if bar is not None:
                 bar.update(1)
-        key = _hash(["latency", setup_key, ind.card["hash"]])
+        key = _hash(["latency with quartiles", setup_key, ind.card["hash"]])
         if key not in cache:
             cache[key] = _latency(p, ready(ind))
             save()
@@ -329,6 +332,8 @@ def _jobs(cfg: dict, sets: dict) -> list[tuple]:
     ind, seen = cfg["in_distribution"], cfg["seen_thickness_mm"]
     jobs = []
     for s in cfg["setups"]:
+        if s.get("truth"):  # the truth: nothing to measure it against
+            continue
         jobs.append((s, ind, None, "table1", s["name"]))
         for o in cfg["out_of_distribution"]:
             jobs.append((s, o, None, "table2", f"{s['name']} / {o}"))
@@ -360,24 +365,41 @@ def _trained(s: dict, cfg: dict, ind, progress: bool = False) -> str:
 
 
 def _points(s: dict, cfg: dict, tables: dict, latency: dict) -> list[dict]:
-    """The chart's points of set-up ``s``: its seconds per scene at each batch size against its
-    error pooled over the out-of-distribution rows (the in-distribution row if there are none).
+    """The chart's points of set-up ``s``: its seconds per scene at each batch size (the
+    median, and ``spread``: its quartiles over the repeats) against its error in distribution
+    (``in``) and pooled over the out-of-distribution rows (``out``), each with the 95 %
+    interval of its mean over the test scenes; ``truth`` for the FEM the data was made with.
     """
-    err = _pooled(
-        [tables["table2"].get(f"{s['name']} / {o}") for o in cfg["out_of_distribution"]]
-        or [tables["table1"][s["name"]]]
-    )
+    truth = bool(s.get("truth", False))
+    ind = None if truth else _pooled([tables["table1"].get(s["name"])])
+    out = None
+    if not truth and cfg["out_of_distribution"]:
+        out = _pooled(
+            [tables["table2"].get(f"{s['name']} / {o}") for o in cfg["out_of_distribution"]]
+        )
     chart = bool(s.get("chart", True))
-    return [
-        {"label": s["name"], "batch": int(b), "seconds": sec, "chart": chart, **err}
-        for b, sec in latency.items()
-    ]
+    points = []
+    for b, sec in latency.items():
+        median, spread = (sec, None) if np.isscalar(sec) else (sec[0], tuple(sec[1:]))
+        points.append(
+            {
+                "label": s["name"],
+                "batch": int(b),
+                "seconds": float(median),
+                "spread": spread,
+                "chart": chart,
+                "truth": truth,
+                "in": ind,
+                "out": out,
+            }
+        )
+    return points
 
 
 def _latency(p, ds, repeats: int = 5) -> dict:
-    """Seconds per scene at batch 1 and batch 64 (medians over ``repeats`` after a warm-up) on
-    the first in-distribution test scenes; the FEM (seconds a scene, solved one at a time) at
-    batch 1 only, on 2 scenes.
+    """Seconds per scene at batch 1 and batch 64, each ``[median, lower quartile, upper
+    quartile]`` over the repeats after a warm-up, on the first in-distribution test scenes;
+    the FEM (seconds a scene, solved one at a time) at batch 1 only, on 5 scenes.
     """
     scenes, _ = scenes_of(ds, "test", limit=64)
     with warnings.catch_warnings():
@@ -385,10 +407,29 @@ def _latency(p, ds, repeats: int = 5) -> dict:
         warnings.simplefilter("ignore", ImpossibleAnswer)
         p.predict(scenes[0])  # warm-up
         if not getattr(p, "batched", True):  # the FEM: seconds a scene
-            return {"1": float(np.median([_timed(p, [s]) for s in scenes[:2]]))}
-        one = float(np.median([_timed(p, [s]) for s in scenes[: repeats * 4]]))
-        many = float(np.median([_timed(p, scenes) / len(scenes) for _ in range(repeats)]))
+            return {"1": _quartiles([_timed(p, [s]) for s in scenes[1:6]])}
+        one = _quartiles([_timed(p, [s]) for s in scenes[: repeats * 4]])
+        many = _quartiles([_timed(p, scenes) / len(scenes) for _ in range(repeats)])
     return {"1": one, str(len(scenes)): many}
+
+
+def _speed_row(p: dict) -> list[str]:
+    """A row of the report's speed table."""
+    ms = f"{1e3 * p['seconds']:.3g}"
+    if p.get("spread"):
+        ms += f" ({1e3 * p['spread'][0]:.3g}-{1e3 * p['spread'][1]:.3g})"
+    if p.get("truth"):
+        return [p["label"], str(p["batch"]), ms, "the truth", "the truth", "–"]
+
+    def err(e):
+        return "–" if e is None else f"{e['rel_mee']:.2f} ± {e['ci']:.2f}"
+
+    peak = "–" if p["out"] is None else f"{p['out']['peak_err']:+.1f}"
+    return [p["label"], str(p["batch"]), ms, err(p["in"]), err(p["out"]), peak]
+
+
+def _quartiles(x: list) -> list[float]:
+    return [float(v) for v in np.percentile(x, [50, 25, 75])]
 
 
 def _timed(p, scenes) -> float:
@@ -397,15 +438,24 @@ def _timed(p, scenes) -> float:
     return time.perf_counter() - t0
 
 
-def _pooled(rows: list) -> dict:
-    """Relative MEE and peak error (%) pooled over rows (means weighted by their samples)."""
-    rows = [r for r in rows if r]
+def _pooled(rows: list) -> dict | None:
+    """Relative MEE and peak error (%) pooled over rows (means weighted by their samples), and
+    ``ci``: the half-width (%) of the 95 % interval of the pooled relative MEE's mean over the
+    scenes (from the rows' means and standard deviations); ``None`` without rows.
+    """
+    rows = [r for r in rows if r and r.get("samples")]
+    if not rows:
+        return None
     w = np.array([r["samples"] for r in rows], dtype=float)
     out = {}
     for k in ("rel_mee", "peak_err"):
         v = np.array([r[k][0] for r in rows], dtype=float)
         ok = np.isfinite(v)
         out[k] = float(np.sum(v[ok] * w[ok]) / np.sum(w[ok])) if ok.any() else float("nan")
+    mean = np.array([r["rel_mee"][0] for r in rows], dtype=float)
+    std = np.array([r["rel_mee"][1] for r in rows], dtype=float)
+    variance = np.sum(w * (std**2 + (mean - out["rel_mee"]) ** 2)) / w.sum()
+    out["ci"] = float(1.96 * np.sqrt(variance / w.sum()))
     return out
 
 
@@ -465,25 +515,29 @@ def _write(
             f"Speed against accuracy ({cfg['name']}): lower left is better",
         )
         speeds = markdown(
-            ["set-up", "batch", "ms/scene", "OOD rel. MEE %", "OOD peak err %"],
             [
-                [
-                    p["label"],
-                    str(p["batch"]),
-                    f"{1e3 * p['seconds']:.3g}",
-                    f"{p['rel_mee']:.2f}",
-                    f"{p['peak_err']:+.1f}",
-                ]
-                for p in points
+                "set-up",
+                "batch",
+                "ms/scene (quartiles)",
+                "rel. MEE % in distribution",
+                "OOD rel. MEE %",
+                "OOD peak err %",
             ],
-            "lrrrr",
+            [_speed_row(p) for p in points],
+            "lrrrrr",
         )
         parts.insert(
             2 + bool(cost),
             "## Speed against accuracy\n\n![speed against accuracy]"
             "(speed_accuracy.png)\n\nTime per scene on this machine at batch 1 and "
-            "64 (median of repeats); error pooled over the out-of-distribution test "
-            "sets. The star is the paper's reported point (its GPU, its data), a "
-            "reference, not our measurement.\n\n" + speeds,
+            "64: the median over repeats, the bars its quartiles (the FEM: 5 scenes solved "
+            "one at a time, from rest). Error: the relative MEE in distribution and pooled "
+            "over the out-of-distribution test sets, the bars the 95 % interval of its mean "
+            "over the test scenes (rel. MEE ± that half-width below). Circles are batch 1, "
+            "squares batch 64, each with its own Pareto front. The FEM at the mesh the data "
+            "was made at is the truth (no error of its own) and sits on the panels' floor "
+            "with the paper's FEM time (its CPU, one thread, as reported); the star is the "
+            "paper's reported UV-UNet (its GPU, its data), a reference, not our "
+            "measurement.\n\n" + speeds,
         )
     atomic_write_text(out / "ablation.md", "\n".join(parts))

@@ -53,64 +53,74 @@ def pareto(x: np.ndarray, y: np.ndarray) -> np.ndarray:
     return np.asarray(front, dtype=int)
 
 
+PANELS = (("in", "in distribution"), ("out", "out of distribution (pooled)"))
+"""The chart's panels: the key of each point's error, and the panel's words."""
+PAPER_FEM = {
+    "seconds": 84.0,
+    "spread": (84.0 - 53.4, 84.0 + 53.4),
+    "label": "paper's FEM, 84 ± 53 s (reported: i7-12700K, one thread)",
+}
+"""The paper's FEM time per simulation (Runtime Evaluation: 84 ± 53.4 s), its truth."""
+
+
 def speed_accuracy(points: list[dict], path, title: str = "") -> list[pathlib.Path]:
-    """Draw ``points`` (each: ``label``, ``seconds`` per scene, ``rel_mee`` %, ``peak_err`` %
-    signed, ``batch``) into ``path`` as PNG and SVG; returns the files written.
+    """Draw ``points`` into ``path`` as PNG and SVG; returns the files written. Each point:
+    ``label``, ``batch``, ``seconds`` per scene and ``spread`` (its quartiles, or ``None``),
+    and per panel (``in``, ``out``) ``{"rel_mee": %, "ci": %}`` or ``None``; a point with
+    ``truth`` (the FEM the data was made with) sits on the panels' floor.
     """
     import matplotlib  # deferred: pictures only
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt  # deferred: pictures only
     import matplotlib.ticker  # deferred: pictures only
+    from matplotlib.lines import Line2D  # deferred: pictures only
 
     if not points:
         raise ValueError("no points to chart")
-    fig, axes = plt.subplots(1, 2, figsize=(13, 5.4), dpi=130)  # laid out as saved
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5.6), dpi=130)  # laid out as saved
     x = np.array([p["seconds"] * 1e3 for p in points])
+    spread = np.array(
+        [
+            [x[i] - 1e3 * p["spread"][0], 1e3 * p["spread"][1] - x[i]]
+            if p.get("spread")
+            else [0.0, 0.0]
+            for i, p in enumerate(points)
+        ]
+    ).T
+    truths = [i for i, p in enumerate(points) if p.get("truth")]
     names = []  # (axes, points to name) once laid out
-    for ax, key, what in (
-        (axes[0], "rel_mee", "out-of-distribution relative MEE, %"),
-        (axes[1], "peak_err", "out-of-distribution |peak error|, %"),
-    ):
-        y = np.array([abs(p[key]) for p in points])
-        ok = np.isfinite(x) & np.isfinite(y) & (x > 0)
-        for fam, colour in FAMILIES.items():
-            for batched, marker in ((False, "o"), (True, "s")):
-                sel = [
-                    i
-                    for i, p in enumerate(points)
-                    if ok[i] and family(p["label"]) == fam and (p.get("batch", 1) > 1) == batched
-                ]
-                if sel:
-                    ax.scatter(
-                        x[sel],
-                        y[sel],
-                        c=colour,
-                        marker=marker,
-                        s=46,
-                        zorder=3,
-                        edgecolors="white",
-                        linewidths=0.6,
-                        label=f"{fam}, {'batched' if batched else 'batch 1'}",
-                    )
-        idx = np.flatnonzero(ok)
-        front = idx[pareto(x[idx], y[idx])]
-        if len(front) > 1:
-            ax.step(
-                x[front],
-                y[front],
-                where="post",
-                c="#999999",
-                lw=1.2,
-                ls="--",
-                zorder=2,
-                label="Pareto front",
+    for ax, (key, what) in zip(axes, PANELS):
+        y = np.array([p[key]["rel_mee"] if p.get(key) else np.nan for p in points])
+        ci = np.array([p[key]["ci"] if p.get(key) else 0.0 for p in points])
+        ok = np.isfinite(x) & np.isfinite(y) & (x > 0) & (y > 0)
+        for i in np.flatnonzero(ok):
+            colour = FAMILIES[family(points[i]["label"])]
+            ax.errorbar(
+                x[i],
+                y[i],
+                xerr=spread[:, i : i + 1],
+                yerr=[[min(ci[i], 0.95 * y[i])], [ci[i]]],
+                fmt="o" if points[i]["batch"] == 1 else "s",
+                ms=6.5,
+                color=colour,
+                mec="white",
+                mew=0.6,
+                elinewidth=0.9,
+                ecolor=colour,
+                alpha=0.95,
+                zorder=3,
             )
-        for label in {points[i]["label"] for i in idx}:  # a set-up's batch sizes, joined
-            mine = sorted((x[i], y[i]) for i in idx if points[i]["label"] == label)
+        for label in {points[i]["label"] for i in np.flatnonzero(ok)}:  # its batch sizes
+            mine = sorted((x[i], y[i]) for i in np.flatnonzero(ok) if points[i]["label"] == label)
             if len(mine) > 1:
-                ax.plot(*zip(*mine), c=FAMILIES[family(label)], lw=0.8, alpha=0.5, zorder=2)
-        if key == "rel_mee":
+                ax.plot(*zip(*mine), c=FAMILIES[family(label)], lw=0.8, alpha=0.4, zorder=2)
+        for batched, style in ((False, "-"), (True, "--")):
+            idx = [i for i in np.flatnonzero(ok) if (points[i]["batch"] > 1) == batched]
+            front = np.asarray(idx, dtype=int)[pareto(x[idx], y[idx])] if idx else []
+            if len(front) > 1:
+                ax.step(x[front], y[front], where="post", c="#999999", lw=1.1, ls=style, zorder=2)
+        if key == "out":
             ax.scatter(
                 [PAPER_POINT["seconds"] * 1e3],
                 [PAPER_POINT["rel_mee"]],
@@ -119,35 +129,114 @@ def speed_accuracy(points: list[dict], path, title: str = "") -> list[pathlib.Pa
                 facecolors="none",
                 edgecolors="black",
                 zorder=4,
-                label=PAPER_POINT["label"],
             )
         ax.set_xscale("log")
         ax.set_yscale("log")
-        if ok.any():  # room below the lowest points for their names
-            ax.set_ylim(y[ok].min() / 1.8, y[ok].max() * 1.4)
-            ax.set_xlim(x[ok].min() / 1.6, x[ok].max() * 6)  # and right of the slowest
+        low = y[ok].min() / 2.6 if ok.any() else 0.1
+        floor = low * 1.35  # the truth's row, under every measured error
+        ax.set_ylim(low, (y[ok].max() * 1.5) if ok.any() else 100)
+        xs = list(x[ok]) + [x[i] for i in truths] + [1e3 * PAPER_FEM["spread"][1]]
+        ax.set_xlim(min(xs) / 1.6, max(xs) * 6)
+        truth_x = [x[i] for i in truths]
+        ax.errorbar(
+            truth_x + [1e3 * PAPER_FEM["seconds"]],
+            [floor] * (len(truths) + 1),
+            xerr=np.concatenate(
+                [
+                    spread[:, truths],
+                    1e3
+                    * np.array(
+                        [
+                            [PAPER_FEM["seconds"] - PAPER_FEM["spread"][0]],
+                            [PAPER_FEM["spread"][1] - PAPER_FEM["seconds"]],
+                        ]
+                    ),
+                ],
+                axis=1,
+            ),
+            fmt="none",
+            ecolor="#444444",
+            elinewidth=0.9,
+            zorder=3,
+        )
+        ax.scatter(truth_x, [floor] * len(truths), marker="D", s=34, c="#444444", zorder=4)
+        ax.scatter(
+            [1e3 * PAPER_FEM["seconds"]],
+            [floor],
+            marker="D",
+            s=34,
+            facecolors="white",
+            edgecolors="#444444",
+            zorder=4,
+        )
+        ax.axhline(floor * 1.25, c="#cccccc", lw=0.8, zorder=1)
+        ax.text(
+            0.01,
+            floor * 1.2,
+            "the truth (no error of its own)",
+            transform=ax.get_yaxis_transform(),
+            fontsize=7,
+            color="#666666",
+            va="top",
+        )
         ax.set_xlabel("time per scene, ms (log; this CPU unless marked)")
-        ax.set_ylabel(what + " (log)")
+        ax.set_ylabel("relative MEE, % (log)")
+        ax.set_title(what, fontsize=10)
         ax.grid(True, which="both", alpha=0.25)
         fmt = matplotlib.ticker.FuncFormatter(
             lambda v, _: f"{v / 1e3:g}k" if v >= 1e3 else f"{v:g}"
         )  # 1k, 2k: ticks keep apart
-        for axis in (ax.xaxis, ax.yaxis):  # 1-2-5 ticks, labelled
-            axis.set_major_locator(matplotlib.ticker.LogLocator(subs=(1.0, 2.0, 5.0)))
+        for axis, subs in ((ax.xaxis, (1.0,)), (ax.yaxis, (1.0, 2.0, 5.0))):  # labelled ticks
+            axis.set_major_locator(matplotlib.ticker.LogLocator(subs=subs))
             axis.set_major_formatter(fmt)
             axis.set_minor_formatter(matplotlib.ticker.NullFormatter())
-        names.append(
-            (
-                ax,
-                [(x[i], y[i], points[i]["label"]) for i in idx if points[i].get("batch", 1) == 1],
-                [(x[i], y[i]) for i in idx],
+        for at, text in [(x[i], points[i]["label"]) for i in truths] + [
+            (1e3 * PAPER_FEM["seconds"], "paper's FEM")
+        ]:  # the truth's row is theirs alone: named right above each
+            ax.annotate(
+                text,
+                (at, floor),
+                xytext=(0, 6),
+                textcoords="offset points",
+                ha="center",
+                **LABEL_STYLE,
             )
-        )
-    handles, labels = axes[0].get_legend_handles_labels()
-    seen = dict(zip(labels, handles))
-    fig.legend(seen.values(), seen.keys(), loc="lower center", ncol=4, fontsize=8, frameon=False)
-    fig.suptitle(title or "Speed against accuracy: lower left is better", fontsize=12)
-    fig.tight_layout(rect=(0, 0.12, 1, 0.95))
+        items = [
+            (x[i], y[i], points[i]["label"]) for i in np.flatnonzero(ok) if points[i]["batch"] == 1
+        ]
+        marks = [(x[i], y[i]) for i in np.flatnonzero(ok)]
+        names.append((ax, items, marks))
+    legend = [
+        Line2D([], [], ls="", marker="o", color=c, mec="white", ms=7, label=f)
+        for f, c in FAMILIES.items()
+        if any(family(p["label"]) == f for p in points)
+    ]
+    legend += [
+        Line2D([], [], ls="", marker="o", color="#888888", ms=7, label="batch 1"),
+        Line2D([], [], ls="", marker="s", color="#888888", ms=7, label="batch 64"),
+        Line2D([], [], c="#999999", ls="-", label="Pareto front, batch 1"),
+        Line2D([], [], c="#999999", ls="--", label="Pareto front, batch 64"),
+        Line2D(
+            [],
+            [],
+            ls="",
+            marker="D",
+            color="#444444",
+            label="our FEM at the data's mesh (the truth)",
+        ),
+        Line2D([], [], ls="", marker="D", mfc="white", color="#444444", label=PAPER_FEM["label"]),
+        Line2D(
+            [], [], ls="", marker="*", mfc="none", color="black", ms=11, label=PAPER_POINT["label"]
+        ),
+    ]
+    fig.legend(handles=legend, loc="lower center", ncol=4, fontsize=8, frameon=False)
+    fig.suptitle(
+        (title or "Speed against accuracy: lower left is better")
+        + "\nbars: quartiles of the time over repeats; 95 % interval of the mean error over the "
+        "test scenes",
+        fontsize=11,
+    )
+    fig.tight_layout(rect=(0, 0.14, 1, 0.93))
     for ax, items, markers in names:
         _labels(ax, items, markers)
     path = pathlib.Path(path)

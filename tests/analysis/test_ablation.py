@@ -3,6 +3,7 @@ missing dataset made from its config.
 """
 
 import json
+import pathlib
 
 import pytest
 
@@ -73,7 +74,14 @@ def test_tables_rows_and_the_cache(config, tmp_path, monkeypatch):
     pts = {(p["label"], p["batch"]): p for p in res["points"]}
     assert ("Naive", 1) in pts and ("FEM", 1) in pts and ("FEM", 6) not in pts
     assert pts[("FEM", 1)]["seconds"] > 100 * pts[("Naive", 1)]["seconds"]
-    assert pts[("Naive", 1)]["rel_mee"] == pytest.approx(t["table2"]["Naive / bands"]["rel_mee"][0])
+    naive = pts[("Naive", 1)]
+    assert naive["out"]["rel_mee"] == pytest.approx(t["table2"]["Naive / bands"]["rel_mee"][0])
+    assert naive["in"]["rel_mee"] == pytest.approx(t["table1"]["Naive"]["rel_mee"][0])
+    # the 95 % interval of the mean over the test scenes, and the time's quartiles
+    n, std = t["table1"]["Naive"]["samples"], t["table1"]["Naive"]["rel_mee"][1]
+    assert naive["in"]["ci"] == pytest.approx(1.96 * std / n**0.5)
+    low, high = naive["spread"]
+    assert low <= naive["seconds"] <= high
     csv = (tmp_path / "report" / "table2.csv").read_text().splitlines()
     assert csv[0].startswith("setup,samples,mae_x_mean") and len(csv) == 1 + 3 + 3
 
@@ -99,6 +107,24 @@ def test_a_setup_off_the_chart_stays_in_the_tables(config, monkeypatch):
     assert "Naive: only 5 mm" in res["tables"]["table1"]
     assert {p["label"] for p in res["points"]} == {"Naive", "Naive: only 5 mm"}
     assert drawn and drawn[-1] == {"Naive"}
+
+
+def test_the_truth_is_timed_and_drawn_but_not_measured(config, monkeypatch):
+    """``truth: true`` (the FEM at the data's own mesh): no table row, a chart point on the
+    floor with its time's quartiles.
+    """
+    drawn = []
+    monkeypatch.setattr(
+        "stmpl.analysis.ablation.speed_accuracy", lambda pts, *a, **k: drawn.append(pts)
+    )
+    config["setups"] = [config["setups"][0], {**config["setups"][2], "truth": True}]
+    res = ablate.run(config, progress=False)
+    assert "FEM" not in res["tables"]["table1"] and not res["tables"]["table3"]
+    (truth,) = [p for p in drawn[-1] if p["label"] == "FEM"]
+    assert truth["truth"] and truth["in"] is None and truth["out"] is None
+    assert truth["spread"][0] <= truth["seconds"] <= truth["spread"][1]
+    md = (pathlib.Path(config["out"]) / "ablation.md").read_text()
+    assert "| FEM | 1 |" in md and "the truth" in md
 
 
 def test_a_changed_setup_reruns_only_itself(config, monkeypatch):
@@ -250,6 +276,7 @@ def test_a_dataset_made_again_stands_for_the_recorded_one_only_if_it_measures_th
         ({"setups": [{"name": "x", "predictor": "fem", "colour": 1}]}, "takes keys"),
         ({"setups": [{"name": "x", "predictor": "fem", "fidelity": "half"}]}, "full or auto"),
         ({"setups": [{"name": "x", "predictor": "fem", "chart": "no"}]}, "chart must be true or"),
+        ({"setups": [{"name": "x", "predictor": "fem", "truth": 1}]}, "truth must be true or"),
         ({"datasets": {}}, "at least one dataset"),
     ],
 )

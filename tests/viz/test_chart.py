@@ -15,13 +15,40 @@ def test_families_and_files(tmp_path):
     assert [
         family(n) for n in ("GNN: only 3", "linear FEM", "FEM (coarse)", "UV-UNet", "Naive", "x")
     ] == ["GNN", "linear FEM", "FEM", "UV-UNet", "Naive", "other"]
+    err = {"rel_mee": 0.5, "ci": 0.05, "peak_err": 2.0}
     pts = [
-        {"label": "GNN", "batch": 1, "seconds": 2e-3, "rel_mee": 0.5, "peak_err": 2.0},
-        {"label": "GNN", "batch": 64, "seconds": 2e-4, "rel_mee": 0.5, "peak_err": 2.0},
-        {"label": "FEM (coarse)", "batch": 1, "seconds": 3.0, "rel_mee": 2.0, "peak_err": -8.0},
+        {
+            "label": "GNN",
+            "batch": 1,
+            "seconds": 2e-3,
+            "spread": (1.8e-3, 2.5e-3),
+            "in": err,
+            "out": err,
+        },
+        {"label": "GNN", "batch": 64, "seconds": 2e-4, "spread": None, "in": err, "out": err},
+        {
+            "label": "FEM (coarse)",
+            "batch": 1,
+            "seconds": 3.0,
+            "spread": (2.0, 4.0),
+            "in": {"rel_mee": 2.0, "ci": 0.3},
+            "out": None,
+        },
+        {
+            "label": "FEM (the truth)",
+            "batch": 1,
+            "seconds": 5.0,
+            "spread": (4.0, 6.0),
+            "truth": True,
+            "in": None,
+            "out": None,
+        },
     ]
     files = speed_accuracy(pts, tmp_path / "c")
     assert [f.suffix for f in files] == [".png", ".svg"] and files[0].stat().st_size > 20_000
+    svg = files[1].read_text()
+    for words in ("in distribution", "out of distribution", "batch 64", "the truth", "84 ± 53 s"):
+        assert words in svg, words
 
 
 def test_names_do_not_overlap_one_another():
