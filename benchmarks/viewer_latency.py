@@ -33,6 +33,7 @@ from stmpl.viewer.app import Viewer, project
 
 ARGS = ["--enable-unsafe-swiftshader", "--use-angle=swiftshader"]
 W, H = 1280, 800
+"""The page's default size, px."""
 
 
 def facing(part, along: float) -> int:
@@ -72,7 +73,16 @@ def main(argv=None) -> None:
     ap.add_argument(
         "--prepare", action="store_true", help="the viewer prepares the body first (--prepare)"
     )
+    ap.add_argument(
+        "--viewport",
+        nargs=2,
+        type=int,
+        default=[W, H],
+        metavar=("WIDTH", "HEIGHT"),
+        help="the page's size in pixels (software WebGL draws every one of them)",
+    )
     args = ap.parse_args(argv)
+    w, h = args.viewport
     chromium = shutil.which("chromium")
     if chromium is None:
         raise SystemExit("chromium is not installed: apt install chromium")
@@ -82,14 +92,17 @@ def main(argv=None) -> None:
     t0 = time.perf_counter()
     viewer = Viewer([args.model], port=port, prepare=args.prepare)
     viewer.mailbox.idle(600)
-    print(f"{describe()}; viewer up with {args.model} (auto) in {time.perf_counter() - t0:.1f} s")
+    print(
+        f"{describe()}; viewer up with {args.model} (auto) in {time.perf_counter() - t0:.1f} s; "
+        f"page {w} x {h} px"
+    )
     part = viewer.part
     places = [facing(part, f) for f in np.linspace(0.15, 0.85, args.places)]
     out: dict = {"first": [], "cached": [], "same": [], "drag": []}
     try:
         with sync_playwright() as p:
             browser = p.chromium.launch(executable_path=chromium, args=ARGS)
-            page = browser.new_page(viewport={"width": W, "height": H})
+            page = browser.new_page(viewport={"width": w, "height": h})
             page.goto(f"http://127.0.0.1:{port}")
             page.wait_for_selector("#stmpl-answer", timeout=120_000)
             time.sleep(2.0)
@@ -97,7 +110,7 @@ def main(argv=None) -> None:
             for name in ("first", "cached"):
                 for v in places:
                     n = shown(page)
-                    x, y = project(camera, part.vertices[v], W, H)
+                    x, y = project(camera, part.vertices[v], w, h)
                     t = time.perf_counter()
                     page.mouse.click(x, y)
                     wait_shown(page, n + 1)
@@ -105,7 +118,7 @@ def main(argv=None) -> None:
             server = list(viewer.latencies[-len(places) :])
             sent_before = viewer.tiles_sent
             for v in places:  # the place just pressed again: an answer with nothing to redraw
-                x, y = project(camera, part.vertices[v], W, H)
+                x, y = project(camera, part.vertices[v], w, h)
                 n = shown(page)
                 page.mouse.click(x, y)
                 wait_shown(page, n + 1)
@@ -116,8 +129,8 @@ def main(argv=None) -> None:
                 out["same"].append(time.perf_counter() - t)
             redrawn = viewer.tiles_sent - sent_before
             a, b = (
-                project(camera, part.vertices[places[0]], W, H),
-                project(camera, part.vertices[places[-1]], W, H),
+                project(camera, part.vertices[places[0]], w, h),
+                project(camera, part.vertices[places[-1]], w, h),
             )
             page.mouse.move(*a)
             page.mouse.down()
@@ -136,11 +149,11 @@ def main(argv=None) -> None:
                 close = page.locator("button.mantine-Notification-closeButton")
                 for k in range(close.count()):  # the headless browser's software-WebGL note
                     close.nth(k).click()
-                x, y = project(camera, part.vertices[facing(part, 0.45)], W, H)
+                x, y = project(camera, part.vertices[facing(part, 0.45)], w, h)
                 n = shown(page)
                 page.mouse.click(x, y)
                 wait_shown(page, n + 1)
-                page.mouse.move(40, H - 40)  # no hover outline on the skin
+                page.mouse.move(40, h - 40)  # no hover outline on the skin
                 time.sleep(1.0)
                 page.screenshot(path=str(args.shots / "viewer.png"))
                 force = page.locator(
