@@ -114,6 +114,17 @@ def contact_camera(deformation) -> tuple[np.ndarray, np.ndarray, float]:
     return basis, centre, reach
 
 
+def skin_faces(part) -> np.ndarray:
+    """``(F', 3)`` the part's faces less those with all three corners on an open rim: where
+    the part was cut from the body such a face spans the cut and, seen from the side, hangs
+    off the limb's outline like a stray spike.
+    """
+    on_rim = np.zeros(part.n_vertices, bool)
+    for rim in part.rims:
+        on_rim[rim] = True
+    return part.faces[~on_rim[part.faces].all(1)]
+
+
 def in_window(triangles: np.ndarray, basis: np.ndarray, window) -> np.ndarray:
     """``(T,)`` which triangles ``(T, 3, 3)`` seen through ``basis`` reach into ``window``
     ``(x0, x1, y0, y1)`` (m, camera coordinates).
@@ -193,10 +204,11 @@ def contact_figure(
     scale = EXAGGERATION if EXAGGERATION * top <= depth else 1.0
     cmap = matplotlib.colormaps["YlOrRd"]  # light where still: the shading shows shape
     shapes = [np.asarray(m.vertices)[np.asarray(m.faces)] for m in objects]
+    faces = skin_faces(part)
     skins = {
-        name: part.vertices[part.faces]
+        name: part.vertices[faces]
         if isinstance(d, str)
-        else (part.vertices + scale * d.displacement)[part.faces]
+        else (part.vertices + scale * d.displacement)[faces]
         for name, d in rows
     }
     window = fitted_window([*skins.values(), *shapes], basis, centre, reach)
@@ -235,7 +247,7 @@ def contact_figure(
             why = textwrap.fill(d, 44, max_lines=3, placeholder=" ...")
             ax.set_title(f"{name}: failed, no answer\n{why}", fontsize=10, color="#a00000")
             continue
-        tri, val = refine(skin[near], d.magnitude[part.faces][near] * 1e3)
+        tri, val = refine(skin[near], d.magnitude[faces][near] * 1e3)
         draw_meshes(ax, basis, [(tri, cmap(val.mean(1) / top), True), *seen])  # far side hidden
         mag = d.magnitude * 1e3
         ax.set_xlim(x0, x1)

@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from stmpl.viz.render import contact_figure, refine
+from stmpl.body.primitives import sheet, tube
+from stmpl.viz.render import contact_figure, refine, skin_faces
 
 
 def test_refine_keeps_area_and_interpolates_linearly():
@@ -14,6 +15,19 @@ def test_refine_keeps_area_and_interpolates_linearly():
     area = 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
     assert area.sum() == pytest.approx(0.5)
     np.testing.assert_allclose(v, t[..., 0] + 2 * t[..., 1])
+
+
+def test_pictures_leave_out_the_faces_that_span_a_cut():
+    """A face whose three corners lie on an open rim spans the cut (on a sheet: the two
+    corner triangles), not the skin; a closed tube's rim faces each keep a corner inside.
+    """
+    flat = sheet(0.1, 0.1, 5, 5)
+    kept = skin_faces(flat)
+    rim = np.zeros(flat.n_vertices, bool)
+    rim[np.concatenate(flat.rims)] = True
+    assert len(kept) == len(flat.faces) - 2 and not rim[kept].all(1).any()
+    limb = tube()
+    np.testing.assert_array_equal(skin_faces(limb), limb.faces)
 
 
 def test_contact_figure(tmp_path, arm):
