@@ -119,13 +119,19 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
             base, self.model(x, None, ei, self.batch_edges(body, B)).reshape(B, N, 3)
         )
 
-    def batch_edges(self, body, B: int) -> torch.Tensor:
-        """``(B E, latent)``: each sample's body's encoded edges, sample after sample."""
+    def batch_edges(self, body, B: int, keep=None) -> torch.Tensor:
+        """``(B E, latent)``: each sample's body's encoded edges, sample after sample; or only
+        rows ``keep`` (ids ``b E + e``, numpy) of them.
+        """
+        E = self.edge_index.shape[1]
+        rows = np.arange(B * E) if keep is None else np.asarray(keep)
         if body is None:
-            return self.edges().repeat(B, 1)
-        uniq, inv = torch.unique(body, return_inverse=True)
-        enc = torch.stack([self.edges(int(k)) for k in uniq])  # (U, E, latent)
-        return enc.index_select(0, inv).reshape(-1, enc.shape[-1])
+            enc, at = self.edges(), rows % E
+        else:  # the bodies' encoded edges one after another; each row's body's
+            uniq, inv = np.unique(body.cpu().numpy(), return_inverse=True)
+            enc = torch.cat([self.edges(int(k)) for k in uniq])  # (U E, latent)
+            at = inv.ravel()[rows // E] * E + rows % E
+        return enc.index_select(0, torch.as_tensor(at, device=enc.device))
 
     def edges(self, k: int = 0) -> torch.Tensor:
         """Body slot ``k``'s encoded edge features ``(E, latent)`` (0: the model's own part): a
@@ -204,11 +210,7 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         ]
         dev = x.device
         sub_ei = torch.as_tensor(np.stack([where[src[keep]], where[dst[keep]]]), device=dev)
-        E = ei.shape[1]
-        if body is None:
-            sub_e = self.edges().index_select(0, torch.as_tensor(keep % E, device=dev))
-        else:
-            sub_e = self.batch_edges(body, B).index_select(0, torch.as_tensor(keep, device=dev))
+        sub_e = self.batch_edges(body, B, keep)
         idx = torch.as_tensor(nodes, device=dev)
         y = self.model(x.index_select(0, idx), None, sub_ei, sub_e, sizes=sizes)  # (inner, 3)
         out = torch.zeros(B * N, 3, device=dev, dtype=y.dtype)
