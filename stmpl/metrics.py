@@ -105,6 +105,40 @@ def summarise(rows: list[dict]) -> dict:
     return out
 
 
+def pooled(rows: list[dict]) -> dict:
+    """One row of the evaluations ``rows`` (each as :func:`summarise` gives, with
+    :data:`COUNTS`) over all their samples together: each measure's mean weighted by the rows'
+    samples and its standard deviation over every sample (within the rows and between their
+    means); the counts, samples and seconds summed, the reasons for unsolved scenes merged.
+    """
+    rows = [r for r in rows if r and r.get("samples")]
+    if not rows:
+        raise ValueError("no rows to pool")
+    w = np.array([r["samples"] for r in rows], dtype=float)
+    out: dict = {"samples": int(w.sum())}
+    for k, v in rows[0].items():
+        if isinstance(v, (list, tuple)) and len(v) == 2 and all(k in r for r in rows):
+            m = np.array([r[k][0] for r in rows], dtype=float)
+            sd = np.array([r[k][1] for r in rows], dtype=float)
+            ok = np.isfinite(m) & np.isfinite(sd)
+            if not ok.any():
+                out[k] = (np.nan, np.nan)
+                continue
+            mean = float(np.sum(w[ok] * m[ok]) / w[ok].sum())
+            var = np.sum(w[ok] * (sd[ok] ** 2 + (m[ok] - mean) ** 2)) / w[ok].sum()
+            out[k] = (mean, float(np.sqrt(var)))
+    for k in (*COUNTS, "evaluated_seconds"):
+        if all(k in r for r in rows):
+            out[k] = sum(r[k] for r in rows)
+    why: dict = {}
+    for r in rows:
+        for reason, n in (r.get("unsolved_why") or {}).items():
+            why[reason] = why.get(reason, 0) + n
+    if why:
+        out["unsolved_why"] = why
+    return out
+
+
 COLUMNS = (
     [
         ("mae_x", "MAE x"),

@@ -3,6 +3,7 @@ import pytest
 
 from stmpl import metrics
 from stmpl.body.primitives import tube
+from stmpl.metrics import pooled, summarise
 
 
 def test_sample_metrics_by_hand():
@@ -54,3 +55,20 @@ def test_seam_gap():
     g = part.seam_groups[0]
     corners[g[1]] = [0.0, 0.0, 2e-3]  # one copy of one seam vertex 2 mm off
     assert metrics.seam_gap(part, corners) == pytest.approx(2.0 / len(part.seam_groups))
+
+
+def test_rows_pooled_are_the_row_of_all_their_samples():
+    """Pooling two sets' rows gives what one row over both sets' samples gives: means weighted
+    by samples, the spread within and between the rows; counts summed, reasons merged.
+    """
+    rng = np.random.default_rng(0)
+    a = [{"rel_mee": x, "peak_err": y} for x, y in rng.normal([1, 2], 0.3, (7, 2))]
+    b = [{"rel_mee": x, "peak_err": y} for x, y in rng.normal([3, -1], 0.5, (12, 2))]
+    ra, rb = summarise(a), summarise(b)
+    ra.update(unsolved=2, unsolved_why={"buckled": 2})
+    rb.update(unsolved=3, unsolved_why={"buckled": 1, "stagnated": 2})
+    both, whole = pooled([ra, rb]), summarise(a + b)
+    assert both["samples"] == 19 and both["unsolved"] == 5
+    assert both["unsolved_why"] == {"buckled": 3, "stagnated": 2}
+    for k in ("rel_mee", "peak_err"):
+        np.testing.assert_allclose(both[k], whole[k], rtol=1e-12)
