@@ -253,12 +253,15 @@ def clusters(tri: np.ndarray, leaf: int = LEAF) -> list[np.ndarray]:
     return out
 
 
-def winding_number(mesh, points: np.ndarray, far: float = FAR) -> np.ndarray:
+def winding_number(
+    mesh, points: np.ndarray, far: float = FAR, chunk: int = 1_000_000
+) -> np.ndarray:
     """``(P,)`` generalized winding number of a triangle mesh at ``points`` ``(P, 3)``: the sum
     of the signed solid angles of its triangles over ``4 pi`` (1 inside a closed outward-facing
     mesh, 0 outside). Triangles are grouped in clusters; a cluster seen from farther than
     ``far`` times its radius counts as its dipole, the others triangle by triangle (Barill et
-    al. 2018, "Fast winding numbers for soups and clouds", to first order).
+    al. 2018, "Fast winding numbers for soups and clouds", to first order). ``chunk``: at most
+    about this many (point, cluster) pairs at a time.
     """
     tri = np.asarray(mesh.triangles, dtype=float)  # (M, 3, 3)
     points = np.asarray(points, dtype=float).reshape(-1, 3)
@@ -272,18 +275,23 @@ def winding_number(mesh, points: np.ndarray, far: float = FAR) -> np.ndarray:
     radius = np.array(
         [np.linalg.norm(tri[g].reshape(-1, 3) - c, axis=1).max() for g, c in zip(groups, centre)]
     )
-    away = centre[None] - points[:, None]  # (P, K, 3)
-    dist = np.linalg.norm(away, axis=2)
-    near = dist <= far * radius[None]
-    flux = np.einsum("pki,ki->pk", away, dipole)  # the dipoles' solid angles, times dist^3
-    angle = np.divide(flux, dist**3, out=np.zeros_like(flux), where=~near).sum(1)
-    pk = np.argwhere(near)
-    if len(pk):
-        counts = np.array([len(g) for g in groups])[pk[:, 1]]
-        rows = np.repeat(pk[:, 0], counts)
-        cols = np.concatenate([groups[k] for k in pk[:, 1]])
-        np.add.at(angle, rows, solid_angles(tri[cols], points[rows]))
-    return angle / (4 * np.pi)
+    sizes = np.array([len(g) for g in groups])
+    out = np.empty(len(points))
+    step = max(1, chunk // len(groups))  # points at a time: (step, K) pairs in memory
+    for s in range(0, len(points), step):
+        x = points[s : s + step]
+        away = centre[None] - x[:, None]  # (p, K, 3)
+        dist = np.linalg.norm(away, axis=2)
+        near = dist <= far * radius[None]
+        flux = np.einsum("pki,ki->pk", away, dipole)  # the dipoles' solid angles, times dist^3
+        angle = np.divide(flux, dist**3, out=np.zeros_like(flux), where=~near).sum(1)
+        pk = np.argwhere(near)
+        if len(pk):
+            rows = np.repeat(pk[:, 0], sizes[pk[:, 1]])
+            cols = np.concatenate([groups[k] for k in pk[:, 1]])
+            np.add.at(angle, rows, solid_angles(tri[cols], x[rows]))
+        out[s : s + step] = angle / (4 * np.pi)
+    return out
 
 
 def distance_to_surface(mesh, points: np.ndarray, upto: float = np.inf) -> np.ndarray:
