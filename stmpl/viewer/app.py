@@ -33,6 +33,23 @@ from stmpl.viz.verdict import facts, verdict
 
 OBJECT_COLOUR = (150, 190, 255)
 
+BODIES = {
+    "as started": {},
+    "thin": {"weight": 0.1},
+    "heavy": {"weight": 0.9},
+    "muscular": {"muscle": 0.9},
+    "short": {"height": 0.1},
+    "tall": {"height": 0.9},
+    "older": {"age": 0.9},
+    "female": {"gender": 0.0},
+    "male": {"gender": 1.0},
+}
+"""Anny bodies the page offers: changes to the phenotype the viewer started with (anny's
+``weight``, ``muscle``, ``height``, ``age``, ``gender``, each in [0, 1])."""
+TISSUES = ("paper", "forearm", "upper_arm", "abdomen")
+"""The FEM's tissue presets (``fem.layers``): the paper's gel and the layered skin, fat and
+muscle of three places. The learned models know the gel only; a layered tissue is the FEM's."""
+
 
 def ray_hit(vertices: np.ndarray, faces: np.ndarray, origin, direction) -> int | None:
     """The vertex nearest to where the ray first meets the mesh (Moller-Trumbore over every
@@ -127,7 +144,9 @@ class Viewer:
         first = next(iter(self.predictors.values()))
         skin = int(getattr(first, "part", None) and first.part.source.get("subdivisions", 0) or 0)
         self.part_name, self.phenotype, self.skin = part, dict(phenotype or {}), skin
+        self.started = dict(self.phenotype)  # what the page's bodies change
         self.thickness_mm = thickness_mm
+        self._body = threading.Lock()  # the body, its thickness and tiles change together
         self._build_part()
         if prepare:  # columns ahead: no press waits for the linear FEM
             for p in self.predictors.values():
@@ -151,20 +170,36 @@ class Viewer:
     # -- the body ---------------------------------------------------------------------------
     def _build_part(self) -> None:
         spec = {"model": "anny", "subdivisions": self.skin, "phenotype": self.phenotype}
-        self.part = part_from_spec(spec, self.part_name)
+        part = part_from_spec(spec, self.part_name)
         if self.thickness_mm is None:
-            self.thickness = tissue.from_weight(self.part, self.phenotype.get("weight", 0.5))
+            thickness = tissue.from_weight(part, self.phenotype.get("weight", 0.5))
         else:
-            self.thickness = tissue.constant(self.part, self.thickness_mm * 1e-3)
-        self.tree = cKDTree(self.part.vertices)
-        self.tiles = Tiles(self.part.vertices, self.part.faces, 16)
-        self.vertex = int(
-            np.argmin(
-                np.linalg.norm(
-                    self.part.vertices - self.part.vertices.mean(0) + [0.0, 0.05, 0.0], axis=1
+            thickness = tissue.constant(part, self.thickness_mm * 1e-3)
+        with self._body:
+            self.part, self.thickness = part, thickness
+            self.tree = cKDTree(part.vertices)
+            self.tiles = Tiles(part.vertices, part.faces, 16)
+            if getattr(self, "vertex", None) is None or self.vertex >= part.n_vertices:
+                self.vertex = int(
+                    np.argmin(
+                        np.linalg.norm(
+                            part.vertices - part.vertices.mean(0) + [0.0, 0.05, 0.0], axis=1
+                        )
+                    )
                 )
-            )
-        )
+
+    def rebody(self, phenotype: dict | None = None, thickness_mm: float | None = None) -> None:
+        """Another body (anny's ``phenotype``) or tissue (``thickness_mm``; ``None``: from the
+        weight): the part built again, drawn at rest, and the press answered on it.
+        """
+        if phenotype is not None:
+            self.phenotype = dict(phenotype)
+        self.thickness_mm = thickness_mm
+        self.status.content = "building the body..."
+        self._build_part()
+        self.last = None
+        self._draw_body()
+        self.request()
 
     def _draw_body(self) -> None:
         centre = self.part.vertices.mean(axis=0)
@@ -222,6 +257,17 @@ class Viewer:
             self.shot = g.add_button("screenshot (PNG)")
             self.save_glb = g.add_button("deformed mesh (GLB)")
             self.save_ply = g.add_button("deformed mesh (PLY)")
+        with g.add_folder("body and tissue", expand_by_default=False):
+            self.body = g.add_dropdown("body", list(BODIES), initial_value="as started")
+            mm = 1e3 * float(np.mean(self.thickness))
+            self.depth = g.add_slider("tissue, mm", 2.5, 12.5, 0.25, round(4 * mm) / 4)
+            self.tissue = g.add_dropdown("FEM's tissue", list(TISSUES), initial_value="paper")
+            g.add_markdown(
+                "The learned models know the paper's gel; a layered tissue is the FEM's "
+                "(compare with the FEM)."
+            )
+        self.body.on_update(lambda _: self._body_changed(thickness=False))
+        self.depth.on_update(lambda _: self._body_changed(thickness=True))
         self.mesh = None
         for h in (self.model, self.force, self.radius, self.grip):
             h.on_update(lambda _: self.request())
@@ -231,6 +277,24 @@ class Viewer:
         self.shot.on_click(self._screenshot)
         self.save_glb.on_click(lambda e: self._save(e, "glb"))
         self.save_ply.on_click(lambda e: self._save(e, "ply"))
+
+    def _body_changed(self, thickness: bool) -> None:
+        """A body from the page's list, or a tissue depth from its slider (until the slider is
+        moved, a body's tissue follows its weight), built in the background.
+        """
+        phenotype = {**self.started, **BODIES[self.body.value]}
+        mm = float(self.depth.value) if thickness else self.thickness_mm
+        if not thickness and phenotype == self.phenotype:
+            return
+        threading.Thread(
+            target=self._rebody_safely, args=(phenotype, mm), name="stmpl-body", daemon=True
+        ).start()
+
+    def _rebody_safely(self, phenotype: dict, mm: float | None) -> None:
+        try:
+            self.rebody(phenotype, mm)
+        except Exception as e:  # a body anny cannot build, a thickness out of range: said
+            self._say_error(str(e).splitlines()[0] if str(e) else type(e).__name__)
 
     def _welcome(self, client) -> None:
         client.add_notification(
@@ -299,7 +363,9 @@ class Viewer:
     def _answer(self, request):
         t0, name, kw = request
         choice = Choice(**kw)
-        scene, meshes = pressed(self.part, self.thickness, choice, self.phenotype)
+        with self._body:
+            part, thickness, phenotype = self.part, self.thickness, dict(self.phenotype)
+        scene, meshes = pressed(part, thickness, choice, phenotype)
         with warnings.catch_warnings():  # said on the page instead
             warnings.simplefilter("ignore", OutsideEnvelope)
             warnings.simplefilter("ignore", ImpossibleAnswer)
@@ -312,6 +378,8 @@ class Viewer:
             return
         t0, name, _ = request
         choice, scene, d, meshes = result
+        if scene.part is not self.part:  # answered on a body the page has left
+            return
         self.last = (choice, scene, d, meshes, name)
         mag = d.magnitude * 1e3
         top = legend.scale_mm(float(mag.max()))
@@ -325,8 +393,9 @@ class Viewer:
         self.status.content = (
             f'<div id="stmpl-answer" data-n="{len(self.latencies)}" style="font-size:0.9em">'
             f"<b>{html.escape(name)}</b>: deepest {mag.max():.2f} mm, answered in "
-            f"{duration(d.info['seconds'])}; {choice.force:g} N; {sent} of {len(self.tiles)} "
-            "surface tiles sent</div>"
+            f"{duration(d.info['seconds'])}; {choice.force:g} N on "
+            f"{1e3 * float(np.mean(scene.thickness)):.3g} mm of tissue; {sent} of "
+            f"{len(self.tiles)} surface tiles sent</div>"
         )
         self.server.flush()  # now, not at the next batch: the person is waiting
 
@@ -363,10 +432,16 @@ class Viewer:
         def solve() -> None:
             t0 = time.perf_counter()
             try:
-                fem = predictor_from_spec("fem", "cpu", fidelity="auto").predict(scene)
+                fem = predictor_from_spec(
+                    "fem",
+                    "cpu",
+                    fidelity="auto",
+                    tissue=self.tissue.value,
+                    phenotype=self.phenotype,
+                ).predict(scene)
                 m = sample_metrics(fem.displacement, d.displacement)
                 self.compared.content = (
-                    f"FEM: deepest {fem.magnitude.max() * 1e3:.2f} mm in "
+                    f"FEM ({self.tissue.value}): deepest {fem.magnitude.max() * 1e3:.2f} mm in "
                     f"{duration(time.perf_counter() - t0)}; **{name}** against it: relative "
                     f"MEE {m['rel_mee']:.2f} %, peak {m['peak_err']:+.1f} %. The colours show "
                     "the error until the next press."
