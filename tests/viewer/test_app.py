@@ -180,3 +180,13 @@ def test_a_person_presses_the_arm_in_a_real_browser(tmp_path):
         viewer.close()
     assert not left, f"the page reached beyond this machine: {left[:3]}"
     assert (tmp_path / "pressed.png").stat().st_size > 20_000
+
+
+def test_the_page_offers_every_tissue_the_fem_has_and_real_bodies():
+    from fem.layers import PRESETS
+
+    from stmpl.viewer.app import BODIES, TISSUES
+
+    assert set(TISSUES) == {"paper", *PRESETS}
+    keys = {"weight", "muscle", "height", "age", "gender", "proportions"}
+    assert all(set(b) <= keys and all(0 <= v <= 1 for v in b.values()) for b in BODIES.values())
