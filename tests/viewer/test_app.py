@@ -13,7 +13,8 @@ import numpy as np
 import pytest
 import trimesh
 
-from stmpl.viewer.app import Viewer, camera_ray, project, ray_hit
+from fem.layers import PRESETS
+from stmpl.viewer.app import BODIES, TISSUES, Viewer, camera_ray, project, ray_hit
 
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 ARGS = ["--enable-unsafe-swiftshader", "--use-angle=swiftshader"]  # WebGL without a GPU
@@ -183,10 +184,6 @@ def test_a_person_presses_the_arm_in_a_real_browser(tmp_path):
 
 
 def test_the_page_offers_every_tissue_the_fem_has_and_real_bodies():
-    from fem.layers import PRESETS
-
-    from stmpl.viewer.app import BODIES, TISSUES
-
     assert set(TISSUES) == {"paper", *PRESETS}
     keys = {"weight", "muscle", "height", "age", "gender", "proportions"}
     assert all(set(b) <= keys and all(0 <= v <= 1 for v in b.values()) for b in BODIES.values())
