@@ -6,7 +6,8 @@ surface on screen, in Debian's chromium driven headless by Playwright (software 
 
 The viewer serves the fine left arm with the model at fidelity auto; the browser clicks the
 front of the arm at ``--places`` places along it, twice: the first pass meets each place new
-(a model on the linear FEM prior computes that place's columns then), the second finds them
+(a model on the linear FEM prior needs that place's columns then: Naive answers at once as its
+stand-in while they are solved, and the model's own answer follows), the second finds them
 cached. Each latency runs from just before the click is dispatched to the second animation
 frame after the page shows the new answer (the answer's stamp in the page; the surface tiles
 arrive in the same message batch, before it). Then a drag along the arm: each pointer move to
@@ -34,6 +35,8 @@ from stmpl.viewer.app import Viewer, project
 ARGS = ["--enable-unsafe-swiftshader", "--use-angle=swiftshader"]
 W, H = 1280, 800
 """The page's default size, px."""
+STAND_IN = "zoo:naive_arm_fine"
+"""The model that answers at once where the measured one waits for its prior's columns."""
 
 
 def facing(part, along: float) -> int:
@@ -90,7 +93,9 @@ def main(argv=None) -> None:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     t0 = time.perf_counter()
-    viewer = Viewer([args.model], port=port, prepare=args.prepare)
+    # Naive beside the model, as `stmpl view` serves it: at a place new to the model's prior it
+    # answers at once, marked as a stand-in, while the prior's columns are solved
+    viewer = Viewer([args.model, STAND_IN], port=port, prepare=args.prepare)
     viewer.mailbox.idle(600)
     print(
         f"{describe()}; viewer up with {args.model} (auto) in {time.perf_counter() - t0:.1f} s; "

@@ -14,6 +14,7 @@ from models.linear.operator import (
     fit_on_demand,
     fit_operator,
     install,
+    needed_columns,
     reattach,
     solve_needed,
 )
@@ -82,6 +83,12 @@ class LinearPrior:
             return 0
         return prepare_operator(self, self.model.prior, part, thickness, progress)
 
+    def missing(self, scene) -> int:
+        """The prior's columns ``scene`` loads that are not yet solved
+        (:func:`missing_columns`); 0 without the prior.
+        """
+        return missing_columns(self, self.model.prior, scene) if self.prior else 0
+
     def body_prior(self, k: int):
         """The linear FEM of body slot ``k`` (the model's own: ``model.prior``), on demand: a
         :class:`~fem.compliance.ColumnStore` for that body and the recorded FEM set-up, whose
@@ -116,6 +123,24 @@ def prepare_operator(predictor, own, part, thickness, progress: bool = True) -> 
         raise ValueError(f"thickness must be ({part.n_vertices},) finite values in m")
     with torch.no_grad():
         return solve_needed(op.store, op, t, np.ones_like(t), progress)
+
+
+def missing_columns(predictor, own, scene) -> int:
+    """How many columns of the on-demand linear FEM (``own``, the predictor's own operator, or
+    another body's: :func:`body_operator`) ``scene`` loads that are not yet solved; 0 for a
+    stored operator (it carries them all).
+    """
+    k = predictor.slot(scene.part)
+    op = own if k == 0 else body_operator(predictor, k)
+    if not op.on_demand:
+        return 0
+    t = np.asarray(scene.thickness, dtype=np.float32)[None]
+    f = np.asarray(scene.force, dtype=np.float32)[None]
+    store = op.store
+    return sum(
+        len(store.missing(store.level(float(op.levels[lv])), cols))
+        for lv, cols in enumerate(needed_columns(op, t, f))
+    )
 
 
 def on_bodies(predictor, own, thickness, force, body=None):

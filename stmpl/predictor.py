@@ -227,5 +227,11 @@ class BasePredictor:
         """
         return 0
 
+    def missing(self, scene: Scene) -> int:
+        """How many pieces (a linear FEM prior's columns) an answer to ``scene`` would compute
+        before it answers: 0 when it answers at once. None by default.
+        """
+        return 0
+
     def predict_batch(self, scenes: list[Scene]) -> list[np.ndarray]:
         raise NotImplementedError

@@ -283,7 +283,9 @@ def check_operator(value) -> str:
     return value
 
 
-def _needed(op: ComplianceOperator, thickness: np.ndarray, force: np.ndarray) -> list[np.ndarray]:
+def needed_columns(
+    op: ComplianceOperator, thickness: np.ndarray, force: np.ndarray
+) -> list[np.ndarray]:
     """Per level, the vertices whose column the samples ``thickness``, ``force`` ``(S, N)``
     need (loaded, with a non-zero interpolation weight on that level).
     """
@@ -299,7 +301,7 @@ def solve_needed(
     one solve per level over all of them (the union of many loads is most of the part, where
     one factorisation beats a patch per load). Returns how many were computed.
     """
-    need = _needed(op, thickness, force)
+    need = needed_columns(op, thickness, force)
     bar = None
     if progress:
         total = sum(

@@ -22,7 +22,7 @@ from models.linear.operator import (
     install,
     reattach,
 )
-from models.prior import on_bodies, prepare_operator
+from models.prior import missing_columns, on_bodies, prepare_operator
 
 
 class LinearPredictor(LearnedPredictor):
@@ -77,6 +77,10 @@ class LinearPredictor(LearnedPredictor):
 
     def restored(self) -> None:
         reattach(self, self.model)
+
+    def missing(self, scene) -> int:
+        """The operator's columns ``scene`` loads that are not yet solved (0 when stored)."""
+        return missing_columns(self, self.model, scene)
 
     def prepare(self, part, thickness, progress: bool = True) -> int:
         """Solve the operator's columns at every vertex of ``part`` for tissue ``thickness``

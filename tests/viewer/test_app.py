@@ -187,3 +187,33 @@ def test_the_page_offers_every_tissue_the_fem_has_and_real_bodies():
     assert set(TISSUES) == {"paper", *PRESETS}
     keys = {"weight", "muscle", "height", "age", "gender", "proportions"}
     assert all(set(b) <= keys and all(0 <= v <= 1 for v in b.values()) for b in BODIES.values())
+
+
+def test_a_press_at_a_new_place_is_answered_at_once_by_a_stand_in(monkeypatch, tmp_path):
+    """Where the GNN's linear prior has no columns yet (an empty column cache), Naive answers at
+    once, marked as a stand-in, while they are solved in the background; then the GNN's own
+    answer replaces it, with nothing marked.
+    """
+    import fem.compliance
+
+    monkeypatch.setattr(fem.compliance, "default_cache_dir", lambda: tmp_path)
+    shown, show = [], Viewer._show
+
+    def recording(self, request, result):
+        if not isinstance(result, Exception):
+            shown.append((request[1], result[2].info.get("stand_in")))
+        return show(self, request, result)
+
+    monkeypatch.setattr(Viewer, "_show", recording)
+    viewer = Viewer(["zoo:gnn_arm_bodies", "zoo:naive_arm_fine"], port=_free_port())
+    try:
+        end = time.monotonic() + 300
+        while viewer.solving or not viewer.mailbox.idle(1) or len(shown) < 2:
+            assert time.monotonic() < end, f"no answer of the GNN's own: {shown}"
+            time.sleep(0.2)
+    finally:
+        viewer.close()
+    first, last = shown[0], shown[-1]
+    assert first == ("gnn_arm_bodies", {"for": "gnn_arm_bodies", "by": "naive_arm_fine"})
+    assert last == ("gnn_arm_bodies", None)
+    assert "a stand-in" not in viewer.verdict.content
