@@ -404,7 +404,7 @@ def _points(s: dict, cfg: dict, tables: dict, latency: dict) -> list[dict]:
 def _latency(p, ds, repeats: int = 5) -> dict:
     """Seconds per scene at batch 1 and batch 64, each ``[median, lower quartile, upper
     quartile]`` over the repeats after a warm-up, on the first in-distribution test scenes;
-    the FEM (seconds a scene, solved one at a time) at batch 1 only, on 5 scenes.
+    the FEM (seconds a scene, solved one at a time) at batch 1 only, on 3 scenes.
     """
     scenes, _ = scenes_of(ds, "test", limit=64)
     with warnings.catch_warnings():
@@ -412,7 +412,7 @@ def _latency(p, ds, repeats: int = 5) -> dict:
         warnings.simplefilter("ignore", ImpossibleAnswer)
         p.predict(scenes[0])  # warm-up
         if not getattr(p, "batched", True):  # the FEM: seconds a scene
-            return {"1": _quartiles([_timed(p, [s]) for s in scenes[1:6]])}
+            return {"1": _quartiles([_timed(p, [s]) for s in scenes[:3]])}
         one = _quartiles([_timed(p, [s]) for s in scenes[: repeats * 4]])
         many = _quartiles([_timed(p, scenes) / len(scenes) for _ in range(repeats)])
     return {"1": one, str(len(scenes)): many}
@@ -528,7 +528,7 @@ def _write(
             2 + bool(cost),
             "## Speed against accuracy\n\n![speed against accuracy]"
             "(speed_accuracy.png)\n\nTime per scene on this machine at batch 1 and "
-            "64: the median over repeats, the bars its quartiles (the FEM: 5 scenes solved "
+            "64: the median over repeats, the bars its quartiles (the FEM: 3 scenes solved "
             "one at a time, from rest). Error: the relative MEE in distribution and pooled "
             "over the out-of-distribution test sets, the bars the 95 % interval of its mean "
             "over the test scenes (rel. MEE ± that half-width below). Circles are batch 1, "
