@@ -17,7 +17,8 @@ MIRROR = np.array([-1.0, 1.0, 1.0])
 _TWINS: dict = {}
 
 
-def _counterpart(name: str) -> str | None:
+def counterpart(name: str) -> str | None:
+    """The other side's part of part ``name`` (``right_arm`` for ``left_arm``), or None."""
     for a, b in (("left_", "right_"), ("right_", "left_")):
         if name.startswith(a):
             return b + name[len(a) :]
@@ -32,7 +33,7 @@ def mirror_twin(part: BodyPart, template: BodyPart) -> BodyPart | None:
     arms are), the template's mesh with ``part``'s vertices mirrored (its normals mirrored too);
     else None. Which body it is does not matter: the correspondence is the mesh's.
     """
-    if _counterpart(part.name) != template.name or part.n_vertices != template.n_vertices:
+    if counterpart(part.name) != template.name or part.n_vertices != template.n_vertices:
         return None
     key = (part.faces.tobytes(), template.faces.tobytes())
     if key not in _TWINS:

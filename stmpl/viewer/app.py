@@ -18,6 +18,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from stmpl import tissue
+from stmpl.body.mirror import counterpart
 from stmpl.body.spec import part_from_spec
 from stmpl.contact.hand import GRIPS
 from stmpl.failures import ImpossibleAnswer, OutsideEnvelope
@@ -189,25 +190,39 @@ class Viewer:
                     )
                 )
 
-    def rebody(self, phenotype: dict | None = None, thickness_mm: float | None = None) -> None:
-        """Another body (anny's ``phenotype``) or tissue (``thickness_mm``; ``None``: from the
-        weight): the part built again, drawn at rest, and the press answered on it.
+    def rebody(
+        self,
+        phenotype: dict | None = None,
+        thickness_mm: float | None = None,
+        part: str | None = None,
+    ) -> None:
+        """Another body (anny's ``phenotype``), tissue (``thickness_mm``; ``None``: from the
+        weight) or ``part`` (the other side's): built again, drawn at rest, and the press
+        answered on it.
         """
         if phenotype is not None:
             self.phenotype = dict(phenotype)
         self.thickness_mm = thickness_mm
+        moved = part is not None and part != self.part_name
+        if moved:
+            self.part_name, self.vertex = part, None
         self.status.content = "building the body..."
         self._build_part()
         self.last = None
-        self._draw_body()
+        self._draw_body(look=moved)
         self.request()
 
-    def _draw_body(self) -> None:
+    def _draw_body(self, look: bool = False) -> None:
+        """The body at rest; with ``look``, every open page's camera turned to it too (another
+        part).
+        """
         centre = self.part.vertices.mean(axis=0)
         size = float(np.ptp(self.part.vertices, axis=0).max())
+        at, eye = tuple(centre), tuple(centre + np.array([0.0, -0.85 * size, 0.15 * size]))
         cam = self.server.initial_camera
-        cam.look_at = tuple(centre)
-        cam.position = tuple(centre + np.array([0.0, -0.85 * size, 0.15 * size]))
+        cam.look_at, cam.position = at, eye
+        for client in self.server.get_clients().values() if look else ():
+            client.camera.look_at, client.camera.position = at, eye
         self.tiles.forget()
         rest = legend.colours(np.zeros(self.part.n_vertices), 1.0)
         self._send_tiles(self.part.vertices, rest)
@@ -259,6 +274,8 @@ class Viewer:
             self.save_glb = g.add_button("deformed mesh (GLB)")
             self.save_ply = g.add_button("deformed mesh (PLY)")
         with g.add_folder("body and tissue", expand_by_default=False):
+            sides = [self.part_name] + [x for x in [counterpart(self.part_name)] if x]
+            self.side = g.add_dropdown("part", sides, initial_value=self.part_name)
             self.body = g.add_dropdown("body", list(BODIES), initial_value="as started")
             mm = 1e3 * float(np.mean(self.thickness))
             self.depth = g.add_slider("tissue, mm", 2.5, 12.5, 0.25, round(4 * mm) / 4)
@@ -267,6 +284,7 @@ class Viewer:
                 "The learned models know the paper's gel; a layered tissue is the FEM's "
                 "(compare with the FEM)."
             )
+        self.side.on_update(lambda _: self._body_changed(thickness=False))
         self.body.on_update(lambda _: self._body_changed(thickness=False))
         self.depth.on_update(lambda _: self._body_changed(thickness=True))
         self.mesh = None
@@ -285,15 +303,16 @@ class Viewer:
         """
         phenotype = {**self.started, **BODIES[self.body.value]}
         mm = float(self.depth.value) if thickness else self.thickness_mm
-        if not thickness and phenotype == self.phenotype:
+        side = self.side.value
+        if not thickness and phenotype == self.phenotype and side == self.part_name:
             return
         threading.Thread(
-            target=self._rebody_safely, args=(phenotype, mm), name="stmpl-body", daemon=True
+            target=self._rebody_safely, args=(phenotype, mm, side), name="stmpl-body", daemon=True
         ).start()
 
-    def _rebody_safely(self, phenotype: dict, mm: float | None) -> None:
+    def _rebody_safely(self, phenotype: dict, mm: float | None, side: str) -> None:
         try:
-            self.rebody(phenotype, mm)
+            self.rebody(phenotype, mm, side)
         except Exception as e:  # a body anny cannot build, a thickness out of range: said
             self._say_error(str(e).splitlines()[0] if str(e) else type(e).__name__)
 

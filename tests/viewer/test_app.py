@@ -176,6 +176,13 @@ def test_a_person_presses_the_arm_in_a_real_browser(tmp_path):
             assert viewer.phenotype["weight"] == 0.9 and viewer.thickness_mm == 9.0
             assert np.abs(viewer.part.vertices - part.vertices).max() > 1e-3  # another shape
             assert "on 9 mm of tissue" in status.inner_text()
+            part = viewer.part  # the other arm: the left arm's model answers it in the mirror
+            page.get_by_role("combobox", name="part").click()
+            page.get_by_role("option", name="right_arm").click()
+            _rebuilt(viewer, part)
+            _settle(viewer, page)
+            assert viewer.part.name == "right_arm" and viewer.last[1].part is viewer.part
+            assert viewer.last[2].info.get("mirrored")
             browser.close()
     finally:
         viewer.close()
