@@ -204,8 +204,8 @@ class Viewer:
             self.phenotype = dict(phenotype)
         self.thickness_mm = thickness_mm
         moved = part is not None and part != self.part_name
-        if moved:
-            self.part_name, self.vertex = part, None
+        if moved:  # the press stays at the same vertex: the other side's twin of it
+            self.part_name = part
         self.status.content = "building the body..."
         self._build_part()
         self.last = None
