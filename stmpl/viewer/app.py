@@ -438,6 +438,7 @@ class Viewer:
         choice, scene, d, meshes = result
         if scene.part is not self.part:  # answered on a body the page has left
             return
+        name = d.info.get("stand_in", {}).get("by", name)  # whose answer it is: saved so too
         self.last = (choice, scene, d, meshes, name)
         mag = d.magnitude * 1e3
         top = legend.scale_mm(float(mag.max()))
@@ -445,14 +446,6 @@ class Viewer:
         sent = self._send_tiles(d.vertices, colours)
         self._send_objects(meshes)
         kind, words = verdict(d.info)
-        stand_in = d.info.get("stand_in")
-        if stand_in:  # not the chosen model's answer: said first, in orange
-            kind = "outside"
-            words = (
-                f"a stand-in: {stand_in['by']} answers while {stand_in['for']}'s linear FEM is "
-                f"solved for this place (seconds); {stand_in['for']}'s answer follows"
-            )
-            name = stand_in["by"]
         self.verdict.content = legend.verdict_html(kind, words)
         self.scale.content = legend.colour_bar(top)
         self.latencies.append(time.perf_counter() - t0)

@@ -9,13 +9,20 @@ from stmpl.tissue import GEL_TRUSTED_COMPRESSION
 
 def verdict(info: dict) -> tuple[str, str]:
     """``(kind, words)`` of a :class:`~stmpl.scene.Deformation`'s ``info``: ``impossible``
-    (past where the gel buckles), ``outside`` (the envelope's first reasons) or ``inside``.
+    (past where the gel buckles), ``outside`` (another model standing in for the chosen one,
+    or the envelope's first reasons) or ``inside``.
     """
     if not info.get("physical", True):
         c = info.get("max_compression", float("nan"))
         return "impossible", (
             f"the skin moves in {c:.2f} x the tissue's depth, past {GEL_TRUSTED_COMPRESSION:g} "
             "where the gel buckles and the FEM gives no answer: do not use"
+        )
+    stand_in = info.get("stand_in")  # another model's answer while the chosen one prepares
+    if stand_in:
+        return "outside", (
+            f"a stand-in: {stand_in['by']} answers while {stand_in['for']}'s linear FEM is "
+            f"solved for this place (seconds); {stand_in['for']}'s answer follows"
         )
     env = info.get("envelope")
     if env and not env.get("inside", True):

@@ -207,9 +207,9 @@ def test_a_press_at_a_new_place_is_answered_at_once_by_a_stand_in(monkeypatch, t
     shown, show = [], Viewer._show
 
     def recording(self, request, result):
-        if not isinstance(result, Exception):
-            shown.append((request[1], result[2].info.get("stand_in")))
-        return show(self, request, result)
+        show(self, request, result)
+        if not isinstance(result, Exception):  # asked of, whose answer stood in, shown as
+            shown.append((request[1], result[2].info.get("stand_in"), self.last[4]))
 
     monkeypatch.setattr(Viewer, "_show", recording)
     viewer = Viewer(["zoo:gnn_arm_bodies", "zoo:naive_arm_fine"], port=_free_port())
@@ -221,6 +221,7 @@ def test_a_press_at_a_new_place_is_answered_at_once_by_a_stand_in(monkeypatch, t
     finally:
         viewer.close()
     first, last = shown[0], shown[-1]
-    assert first == ("gnn_arm_bodies", {"for": "gnn_arm_bodies", "by": "naive_arm_fine"})
-    assert last == ("gnn_arm_bodies", None)
+    stood = {"for": "gnn_arm_bodies", "by": "naive_arm_fine"}
+    assert first == ("gnn_arm_bodies", stood, "naive_arm_fine")  # saved under Naive's name
+    assert last == ("gnn_arm_bodies", None, "gnn_arm_bodies")
     assert "a stand-in" not in viewer.verdict.content

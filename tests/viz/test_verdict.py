@@ -26,6 +26,15 @@ def test_the_verdict_names_what_it_finds_first():
     )
     assert kind == "impossible" and "0.62" in words and "buckles" in words
     assert verdict({"physical": True, "envelope": None})[0] == "inside"
+    # another model standing in for the chosen one is never shown as the chosen one's answer
+    kind, words = verdict(
+        {
+            "physical": True,
+            "envelope": {"inside": True, "outside": []},
+            "stand_in": {"for": "gnn", "by": "naive"},
+        }
+    )
+    assert kind == "outside" and words.startswith("a stand-in: naive answers while gnn's")
 
 
 def test_a_saved_mesh_carries_its_verdict():
