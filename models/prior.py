@@ -17,6 +17,7 @@ from models.linear.operator import (
     needed_columns,
     reattach,
     solve_needed,
+    unsolved,
 )
 
 PRIORS = ("none", "linear")
@@ -114,9 +115,8 @@ def prepare_operator(predictor, own, part, thickness, progress: bool = True) -> 
     """
     import torch  # deferred: about a second to import; the core's types do not need it
 
-    k = predictor.slot(part)
-    op = own if k == 0 else body_operator(predictor, k)
-    if not op.on_demand:
+    op = _on_demand(predictor, own, part)
+    if op is None:
         return 0
     t = np.asarray(thickness, dtype=np.float32)[None]
     if t.shape != (1, part.n_vertices) or not np.all(np.isfinite(t)):
@@ -130,17 +130,21 @@ def missing_columns(predictor, own, scene) -> int:
     another body's: :func:`body_operator`) ``scene`` loads that are not yet solved; 0 for a
     stored operator (it carries them all).
     """
-    k = predictor.slot(scene.part)
-    op = own if k == 0 else body_operator(predictor, k)
-    if not op.on_demand:
+    op = _on_demand(predictor, own, scene.part)
+    if op is None:
         return 0
     t = np.asarray(scene.thickness, dtype=np.float32)[None]
     f = np.asarray(scene.force, dtype=np.float32)[None]
-    store = op.store
-    return sum(
-        len(store.missing(store.level(float(op.levels[lv])), cols))
-        for lv, cols in enumerate(needed_columns(op, t, f))
-    )
+    return unsolved(op.store, op, needed_columns(op, t, f))
+
+
+def _on_demand(predictor, own, part):
+    """The on-demand linear FEM of ``part``'s body (``own`` for the predictor's own), or None
+    when the operator is stored (it carries every column).
+    """
+    k = predictor.slot(part)
+    op = own if k == 0 else body_operator(predictor, k)
+    return op if op.on_demand else None
 
 
 def on_bodies(predictor, own, thickness, force, body=None):

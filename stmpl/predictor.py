@@ -229,7 +229,7 @@ class BasePredictor:
 
     def missing(self, scene: Scene) -> int:
         """How many pieces (a linear FEM prior's columns) an answer to ``scene`` would compute
-        before it answers: 0 when it answers at once. None by default.
+        before it answers: 0 when it answers at once, as by default.
         """
         return 0
 

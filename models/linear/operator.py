@@ -294,6 +294,15 @@ def needed_columns(
     return [np.flatnonzero(need[..., lv].any(0)) for lv in range(w.shape[-1])]
 
 
+def unsolved(store, op: ComplianceOperator, need: list[np.ndarray]) -> int:
+    """How many of the columns ``need`` (per level, :func:`needed_columns`) ``store`` has not
+    solved yet.
+    """
+    return sum(
+        len(store.missing(store.level(float(op.levels[lv])), c)) for lv, c in enumerate(need)
+    )
+
+
 def solve_needed(
     store, op: ComplianceOperator, thickness: np.ndarray, force: np.ndarray, progress: bool = True
 ) -> int:
@@ -304,9 +313,7 @@ def solve_needed(
     need = needed_columns(op, thickness, force)
     bar = None
     if progress:
-        total = sum(
-            len(store.missing(store.level(float(op.levels[lv])), c)) for lv, c in enumerate(need)
-        )
+        total = unsolved(store, op, need)
         bar = tqdm(total=total, unit="col", desc="linear FEM columns", dynamic_ncols=True)
     solved = 0
     for lv, cols in enumerate(need):
