@@ -384,14 +384,13 @@ def _points(s: dict, cfg: dict, tables: dict, latency: dict) -> list[dict]:
         )
     chart = bool(s.get("chart", True))
     points = []
-    for b, sec in latency.items():
-        median, spread = (sec, None) if np.isscalar(sec) else (sec[0], tuple(sec[1:]))
+    for b, (median, low, high) in latency.items():
         points.append(
             {
                 "label": s["name"],
                 "batch": int(b),
                 "seconds": float(median),
-                "spread": spread,
+                "spread": (low, high),
                 "chart": chart,
                 "truth": truth,
                 "in": ind,

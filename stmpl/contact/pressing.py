@@ -211,8 +211,8 @@ class Contact:
 
 
 def solid_angles(tri: np.ndarray, points: np.ndarray) -> np.ndarray:
-    """``(P,)`` the summed signed solid angle (sr) of triangles ``(P, 3, 3)`` seen from
-    ``points`` ``(P, 3)``, each its own (Van Oosterom and Strackee's formula).
+    """``(P,)`` the signed solid angle (sr) of each triangle ``(P, 3, 3)`` seen from its point
+    of ``points`` ``(P, 3)`` (Van Oosterom and Strackee's formula).
     """
     d = tri - points[:, None]
     a, b, c = d[:, 0], d[:, 1], d[:, 2]
