@@ -337,3 +337,14 @@ class ColumnStore:
             self.ensure(level, columns)
         self._level(level)  # each column contiguous: the gather is k copies
         return self._by_column[level][np.asarray(columns, dtype=np.int64)].transpose(1, 0, 2)
+
+    def combination(self, level: int, columns, weights) -> np.ndarray:
+        """``(N, 3)`` float32: ``sum_k weights_k G[:, columns_k]`` at ``level``, the answer to
+        forces ``weights`` ``(k,)`` N on the vertices ``columns`` ``(k,)`` (computed already:
+        :meth:`ensure`). One product over the columns' contiguous rows.
+        """
+        self._level(level)
+        n = self.part.n_vertices
+        rows = self._by_column[level].reshape(n, 3 * n)
+        w = np.asarray(weights, dtype=np.float32)
+        return (w @ rows[np.asarray(columns, dtype=np.int64)]).reshape(n, 3)

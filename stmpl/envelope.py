@@ -94,9 +94,9 @@ def contacts(part: BodyPart, force: np.ndarray) -> list[np.ndarray]:
     if len(loaded) == 0:
         return []
     e = part.edges
-    e = e[on[e[:, 0]] & on[e[:, 1]]]  # edges inside the load
-    label = np.arange(part.n_vertices)
-    while True:  # each vertex takes its patch's least index
+    e = np.searchsorted(loaded, e[on[e[:, 0]] & on[e[:, 1]]])  # edges inside the load, local
+    label = np.arange(len(loaded))
+    while True:  # each loaded vertex takes its patch's least index
         new = label.copy()
         np.minimum.at(new, e[:, 0], label[e[:, 1]])
         np.minimum.at(new, e[:, 1], label[e[:, 0]])
@@ -104,7 +104,6 @@ def contacts(part: BodyPart, force: np.ndarray) -> list[np.ndarray]:
         if np.array_equal(new, label):
             break
         label = new
-    label = label[loaded]
     return [loaded[label == c] for c in np.unique(label)]
 
 

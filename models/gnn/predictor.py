@@ -24,7 +24,7 @@ from models.features import (
 from models.gnn.network import MeshGraphNet, NormalisedGraphNet, Normaliser
 from models.learned import LearnedPredictor
 from models.linear.operator import ComplianceOperator
-from models.prior import LinearPrior
+from models.prior import CORRECTION_SCALE, LinearPrior
 from stmpl import reach
 
 
@@ -71,6 +71,10 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         part = self.part
         e = part.edges
         self._ei = ei = np.concatenate([e, e[:, ::-1]]).T  # (2, 2E): both directions
+        self._in_order = np.argsort(ei[1], kind="stable")  # the edges grouped by their target
+        self._in_ptr = np.concatenate(
+            [[0], np.cumsum(np.bincount(ei[1], minlength=len(part.vertices)))]
+        )
         feats = self.edge_features(part)
         length = float(feats[:, 3].mean())
         dev = self.device
@@ -125,10 +129,11 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         """
         E = self.edge_index.shape[1]
         rows = np.arange(B * E) if keep is None else np.asarray(keep)
-        if body is None:
-            enc, at = self.edges(), rows % E
+        slots = np.zeros(1, int) if body is None else body.cpu().numpy()
+        if (slots == slots[0]).all():  # one body: its own encoded edges, nothing copied
+            enc, at = self.edges(int(slots[0])), rows % E
         else:  # the bodies' encoded edges one after another; each row's body's
-            uniq, inv = np.unique(body.cpu().numpy(), return_inverse=True)
+            uniq, inv = np.unique(slots, return_inverse=True)
             enc = torch.cat([self.edges(int(k)) for k in uniq])  # (U E, latent)
             at = inv.ravel()[rows // E] * E + rows % E
         return enc.index_select(0, torch.as_tensor(at, device=enc.device))
@@ -195,24 +200,29 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         ).ravel()
         sub = np.flatnonzero(level <= steps)  # global ids b * N + i
         nodes = sub[np.argsort(level[sub], kind="stable")]
+        counts = np.bincount(level[nodes], minlength=steps + 1)
         where = np.full(B * N, -1)
         where[nodes] = np.arange(len(nodes))
-        ei = self.edge_index.cpu().numpy()
-        src = (ei[0][None] + N * np.arange(B)[:, None]).ravel()
-        dst = (ei[1][None] + N * np.arange(B)[:, None]).ravel()
-        keep = np.flatnonzero((where[src] >= 0) & (level[dst] < steps))  # edges a step reads
-        keep = keep[np.argsort(level[dst[keep]], kind="stable")]
-        counts = np.bincount(level[nodes], minlength=steps + 1)
-        edge_counts = np.bincount(level[dst[keep]], minlength=steps + 1)
+        # the edges a step reads: those into the nodes under ``steps`` hops, target by target
+        targets = nodes[: int(counts[:steps].sum())]
+        scene, i = np.divmod(targets, N)
+        start, deg = self._in_ptr[i], np.diff(self._in_ptr)[i]
+        at = np.repeat(start - np.cumsum(deg) + deg, deg) + np.arange(int(deg.sum()))
+        e = self._in_order[at]  # edge ids of the mesh, grouped by target
+        E = self._ei.shape[1]
+        keep = np.repeat(scene, deg) * E + e  # rows of batch_edges
+        src = self._ei[0][e] + np.repeat(scene * N, deg)
+        edge_counts = np.bincount(np.repeat(level[targets], deg), minlength=steps + 1)
         sizes = [
             (int(counts[: steps - s + 1].sum()), int(edge_counts[: steps - s + 1].sum()))
             for s in range(1, steps + 1)
         ]
         dev = x.device
-        sub_ei = torch.as_tensor(np.stack([where[src[keep]], where[dst[keep]]]), device=dev)
+        sub_ei = torch.as_tensor(np.stack([where[src], np.repeat(where[targets], deg)]), device=dev)
         sub_e = self.batch_edges(body, B, keep)
         idx = torch.as_tensor(nodes, device=dev)
         y = self.model(x.index_select(0, idx), None, sub_ei, sub_e, sizes=sizes)  # (inner, 3)
-        out = torch.zeros(B * N, 3, device=dev, dtype=y.dtype)
-        out[idx[: len(y)]] = y
-        return self.corrected(base, out.reshape(B, N, 3))
+        if base is None:  # the network inside, zero outside
+            return y.new_zeros(B * N, 3).index_copy_(0, idx[: len(y)], y).reshape(B, N, 3)
+        out = base.reshape(B * N, 3).clone()  # the prior, corrected inside
+        return out.index_add_(0, idx[: len(y)], y, alpha=CORRECTION_SCALE).reshape(B, N, 3)

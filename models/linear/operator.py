@@ -107,44 +107,50 @@ class ComplianceOperator(nn.Module):
 
     def weights(self, thickness: torch.Tensor) -> torch.Tensor:
         """``(B, N, L)`` interpolation weights of each vertex's thickness over the levels."""
-        if len(self.levels) == 0:
-            raise RuntimeError("the compliance operator is empty; fit the predictor first")
+        self.grow(thickness.detach().cpu().numpy())
         lv = self.levels
-        if self.on_demand and self.exact and thickness.numel():
-            lo_row, hi_row = thickness.amin(-1), thickness.amax(-1)
-            uniform = torch.unique(lo_row[(hi_row - lo_row) <= 1e-9 * hi_row.clamp_min(1e-3)])
-            new = [t for t in uniform.tolist() if not bool((torch.abs(lv - t) <= 1e-9).any())]
-            if new:
-                self.levels = torch.sort(
-                    torch.cat([lv, torch.tensor(new, dtype=lv.dtype, device=lv.device)])
-                )[0]
-                lv = self.levels
-        lo, hi = float(lv[0]), float(lv[-1])
-        tmin, tmax = float(thickness.min()), float(thickness.max())
-        tol = 1e-6 * hi
-        if self.on_demand and self.extend and (tmin < lo - tol or tmax > hi + tol):
-            new = sorted({t for t in (tmin, tmax) if t < lo - tol or t > hi + tol})  # once
-            self.levels = torch.sort(
-                torch.cat([lv, torch.tensor(new, dtype=lv.dtype, device=lv.device)])
-            )[0]
-            return self.weights(thickness)
-        if tmin < lo - tol or tmax > hi + tol:
-            raise ValueError(
-                f"thickness {tmin * 1e3:.3g}..{tmax * 1e3:.3g} mm lies outside the "
-                f"operator's levels {lo * 1e3:g}..{hi * 1e3:g} mm (the linear FEM "
-                "was computed there; a linear model with wider levels_mm covers "
-                "more)"
-            )
         L = len(lv)
         if L == 1:
             return torch.ones(*thickness.shape, 1, device=thickness.device)
-        t = thickness.clamp(lo, hi)  # only rounding (checked above)
+        t = thickness.clamp(float(lv[0]), float(lv[-1]))  # only rounding (checked)
         k = torch.searchsorted(lv, t.contiguous()).clamp(1, L - 1)
         a = ((t - lv[k - 1]) / (lv[k] - lv[k - 1]))[..., None]
         w = torch.zeros(*thickness.shape, L, device=thickness.device)
         w.scatter_(-1, (k - 1)[..., None], 1 - a)
         w.scatter_add_(-1, k[..., None], a)
         return w
+
+    def grow(self, thickness: np.ndarray) -> np.ndarray:
+        """The levels ``(L,)`` m (float32) that interpolate ``thickness`` ``(B, N)`` m: on
+        demand, with :attr:`exact` a uniform layer's thickness added as a level and with
+        :attr:`extend` one beyond the levels; otherwise ``ValueError`` for a thickness outside
+        them.
+        """
+        if len(self.levels) == 0:
+            raise RuntimeError("the compliance operator is empty; fit the predictor first")
+        t = np.asarray(thickness, dtype=np.float32)
+        lv = self.levels.cpu().numpy()
+        new = []
+        if self.on_demand and self.exact and t.size:
+            lo_row, hi_row = t.min(-1), t.max(-1)
+            uniform = np.unique(lo_row[(hi_row - lo_row) <= 1e-9 * np.maximum(hi_row, 1e-3)])
+            new = [x for x in uniform if not (np.abs(lv - x) <= 1e-9).any()]
+        lo, hi = float(min([lv[0], *new])), float(max([lv[-1], *new]))
+        tmin, tmax = float(t.min()), float(t.max())
+        tol = 1e-6 * hi
+        beyond = [x for x in (tmin, tmax) if x < lo - tol or x > hi + tol]
+        if beyond and not (self.on_demand and self.extend):
+            raise ValueError(
+                f"thickness {tmin * 1e3:.3g}..{tmax * 1e3:.3g} mm lies outside the "
+                f"operator's levels {lo * 1e3:g}..{hi * 1e3:g} mm (the linear FEM "
+                "was computed there; a linear model with wider levels_mm covers "
+                "more)"
+            )
+        new = sorted(set(new) | set(beyond))
+        if new:
+            lv = np.sort(np.concatenate([lv, np.asarray(new, np.float32)]))
+            self.levels = torch.as_tensor(lv, device=self.levels.device)
+        return lv
 
     def _matrices(self, n: int) -> list:
         """Per level, the operator as a sparse CSR matrix ``(3 n, n)`` (rows ``3 i + c``), built
@@ -177,32 +183,63 @@ class ComplianceOperator(nn.Module):
 
     def forward(self, thickness: torch.Tensor, force: torch.Tensor) -> torch.Tensor:
         B, N = force.shape
+        if self.on_demand:
+            return self._on_demand(thickness, force)
         fw = force[..., None] * self.weights(thickness)  # (B, N, L)
         used = torch.nonzero(fw.abs().sum((0, 1))).flatten().tolist()  # levels that carry load
-        if self.on_demand:
-            if N != self.store.part.n_vertices:
-                raise ValueError(
-                    f"the operator covers {self.store.part.n_vertices} vertices, the input {N}"
-                )
-            u = torch.zeros(B, N, 3, device=force.device)
-            for lv in used:
-                at = self.store.level(float(self.levels[lv]))
-                cols = torch.nonzero(fw[..., lv].abs().sum(0)).flatten()
-                self.store.ensure(at, cols.cpu().numpy())  # one patch for the batch
-                for b in range(B):  # each scene its own columns
-                    cb = torch.nonzero(fw[b, :, lv]).flatten()
-                    if len(cb) == 0:
-                        continue
-                    G = torch.from_numpy(self.store.columns(at, cb.cpu().numpy(), ensure=False))
-                    u[b] = u[b] + torch.einsum(
-                        "nkc,k->nc", G.to(force.device), fw[b, cb, lv].float()
-                    )
-            return u
         u = torch.zeros(3 * N, B, device=force.device, dtype=self.values.dtype)
         mats = self._matrices(N)
         for lv in used:
             u = u + mats[lv] @ fw[..., lv].T.to(self.values.dtype)  # (3N, N) @ (N, B)
         return u.T.reshape(B, N, 3)
+
+    def _on_demand(self, thickness: torch.Tensor, force: torch.Tensor) -> torch.Tensor:
+        """:meth:`forward` from the store's columns: only the loaded vertices' thickness is
+        interpolated, and each scene's answer is one weighted sum of its loaded columns per
+        level (the columns of the whole batch solved first, one patch per level).
+        """
+        B, N = force.shape
+        if N != self.store.part.n_vertices:
+            raise ValueError(
+                f"the operator covers {self.store.part.n_vertices} vertices, the input {N}"
+            )
+        t = thickness.detach().cpu().numpy().astype(np.float32, copy=False)
+        levels = self.grow(t)
+        f = force.detach().cpu().numpy().astype(np.float32, copy=False)
+        terms: dict[int, list] = {}  # level -> [(scene, columns, weighted forces)]
+        for b in range(B):
+            cols = np.flatnonzero(f[b])
+            if len(cols) == 0:
+                continue
+            for lv, w in _interpolation(levels, t[b, cols]):
+                fw = f[b, cols] * w
+                keep = fw != 0
+                if keep.any():
+                    terms.setdefault(lv, []).append((b, cols[keep], fw[keep]))
+        u = np.zeros((B, N, 3), np.float32)
+        for lv, rows in terms.items():
+            at = self.store.level(float(levels[lv]))
+            self.store.ensure(at, np.concatenate([c for _, c, _ in rows]))  # one patch
+            for b, cols, fw in rows:
+                u[b] += self.store.combination(at, cols, fw)
+        return torch.from_numpy(u).to(force.device)
+
+
+def _interpolation(levels: np.ndarray, t: np.ndarray) -> list[tuple[int, np.ndarray]]:
+    """``[(level, weights (K,))]``: the linear interpolation of thicknesses ``t`` ``(K,)`` m
+    between ``levels`` ``(L,)`` (rising), as :meth:`ComplianceOperator.weights` gives it.
+    """
+    L = len(levels)
+    if L == 1:
+        return [(0, np.ones(len(t), np.float32))]
+    t = np.clip(t, levels[0], levels[-1])  # only rounding (checked by grow)
+    k = np.clip(np.searchsorted(levels, t), 1, L - 1)
+    a = ((t - levels[k - 1]) / (levels[k] - levels[k - 1])).astype(np.float32)
+    out = []
+    for lv in range(int(k.min()) - 1, int(k.max()) + 1):  # the levels between
+        w = np.where(k - 1 == lv, 1 - a, 0).astype(np.float32) + np.where(k == lv, a, 0)
+        out.append((lv, w.astype(np.float32)))
+    return out
 
 
 def cache_dir() -> pathlib.Path:
