@@ -52,6 +52,10 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
     }
     counts = ("latent", "steps")
 
+    def network(self):
+        """The graph network itself (:class:`MeshGraphNet`): normalisers and prior stay eager."""
+        return self.model.net
+
     def edge_features(self, part) -> np.ndarray:
         """``(2E, 4)`` edge inputs of a body of the mesh: the rest-pose offset ``x_j - x_i``
         (m) along :attr:`edge_index` and its length.

@@ -55,6 +55,10 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
     }
     counts = ("size", "width", "depth")
 
+    def network(self) -> nn.Module:
+        """The UNet itself (the prior beside it stays eager)."""
+        return self.model.net if isinstance(self.model, WithPrior) else self.model
+
     def build_model(self) -> nn.Module:
 
         c = self.config
