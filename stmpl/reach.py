@@ -107,13 +107,22 @@ def moved(
 ) -> np.ndarray:
     """``(B, N)`` mask of the loaded vertices (``force`` ``(B, N)`` > 0) and of those that
     ``displacement`` ``(B, N, 3)`` (m; the linear prior's answer) moves by more than
-    ``tolerance`` of its deepest, grown by ``rings`` rings of mesh neighbours. An unloaded scene
-    moves nothing.
+    ``tolerance`` of its deepest (:func:`moving`), grown by ``rings`` rings of mesh neighbours.
+    An unloaded scene moves nothing.
     """
-    mag = np.linalg.norm(displacement, axis=-1)
-    m = (force > 0) | (mag > tolerance * mag.max(-1, keepdims=True))
+    return grown(part, moving(force, displacement, tolerance), rings)
+
+
+def moving(
+    force: np.ndarray, displacement: np.ndarray, tolerance: float = REGION_TOLERANCE
+) -> np.ndarray:
+    """:func:`moved` before its rings: the loaded vertices and those ``displacement`` moves by
+    more than ``tolerance`` of its deepest, ``(B, N)``.
+    """
+    mag = np.einsum("...i,...i->...", displacement, displacement)  # squared
+    m = (force > 0) | (mag > tolerance**2 * mag.max(-1, keepdims=True))
     m &= (force > 0).any(-1, keepdims=True)
-    return grown(part, m, rings)
+    return m
 
 
 def within_margin(part: BodyPart, thickness: np.ndarray, force: np.ndarray) -> np.ndarray:

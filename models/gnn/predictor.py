@@ -22,6 +22,7 @@ from models.features import (
     load_channels,
 )
 from models.gnn.network import MeshGraphNet, NormalisedGraphNet, Normaliser
+from models.gnn.subgraph import mesh, subgraph
 from models.learned import LearnedPredictor
 from models.linear.operator import ComplianceOperator
 from models.prior import CORRECTION_SCALE, LinearPrior
@@ -75,10 +76,7 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         part = self.part
         e = part.edges
         self._ei = ei = np.concatenate([e, e[:, ::-1]]).T  # (2, 2E): both directions
-        self._in_order = np.argsort(ei[1], kind="stable")  # the edges grouped by their target
-        self._in_ptr = np.concatenate(
-            [[0], np.cumsum(np.bincount(ei[1], minlength=len(part.vertices)))]
-        )
+        self._mesh = mesh(part, ei)  # what the subgraphs at fidelity auto read
         feats = self.edge_features(part)
         length = float(feats[:, 3].mean())
         dev = self.device
@@ -191,41 +189,24 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
 
     def _raw_local(self, x, thickness, force, base, body=None):
         """:meth:`raw` on the subgraphs of :meth:`region`: the network's output inside each
-        scene's region, the prior (or zero) outside. The subgraph's nodes are sorted by their
-        hops from the region (:meth:`hops`) and its edges by their target's, so that each step
-        updates only the nodes later steps read (:meth:`MeshGraphNet.forward`'s ``sizes``).
+        scene's region, the prior (or zero) outside. The subgraph (:mod:`models.gnn.subgraph`)
+        has its nodes sorted by their hops from the region (as :meth:`hops` counts them) and its
+        edges by their target's, so that each step updates only the nodes later steps read
+        (:meth:`MeshGraphNet.forward`'s ``sizes``).
         """
         B, N = thickness.shape
         steps = int(self.config["steps"])
-        level = self.hops(
-            thickness.cpu().numpy(),
-            force.cpu().numpy(),
-            None if base is None else base.detach().cpu().numpy(),
-        ).ravel()
-        sub = np.flatnonzero(level <= steps)  # global ids b * N + i
-        nodes = sub[np.argsort(level[sub], kind="stable")]
-        counts = np.bincount(level[nodes], minlength=steps + 1)
-        where = np.full(B * N, -1)
-        where[nodes] = np.arange(len(nodes))
-        # the edges a step reads: those into the nodes under ``steps`` hops, target by target
-        targets = nodes[: int(counts[:steps].sum())]
-        scene, i = np.divmod(targets, N)
-        start, deg = self._in_ptr[i], np.diff(self._in_ptr)[i]
-        at = np.repeat(start - np.cumsum(deg) + deg, deg) + np.arange(int(deg.sum()))
-        e = self._in_order[at]  # edge ids of the mesh, grouped by target
-        E = self._ei.shape[1]
-        keep = np.repeat(scene, deg) * E + e  # rows of batch_edges
-        src = self._ei[0][e] + np.repeat(scene * N, deg)
-        edge_counts = np.bincount(np.repeat(level[targets], deg), minlength=steps + 1)
-        sizes = [
-            (int(counts[: steps - s + 1].sum()), int(edge_counts[: steps - s + 1].sum()))
-            for s in range(1, steps + 1)
-        ]
+        f = force.cpu().numpy()
+        if base is not None:  # the region: where the linear FEM moves the tissue, a ring wider
+            seeds, grow = reach.moving(f, base.detach().cpu().numpy(), self.region_tolerance), 1
+        else:
+            seeds, grow = reach.within_margin(self.part, thickness.cpu().numpy(), f), 0
+        g = subgraph(self._mesh, self.part, seeds, steps, grow)
         dev = x.device
-        sub_ei = torch.as_tensor(np.stack([where[src], np.repeat(where[targets], deg)]), device=dev)
-        sub_e = self.batch_edges(body, B, keep)
-        idx = torch.as_tensor(nodes, device=dev)
-        y = self.model(x.index_select(0, idx), None, sub_ei, sub_e, sizes=sizes)  # (inner, 3)
+        sub_ei = torch.as_tensor(g.edges, device=dev)
+        sub_e = self.batch_edges(body, B, g.rows)
+        idx = torch.as_tensor(g.nodes, device=dev)
+        y = self.model(x.index_select(0, idx), None, sub_ei, sub_e, sizes=g.sizes(steps))
         if base is None:  # the network inside, zero outside
             return y.new_zeros(B * N, 3).index_copy_(0, idx[: len(y)], y).reshape(B, N, 3)
         out = base.reshape(B * N, 3).clone()  # the prior, corrected inside

@@ -235,6 +235,8 @@ def _interpolation(levels: np.ndarray, t: np.ndarray) -> list[tuple[int, np.ndar
     t = np.clip(t, levels[0], levels[-1])  # only rounding (checked by grow)
     k = np.clip(np.searchsorted(levels, t), 1, L - 1)
     a = ((t - levels[k - 1]) / (levels[k] - levels[k - 1])).astype(np.float32)
+    if (k == k[0]).all():  # every loaded vertex in one interval (as on a uniform layer)
+        return [(int(k[0]) - 1, 1 - a), (int(k[0]), a)]
     out = []
     for lv in range(int(k.min()) - 1, int(k.max()) + 1):  # the levels between
         w = np.where(k - 1 == lv, 1 - a, 0).astype(np.float32) + np.where(k == lv, a, 0)
