@@ -101,3 +101,23 @@ def test_a_model_of_the_left_arm_answers_the_right_in_the_mirror(anny_body):
     np.testing.assert_allclose(d_r.displacement, d_l.displacement * [-1, 1, 1], atol=1e-12)
     fem = FEMPredictor().predict(s_r)
     assert sample_metrics(fem.displacement, d_r.displacement)["rel_mee"] < 1.0
+
+
+@pytest.mark.parametrize("name", ["gnn/prior", "uv_unet/prior"])
+@pytest.mark.parametrize("fidelity", ["full", "auto"])
+def test_a_batch_answered_in_chunks_is_answered_as_one(name, fidelity, ds, make, monkeypatch):
+    """A batch bigger than a network call takes (:meth:`LearnedPredictor.chunk`) is answered
+    chunk by chunk, in order, with the same answers as in one call.
+    """
+    import models.learned
+
+    p = make(name, ds).with_fidelity(fidelity)
+    scenes = scenes_of(ds, "test", limit=5)[0]
+    monkeypatch.setattr(models.learned, "CHUNK_SCENES", 64)
+    monkeypatch.setattr(models.learned, "CHUNK_VERTICES", 64 * ds.part.n_vertices)
+    whole = [d.displacement for d in p.predict(scenes)]
+    monkeypatch.setattr(models.learned, "CHUNK_SCENES", 2)
+    monkeypatch.setattr(models.learned, "CHUNK_VERTICES", 2 * ds.part.n_vertices)
+    assert p.chunk() == 2
+    for a, b in zip(p.predict(scenes), whole):
+        np.testing.assert_allclose(a.displacement, b, rtol=1e-5, atol=1e-10)
