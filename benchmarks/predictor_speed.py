@@ -1,7 +1,7 @@
 """How fast the shipped models answer, and how far from what this CPU can do.
 
     python benchmarks/predictor_speed.py [--models gnn_arm_bodies uv_unet_arm_bodies ...]
-        [--repeat 30] [--threads 2]
+        [--repeat 30] [--threads 2] [--compiled]
 
 Each zoo model (default: the command line's default GNN and UV-UNet, the linear FEM and
 Naive) answers scenes on the skin it was made for (the once-subdivided left arm: 0.3 N disks
@@ -12,7 +12,9 @@ whole ``predict()`` (features, prior, network, envelope, the answer): the networ
 it, the network's floating-point work per scene (``torch.utils.flop_counter``: matrix products
 and convolutions) and the rate it achieves, against this CPU's fp32 matrix-product rate
 (a 1024 x 1024 product, the best of a few). The last column is batch 64's time per scene over
-batch 1's: below 1 a batch pays. Targets: the default GNN at ``auto`` and batch 1 in at most
+batch 1's: below 1 a batch pays. With ``--compiled`` each learned model is measured again with
+its network compiled (``predictor.compile()``, :mod:`models.compiled`; the compile's seconds
+are printed). Targets: the default GNN at ``auto`` and batch 1 in at most
 1 ms, the UV-UNet in at most 2 ms; at batch 64 a quarter of batch 1's time per scene. Run it
 alone: the times are wall-clock.
 """
@@ -128,6 +130,9 @@ def main() -> None:
     ap.add_argument("--models", nargs="+", default=DEFAULT)
     ap.add_argument("--repeat", type=int, default=30)
     ap.add_argument("--threads", type=int, default=torch.get_num_threads())
+    ap.add_argument(
+        "--compiled", action="store_true", help="measure each learned model compiled too"
+    )
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     warnings.simplefilter("ignore", OutsideEnvelope)
@@ -156,28 +161,35 @@ def main() -> None:
             except (TypeError, ValueError) as e:  # a model without fidelities
                 print(f"{name} at {fidelity}: {e}")
                 continue
-            if hasattr(p, "model"):
-                p.model.eval()
-            with torch.no_grad():
-                one = measure(p, many[:1], args.repeat)
-                lots = measure(p, many, max(3, args.repeat // 6))
             work = flops(p, many[0])
-            net = one["network"]
-            print(
-                row(
-                    [
-                        name,
-                        fidelity,
-                        f"{1e3 * one['seconds']:.2f}",
-                        f"{1e3 * net:.2f}",
-                        f"{100 * (1 - net / one['seconds']):.0f} %",
-                        f"{work / 1e6:.1f}",
-                        f"{work / net / 1e9:.1f}" if net > 0 else "-",
-                        f"{1e3 * lots['seconds']:.2f}",
-                        f"{lots['seconds'] / one['seconds']:.2f}",
-                    ]
-                )
-            )
+            print(row(report(name, fidelity, p, many, args.repeat, work)))
+            if args.compiled and hasattr(p, "model"):
+                seconds = p.compile(many[0])
+                label = f"{fidelity}, compiled ({seconds:.0f} s)"
+                print(row(report(name, label, p, many, args.repeat, work)))
+
+
+def report(name: str, label: str, p, many: list[Scene], repeat: int, work: float) -> list[str]:
+    """One row of the table: ``p`` at batch 1 and 64 on ``many``; ``work``: its network's
+    floating-point operations per scene (:func:`flops`).
+    """
+    if hasattr(p, "model"):
+        p.model.eval()
+    with torch.no_grad():
+        one = measure(p, many[:1], repeat)
+        lots = measure(p, many, max(3, repeat // 6))
+    net = one["network"]
+    return [
+        name,
+        label,
+        f"{1e3 * one['seconds']:.2f}",
+        f"{1e3 * net:.2f}",
+        f"{100 * (1 - net / one['seconds']):.0f} %",
+        f"{work / 1e6:.1f}",
+        f"{work / net / 1e9:.1f}" if net > 0 else "-",
+        f"{1e3 * lots['seconds']:.2f}",
+        f"{lots['seconds'] / one['seconds']:.2f}",
+    ]
 
 
 if __name__ == "__main__":

@@ -82,7 +82,11 @@ class UVMap(torch.nn.Module):
             pix = torch.nonzero(slot >= 0).flatten()  # in the window's raster
             sel = slot[pix]
             corner_vertex, w = corner_vertex[sel], w[sel]
-        px = (values[:, corner_vertex] * w[None, :, :, None]).sum(dim=2)  # (B, P, C)
+        table = values.permute(1, 0, 2).reshape(self.n_vertices, b * c)  # a vertex a row
+        px = torch.nn.functional.embedding_bag(  # each pixel's corners, weighted, summed
+            corner_vertex, table, per_sample_weights=w, mode="sum"
+        )
+        px = px.reshape(-1, b, c).transpose(0, 1)  # (B, P, C)
         out = values.new_zeros(b, h * wd, c)
         out = out.index_copy(1, pix, px)
         out = out.transpose(1, 2).reshape(b, c, h, wd)
