@@ -22,7 +22,7 @@ from models.features import (
     load_channels,
 )
 from models.gnn.network import MeshGraphNet, NormalisedGraphNet, Normaliser
-from models.gnn.subgraph import mesh, subgraph
+from models.gnn.subgraph import compiled, mesh, subgraph
 from models.learned import LearnedPredictor
 from models.linear.operator import ComplianceOperator
 from models.prior import CORRECTION_SCALE, LinearPrior
@@ -56,6 +56,13 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
     def network(self):
         """The graph network itself (:class:`MeshGraphNet`): normalisers and prior stay eager."""
         return self.model.net
+
+    def compile(self, scene=None) -> float:
+        """As :meth:`LearnedPredictor.compile`; the subgraphs at fidelity ``auto`` come from
+        the compiled kernel from then on (:func:`models.gnn.subgraph.compiled`).
+        """
+        compiled()
+        return super().compile(scene)
 
     def edge_features(self, part) -> np.ndarray:
         """``(2E, 4)`` edge inputs of a body of the mesh: the rest-pose offset ``x_j - x_i``

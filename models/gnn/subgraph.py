@@ -16,6 +16,7 @@ Vertex ids over a batch are ``b N + i``; edges of the mesh are the predictor's d
 from __future__ import annotations
 
 import functools
+import sys
 from typing import NamedTuple
 
 import numpy as np
@@ -198,8 +199,15 @@ def make_kernel():
 
 @functools.cache
 def compiled():
-    """The compiled kernel, made at a process's first answer at fidelity ``auto`` (importing
-    Numba and loading the kernel from its cache: a quarter of a second a process that never
-    answers at ``auto`` does not pay).
+    """The compiled kernel (importing Numba and loading the kernel from its cache: about half a
+    second in a new process, once).
     """
     return make_kernel()
+
+
+def loaded():
+    """:func:`compiled`'s kernel if Numba is already imported in this process (by the FEM, or by
+    :meth:`~models.gnn.predictor.GNNPredictor.compile`), else ``False``: a one-off answer does
+    not pay half a second to save a third of a millisecond.
+    """
+    return compiled() if "numba" in sys.modules else False
