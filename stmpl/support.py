@@ -182,7 +182,10 @@ class Support:
         the training scenes and its nearest measured scene kept the promise.
         """
         q = np.asarray(coords, dtype=float) / self.scale
-        d = self.distance(coords)
+        if "backing tree" not in self._trees:
+            self._trees["backing tree"] = cKDTree(self._backing())
+        near, _ = self._trees["backing tree"].query(q)  # at least the one-sided distance
+        d = near if near <= self.reach * (1 + 1e-9) else self.distance(coords)
         if d > self.reach * (1 + 1e-9):
             return [
                 f"no scene in the data combines its thickness, force, area and pressures: the "

@@ -84,3 +84,16 @@ def test_a_bad_support_is_named():
         Support.from_dict({**good, "points": "many"})
     with pytest.raises(ValueError, match="mismatched evidence"):
         Support.from_dict({**good, "measured": [[0.0] * len(COORDS)], "kept": []})
+
+
+def test_the_quick_nearest_check_decides_as_the_one_sided_distance():
+    """An answer is backed where the one-sided distance to the nearest training scene is within
+    reach; the nearest-neighbour tree (a Euclidean distance, never shorter) only shortcuts it:
+    over random scenes, inside and outside alike, the verdict is the full distance's.
+    """
+    rng = np.random.default_rng(3)
+    s = Support.of(rng.normal(size=(300, len(COORDS))))
+    queries = rng.normal(scale=1.6, size=(400, len(COORDS))) * s.scale
+    inside = [not s.reasons(q) for q in queries]
+    truth = [s.distance(q) <= s.reach * (1 + 1e-9) for q in queries]
+    assert inside == truth and 20 < sum(inside) < 380
