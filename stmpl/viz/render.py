@@ -167,7 +167,8 @@ def _warning(d) -> str | None:
     if not d.info.get("physical", True):
         return "past where the gel buckles: do not use"
     if env and not env["inside"]:
-        return "outside its envelope: " + env["outside"][0].split(" (")[0]
+        why = env["outside"][0].split(" (")[0].split(": the nearest")[0]
+        return textwrap.fill("outside its envelope: " + why, 46, break_on_hyphens=False)
     return None
 
 
@@ -214,9 +215,17 @@ def contact_figure(
     window = fitted_window([*skins.values(), *shapes], basis, centre, reach)
     x0, x1, y0, y1 = window
     panel = 4.4  # inches across a panel
-    warned = any(isinstance(d, str) or _warning(d) for _, d in rows)
-    above, foot = (1.45 if warned else 1.25), 0.15  # inches for the titles, and below
     width = panel * len(rows) + 1.6
+    text = (title or _title(first.scene)) + (
+        f"\n(displacements drawn {scale:g}x their size; colours true)"
+        if scale > 1
+        else "\n(displacements drawn true to scale)"
+    )
+    chars = int(13 * width)  # what a line of 10 pt text holds across the figure
+    text = "\n".join(textwrap.fill(line, chars) for line in text.splitlines())
+    titles = {name: _panel_title(name, d, truth) for name, d in rows}
+    lines = text.count("\n") + 1 + max(t[0].count("\n") + 1 for t in titles.values())
+    above, foot = 0.3 + LINE * lines, 0.15  # inches for the titles, and below
     height = panel * (y1 - y0) / (x1 - x0) + above + foot
     fig = plt.figure(figsize=(width, height))
     grid = fig.add_gridspec(
@@ -240,47 +249,52 @@ def contact_figure(
     for (name, d), ax in zip(rows, axes):
         skin = skins[name]
         near = in_window(skin, basis, window)  # refined only where it is seen
-        if isinstance(d, str):  # a solve that failed: the skin at rest, and why
+        if isinstance(d, str):  # a solve that failed: the skin at rest
             draw_meshes(ax, basis, [(skin[near], (0.85, 0.85, 0.85, 1.0), True), *seen])
-            ax.set_xlim(x0, x1)
-            ax.set_ylim(y0, y1)
-            why = textwrap.fill(d, 44, max_lines=3, placeholder=" ...")
-            ax.set_title(f"{name}: failed, no answer\n{why}", fontsize=10, color="#a00000")
-            continue
-        tri, val = refine(skin[near], d.magnitude[faces][near] * 1e3)
-        draw_meshes(ax, basis, [(tri, cmap(val.mean(1) / top), True), *seen])  # far side hidden
-        mag = d.magnitude * 1e3
+        else:
+            tri, val = refine(skin[near], d.magnitude[faces][near] * 1e3)
+            draw_meshes(ax, basis, [(tri, cmap(val.mean(1) / top), True), *seen])  # far side hidden
         ax.set_xlim(x0, x1)
         ax.set_ylim(y0, y1)
-        ms = d.info.get("seconds")
-        head = (
-            f"{name}"
-            + (" (in the mirror)" if d.info.get("mirrored") else "")
-            + (f", {duration(ms)}" if ms is not None else "")
-        )
-        lines = [head, f"deepest {mag.max():.2f} mm"]
-        if truth is not None and d is not truth:
-            m = sample_metrics(truth.displacement, d.displacement)
-            lines.append(f"error {m['rel_mee']:.2f} % of the deepest, peak {m['peak_err']:+.1f} %")
-        warn = _warning(d)
-        if warn:
-            lines.append(warn)
-        ax.set_title("\n".join(lines), fontsize=10, color="#a00000" if warn else "black")
+        head, color = titles[name]
+        ax.set_title(head, fontsize=10, color=color)
     sm = matplotlib.cm.ScalarMappable(matplotlib.colors.Normalize(0, top), cmap)
     fig.colorbar(sm, cax=fig.add_subplot(grid[0, -1]), label="displacement |u| (mm)")
-    text = (title or _title(first.scene)) + (
-        f"\n(displacements drawn {scale:g}x their size; colours true)"
-        if scale > 1
-        else "\n(displacements drawn true to scale)"
-    )
-    chars = int(13 * width)  # what a line of 10 pt text holds across the figure
-    text = "\n".join(textwrap.fill(line, chars) for line in text.splitlines())
-    fig.suptitle(text, y=0.985, fontsize=10)
+    fig.suptitle(text, y=1 - 0.1 / height, va="top", fontsize=10)
     if path is not None:
         pathlib.Path(path).parent.mkdir(parents=True, exist_ok=True)
         fig.savefig(path, dpi=dpi)
         plt.close(fig)
     return fig
+
+
+LINE = 0.17
+"""Inches a line of 10 pt text takes."""
+
+
+def _panel_title(name: str, d, truth) -> tuple[str, str]:
+    """A panel's title and its colour: the method, its time, its deepest displacement, its
+    error against ``truth``, and in red why it is not to be trusted; or, for a solve that
+    failed (``d`` its reason), that it gave no answer and why.
+    """
+    red = "#a00000"
+    if isinstance(d, str):
+        why = textwrap.fill(d, 44, max_lines=3, placeholder=" ...")
+        return f"{name}: failed, no answer\n{why}", red
+    ms = d.info.get("seconds")
+    head = (
+        f"{name}"
+        + (" (in the mirror)" if d.info.get("mirrored") else "")
+        + (f", {duration(ms)}" if ms is not None else "")
+    )
+    lines = [head, f"deepest {d.magnitude.max() * 1e3:.2f} mm"]
+    if truth is not None and d is not truth:
+        m = sample_metrics(truth.displacement, d.displacement)
+        lines.append(f"error {m['rel_mee']:.2f} % of the deepest, peak {m['peak_err']:+.1f} %")
+    warn = _warning(d)
+    if warn:
+        lines.append(warn)
+    return "\n".join(lines), red if warn else "black"
 
 
 def duration(seconds: float) -> str:

@@ -54,10 +54,19 @@ def test_contact_figure(tmp_path, arm):
     }
     fig = contact_figure({"linear": d}, None, [touch.objects[0].posed()], tmp_path / "c.png")
     ax = fig.axes[0]
-    assert ax.get_title().endswith(
+    assert " ".join(ax.get_title().split()).endswith(
         "outside its envelope: mean pressure of a contact 0.48 kPa > 0.4 kPa"
     )
     assert ax.title.get_color() == "#a00000"
+    # a long reason is cut to its claim and wrapped to the panel's width
+    d.info["envelope"]["outside"] = [
+        "no scene in the data combines its thickness, force, area and pressures: the nearest "
+        "lies 1.54 x the data's spacing away"
+    ]
+    fig = contact_figure({"linear": d}, None, [], tmp_path / "c.png")
+    title = fig.axes[0].get_title()
+    assert " ".join(title.split()).endswith("combines its thickness, force, area and pressures")
+    assert max(len(line) for line in title.splitlines()) <= 46
     d.info["physical"] = False
     fig = contact_figure({"linear": d}, None, [], tmp_path / "c.png")
     assert "past where the gel buckles" in fig.axes[0].get_title()
