@@ -71,13 +71,16 @@ SETUP_KEYS = {
     "fidelity",
     "chart",
     "truth",
+    "seeds",
 }
 """``limit``: evaluate on at most this many samples of each test split (the FEM takes seconds
 per scene); ``fidelity``: ``full`` (the default) or ``auto`` (model no more of the part than the
 scene needs, :data:`stmpl.fidelity.FIDELITIES`); ``chart: false`` keeps a set-up that differs
 only in its training data (not in its speed) off the speed-vs-accuracy chart (it stays in the
 tables and in the chart's table); ``truth: true`` marks the FEM at the mesh the data was made
-at: the truth itself, timed only and drawn on the chart's floor (no error to measure)."""
+at: the truth itself, timed only and drawn on the chart's floor (no error to measure);
+``seeds``: a trained set-up trained once per seed (at least two), its rows the seeds' results
+together (:func:`over_seeds`) with the spread of their relative MEEs."""
 
 
 def read_config(source) -> dict:
@@ -118,6 +121,18 @@ def read_config(source) -> dict:
             raise ValueError(
                 f"setup {s['name']!r}: fidelity must be full or auto, got {s['fidelity']!r}"
             )
+        seeds = s.get("seeds")
+        if seeds is not None and (
+            "train" not in s
+            or not isinstance(seeds, list)
+            or len(seeds) < 2
+            or len(set(seeds)) != len(seeds)
+            or not all(isinstance(x, int) and not isinstance(x, bool) and x >= 0 for x in seeds)
+        ):
+            raise ValueError(
+                f"setup {s['name']!r}: seeds must list two or more different integers >= 0 "
+                f"for a trained set-up (train:), got {seeds!r}"
+            )
         for flag in ("chart", "truth"):
             if not isinstance(s.get(flag, flag == "chart"), bool):
                 raise ValueError(
@@ -155,14 +170,18 @@ def _slug(name: str) -> str:
     return "".join(c if c.isalnum() else "_" for c in name).strip("_").lower()
 
 
-def _training_config(setup: dict, cfg: dict, ds) -> dict:
-
+def _training_config(setup: dict, cfg: dict, ds, seed: int | None = None) -> dict:
+    """The training config of set-up ``setup`` on dataset ``ds`` (with ``seed``, that seed's),
+    its run folder named by the hash of everything that decides it.
+    """
     t = read_train(setup["train"])
     t = copy.deepcopy(t)
     t["data"] = str(ds.folder)
     for k in ("thickness_mm", "epochs", "max_train"):
         if k in setup:
             t[k] = setup[k]
+    if seed is not None:
+        t["seed"] = seed
     if "options" in setup:
         t["options"] = {**t["options"], **setup["options"]}
     key = _hash([{k: v for k, v in t.items() if k not in ("out", "name")}, ds.card["hash"]])
@@ -285,36 +304,30 @@ def run(config, progress: bool = True, accept_remade: bool = False) -> dict:
     for s in cfg["setups"]:  # one set-up at a time: trained, measured, its report out
         if bar is not None:
             bar.set_postfix_str(s["name"])
-        spec = _trained(s, cfg, ind, progress)
         fidelity = s.get("fidelity", "full")
-        p = _open(spec, fidelity)
-        setup_key = _setup_key(spec, fidelity)
+        models = [
+            (_open(spec, fidelity), _setup_key(spec, fidelity))
+            for spec in _trained(s, cfg, ind, progress)
+        ]
         if "train" in s:
-            cost["train"] += float(getattr(p, "meta", {}).get("training", {}).get("seconds", 0))
+            for p, _ in models:
+                meta = getattr(p, "meta", {})
+                cost["train"] += float(meta.get("training", {}).get("seconds", 0))
+        p, setup_key = models[0]  # the one timed
         if bar is not None:
             bar.update(1)
         for _, d, thick, tab, row in [j for j in jobs if j[0] is s]:
-            ds = sets[d]
-            key = _job_key(setup_key, ds, thick, cfg, s)
-            if key not in cache or "inside_broken" not in cache[key]:  # older: no honesty counts
-                t0 = time.perf_counter()
-                res = evaluate_dataset(
-                    p,
-                    ready(ds),
-                    "test",
-                    thickness_mm=thick,
-                    batch=cfg["batch"],
-                    limit=s.get("limit"),
-                )
-                cache[key] = {**res, "evaluated_seconds": time.perf_counter() - t0}
-                save()
-            tables[tab][row] = cache[key]
-            cost["evaluate"] += cache[key].get("evaluated_seconds", 0.0)
+            results = [
+                _evaluated(model, model_key, sets[d], thick, cfg, s, cache, save)
+                for model, model_key in models
+            ]
+            cost["evaluate"] += sum(r.get("evaluated_seconds", 0.0) for r in results)
+            tables[tab][row] = results[0] if len(results) == 1 else over_seeds(results)
             if bar is not None:
                 bar.update(1)
         ood = [tables["table2"].get(f"{s['name']} / {o}") for o in cfg["out_of_distribution"]]
         if len(ood) > 1 and all(ood):  # the paper's pooled out-of-distribution row
-            tables["table2"][f"{s['name']} / {POOLED}"] = pooled(ood)
+            tables["table2"][f"{s['name']} / {POOLED}"] = pooled_rows(ood)
         key = _hash(["latency with quartiles", setup_key, ind.card["hash"]])
         if key not in cache:
             cache[key] = _latency(p, ready(ind))
@@ -354,19 +367,23 @@ def _jobs(cfg: dict, sets: dict) -> list[tuple]:
     return jobs
 
 
-def _trained(s: dict, cfg: dict, ind, progress: bool = False) -> str:
-    """The predictor spec of set-up ``s``: its own, or the checkpoint its training recipe writes
-    (trained on the in-distribution set ``ind`` unless it is there already; with ``progress``,
-    the training's own bar of epochs shows under the ablation's).
+def _trained(s: dict, cfg: dict, ind, progress: bool = False) -> list[str]:
+    """The predictor specs of set-up ``s``: its own, or the checkpoint its training recipe
+    writes, one per seed of ``seeds`` (trained on the in-distribution set ``ind`` unless it is
+    there already; with ``progress``, the training's own bar of epochs shows under the
+    ablation's).
     """
     if "train" not in s:
-        return s["predictor"]
-    t = _training_config(s, cfg, ind)
-    ckpt = pathlib.Path(t["out"]) / f"{t['name']}.safetensors"
-    if not ckpt.is_file():
-        ready(ind)
-        ckpt = train(t, progress=progress)
-    return str(ckpt)
+        return [s["predictor"]]
+    out = []
+    for seed in s.get("seeds") or [None]:
+        t = _training_config(s, cfg, ind, seed)
+        ckpt = pathlib.Path(t["out"]) / f"{t['name']}.safetensors"
+        if not ckpt.is_file():
+            ready(ind)
+            ckpt = train(t, progress=progress)
+        out.append(str(ckpt))
+    return out
 
 
 def _points(s: dict, cfg: dict, tables: dict, latency: dict) -> list[dict]:
@@ -430,6 +447,48 @@ def _speed_row(p: dict) -> list[str]:
 
     peak = "–" if p["out"] is None else f"{p['out']['peak_err']:+.1f}"
     return [p["label"], str(p["batch"]), ms, err(p["in"]), err(p["out"]), peak]
+
+
+def _evaluated(model, model_key: str, ds, thick, cfg: dict, s: dict, cache: dict, save) -> dict:
+    """``model``'s evaluation on ``ds``'s test split (thicknesses ``thick``), from the cache
+    or measured and cached (``save`` writes the cache).
+    """
+    key = _job_key(model_key, ds, thick, cfg, s)
+    if key not in cache or "inside_broken" not in cache[key]:  # older entries: no honesty
+        t0 = time.perf_counter()
+        res = evaluate_dataset(
+            model, ready(ds), "test", thickness_mm=thick, batch=cfg["batch"], limit=s.get("limit")
+        )
+        cache[key] = {**res, "evaluated_seconds": time.perf_counter() - t0}
+        save()
+    return cache[key]
+
+
+def over_seeds(rows: list[dict]) -> dict:
+    """One row of a set-up trained with several seeds, from each seed's evaluation on the same
+    test scenes: every measure over all the seeds' answers together
+    (:func:`stmpl.metrics.pooled`), the honesty counts summed over the seeds' answers,
+    ``samples`` the scenes (each answered once per seed) and ``seeds``: their ``count``, each
+    one's relative MEE (%) and its ``rows``.
+    """
+    out = pooled(rows)
+    out["samples"] = int(rows[0]["samples"])
+    out["seeds"] = {
+        "count": len(rows),
+        "rel_mee": [float(r["rel_mee"][0]) for r in rows],
+        "rows": rows,
+    }
+    return out
+
+
+def pooled_rows(rows: list[dict]) -> dict:
+    """Table 2's pooled row over the out-of-distribution ``rows`` of one set-up
+    (:func:`stmpl.metrics.pooled`); a set-up of several seeds pooled seed by seed first.
+    """
+    if "seeds" not in rows[0]:
+        return pooled(rows)
+    n = rows[0]["seeds"]["count"]
+    return over_seeds([pooled([r["seeds"]["rows"][k] for r in rows]) for k in range(n)])
 
 
 def _quartiles(x: list) -> list[float]:

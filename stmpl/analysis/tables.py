@@ -208,6 +208,9 @@ def table(rows: dict, paper: dict | None = None, fmt: str = "markdown") -> str:
             n += f" of {r['samples'] + r['unsolved']}"
         if r.get("failed"):
             n += f" ({r['failed']} failed)"
+        if r.get("seeds"):  # a set-up trained with several seeds: the spread of their errors
+            e = r["seeds"]["rel_mee"]
+            n += f" x {len(e)} seeds (rel. MEE {min(e):.2f}-{max(e):.2f} %)"
         lines.append([label, n, *cells])
     return markdown(head, lines, "lr" + "r" * len(COLUMNS))
 

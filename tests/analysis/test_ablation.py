@@ -127,6 +127,44 @@ def test_the_truth_is_timed_and_drawn_but_not_measured(config, monkeypatch):
     assert "| FEM | 1 |" in md and "the truth" in md
 
 
+def test_a_setup_of_several_seeds_trains_each_and_tables_them_together(config, tmp_path):
+    """``seeds``: one training run per seed (their own run folders), each measured; the row is
+    their answers together (the scenes counted once, the seeds' relative MEEs beside), the
+    pooled out-of-distribution row pooled seed by seed; the report says how many seeds and
+    their spread.
+    """
+    naive = {**config["setups"][0]["train"], "epochs": 5}
+    config["out_of_distribution"] = ["bands", "bands2"]
+    config["datasets"]["bands2"] = config["datasets"]["bands"]
+    config["setups"] = [
+        {"name": "Naive", "train": naive},
+        {"name": "Naive x3", "train": naive, "seeds": [0, 1, 2]},
+    ]
+    res = ablate.run(config, progress=False)
+    runs = sorted(p.name for p in (tmp_path / "runs").iterdir())
+    assert len([r for r in runs if r.startswith("naive_x3-")]) == 3
+    plain = [r.split("-")[1] for r in runs if r.startswith("naive-")]
+    assert plain and f"naive_x3-{plain[0]}" in runs  # seed 0: the plain recipe's config
+    one, three = res["tables"]["table1"]["Naive"], res["tables"]["table1"]["Naive x3"]
+    assert three["samples"] == one["samples"] and three["seeds"]["count"] == 3
+    seeds = three["seeds"]["rel_mee"]
+    assert seeds[0] == pytest.approx(one["rel_mee"][0])  # seed 0 trains as the plain recipe
+    assert len(set(seeds)) == 3  # other seeds, other networks
+    assert min(seeds) <= three["rel_mee"][0] <= max(seeds)
+    pooled = res["tables"]["table2"][f"Naive x3 / {ablate.POOLED}"]
+    bands = res["tables"]["table2"]["Naive x3 / bands"]
+    assert pooled["seeds"]["count"] == 3 and pooled["samples"] == 2 * bands["samples"]
+    assert pooled["rel_mee"][0] == pytest.approx(bands["rel_mee"][0])  # the same set twice
+    md = (tmp_path / "report" / "ablation.md").read_text()
+    assert f"x 3 seeds (rel. MEE {min(seeds):.2f}-{max(seeds):.2f} %)" in md
+    with pytest.raises(ValueError, match="seeds must list two or more"):
+        ablate.read_config({**config, "setups": [{**config["setups"][1], "seeds": [1]}]})
+    with pytest.raises(ValueError, match="for a trained set-up"):
+        ablate.read_config(
+            {**config, "setups": [{"name": "F", "predictor": "fem", "seeds": [0, 1]}]}
+        )
+
+
 def test_a_changed_setup_reruns_only_itself(config, monkeypatch):
     ablate.run(config, progress=False)
     calls = []
