@@ -322,10 +322,17 @@ class LearnedPredictor(BasePredictor):
         if self.model.training:
             self.model.eval()
         n = self.chunk()
+        if len(scenes) > n:
+            self.ahead(scenes)
         out = []
         for k in range(0, len(scenes), n):
             out += self._answers(scenes[k : k + n])
         return out
+
+    def ahead(self, scenes) -> None:
+        """Compute at once what every chunk of a batch would compute on its own (a linear
+        prior's columns: one solve for the batch, not one per chunk). Nothing by default.
+        """
 
     def _answers(self, scenes) -> list[np.ndarray]:
         """:meth:`predict_batch` of one network call."""

@@ -90,6 +90,25 @@ class LinearPrior:
         """
         return missing_columns(self, self.model.prior, scene) if self.prior else 0
 
+    def ahead(self, scenes) -> None:
+        """Solve the columns a batch of ``scenes`` needs on each of their bodies at once, one
+        solve per level (:func:`models.linear.operator.solve_needed`), before the batch is
+        answered chunk by chunk.
+        """
+        if not self.prior:
+            return
+        by_body: dict = {}
+        for s in scenes:
+            by_body.setdefault(id(s.part), []).append(s)
+        for group in by_body.values():
+            op = _on_demand(self, self.model.prior, group[0].part)
+            if op is None:
+                continue
+            t = np.stack([s.thickness for s in group]).astype(np.float32)
+            f = np.stack([s.force for s in group]).astype(np.float32)
+            if unsolved(op.store, op, needed_columns(op, t, f)):
+                solve_needed(op.store, op, t, f, progress=False)
+
     def body_prior(self, k: int):
         """The linear FEM of body slot ``k`` (the model's own: ``model.prior``), on demand: a
         :class:`~fem.compliance.ColumnStore` for that body and the recorded FEM set-up, whose

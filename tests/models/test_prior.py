@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from models.linear.operator import needed_columns
 from stmpl import predictor
 from stmpl.pipeline.evaluate import scenes_of
 
@@ -65,3 +66,36 @@ def test_on_demand_prior_travels_as_its_set_up(kind, ds, tmp_path, make, monkeyp
     assert q.model.prior.on_demand and q.model.prior.index.shape[1] == 0
     for a, b in zip(p.predict(scenes), q.predict(scenes)):
         np.testing.assert_allclose(a.displacement, b.displacement, rtol=1e-5, atol=1e-12)
+
+
+def test_a_batch_in_chunks_solves_its_columns_at_once(ds, tmp_path, monkeypatch):
+    """A batch answered chunk by chunk (:meth:`LearnedPredictor.chunk`) solves the columns of
+    all its scenes first, one solve per level, not one per chunk; the answers are those of the
+    batch in one call.
+    """
+    import models.learned
+
+    monkeypatch.setenv("STMPL_CACHE_DIR", str(tmp_path / "fit"))
+    p = predictor.create(
+        "gnn", ds.part, {**TINY_MODELS["gnn"], "prior": "linear", "operator": "on_demand"}
+    )
+    p.fit(ds, progress=False)
+    path = p.save(tmp_path / "g.safetensors")
+    scenes = scenes_of(ds, "train")[0]
+    scenes = [s for s in scenes if s.thickness[0] == scenes[0].thickness[0]][:6]  # one layer
+    assert len(scenes) >= 5
+    whole = [d.displacement for d in p.predict(scenes)]
+    monkeypatch.setenv("STMPL_CACHE_DIR", str(tmp_path / "empty"))  # nothing solved
+    q = predictor.read(path)
+    monkeypatch.setattr(models.learned, "CHUNK_VERTICES", 2 * ds.part.n_vertices)
+    assert q.chunk() == 2 and all(q.missing(s) > 0 for s in scenes)
+    answers = q.predict(scenes)
+    op = q.model.prior
+    t = np.stack([s.thickness for s in scenes]).astype(np.float32)
+    f = np.stack([s.force for s in scenes]).astype(np.float32)
+    levels = sum(1 for c in needed_columns(op, t, f) if len(c))
+    assert len(op.store.log) == levels  # one solve per level for the batch, not per chunk
+    assert all(q.missing(s) == 0 for s in scenes)
+    for a, b in zip(answers, whole):
+        peak = np.linalg.norm(b, axis=1).max()
+        assert np.linalg.norm(a.displacement - b, axis=1).max() < 0.01 * peak
