@@ -122,15 +122,10 @@ def evaluate_models(args) -> int:
 
 
 def zoo_models(args) -> int:
-    """``stmpl zoo list|show|verify|add|measure|limit|support``."""
-    if args.action == "list":
-        print(zoo.brief(args.zoo), end="")
-        print("every figure of a model: stmpl zoo show NAME")
-    elif args.action == "show":
-        if len(args.names) != 1:
-            raise ValueError("zoo show needs one model NAME (stmpl zoo list names them)")
-        print(zoo.show(args.names[0], args.zoo), end="")
-    elif args.action == "verify":
+    """``stmpl zoo verify|add|measure|limit|support`` (``list`` and ``show``:
+    :mod:`stmpl.cli.zoo`).
+    """
+    if args.action == "verify":
         bad = []
         for name in args.names or zoo.names(args.zoo):
             try:

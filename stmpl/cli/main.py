@@ -8,7 +8,6 @@ traceback. Anything else is a bug and keeps its traceback.
 from __future__ import annotations
 
 import argparse
-import importlib
 import logging
 import signal
 import sys
@@ -27,6 +26,7 @@ from stmpl.cli.arguments import (
     scene_options,
     simulate_options,
 )
+from stmpl.cli.dispatch import command
 from stmpl.failures import PredictionFailed
 
 COMMANDS = "stmpl.commands"
@@ -167,7 +167,7 @@ def parser() -> argparse.ArgumentParser:
         help="limit: the stability sweep whose points cap the models' envelopes "
         "where they break their promise (configs/ablation/stability.yaml)",
     )
-    zo.set_defaults(func="stmpl.cli.commands:zoo_models")
+    zo.set_defaults(func="stmpl.cli.zoo:zoo_models")
 
     pa = sub.add_parser("parts", help="list the body model's parts and their sizes")
     body_options(pa)
@@ -218,16 +218,6 @@ def main(argv=None) -> int:
         finally:
             signal.signal(signal.SIGTERM, previous)
     return _run(args)
-
-
-def command(func):
-    """A command's function: itself, or the one a ``"module:function"`` string names, imported
-    now (the parser names them so, and stays light).
-    """
-    if not isinstance(func, str):
-        return func
-    module, name = func.split(":")
-    return getattr(importlib.import_module(module), name)
 
 
 def _run(args) -> int:
