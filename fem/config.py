@@ -15,6 +15,7 @@ import yaml
 from fem.bodies import check_bodies
 from fem.layers import preset, read_tissue
 from fem.material import material
+from fem.shapes import PRESSES
 from fem.simulate import resolution
 from fem.solver import SolverOptions
 from stmpl import config as checked
@@ -58,11 +59,14 @@ PLACEMENT_KEYS = {
     "letter": {"chars", "uv", "heights", "strokes", "angles"},
     "grasp": {"along", "around", "grips", "hand_heights", "depth"},
     "palm": {"uv", "spins", "hand_heights", "depth"},
+    "press_disk": {"centres", "radii", "rounding"},
+    "press_sphere": {"centres", "radii"},
 }
 PLACEMENT_VALUES = {
     "centres": "count",
     "spread": "number",
     "depth": "number",
+    "rounding": "number",
     "uv": "pairs",
     "semi_axes": "pairs",
     "chars": "strings",
@@ -141,6 +145,14 @@ def check(cfg: dict) -> None:
     _check_setup(cfg)
     _check_tissue(cfg)
     checked.one_of(cfg["fidelity"], "fidelity", FIDELITIES)
+    presses = sorted(set(cfg["placements"]) & set(PRESSES))
+    if presses and cfg["fidelity"] != "full":
+        raise ValueError(
+            f"fidelity {cfg['fidelity']}: {', '.join(presses)} are solved on the whole part "
+            "(fidelity: full)"
+        )
+    if presses and cfg["linear"]:
+        raise ValueError(f"linear: {', '.join(presses)} have no linear FEM answer (linear: false)")
     if not isinstance(cfg["linear"], bool):
         raise ValueError(f"linear must be true or false, got {cfg['linear']!r}")
     if cfg["bodies"] is not None:

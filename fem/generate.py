@@ -32,6 +32,7 @@ from fem.bodies import member_folder, members
 from fem.config import config_hash, defaulted, read_config
 from fem.layers import preset
 from fem.placements import Plan, plan
+from fem.shapes import PRESSES
 from stmpl.data.dataset import BODIES_FORMAT
 from stmpl.data.format import (
     FORMAT,
@@ -117,6 +118,8 @@ def write_card(out: pathlib.Path, p: Plan, chash: str, runs: list) -> dict:
         "samples_per_split": {s: int((split == i).sum()) for i, s in enumerate(SPLITS)},
         "samples_per_kind": {k: kinds.count(k) for k in sorted(set(kinds))},
         "samples_per_thickness_mm": {f"{t:g}": int((level == i).sum()) for i, t in enumerate(th)},
+        "tissue": getattr(preset(p.cfg["tissue"]), "name", "paper"),
+        "force_range_N": [float(min(p.cfg["forces"])), float(max(p.cfg["forces"]))],
         "samples_per_force_N": {f"{f:g}": int(np.isclose(total, f).sum()) for f in p.cfg["forces"]},
         "attempted": int(len(p.tasks) * len(p.cfg["forces"])),
         "failures": len(failures),
@@ -166,9 +169,12 @@ def read_part(out: pathlib.Path) -> BodyPart:
 
 def _check_solvable(p: Plan) -> None:
     """Refuse a config with nothing to solve: every force level of every placement over
-    ``max_pressure``.
+    ``max_pressure`` (which presses, carried by the contact they make, do not meet).
     """
-    smallest = min(p.cfg["forces"]) / max(pl["area"] for pl in p.placements)
+    shared = [pl["area"] for pl in p.placements if pl["kind"] not in PRESSES]
+    if not shared:  # a press carries what its contact carries: max_pressure does not apply
+        return
+    smallest = min(p.cfg["forces"]) / max(shared)
     if smallest > p.cfg["max_pressure"]:
         raise ValueError(
             f"nothing to solve: even the smallest force ({min(p.cfg['forces']):g} N)"

@@ -1,6 +1,6 @@
 """The contact wing's objects as the FEM's rigid shapes: a posed mesh
-(:class:`~stmpl.contact.pressing.Pressing`: a disk, a box, a user's file, a posed hand) and
-anny's hand closing in a grip (:func:`grip`).
+(:class:`~stmpl.contact.pressing.Pressing`: a disk, a box, a user's file, a posed hand),
+anny's hand closing in a grip (:func:`grip`) and a dataset's pressed objects (:func:`placed`).
 """
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 from trimesh.remesh import subdivide_loop
 
-from fem.shapes import ROUNDING, Surface
+from fem.shapes import PRESSES, ROUNDING, Punch, Sphere, Surface, skin_near, touching
 from stmpl.contact.hand import Hand, SkinDistance, grasp
 from stmpl.contact.pressing import Pressing
 from stmpl.part import BodyPart
@@ -79,3 +79,21 @@ def grip(
             lo, hi = (mid, hi) if clearance(mid).min() < 0 else (lo, mid)
     start = closer - hi * path
     return Surface(start, faces, rounding, path=path, name=f"hand ({kind} grip)")
+
+
+def placed(part: BodyPart, kind: str, params: dict):
+    """``(shape, direction (3,))``: the rigid object of a press placement (``kind`` one of
+    :data:`PRESSES`, ``params`` its ``at``, ``radius`` and for a disk ``rounding``) over vertex
+    ``at`` of ``part``, facing along the inward normal there, moved back to first contact with
+    the skin around it (:func:`fem.shapes.touching`): depth 0 touches, depth ``d`` presses
+    ``d`` (m) in.
+    """
+    at, radius = int(params["at"]), float(params["radius"])
+    p, n = part.vertices[at], part.normals[at]
+    if kind == "press_disk":
+        shape = Punch(p, -n, radius, rounding=float(params.get("rounding", 0.0)))
+    elif kind == "press_sphere":
+        shape = Sphere(p + radius * n, radius)
+    else:
+        raise ValueError(f"unknown press {kind!r}; use {list(PRESSES)}")
+    return touching(shape, -n, skin_near(part, p, 3 * radius)), -n

@@ -12,6 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 
 import stmpl.contact.pressing as contact
+from fem.shapes import PRESSES
 from stmpl import loads
 from stmpl.body.spec import part_from_spec
 from stmpl.contact.hand import Hand, grasp, palm_press
@@ -44,13 +45,22 @@ def placements(cfg: dict, part: BodyPart) -> list[dict]:
     out = []
     for kind in sorted(cfg["placements"]):  # canonical order: a YAML round trip keeps task ids
         spec = cfg["placements"][kind]
-        if kind in ("disk", "ellipse", "spots"):
+        if kind in ("disk", "ellipse", "spots", *PRESSES):
             centres = [int(v) for v in farthest_points(part, int(spec.get("centres", 8)))]
         if kind == "disk":
             out += [
                 {"kind": kind, "params": {"at": c, "radius": float(r)}}
                 for c in centres
                 for r in spec.get("radii", [0.02])
+            ]
+        elif kind in PRESSES:
+            rounding = {}
+            if kind == "press_disk":
+                rounding = {"rounding": float(spec.get("rounding", 0.0))}
+            out += [
+                {"kind": kind, "params": {"at": c, "radius": float(r), **rounding}}
+                for c in centres
+                for r in spec.get("radii", [0.01])
             ]
         elif kind == "ellipse":
             out += [
@@ -143,8 +153,14 @@ def placements(cfg: dict, part: BodyPart) -> list[dict]:
 
 
 def make_load(part: BodyPart, placement: dict, total: float = 1.0):
-    """The :class:`~stmpl.loads.Load` of a placement; names the placement if it is impossible."""
+    """The :class:`~stmpl.loads.Load` of a placement (of a press, the object's footprint: the
+    disk of its radius where it first touches); names the placement if it is impossible.
+    """
     params = dict(placement["params"])
+    if placement["kind"] in PRESSES:  # the object's footprint: where it presses at first
+        params.pop("rounding", None)
+        params["at"] = int(params["at"])
+        return loads.disk(part, total=total, **params)
     if placement["kind"] in HANDS:  # the touched vertices were found by plan()
         return loads.from_vertices(part, placement["touched"], total, placement["kind"], params)
     if "uv" in params:

@@ -78,29 +78,41 @@ class Sphere(Centred):
 class Punch(Centred):
     """A rigid flat-ended cylinder of ``radius`` (m): its flat face a disk centred at
     ``centre`` ``(3,)`` facing along ``axis`` ``(3,)`` (the way it presses), its body behind
-    the face.
+    the face. ``rounding`` (m, below ``radius``) rounds the rim of the face to that radius, as
+    a real disk's edge is (0: the sharp-edged punch of the closed forms, whose rim concentrates
+    the stress without bound).
     """
 
     centre: np.ndarray
     axis: np.ndarray
     radius: float
+    rounding: float = 0.0
     name = "punch"
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "centre", point(self.centre, "centre"))
         object.__setattr__(self, "axis", unit(self.axis))
         positive(self.radius, "radius")
+        r = self.rounding
+        if not (np.isfinite(r) and 0 <= r < self.radius):
+            raise ValueError(
+                f"rounding must be >= 0 and below the radius {self.radius:g} m, got {r!r}"
+            )
 
     def distance(self, x: np.ndarray):
         """``(phi (K,), grad (K, 3), None)``: the exact signed distance to the semi-infinite
-        cylinder and its gradient (flat and straight faces: no curvature term is kept).
+        cylinder with its rim rounded and its gradient (no curvature term is kept).
+
+        The rounded punch is the sharp one of radius ``radius - rounding``, its face moved
+        back by ``rounding``, grown by ``rounding`` in every direction.
         """
-        d = x - self.centre
-        y = d @ self.axis  # ahead of the face: y > 0
+        r = self.rounding
+        d = x - (self.centre - r * self.axis)
+        y = d @ self.axis  # ahead of the (inner) face: y > 0
         radial = d - y[:, None] * self.axis
         rho = np.linalg.norm(radial, axis=1)
         e = radial / np.maximum(rho, 1e-12)[:, None]
-        s = rho - self.radius
+        s = rho - (self.radius - r)
         phi = np.empty(len(x))
         grad = np.empty((len(x), 3))
         inside = (y <= 0) & (s <= 0)
@@ -113,7 +125,7 @@ class Punch(Centred):
         phi[out] = np.hypot(yp, sp_)
         g = yp[:, None] * self.axis + sp_[:, None] * e[out]
         grad[out] = g / np.maximum(phi[out], 1e-300)[:, None]
-        return phi, grad, None
+        return phi - r, grad, None
 
 
 @dataclass(frozen=True)
@@ -153,6 +165,11 @@ class Box(Centred):
         g *= np.sign(p) + (p == 0)
         return phi, g @ self.rotation.T, None
 
+
+PRESSES = ("press_disk", "press_sphere")
+"""A dataset's placement kinds that press a rigid object into the tissue: a flat disk (its rim
+rounded by ``rounding``, m) face-on, and a ball (a fingertip), each of ``radius`` (m) at vertex
+``at`` of the part, pushed along the inward normal there."""
 
 ROUNDING = 5e-4
 """m: the default rounding of a :class:`Surface` (its faces offset outward by half a mm)."""

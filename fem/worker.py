@@ -9,17 +9,83 @@ from __future__ import annotations
 import json
 import os
 import time
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from fem.compliance import local_compliance
+from fem.contact import press_to_force
 from fem.local import simulate_local
 from fem.material import material
+from fem.objects import placed
 from fem.placements import Plan, make_load
-from fem.simulate import simulate
-from fem.solver import SolverOptions
+from fem.shapes import PRESSES
+from fem.simulate import resolution, simulate, tissue_mesh
+from fem.solver import Solver, SolverOptions
 from stmpl.data.format import DOUBLES, FLOATS, INTS, STRINGS
 from stmpl.part import BodyPart
+
+
+@dataclass
+class _Shard:
+    """What every task of a shard shares: the part, the config's set-up, and what the tasks
+    have answered so far (per-sample records, failures and each failure's inputs).
+    """
+
+    part: BodyPart
+    cfg: dict
+    forces: np.ndarray
+    rec: dict
+    failures: list = field(default_factory=list)
+    failed: dict = field(default_factory=lambda: {"thickness": [], "force": []})
+
+    def __post_init__(self) -> None:
+        self.tissue = self.cfg.get("tissue", "paper")
+        self.mat = material(**self.cfg["material"]) if self.tissue == "paper" else None
+        self.phenotype = self.cfg["body"].get("phenotype")
+        self.opts = SolverOptions(**self.cfg["solver"])
+
+    def fail(self, task, thickness, force: np.ndarray, total: float, reason: str) -> None:
+        """One planned sample not solved: ``force`` ``(N,)`` (N) its input."""
+        _failure(self.failures, self.failed, task.where, thickness, force, total, reason)
+
+    def add(self, task, thickness, force, displacement, total, params, diagnostics) -> None:
+        """One sample: per-vertex ``thickness`` (m), ``force`` (N), ``displacement`` (m) and
+        its ``total`` (N), ``params`` and ``diagnostics`` (iterations, residual, seconds,
+        smallest volume ratio, largest compression).
+        """
+        r = self.rec
+        r["task"].append(task.task)
+        r["placement"].append(task.placement)
+        r["thickness_level"].append(task.level)
+        r["thickness"].append(thickness.astype(np.float32))
+        r["force"].append(np.asarray(force).astype(np.float32))
+        r["displacement"].append(displacement.astype(np.float32))
+        r["total"].append(float(total))
+        r["split"].append(int(task.split))
+        r["kind"].append(task.spec["kind"])
+        r["params"].append(json.dumps(params))
+        for k, v in zip(
+            ("iterations", "residual", "solve_time", "min_det_F", "max_compression"), diagnostics
+        ):
+            r[k].append(v)
+
+
+@dataclass(frozen=True)
+class _Task:
+    """One placement at one thickness level."""
+
+    task: int
+    placement: int
+    level: int
+    split: int
+    spec: dict
+    thickness_mm: float
+
+    @property
+    def where(self) -> tuple:
+        """What a failure records: task, placement, split and thickness (mm)."""
+        return (self.task, self.placement, self.split, self.thickness_mm)
 
 
 def solve_shard(payload: dict) -> dict:
@@ -36,77 +102,122 @@ def solve_shard(payload: dict) -> dict:
     part = BodyPart.from_arrays(
         payload["part_name"], payload["part_arrays"], payload["part_source"]
     )
-    tissue = cfg.get("tissue", "paper")
-    mat = material(**cfg["material"]) if tissue == "paper" else None
-    phenotype = cfg["body"].get("phenotype")
-    opts = SolverOptions(**cfg["solver"])
-    forces = np.asarray(cfg["forces"], dtype=float)
     rec = {k: [] for k in FLOATS + INTS + DOUBLES + STRINGS}
     if cfg.get("linear"):
         rec["linear"] = []
-    failures = []
-    failed = {"thickness": [], "force": []}  # the inputs of each failure, in its order
-
-    for task, (pi, ti), placement, split in payload["tasks"]:
-        th_mm = cfg["thickness_mm"][ti]
-        where = (task, pi, split, th_mm)  # what a failure records
-        load = make_load(part, placement)
-        thickness = np.full(part.n_vertices, th_mm * 1e-3)
-        pressure = forces / load.area
-        levels = forces[pressure <= cfg["max_pressure"]]
-        for f in forces[pressure > cfg["max_pressure"]]:
-            why = f"over max_pressure: {f / load.area:.0f} Pa > {cfg['max_pressure']:.0f} Pa"
-            _failure(failures, failed, where, thickness, load.force * f, f, why)
-        if len(levels) == 0:
-            continue
-        lift = None
-        try:
-            setup = (part, thickness, load.force, levels, cfg["resolution"], mat, opts)
-            if cfg.get("fidelity", "full") == "auto":
-                mesh, sols, local = simulate_local(*setup, tissue, phenotype)
-                lift = local.patch.lift
-            else:
-                mesh, sols = simulate(*setup, tissue, phenotype)
-        except ValueError as e:  # a shell that cannot be meshed (folds) is a failure too
-            for f in levels:
-                _failure(failures, failed, where, thickness, load.force * f, f, f"mesh: {e}")
-            continue
-        unit = None  # the linear FEM's answer to 1 N of the pattern
-        for f, s in zip(levels, sols):
-            if s.ok and "linear" in rec and unit is None:
-                unit = linear_answer(part, th_mm * 1e-3, load.force, cfg, mat, opts)
-            if not s.ok:
-                _failure(failures, failed, where, thickness, load.force * f, f, s.reason)
-                continue
-            rec["task"].append(task)
-            rec["placement"].append(pi)
-            rec["thickness_level"].append(ti)
-            rec["thickness"].append(thickness.astype(np.float32))
-            rec["force"].append((load.force * f).astype(np.float32))
-            u = s.part_displacement(mesh)
-            if lift is not None:
-                u = lift(u, part.n_vertices)
-            rec["displacement"].append(u.astype(np.float32))
-            if unit is not None:
-                rec["linear"].append((unit * f).astype(np.float32))
-            rec["total"].append(float(f))
-            rec["split"].append(int(split))
-            rec["kind"].append(placement["kind"])
-            rec["params"].append(json.dumps(placement["params"]))
-            rec["iterations"].append(s.iterations)
-            rec["residual"].append(s.residual)
-            rec["solve_time"].append(s.time)
-            rec["min_det_F"].append(s.min_det_F)
-            rec["max_compression"].append(s.max_compression)
+    if any(t[2]["kind"] in PRESSES for t in payload["tasks"]):
+        rec["pressure"], rec["gap"] = [], []
+    shard = _Shard(part, cfg, np.asarray(cfg["forces"], dtype=float), rec)
+    for task, (pi, ti), spec, split in payload["tasks"]:
+        t = _Task(task, pi, ti, split, spec, cfg["thickness_mm"][ti])
+        (_press if spec["kind"] in PRESSES else _shared)(shard, t)
     return {
         "shard": payload["shard"],
         "records": rec,
-        "failures": failures,
-        "failed": failed,
+        "failures": shard.failures,
+        "failed": shard.failed,
         "tasks": [t[0] for t in payload["tasks"]],
         "wall": time.perf_counter() - t0,
         "pid": os.getpid(),
     }
+
+
+def _shared(shard: _Shard, t: _Task) -> None:
+    """One task of the paper's load model: the placement's pattern carrying each force level
+    (those within ``max_pressure``), solved by continuation over the levels.
+    """
+    cfg, part = shard.cfg, shard.part
+    load = make_load(part, t.spec)
+    thickness = np.full(part.n_vertices, t.thickness_mm * 1e-3)
+    pressure = shard.forces / load.area
+    levels = shard.forces[pressure <= cfg["max_pressure"]]
+    for f in shard.forces[pressure > cfg["max_pressure"]]:
+        why = f"over max_pressure: {f / load.area:.0f} Pa > {cfg['max_pressure']:.0f} Pa"
+        shard.fail(t, thickness, load.force * f, f, why)
+    if len(levels) == 0:
+        return
+    lift = None
+    try:
+        setup = (part, thickness, load.force, levels, cfg["resolution"], shard.mat, shard.opts)
+        if cfg.get("fidelity", "full") == "auto":
+            mesh, sols, local = simulate_local(*setup, shard.tissue, shard.phenotype)
+            lift = local.patch.lift
+        else:
+            mesh, sols = simulate(*setup, shard.tissue, shard.phenotype)
+    except ValueError as e:  # a shell that cannot be meshed (folds) is a failure too
+        for f in levels:
+            shard.fail(t, thickness, load.force * f, f, f"mesh: {e}")
+        return
+    unit = None  # the linear FEM's answer to 1 N of the pattern
+    for f, s in zip(levels, sols):
+        if s.ok and "linear" in shard.rec and unit is None:
+            unit = linear_answer(
+                part, t.thickness_mm * 1e-3, load.force, cfg, shard.mat, shard.opts
+            )
+        if not s.ok:
+            shard.fail(t, thickness, load.force * f, f, s.reason)
+            continue
+        u = s.part_displacement(mesh)
+        if lift is not None:
+            u = lift(u, part.n_vertices)
+        if unit is not None:
+            shard.rec["linear"].append((unit * f).astype(np.float32))
+        diagnostics = (s.iterations, s.residual, s.time, s.min_det_F, s.max_compression)
+        shard.add(t, thickness, load.force * f, u, f, t.spec["params"], diagnostics)
+
+
+def _press(shard: _Shard, t: _Task) -> None:
+    """One press task: the placement's object pushed by force control to each force level in
+    turn (each from the last one's answer, :func:`fem.contact.press_to_force`, within 1 %) into
+    the tissue of the whole part. Each answer is a sample: its ``force`` the contact force on
+    each vertex (N: the contact pressure times the vertex's area, summing to the total normal
+    contact force), ``pressure`` (Pa), ``gap`` (m: each vertex's signed distance at rest to the
+    object at its answer's pose, negative where the object reaches into the rest skin: the
+    pose as the part sees it) and in ``params`` the object, its depth and its reaction. A level
+    that fails is a failure with its reason (its input: the object's footprint carrying the
+    force), and the levels after it are failures as skipped.
+    """
+    cfg, part = shard.cfg, shard.part
+    load = make_load(part, t.spec)
+    thickness = np.full(part.n_vertices, t.thickness_mm * 1e-3)
+    try:
+        shape, direction = placed(part, t.spec["kind"], t.spec["params"])
+        near = part.vertices[[int(t.spec["params"]["at"])]]
+        mesh, mat = tissue_mesh(
+            part, thickness, cfg["resolution"], shard.tissue, shard.phenotype, near=near
+        )
+        order = resolution(cfg["resolution"]).order
+        solver = Solver(mesh, mat, options=shard.opts, order=order)
+    except ValueError as e:  # a shell that cannot be meshed, an object that cannot be placed
+        for f in shard.forces:
+            shard.fail(t, thickness, load.force * f, f, f"set-up: {e}")
+        return
+    last, stop = None, None
+    for f in shard.forces:
+        if stop is not None:
+            shard.fail(t, thickness, load.force * f, f, f"skipped: {stop:g} N failed")
+            continue
+        a = press_to_force(solver, shape, direction, float(f), start=last)
+        if not a.ok:
+            shard.fail(t, thickness, load.force * f, f, a.reason)
+            stop = f
+            continue
+        last = a
+        posed = shape.pushed(a.depth, direction)
+        shard.rec["pressure"].append(a.pressure.astype(np.float32))
+        shard.rec["gap"].append(posed.distance(part.vertices)[0].astype(np.float32))
+        params = {
+            **t.spec["params"],
+            "depth": a.depth,
+            "reaction": a.reaction,
+            "direction": direction.tolist(),
+            "centre": posed.centre.tolist(),
+        }
+        # force control answers within its force tolerance: no Newton residual of its own
+        diagnostics = (a.iterations, float("nan"), a.time, a.min_det_F, a.compression)
+        shard.add(
+            t, thickness, a.pressure * part.vertex_areas, a.displacement, f, params, diagnostics
+        )
 
 
 def _failure(failures: list, failed: dict, where: tuple, thickness, force, total, reason) -> None:

@@ -276,7 +276,9 @@ class Datasets:
             for a in parts:                   # a member without it: NaN, "not known"
                 for k in have:
                     if k not in a:
-                        a[k] = np.full(a["displacement"].shape, np.nan, np.float32)
+                        like = next(b[k] for b in parts if k in b)
+                        shape = (len(a["total"]), *like.shape[1:])
+                        a[k] = np.full(shape, np.nan, np.float32)
             self._all = {k: (np.concatenate([a[k] for a in parts])
                              if isinstance(parts[0][k], np.ndarray)
                              else [x for a in parts for x in a[k]])

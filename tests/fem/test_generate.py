@@ -363,3 +363,61 @@ def test_a_layered_tissue_dataset_holds_the_presets_answers(tmp_path):
 def test_a_bad_tissue_is_named(over, message):
     with pytest.raises(ValueError, match=message):
         read_config(_cfg(**over))
+
+
+def test_a_dataset_of_pressed_objects_holds_force_controlled_answers(tmp_path):
+    """``press_sphere`` and ``press_disk`` placements: each object is pushed by force control
+    to every force level into the layered tissue, and each answer is a sample: its per-vertex
+    contact forces sum to the contact's total (within force control's 1 % of the level), its
+    pressure map and its pose (``gap``: the rest skin's distance to the object, negative where
+    the object reaches in) come with it, the same as one press solved alone, and the card
+    names the tissue and the force range.
+    """
+    from fem.contact import press_to_force
+    from fem.objects import placed
+    from fem.simulate import resolution, tissue_mesh
+    from fem.solver import Solver
+
+    cfg = _cfg(
+        thickness_mm=[7.5],
+        forces=[0.2, 0.5],
+        tissue="forearm",
+        placements={
+            "press_sphere": {"centres": 1, "radii": [0.008]},
+            "press_disk": {"centres": 1, "radii": [0.01], "rounding": 0.001},
+        },
+    )
+    card = generate(cfg, tmp_path / "d", progress=False)
+    assert card["samples"] == 4, card["failures_by_reason"]
+    assert card["tissue"] == "forearm" and card["force_range_N"] == [0.2, 0.5]
+    ds = Dataset(tmp_path / "d")
+    a = ds.arrays()
+    params = a["params"]
+    for i in range(4):
+        assert params[i]["reaction"] == pytest.approx(a["total"][i], rel=0.011)
+        assert a["force"][i].sum() == pytest.approx(a["total"][i], rel=0.05)
+        np.testing.assert_allclose(
+            a["force"][i], a["pressure"][i] * ds.part.vertex_areas, rtol=1e-5
+        )
+        touched = a["pressure"][i] > 0
+        assert a["gap"][i][touched].min() < 0 < a["gap"][i].max()
+        assert params[i]["depth"] > 0
+    sphere = next(i for i in range(4) if a["kind"][i] == "press_sphere" and a["total"][i] == 0.5)
+    p = plan(read_config(cfg)).placements
+    pl = next(q for q in p if q["kind"] == "press_sphere")
+    shape, direction = placed(ds.part, pl["kind"], pl["params"])
+    th = a["thickness"][sphere].astype(float)
+    at = ds.part.vertices[[pl["params"]["at"]]]
+    mesh, mat = tissue_mesh(ds.part, th, cfg["resolution"], "forearm", None, near=at)
+    solver = Solver(mesh, mat, order=resolution(cfg["resolution"]).order)
+    first = press_to_force(solver, shape, direction, 0.2)
+    alone = press_to_force(solver, shape, direction, 0.5, start=first)
+    np.testing.assert_allclose(a["displacement"][sphere], alone.displacement, atol=1e-7)
+
+
+def test_presses_are_solved_on_the_whole_part():
+    cfg = _cfg(placements={"press_sphere": {"centres": 1, "radii": [0.008]}}, fidelity="auto")
+    with pytest.raises(ValueError, match="solved on the whole part"):
+        read_config(cfg)
+    with pytest.raises(ValueError, match="rounding"):
+        read_config(_cfg(placements={"press_disk": {"centres": 1, "rounding": [1]}}))

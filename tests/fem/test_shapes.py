@@ -23,6 +23,26 @@ def test_signed_distances_of_the_shapes():
     np.testing.assert_allclose(grad[1:], [[1, 0, 0], [0, 1, 0]])
 
 
+def test_a_rounded_punch_is_the_sharp_one_with_its_rim_rounded():
+    """Over the middle of its face and beside its straight side the rounded punch is the sharp
+    one; at the rim it is a torus of the rounding's radius: a point off the corner lies that
+    radius less from the rim's circle than from the sharp corner, and its normal points from
+    the circle. The rounding must stay below the radius.
+    """
+    down = np.array([0.0, 0, -1])
+    sharp, round_ = Punch([0, 0, 0], down, 1.0), Punch([0, 0, 0], down, 1.0, rounding=0.2)
+    flat = np.array([[0.0, 0, -0.3], [0.5, 0, -0.1], [1.5, 0, 0.5], [-1.1, 0, 2.0]])
+    np.testing.assert_allclose(round_.distance(flat)[0], sharp.distance(flat)[0], atol=1e-12)
+    corner = np.array([[1.3, 0, -0.3]])  # off the rim, diagonally
+    phi, grad, _ = round_.distance(corner)
+    circle = np.array([0.8, 0, 0.2])  # on the centre line of the rounded rim, behind the face
+    assert phi[0] == pytest.approx(np.linalg.norm(corner[0] - circle) - 0.2)
+    np.testing.assert_allclose(grad[0], (corner[0] - circle) / np.linalg.norm(corner[0] - circle))
+    assert phi[0] > sharp.distance(corner)[0][0]
+    with pytest.raises(ValueError, match="rounding must be >= 0 and below the radius"):
+        Punch([0, 0, 0], down, 1.0, rounding=1.0)
+
+
 @pytest.mark.parametrize("scale", [1.0, 1e-3])
 def test_closest_points_on_triangles_at_any_scale(scale):
     """Against a dense sampling of each triangle (the nearest sample is never closer), at a
