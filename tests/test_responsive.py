@@ -47,7 +47,67 @@ def test_a_stand_in_that_would_wait_too_is_refused(ds):
             return 1
 
     scene = scenes_of(ds, "test", limit=1)[0][0]
-    with pytest.raises(ValueError, match="cannot answer at once"):
+    with pytest.raises(ValueError, match=r"no stand-in \(waiting\) can answer at once"):
         Responsive(Waiting(), Waiting()).predict(scene)
     with pytest.raises(TypeError, match="one Scene"):
         Responsive(Waiting(), Waiting()).predict([scene])
+
+
+class _Fake:
+    """A predictor that answers at once where it is ready, and gets ready by answering once
+    (slowly, once ``gate`` opens); what it answered with is its name in ``info``.
+    """
+
+    def __init__(self, name, ready=True, fails=False):
+        import threading
+
+        self.name, self.ready, self.fails = name, ready, fails
+        self.gate = threading.Event()
+        self.gate.set()
+
+    def missing(self, scene):
+        return 0 if self.ready else 1
+
+    def predict(self, scene):
+        from stmpl.scene import Deformation
+
+        if not self.ready:
+            self.gate.wait(30)
+            if self.fails:
+                raise RuntimeError("no room for the columns")
+            self.ready = True
+        u = np.zeros((scene.part.n_vertices, 3))
+        return Deformation(scene, u, info={"predictor": self.name})
+
+
+def test_the_first_stand_in_that_answers_at_once_answers_and_the_callbacks_are_called(ds):
+    import threading
+
+    scene = scenes_of(ds, "test", limit=1)[0][0]
+    model, busy, quick = _Fake("model", ready=False), _Fake("busy", ready=False), _Fake("quick")
+    model.gate.clear()
+    ready, said = threading.Event(), []
+    live = Responsive(model, [busy, quick], on_ready=ready.set, on_error=said.append)
+    d = live.predict(scene)
+    assert d.info["stand_in"] == {"for": "model", "by": "quick"}  # busy would have to compute
+    assert live.missing(scene) == 1  # being prepared: no stand-in for another meanwhile
+    other = Responsive(_Fake("other", ready=False), [live, quick])
+    assert other.predict(scene).info["stand_in"]["by"] == "quick"
+    model.gate.set()
+    assert ready.wait(30) and live.wait(30) and not said
+    assert live.missing(scene) == 0 and "stand_in" not in live.predict(scene).info
+    failing = _Fake("failing", ready=False, fails=True)
+    live = Responsive(failing, quick, on_error=said.append)
+    live.predict(scene)
+    assert live.wait(30) and said == ["failing could not prepare a place: no room for the columns"]
+
+
+def test_with_wait_the_model_answers_itself_where_no_stand_in_can():
+    from stmpl.body.primitives import tube
+    from stmpl.scene import Scene
+
+    part = tube(n_around=8, n_along=6)
+    scene = Scene(part, np.full(part.n_vertices, 0.005), np.full(part.n_vertices, 0.01))
+    model = _Fake("model", ready=False)
+    d = Responsive(model, _Fake("slow", ready=False), wait=True).predict(scene)
+    assert d.info == {"predictor": "model"} and model.ready

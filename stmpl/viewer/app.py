@@ -24,6 +24,7 @@ from stmpl.contact.hand import GRIPS
 from stmpl.failures import ImpossibleAnswer, OutsideEnvelope
 from stmpl.metrics import sample_metrics
 from stmpl.pipeline.spec import label, predictor_from_spec
+from stmpl.responsive import Responsive
 from stmpl.viewer import legend
 from stmpl.viewer.mailbox import Latest
 from stmpl.viewer.press import OBJECTS, Choice, pressed
@@ -148,7 +149,6 @@ class Viewer:
         self.started = dict(self.phenotype)  # what the page's bodies change
         self.thickness_mm = thickness_mm
         self._body = threading.Lock()  # the body, its thickness and tiles change together
-        self.solving: set[str] = set()  # models whose columns are solved in the background
         self._build_part()
         if prepare:  # columns ahead: no press waits for the linear FEM
             for p in self.predictors.values():
@@ -165,6 +165,12 @@ class Viewer:
         self.server.scene.set_up_direction("+z")
         self._gui()
         self._draw_body()
+        self.live = {  # a press at a new place: another model answers while this one prepares
+            name: Responsive(p, [], True, self.request, self._say_error, name)
+            for name, p in self.predictors.items()
+        }
+        for name, r in self.live.items():
+            r.stand_ins = [other for o, other in self.live.items() if o != name]
         self.mailbox = Latest(self._answer, self._show)
         self.server.on_client_connect(self._welcome)
         self.request()
@@ -386,49 +392,16 @@ class Viewer:
         with self._body:
             part, thickness, phenotype = self.part, self.thickness, dict(self.phenotype)
         scene, meshes = pressed(part, thickness, choice, phenotype)
-        by = name
-        if name in self.solving or self.predictors[name].missing(scene):
-            by = self._stand_in(name, scene)  # answers at once while the columns are solved
-            if by != name:
-                self._solve_later(name, scene)
         with warnings.catch_warnings():  # said on the page instead
             warnings.simplefilter("ignore", OutsideEnvelope)
             warnings.simplefilter("ignore", ImpossibleAnswer)
-            d = self.predictors[by].predict(scene)
-        if by != name:
-            d.info["stand_in"] = {"for": name, "by": by}
+            d = self.live[name].predict(scene)  # a stand-in's while its columns are solved
         return choice, scene, d, meshes
 
-    def _stand_in(self, name: str, scene) -> str:
-        """Another of the page's models that answers ``scene`` at once (Naive, or any whose
-        columns are there), or ``name`` itself when none can: then the press waits.
-        """
-        for other, p in self.predictors.items():
-            if other != name and other not in self.solving and not p.missing(scene):
-                return other
-        return name
-
-    def _solve_later(self, name: str, scene) -> None:
-        """Solve what ``name`` needs for ``scene`` (its prior's columns, cached) in the
-        background, then answer the page's latest press again.
-        """
-        if name in self.solving:
-            return
-        self.solving.add(name)
-
-        def solve() -> None:
-            try:
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", OutsideEnvelope)
-                    warnings.simplefilter("ignore", ImpossibleAnswer)
-                    self.predictors[name].predict(scene)
-            except Exception as e:  # said on the page; the stand-in's answer stays marked
-                self._say_error(f"{name} could not solve this place: {e}")
-            finally:
-                self.solving.discard(name)
-                self.request()
-
-        threading.Thread(target=solve, name="stmpl-columns", daemon=True).start()
+    @property
+    def solving(self) -> list[str]:
+        """The models being prepared for a place in the background."""
+        return [name for name, r in self.live.items() if r.preparing]
 
     def _show(self, request, result) -> None:
         if isinstance(result, Exception):
