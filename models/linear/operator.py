@@ -107,18 +107,9 @@ class ComplianceOperator(nn.Module):
 
     def weights(self, thickness: torch.Tensor) -> torch.Tensor:
         """``(B, N, L)`` interpolation weights of each vertex's thickness over the levels."""
-        self.grow(thickness.detach().cpu().numpy())
-        lv = self.levels
-        L = len(lv)
-        if L == 1:
-            return torch.ones(*thickness.shape, 1, device=thickness.device)
-        t = thickness.clamp(float(lv[0]), float(lv[-1]))  # only rounding (checked)
-        k = torch.searchsorted(lv, t.contiguous()).clamp(1, L - 1)
-        a = ((t - lv[k - 1]) / (lv[k] - lv[k - 1]))[..., None]
-        w = torch.zeros(*thickness.shape, L, device=thickness.device)
-        w.scatter_(-1, (k - 1)[..., None], 1 - a)
-        w.scatter_add_(-1, k[..., None], a)
-        return w
+        t = thickness.detach().cpu().numpy().astype(np.float32, copy=False)
+        levels = self.grow(t)
+        return torch.from_numpy(interpolation(levels, t)).to(thickness.device)
 
     def grow(self, thickness: np.ndarray) -> np.ndarray:
         """The levels ``(L,)`` m (float32) that interpolate ``thickness`` ``(B, N)`` m: on
@@ -211,11 +202,12 @@ class ComplianceOperator(nn.Module):
             cols = np.flatnonzero(f[b])
             if len(cols) == 0:
                 continue
-            for lv, w in _interpolation(levels, t[b, cols]):
-                fw = f[b, cols] * w
+            w = interpolation(levels, t[b, cols])  # (K, L)
+            for lv in np.flatnonzero(w.any(0)):
+                fw = f[b, cols] * w[:, lv]
                 keep = fw != 0
                 if keep.any():
-                    terms.setdefault(lv, []).append((b, cols[keep], fw[keep]))
+                    terms.setdefault(int(lv), []).append((b, cols[keep], fw[keep]))
         u = np.zeros((B, N, 3), np.float32)
         for lv, rows in terms.items():
             at = self.store.level(float(levels[lv]))
@@ -225,23 +217,21 @@ class ComplianceOperator(nn.Module):
         return torch.from_numpy(u).to(force.device)
 
 
-def _interpolation(levels: np.ndarray, t: np.ndarray) -> list[tuple[int, np.ndarray]]:
-    """``[(level, weights (K,))]``: the linear interpolation of thicknesses ``t`` ``(K,)`` m
-    between ``levels`` ``(L,)`` (rising), as :meth:`ComplianceOperator.weights` gives it.
+def interpolation(levels: np.ndarray, t: np.ndarray) -> np.ndarray:
+    """``(..., L)`` float32 weights of thicknesses ``t`` ``(...)`` m over ``levels`` ``(L,)``
+    (rising): linear between the two levels around each thickness (one level: weight 1).
     """
     L = len(levels)
+    w = np.zeros((*np.shape(t), L), np.float32)
     if L == 1:
-        return [(0, np.ones(len(t), np.float32))]
+        w[...] = 1.0
+        return w
     t = np.clip(t, levels[0], levels[-1])  # only rounding (checked by grow)
     k = np.clip(np.searchsorted(levels, t), 1, L - 1)
     a = ((t - levels[k - 1]) / (levels[k] - levels[k - 1])).astype(np.float32)
-    if (k == k[0]).all():  # every loaded vertex in one interval (as on a uniform layer)
-        return [(int(k[0]) - 1, 1 - a), (int(k[0]), a)]
-    out = []
-    for lv in range(int(k.min()) - 1, int(k.max()) + 1):  # the levels between
-        w = np.where(k - 1 == lv, 1 - a, 0).astype(np.float32) + np.where(k == lv, a, 0)
-        out.append((lv, w.astype(np.float32)))
-    return out
+    np.put_along_axis(w, (k - 1)[..., None], (1 - a)[..., None], -1)
+    np.put_along_axis(w, k[..., None], a[..., None], -1)
+    return w
 
 
 def cache_dir() -> pathlib.Path:
