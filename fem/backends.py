@@ -29,30 +29,51 @@ def _watch_parent(parent: int) -> None:
     threading.Thread(target=watch, daemon=True).start()
 
 
-def run(p: Plan, todo: list[int], par: dict, threads: int):
-    """Yield solved shards as they finish, from the chosen backend."""
+def _drain(queue, tell) -> None:
+    """Pass on to ``tell`` every count the workers have put in ``queue``."""
+    if queue is None:
+        return
+    n = 0
+    while not queue.empty():
+        n += queue.get_nowait()
+    if n:
+        tell(n)
+
+
+def run(p: Plan, todo: list[int], par: dict, threads: int, tell=None):
+    """Yield solved shards as they finish, from the chosen backend. ``tell(n)``: called in this
+    process as planned samples end inside the shards (``serial`` and ``processes``; ``dask``
+    reports none: its shards' samples are counted as each shard arrives).
+    """
     if not todo:
         return
     if par["backend"] == "serial" or (par["backend"] == "processes" and par["workers"] == 1):
         for k in todo:
-            yield solve_shard(payload(p, k, None))
+            yield solve_shard(payload(p, k, None, tell))
         return
     if par["backend"] == "processes":
+        ctx = mp.get_context("spawn")
         ex = cf.ProcessPoolExecutor(
-            par["workers"],
-            mp_context=mp.get_context("spawn"),
-            initializer=_watch_parent,
-            initargs=(os.getpid(),),
+            par["workers"], mp_context=ctx, initializer=_watch_parent, initargs=(os.getpid(),)
         )
-        futs = [ex.submit(solve_shard, payload(p, k, threads)) for k in todo]
+        manager = ctx.Manager() if tell is not None else None  # carries the workers' ticks
+        queue = manager.Queue() if manager is not None else None
+        futs = [ex.submit(solve_shard, payload(p, k, threads, queue)) for k in todo]
         try:
-            for f in cf.as_completed(futs):
-                yield f.result()
+            pending = set(futs)
+            while pending:
+                finished, pending = cf.wait(pending, timeout=0.5, return_when=cf.FIRST_COMPLETED)
+                _drain(queue, tell)
+                for f in finished:
+                    yield f.result()
         except BaseException:  # stopped (Ctrl-C, SIGTERM) or failed: the workers go at once
             for proc in list((getattr(ex, "_processes", None) or {}).values()):
                 proc.terminate()
             ex.shutdown(wait=False, cancel_futures=True)
             raise
+        finally:
+            if manager is not None:
+                manager.shutdown()
         ex.shutdown()
         return
     from dask.distributed import (

@@ -303,17 +303,21 @@ def _solve(out, cfg, p: Plan, chash: str, todo: list, par: dict, runs: list, pro
     bar = None
     totals = {"samples": 0, "failed": 0}
     why: Counter = Counter()  # the failures' reasons, as the progress bar sums them up
-    if progress:
+    per_task = len(cfg["forces"])
+    if progress:  # planned samples: a long shard (a press's forces) moves the bar as it goes
+        total = len(p.tasks) * per_task
+        left = sum(len(p.shard_tasks(k)) for k in todo) * per_task
         bar = tqdm(
-            total=p.n_shards,
-            initial=p.n_shards - len(todo),
-            unit="shard",
+            total=total,
+            initial=total - left,
+            unit="sample",
             desc=f"generate {cfg['name']}",
             dynamic_ncols=True,
         )
+    tell = bar.update if bar is not None and par["backend"] != "dask" else None
     done = 0
     try:
-        for result in run(p, todo, par, threads):
+        for result in run(p, todo, par, threads, tell):
             write_shard(
                 out,
                 result["shard"],
@@ -331,7 +335,8 @@ def _solve(out, cfg, p: Plan, chash: str, todo: list, par: dict, runs: list, pro
             totals["failed"] += len(result["failures"])
             why.update(f["reason"].split(":")[0] for f in result["failures"])
             if bar is not None:
-                bar.update(1)
+                if tell is None:  # counted as the shard arrives
+                    bar.update(len(result["tasks"]) * per_task)
                 top = ", ".join(f"{n} {r}" for r, n in why.most_common(2))
                 bar.set_postfix(totals | ({"why": top} if top else {}))  # this run's totals
     finally:

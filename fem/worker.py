@@ -38,6 +38,8 @@ class _Shard:
     rec: dict
     failures: list = field(default_factory=list)
     failed: dict = field(default_factory=lambda: {"thickness": [], "force": []})
+    tell: object = None
+    """Called with 1 as each planned sample ends, solved or failed (a progress bar's tick)."""
 
     def __post_init__(self) -> None:
         self.tissue = self.cfg.get("tissue", "paper")
@@ -48,6 +50,8 @@ class _Shard:
     def fail(self, task, thickness, force: np.ndarray, total: float, reason: str) -> None:
         """One planned sample not solved: ``force`` ``(N,)`` (N) its input."""
         _failure(self.failures, self.failed, task.where, thickness, force, total, reason)
+        if self.tell is not None:
+            self.tell(1)
 
     def add(self, task, thickness, force, displacement, total, params, diagnostics) -> None:
         """One sample: per-vertex ``thickness`` (m), ``force`` (N), ``displacement`` (m) and
@@ -69,6 +73,8 @@ class _Shard:
             ("iterations", "residual", "solve_time", "min_det_F", "max_compression"), diagnostics
         ):
             r[k].append(v)
+        if self.tell is not None:
+            self.tell(1)
 
 
 @dataclass(frozen=True)
@@ -107,7 +113,10 @@ def solve_shard(payload: dict) -> dict:
         rec["linear"] = []
     if any(t[2]["kind"] in PRESSES for t in payload["tasks"]):
         rec["pressure"], rec["gap"] = [], []
-    shard = _Shard(part, cfg, np.asarray(cfg["forces"], dtype=float), rec)
+    tell = payload.get("tell")
+    if tell is not None and not callable(tell):  # a queue from another process
+        tell = tell.put
+    shard = _Shard(part, cfg, np.asarray(cfg["forces"], dtype=float), rec, tell=tell)
     for task, (pi, ti), spec, split in payload["tasks"]:
         t = _Task(task, pi, ti, split, spec, cfg["thickness_mm"][ti])
         (_press if spec["kind"] in PRESSES else _shared)(shard, t)
@@ -254,8 +263,10 @@ def linear_answer(
     return np.einsum("nkc,k->nc", G, pattern[loaded])
 
 
-def payload(p: Plan, k: int, threads: int | None) -> dict:
-    """What a worker needs to solve shard ``k`` of plan ``p`` (plain, picklable data)."""
+def payload(p: Plan, k: int, threads: int | None, tell=None) -> dict:
+    """What a worker needs to solve shard ``k`` of plan ``p`` (plain, picklable data);
+    ``tell``: a callable, or a queue whose ``put`` is called, with 1 as each planned sample ends.
+    """
     tasks = []
     for t in p.shard_tasks(k):
         pi, ti = p.tasks[t]
@@ -269,4 +280,5 @@ def payload(p: Plan, k: int, threads: int | None) -> dict:
         "part_source": p.part.source,
         "tasks": tasks,
         "threads": threads,
+        "tell": tell,
     }

@@ -421,3 +421,20 @@ def test_presses_are_solved_on_the_whole_part():
         read_config(cfg)
     with pytest.raises(ValueError, match="rounding"):
         read_config(_cfg(placements={"press_disk": {"centres": 1, "rounding": [1]}}))
+
+
+@pytest.mark.parametrize("backend, workers", [("serial", 1), ("processes", 2)])
+def test_every_planned_sample_ticks_the_progress_as_it_ends(backend, workers):
+    """The progress bar counts planned samples, solved or failed, as they end inside a shard
+    (a press's shard takes a quarter of an hour), in this process or from workers.
+    """
+    from fem.backends import run
+
+    cfg = read_config(_cfg(forces=[0.05, 0.1, 50.0], max_pressure=1000.0))  # 50 N: over the cap
+    p = plan(cfg)
+    ticks = []
+    par = {"backend": backend, "workers": workers, "scheduler": None}
+    shards = list(run(p, list(range(p.n_shards)), par, 1, ticks.append))
+    solved = sum(len(r["records"]["task"]) for r in shards)
+    failed = sum(len(r["failures"]) for r in shards)
+    assert failed >= len(p.tasks) and sum(ticks) == solved + failed == 3 * len(p.tasks)
