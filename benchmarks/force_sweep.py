@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fem.contact import press_to_force
+from fem.contact import press_to_forces
 from fem.objects import grip, placed
 from fem.simulate import resolution, tissue_mesh
 from fem.solver import Solver
@@ -88,17 +88,12 @@ def solve_case(part_name, obj, where, res, body) -> list[dict]:
     mesh, material = tissue_mesh(part, thickness, res, preset, near=near)
     solver = Solver(mesh, material, order=resolution(res).order)
     setup = time.perf_counter() - t0
-    out, last, failed = [], None, None
-    for force in FORCES[obj]:
-        if failed is not None:
-            out.append(dict(force=force, ok=False, reason=f"skipped: {failed:g} N failed"))
-            continue
-        answer = press_to_force(solver, shape, direction, force, start=last)
-        if answer.ok:
-            last = answer
-        else:
-            failed = force
-        rec = dict(force=force, ok=answer.ok, reason=answer.reason, dofs=len(solver.free))
+    out = []
+
+    def record(force: float, answer) -> None:
+        rec = dict(force=force, ok=answer.ok, reason=answer.reason)
+        if not answer.reason.startswith("skipped"):
+            rec["dofs"] = len(solver.free)
         if answer.ok:
             rec.update(
                 depth_mm=1e3 * answer.depth,
@@ -110,10 +105,13 @@ def solve_case(part_name, obj, where, res, body) -> list[dict]:
                 seconds=answer.time,
             )
         out.append(rec)
-        print(
-            f"  {force:g} N: {'ok' if answer.ok else answer.reason} ({answer.time:.0f} s)",
-            flush=True,
-        )
+        if not answer.reason.startswith("skipped"):
+            print(
+                f"  {force:g} N: {'ok' if answer.ok else answer.reason} ({answer.time:.0f} s)",
+                flush=True,
+            )
+
+    press_to_forces(solver, shape, direction, FORCES[obj], record)
     for rec in out:
         rec["setup_s"] = setup
     return out

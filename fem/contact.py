@@ -336,6 +336,24 @@ def press_to_force(
     return replace(answer, time=time.perf_counter() - t0)
 
 
+def press_to_forces(solver, shape, direction, forces, on_answer=None) -> list[Pressed]:
+    """:func:`press_to_force` to each of ``forces`` (N, rising) in turn, each from the last
+    answer; after a failure the rest are failed as skipped. ``on_answer(force, answer)``: called
+    as each ends (a progress report).
+    """
+    out, last, failed = [], None, None
+    for f in forces:
+        if failed is None:
+            a = press_to_force(solver, shape, direction, float(f), start=last)
+            last, failed = (a, None) if a.ok else (last, f)
+        else:
+            a = Pressed(False, f"skipped: {failed:g} N failed", float("nan"))
+        out.append(a)
+        if on_answer is not None:
+            on_answer(f, a)
+    return out
+
+
 def _aim(a: Pressed, b: Pressed, force: float) -> float:
     """The depth (m) at which ``force`` (N) lies on the power law ``F = c d^p`` through answers
     ``a`` and ``b`` (the force-depth curve of an indenter on soft tissue: ``p`` 1 for a flat

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fem.compliance import local_compliance
-from fem.contact import press_to_force
+from fem.contact import press_to_forces
 from fem.local import simulate_local
 from fem.material import material
 from fem.objects import placed
@@ -201,17 +201,11 @@ def _press(shard: _Shard, t: _Task) -> None:
         for f in shard.forces:
             shard.fail(t, thickness, load.force * f, f, f"set-up: {e}")
         return
-    last, stop = None, None
-    for f in shard.forces:
-        if stop is not None:
-            shard.fail(t, thickness, load.force * f, f, f"skipped: {stop:g} N failed")
-            continue
-        a = press_to_force(solver, shape, direction, float(f), start=last)
+
+    def record(f: float, a) -> None:  # each force as it ends: the progress ticks with it
         if not a.ok:
             shard.fail(t, thickness, load.force * f, f, a.reason)
-            stop = f
-            continue
-        last = a
+            return
         posed = shape.pushed(a.depth, direction)
         shard.rec["pressure"].append(a.pressure.astype(np.float32))
         shard.rec["gap"].append(posed.distance(part.vertices)[0].astype(np.float32))
@@ -227,6 +221,8 @@ def _press(shard: _Shard, t: _Task) -> None:
         shard.add(
             t, thickness, a.pressure * part.vertex_areas, a.displacement, f, params, diagnostics
         )
+
+    press_to_forces(solver, shape, direction, shard.forces, record)
 
 
 def _failure(failures: list, failed: dict, where: tuple, thickness, force, total, reason) -> None:

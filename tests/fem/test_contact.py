@@ -373,3 +373,29 @@ def test_force_control_steps_past_a_depth_where_the_march_stalls(monkeypatch):
     assert not failed.ok and failed.reason.startswith("cannot carry 0.25 N: line search failed")
     stalled = float(failed.reason.split("at depth ")[1].split(" mm")[0])
     assert 0.245 * h <= 1e-3 * stalled <= 0.25 * h  # where it stalled, not where it jumped
+
+
+def test_forces_in_turn_each_from_the_last_and_the_rest_skipped_after_a_failure(monkeypatch):
+    import fem.contact
+
+    starts = []
+
+    def fake(solver, shape, direction, force, start=None):
+        starts.append(None if start is None else start.reaction)
+        if force > 4:
+            return Pressed(False, f"cannot carry {force:g} N: not trusted", 0.005)
+        return Pressed(True, "", 1e-3 * force, reaction=force)
+
+    monkeypatch.setattr(fem.contact, "press_to_force", fake)
+    seen = []
+    out = fem.contact.press_to_forces(
+        None, None, None, [1.0, 2.0, 5.0, 10.0], lambda f, a: seen.append((f, a.ok))
+    )
+    assert starts == [None, 1.0, 2.0]  # each from the last answer; none after the failure
+    assert [a.ok for a in out] == [True, True, False, False]
+    assert out[3].reason == "skipped: 5 N failed" and seen == [
+        (1.0, True),
+        (2.0, True),
+        (5.0, False),
+        (10.0, False),
+    ]
