@@ -7,7 +7,7 @@ to 20 N, on the layered arm and belly; how many solves succeed, and why the othe
 Each case (part, object, placement) is one mesh and one solver; a disk or a fingertip is set
 on the skin at first contact (``fem.shapes.touching``: where the skin is hollow, a flat disk set
 on its middle vertex would start pressed into the skin around it); its forces are met one after
-the other by force control (``fem.contact.press_to_force``, within 1 %), each from the last
+the other by force control (``fem.force_control.press_to_force``, within 1 %), each from the last
 one's state. Every answer is a line of ``--out``; a case already there is not solved again (the
 run resumes where it stopped). ``--report`` prints the success table and the force-depth curves'
 convexity from that file without solving. Run it alone, or with ``OMP_NUM_THREADS=1`` beside
@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-from fem.contact import press_to_forces
+from fem.force_control import press_to_forces
 from fem.objects import grip, placed
 from fem.simulate import resolution, tissue_mesh
 from fem.solver import Solver

@@ -21,7 +21,7 @@ import warnings
 
 import numpy as np
 
-from fem.contact import press_to_force
+from fem.force_control import press_to_force
 from fem.local import press_local
 from fem.shapes import Punch, skin_near, touching
 from fem.simulate import resolution, tissue_mesh

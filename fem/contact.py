@@ -62,6 +62,8 @@ class Contact:
         self.stiffness = positive(stiffness, "contact stiffness")
         self.nodes, self.weights = skin_weights(solver)
         self.multipliers = np.zeros(len(self.nodes))
+        self.held = solver.fixed[self.nodes].all(axis=1)  # skin nodes held in place (a rim)
+        self.held_inside = 0.0
         X = np.zeros((solver.n_all, 3))
         X[: solver.mesh.n_nodes] = solver.mesh.nodes
         if solver.order == 2:
@@ -109,12 +111,14 @@ class Contact:
         that hold it (and what :meth:`pressures` and :meth:`force` report). Returns the deepest
         penetration (m) and the share of the contact force the next update would still change:
         ``k`` times each pressed node's penetration, and the pressure left on nodes that have
-        come away from the object (an object that retracts leaves them).
+        come away from the object (an object that retracts leaves them). :attr:`held_inside`
+        becomes the deepest a held node (which no force moves) lies inside the object, m.
         """
         phi, grad, _, p = self._state(u)
         self.multipliers = p
         self._normals = grad
         inside = np.maximum(-phi, 0.0) * (p > 0)
+        self.held_inside = float(inside[self.held].max(initial=0.0))
         following = np.maximum(p - self.stiffness * phi, 0.0)
         held = float(np.sum(self.weights * np.abs(following - p)))
         total = float(np.sum(self.weights * p))
@@ -147,22 +151,13 @@ FLOOR = 1e-4
 contact nodes, each on the edge of touching), a residual this small of the contact force is
 converged: a tenth of :data:`FORCE_TOLERANCE`."""
 
-AIM_STEPS = 4
-"""Force control aims at most this many marching steps beyond its last answer."""
-
 STEP_RTOL = 1e-4
 """Newton's relative residual on the way to a pose (the steps before its last), with one
 multiplier update each: a start for the next step, not an answer."""
 
-GAP = 0.02
-"""Force control halves a try that failed (past the trust bounds, or a march that could not
-go on) toward its last answer, and aims no deeper than the shallowest failure after; it fails
-when the last answer lies within this share of that depth of it."""
-
-STATE_FAILURES = ("not trusted", "indefinite tangent", "inverted", "non-physical")
-"""Failures of the state at a depth, whatever the way there (past the trust bounds, a layer
-that buckles): force control does not try that depth again. Others (a line search that stalls
-on the way) may pass on a shorter march."""
+HELD = "the object presses the part's held rim"
+"""The failure of a press whose object reaches skin the FEM holds in place (the part's cut
+rims): no depth gets past it, so force control stops at once."""
 
 FORCE_TOLERANCE = 1e-3
 """Multiplier updates go on until the penetration left would add less than this share to the
@@ -245,6 +240,14 @@ def _relax(solver, contact, u, tolerance: float, max_updates: int, on_the_way=Fa
             return {**res, "iterations": iters, "updates": k}
         u = res["u"]
         gap, left = contact.update(u)
+        if contact.held_inside > tolerance:
+            return {
+                "ok": False,
+                "reason": f"{HELD}: {1e3 * contact.held_inside:.3f} mm inside the object, the "
+                "part's cut, held in place, cannot give way (place the object farther from it)",
+                "iterations": iters,
+                "updates": k + 1,
+            }
         if on_the_way:
             return {**res, "u": u, "iterations": iters, "updates": 1, "penetration": gap}
         if gap <= tolerance and left <= FORCE_TOLERANCE:
@@ -282,7 +285,7 @@ def press(
         raise ValueError(f"depths must be finite and >= 0 m, got {depths}")
     if any(b <= a for a, b in zip(depths, depths[1:])):
         raise ValueError(f"depths must rise strictly, got {depths}")
-    with _Pressing(solver, shape, direction, stiffness, tolerance, max_updates, max_step) as go:
+    with Pressing(solver, shape, direction, stiffness, tolerance, max_updates, max_step) as go:
         out, last, failed = [], None, None
         for depth in depths:
             if failed is not None:
@@ -298,185 +301,7 @@ def press(
         return out
 
 
-def press_to_force(
-    solver,
-    shape,
-    direction,
-    force: float,
-    rtol: float = 0.01,
-    step: float = 0.001,
-    stiffness: float | None = None,
-    max_updates: int = 20,
-    start: Pressed | None = None,
-) -> Pressed:
-    """Push ``shape`` along ``direction`` until the reaction is ``force`` (N) within ``rtol``:
-    the depth rises from the placed pose, or from ``start`` (an answer of the same object and
-    solver carrying less than ``force``), each try aimed at the force by the power law through
-    the last two answers and at most :data:`AIM_STEPS` steps of ``step`` (m) ahead, until the
-    reaction passes the force; then the depth is found between the last two answers (each try
-    marched from the nearer one). A try that fails, past the tissue's trust bounds
-    (:class:`~fem.material.Limits`) or in a march that cannot go on, is halved toward the last
-    answer, and no later try aims at or past the shallowest failure: the search fails, saying
-    why and after what force, once its last answer lies within :data:`GAP` of that depth (a
-    march that stalled there is first tried once more with one step past it), or
-    when the force falls as the object goes deeper (a grip slipping). Inside the bracket a failed
-    try is replaced by its middle and quarters. A press that runs through the whole tissue
-    fails too.
-    The answer's ``time`` is the whole search's.
-    """
-    force = positive(force, "target force")
-    if not 0 < rtol < 0.5:
-        raise ValueError(f"rtol must lie in (0, 0.5), got {rtol!r}")
-    if start is not None and not (start.ok and start.reaction < force):
-        raise ValueError(f"start must be an answer that carries less than {force:g} N")
-    t0 = time.perf_counter()
-    answer = _force_control(
-        solver, shape, direction, force, rtol, step, stiffness, max_updates, start
-    )
-    return replace(answer, time=time.perf_counter() - t0)
-
-
-def press_to_forces(solver, shape, direction, forces, on_answer=None) -> list[Pressed]:
-    """:func:`press_to_force` to each of ``forces`` (N, rising) in turn, each from the last
-    answer; after a failure the rest are failed as skipped. ``on_answer(force, answer)``: called
-    as each ends (a progress report).
-    """
-    out, last, failed = [], None, None
-    for f in forces:
-        if failed is None:
-            a = press_to_force(solver, shape, direction, float(f), start=last)
-            last, failed = (a, None) if a.ok else (last, f)
-        else:
-            a = Pressed(False, f"skipped: {failed:g} N failed", float("nan"))
-        out.append(a)
-        if on_answer is not None:
-            on_answer(f, a)
-    return out
-
-
-def _aim(a: Pressed, b: Pressed, force: float) -> float:
-    """The depth (m) at which ``force`` (N) lies on the power law ``F = c d^p`` through answers
-    ``a`` and ``b`` (the force-depth curve of an indenter on soft tissue: ``p`` 1 for a flat
-    punch on a thin layer, 1.5 for a sphere (Hertz), more as the tissue stiffens), ``p`` kept
-    within [1, 4]; from rest (``a`` at 0) Hertz's 1.5.
-    """
-    if a.depth > 0 and a.reaction > 0 and b.reaction > 0 and b.reaction != a.reaction:
-        p = np.log(b.reaction / a.reaction) / np.log(b.depth / a.depth)
-    else:
-        p = 1.5
-    p = min(max(float(p), 1.0), 4.0)
-    return float(b.depth * (force / b.reaction) ** (1.0 / p))
-
-
-def _force_control(solver, shape, direction, force, rtol, step, stiffness, max_updates, start):
-    """:func:`press_to_force`'s search, its arguments checked."""
-    with _Pressing(solver, shape, direction, stiffness, 2e-3, max_updates, step) as go:
-        got = _bracket(go, force, rtol, step, start)
-        return _between(go, force, rtol, *got) if isinstance(got, tuple) else got
-
-
-def _bracket(go, force: float, rtol: float, step: float, start: Pressed | None):
-    """Force control's first phase: deeper from ``start`` (or rest) until an answer carries
-    more than ``force``. Returns ``(below, above)``, or the answer that meets the force, or the
-    failure that ends the search.
-    """
-    deepest = float(go.solver.mesh.thickness.max())
-    reach = AIM_STEPS * step  # how far ahead of the last answer a try may aim
-    lo = start or Pressed(True, "", 0.0, reaction=0.0)
-    depth = min(lo.depth + step, deepest)
-    jumped = False
-    # the shallowest failed try, the start it failed from, and whether a nearer start may pass
-    ceiling, since, path, failure = np.inf, 0.0, False, None
-    stuck = None  # a march failure force control tries to jump past, once
-    while True:
-        answer = go.to(depth, lo if lo.depth > 0 else None)
-        if not answer.ok and stuck is not None:  # the jump failed too
-            return stuck
-        if not answer.ok:  # past the trust bounds, or a march that could not go on
-            ceiling, since, failure = depth, lo.depth, answer
-            path = not answer.reason.startswith(STATE_FAILURES)
-            if ceiling - lo.depth > GAP * ceiling:
-                depth = 0.5 * (lo.depth + ceiling)  # halve the way toward the last answer
-                continue
-            if not path or jumped:
-                return _stuck(force, failure, ceiling, lo)
-            # a march stalled just past the last answer: one step from it that lands beyond
-            # (a contact whose nodes come and go may stall a Newton solve at one depth only)
-            stuck, jumped = _stuck(force, failure, ceiling, lo), True
-            depth = min(max(lo.depth + step, (1 + 2 * GAP) * ceiling), deepest)
-            ceiling, path, failure = np.inf, False, None
-            continue
-        stuck = None
-        if path and ceiling - answer.depth <= GAP * ceiling and since < answer.depth:
-            # close below a march that failed from farther away: a short one may pass
-            ceiling, since, path, failure = np.inf, answer.depth, False, None
-        if abs(answer.reaction - force) <= rtol * force:
-            return answer
-        if answer.reaction > force:
-            return lo, answer
-        if lo.depth > 0 and answer.reaction < lo.reaction * (1 - FORCE_TOLERANCE):
-            return replace(  # e.g. a hand's fingers slipping round the limb as it closes
-                answer,
-                ok=False,
-                displacement=None,
-                reason=f"cannot carry {force:g} N: the force falls as the object goes deeper "
-                f"({lo.reaction:.3g} N at {1e3 * lo.depth:.2f} mm, {answer.reaction:.3g} N at "
-                f"{1e3 * answer.depth:.2f} mm)",
-            )
-        lo, before = answer, lo
-        if failure is not None and ceiling - lo.depth <= GAP * ceiling:
-            return _stuck(force, failure, ceiling, lo)  # as close to the failure as it gets
-        depth = min(_aim(before, lo, force), lo.depth + reach, deepest, ceiling)
-        if depth >= ceiling:  # not again where a try failed: halfway to it
-            depth = 0.5 * (lo.depth + ceiling)
-        if depth <= lo.depth * (1 + 1e-9):
-            return replace(
-                lo,
-                ok=False,
-                displacement=None,
-                reason=f"cannot carry {force:g} N: the object reached the bone "
-                f"({1e3 * deepest:.1f} mm) at {lo.reaction:.3g} N",
-            )
-
-
-def _between(go, force: float, rtol: float, lo: Pressed, hi: Pressed) -> Pressed:
-    """Force control's second phase: the depth between answers ``lo`` and ``hi`` that carries
-    ``force``, aimed by the power law through them; a try that fails is replaced by the
-    bracket's middle and quarters.
-    """
-    failed, answer = [], hi  # shares of the bracket whose tries failed
-    for _ in range(30):
-        aim = _aim(lo, hi, force) if lo.depth > 0 else 0.5 * hi.depth
-        w = min(max((aim - lo.depth) / (hi.depth - lo.depth), 0.05), 0.95)
-        if failed:  # a try inside the bracket failed: another share of it
-            w = next((x for x in (0.5, 0.25, 0.75) if x not in failed), None)
-            if w is None:
-                return replace(answer, reason=f"cannot carry {force:g} N: {answer.reason}")
-        depth = lo.depth + w * (hi.depth - lo.depth)
-        # from the nearer answer: the tissue's answer does not depend on the path (elastic,
-        # frictionless), and the shorter march is the cheaper
-        near = lo if (depth - lo.depth <= hi.depth - depth and lo.depth > 0) else hi
-        answer = go.to(depth, near)
-        if not answer.ok:
-            failed.append(w)
-            continue
-        if abs(answer.reaction - force) <= rtol * force:
-            return answer
-        failed = []
-        lo, hi = (answer, hi) if answer.reaction < force else (lo, answer)
-    return replace(answer, ok=False, displacement=None, reason="force control did not settle")
-
-
-def _stuck(force: float, failure: Pressed, depth: float, last: Pressed) -> Pressed:
-    """Force control's failure where it cannot get past ``failure`` at ``depth`` (m)."""
-    return replace(
-        failure,
-        reason=f"cannot carry {force:g} N: {failure.reason} at depth {1e3 * depth:.2f} mm, "
-        f"after {last.reaction:.3g} N",
-    )
-
-
-class _Pressing:
+class Pressing:
     """A contact on ``solver`` for the length of a ``with`` block; :meth:`to` answers one
     depth from a former answer's state.
     """
@@ -491,7 +316,7 @@ class _Pressing:
         self.options = (tolerance, max_updates, max_step)
         self.contact = Contact(solver, shape, stiffness or default_stiffness(solver))
 
-    def __enter__(self) -> "_Pressing":
+    def __enter__(self) -> "Pressing":
         self.solver.potentials.append(self.contact)
         self.kept = self.solver.options
         self.solver.options = replace(

@@ -26,7 +26,7 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
-from fem.contact import press_to_force
+from fem.force_control import press_to_force
 from fem.material import NeoHookean
 from fem.simulate import resolution, simulate, tissue_mesh
 from fem.solver import Solver
@@ -226,7 +226,7 @@ def press_local(
     ``force`` (N), solved on the patch it moves: the object's footprint (the vertices it would
     reach ``footprint`` m deep into the rest state) stands for the load in :func:`patch`, and
     the patch grows as for a load when the ring next to the cut moves. ``kwargs`` go to
-    :func:`fem.contact.press_to_force`. Returns ``(answer, result)``: the
+    :func:`fem.force_control.press_to_force`. Returns ``(answer, result)``: the
     :class:`~fem.contact.Pressed` answer with its displacement ``(N, 3)`` and pressure ``(N,)``
     on the whole part (zero outside the patch; its ``state`` is the patch's), and a
     :class:`LocalResult`.

@@ -19,23 +19,39 @@ from stmpl.contact.hand import Hand, grasp, palm_press
 from stmpl.part import BodyPart
 
 
-def farthest_points(part: BodyPart, count: int) -> np.ndarray:
+def farthest_points(part: BodyPart, count: int, clearance: float = 0.0) -> np.ndarray:
     """``count`` vertex indices spread evenly over the part (farthest-point sampling from the
-    vertex nearest the centroid; deterministic).
+    vertex nearest the centroid; deterministic), each at least ``clearance`` (m) from the
+    part's cut rims (which the FEM holds in place).
     """
-    if count > part.n_vertices:
-        raise ValueError(
-            f"{count} centres asked for on {part.name}, which has only "
-            f"{part.n_vertices} vertices (each centre is a distinct vertex)"
-        )
     x = part.vertices
+    among = np.arange(part.n_vertices)
+    if clearance > 0 and part.rims:
+        rim = x[np.concatenate(part.rims)]
+        far = np.linalg.norm(x[:, None] - rim[None], axis=2).min(1) >= clearance
+        among = np.flatnonzero(far)
+    if count > len(among):
+        raise ValueError(
+            f"{count} centres asked for on {part.name}, which has only {len(among)} vertices "
+            f"{1e3 * clearance:.0f} mm or more from its cut rims (each centre is a distinct vertex)"
+        )
+    x = x[among]
     first = int(np.argmin(np.linalg.norm(x - x.mean(0), axis=1)))
     out, d = [first], np.linalg.norm(x - x[first], axis=1)
     for _ in range(count - 1):
         nxt = int(np.argmax(d))
         out.append(nxt)
         d = np.minimum(d, np.linalg.norm(x - x[nxt], axis=1))
-    return np.array(out[:count])
+    return among[np.array(out[:count])]
+
+
+def press_clearance(spec: dict, thickness_mm) -> float:
+    """How far (m) a pressed object's centre keeps from the part's cut rims: its largest radius
+    plus twice the deepest tissue. The FEM holds the rims in place, so an object over them would
+    press skin that cannot give way, and the held cut stiffens the tissue about as far as the
+    tissue is deep.
+    """
+    return max(float(r) for r in spec.get("radii", [0.01])) + 2e-3 * max(thickness_mm)
 
 
 def placements(cfg: dict, part: BodyPart) -> list[dict]:
@@ -46,7 +62,8 @@ def placements(cfg: dict, part: BodyPart) -> list[dict]:
     for kind in sorted(cfg["placements"]):  # canonical order: a YAML round trip keeps task ids
         spec = cfg["placements"][kind]
         if kind in ("disk", "ellipse", "spots", *PRESSES):
-            centres = [int(v) for v in farthest_points(part, int(spec.get("centres", 8)))]
+            away = press_clearance(spec, cfg["thickness_mm"]) if kind in PRESSES else 0.0
+            centres = [int(v) for v in farthest_points(part, int(spec.get("centres", 8)), away)]
         if kind == "disk":
             out += [
                 {"kind": kind, "params": {"at": c, "radius": float(r)}}

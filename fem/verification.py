@@ -29,7 +29,10 @@ from dataclasses import replace
 import numpy as np
 from scipy.integrate import quad
 
+from fem.material import NeoHookean, Yeoh, lame
 from fem.mesh import ShellMesh, shell_mesh
+from fem.options import SolverOptions
+from fem.solver import Solver
 from stmpl.body.extract import normalise_chart
 from stmpl.body.primitives import grid, tube
 from stmpl.part import BodyPart
@@ -160,6 +163,32 @@ def quarter_slab(
     fixed[np.abs(y) < 1e-12, 1] = True
     fixed[np.hypot(x, y) > radius * (1 - 1e-9)] = True
     return part, mesh, fixed
+
+
+def punch_slab(
+    a_over_h: float,
+    spacing: float = 0.05,
+    order: int = 2,
+    first_layer: float = 0.0015,
+    ratio: float = 1.4,
+    nu: float = 0.45,
+    volume: str = "point",
+) -> tuple[Solver, float, float]:
+    """Hayes et al.'s set-up ready to press: a bonded layer ``h`` = 1 cm thick of E = 1 kPa,
+    a quarter disk reaching 5 thicknesses past a punch's rim at ``a = a_over_h h`` (m), mesh
+    spacing ``spacing a`` across the rim (see :func:`quarter_slab`). ``volume="mean"``: the same
+    neo-Hookean solid written as a tissue law (shape part ``C10 = mu / 2``, bulk modulus ``K``),
+    its volume term by mean dilatation. Returns ``(solver, a, h)``.
+    """
+    h = 0.01
+    a = a_over_h * h
+    part, mesh, fixed = quarter_slab(h, a + 5 * h, a, spacing * a, first_layer, ratio)
+    law = NeoHookean(1000.0, nu)
+    if volume == "mean":
+        mu, lam = lame(1000.0, nu)
+        law = Yeoh(C10=mu / 2, K=lam + 2 * mu / 3)
+    options = SolverOptions(rims="free", volume=volume)
+    return Solver(mesh, law, fixed, options, order=order), a, h
 
 
 def arm_tube() -> tuple:

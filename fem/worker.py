@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fem.compliance import local_compliance
-from fem.contact import press_to_forces
+from fem.force_control import press_to_forces
 from fem.local import simulate_local
 from fem.material import material
 from fem.objects import placed
@@ -177,12 +177,12 @@ def _shared(shard: _Shard, t: _Task) -> None:
 
 def _press(shard: _Shard, t: _Task) -> None:
     """One press task: the placement's object pushed by force control to each force level in
-    turn (each from the last one's answer, :func:`fem.contact.press_to_force`, within 1 %) into
-    the tissue of the whole part. Each answer is a sample: its ``force`` the contact force on
-    each vertex (N: the contact pressure times the vertex's area, summing to the total normal
-    contact force), ``pressure`` (Pa), ``gap`` (m: each vertex's signed distance at rest to the
-    object at its answer's pose, negative where the object reaches into the rest skin: the
-    pose as the part sees it) and in ``params`` the object, its depth and its reaction. A level
+    turn (each from the last one's answer, :func:`fem.force_control.press_to_force`, within
+    1 %) into the tissue of the whole part. Each answer is a sample: its ``force`` the contact
+    force on each vertex (N: the contact pressure times the vertex's area, summing to the total
+    normal contact force), ``pressure`` (Pa), ``gap`` (m: each vertex's signed distance at rest
+    to the object at its answer's pose, negative where the object reaches into the rest skin:
+    the pose as the part sees it) and in ``params`` the object, its depth and its reaction. A level
     that fails is a failure with its reason (its input: the object's footprint carrying the
     force), and the levels after it are failures as skipped.
     """

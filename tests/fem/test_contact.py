@@ -8,28 +8,11 @@ import numpy as np
 import pytest
 import trimesh
 
-from fem.contact import Contact, Pressed, _aim, _Pressing, press, press_to_force
-from fem.material import Layered, Limits, NeoHookean, Yeoh, lame
+from fem.contact import Contact, Pressing, press
+from fem.material import NeoHookean
 from fem.shapes import Punch, Sphere, Surface
 from fem.solver import Solver, SolverOptions
-from fem.verification import dimitriadis_force, hayes_kappa, hertz_force, quarter_slab
-
-
-def _slab(a_over_h, spacing=0.05, order=2, first_layer=0.0015, ratio=1.4, nu=0.45, volume="point"):
-    """A bonded layer 1 cm thick, a quarter disk reaching 5 thicknesses past the rim at a;
-    E = 1 kPa. ``volume="mean"``: the same neo-Hookean solid written as a tissue law (shape
-    part ``C10 = mu / 2`` and bulk modulus ``K``), its volume term by mean dilatation.
-    """
-    h = 0.01
-    a = a_over_h * h
-    part, mesh, fixed = quarter_slab(h, a + 5 * h, a, spacing * a, first_layer, ratio)
-    law = NeoHookean(1000.0, nu)
-    if volume == "mean":
-        mu, lam = lame(1000.0, nu)
-        law = Yeoh(C10=mu / 2, K=lam + 2 * mu / 3)
-    options = SolverOptions(rims="free", volume=volume)
-    solver = Solver(mesh, law, fixed, options, order=order)
-    return solver, a, h
+from fem.verification import dimitriadis_force, hayes_kappa, hertz_force, punch_slab, quarter_slab
 
 
 def _kappa(solver, a, h, nu, depth=0.01):
@@ -44,7 +27,7 @@ def test_the_contact_potential_is_consistent():
     """Its gradient is its energy's, its Hessian its gradient's (finite differences; a flat
     punch's faces have no curvature term to leave out).
     """
-    solver, a, h = _slab(2.0, spacing=0.25, order=1)
+    solver, a, h = punch_slab(2.0, spacing=0.25, order=1)
     c = Contact(solver, Punch([0, 0, 1e-4], [0, 0, -1], a), 1e6)
     c.multipliers[:] = 5.0
     rng = np.random.default_rng(0)
@@ -66,7 +49,7 @@ def test_a_flat_punch_on_a_bonded_layer_meets_hayes():
     supports carry the reaction; the pressure is zero outside the punch, the contact area the
     punch's face.
     """
-    solver, a, h = _slab(2.0)
+    solver, a, h = punch_slab(2.0)
     delta = 0.01 * h
     (r,) = press(solver, Punch([0, 0, 0], [0, 0, -1], a), [0, 0, -1], [delta])
     assert r.ok, r.reason
@@ -85,11 +68,11 @@ def test_a_flat_punch_on_a_bonded_layer_meets_hayes():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("a_over_h", [0.5, 1.0, 2.0])
-def test_hayes_on_a_finer_slab(a_over_h):
+def test_hayes_on_a_finerpunch_slab(a_over_h):
     """The verification's full version: rings every a / 25 across the rim: +0.5, -0.2, -0.7 %
     (52-133 s each).
     """
-    solver, a, h = _slab(a_over_h, spacing=0.04, first_layer=0.001, ratio=1.3)
+    solver, a, h = punch_slab(a_over_h, spacing=0.04, first_layer=0.001, ratio=1.3)
     delta = 0.01 * h
     (r,) = press(solver, Punch([0, 0, 0], [0, 0, -1], a), [0, 0, -1], [delta])
     assert r.ok, r.reason
@@ -98,7 +81,7 @@ def test_hayes_on_a_finer_slab(a_over_h):
 
 
 def test_depths_must_rise_and_a_failure_skips_the_rest():
-    solver, a, h = _slab(2.0, spacing=0.25, order=1)
+    solver, a, h = punch_slab(2.0, spacing=0.25, order=1)
     with pytest.raises(ValueError, match="depths must rise strictly"):
         press(solver, Punch([0, 0, 0], [0, 0, -1], a), [0, 0, -1], [2e-4, 1e-4])
     out = press(solver, Punch([0, 0, 0], [0, 0, -1], a), [0, 0, -1], [1e-4, 1.2 * h, 1.3 * h])
@@ -107,83 +90,20 @@ def test_depths_must_rise_and_a_failure_skips_the_rest():
     assert not solver.potentials  # the contact leaves with the call
 
 
-def test_force_control_finds_the_depth_that_carries_a_force():
-    """A target reaction met within 1 % (the slab's response is nearly linear here: the depth
-    found lies within 2 % of the one that gave that force).
-    """
-    solver, a, h = _slab(2.0, spacing=0.12)
-    punch = Punch([0, 0, 0], [0, 0, -1], a)
-    (known,) = press(solver, punch, [0, 0, -1], [0.008 * h])
-    assert known.ok, known.reason
-    found = press_to_force(solver, punch, [0, 0, -1], known.reaction, step=0.003 * h)
-    assert found.ok, found.reason
-    assert found.reaction == pytest.approx(known.reaction, rel=0.01)
-    assert found.depth == pytest.approx(0.008 * h, rel=0.02)
-
-
-@pytest.mark.slow
-def test_a_force_past_what_the_gel_carries_fails_where_it_stops():
-    """1 kN on the gel slab: the search closes in on where the gel stops answering (its
-    trust bound, nine tries) and says how far it got.
-    """
-    solver, a, h = _slab(2.0, spacing=0.12)
-    punch = Punch([0, 0, 0], [0, 0, -1], a)
-    failed = press_to_force(solver, punch, [0, 0, -1], 1e3, step=0.2 * h)
-    assert not failed.ok and failed.reason.startswith("cannot carry 1000 N: not trusted")
-    assert "after 0.4" in failed.reason and failed.displacement is None
-
-
-def test_force_control_aims_by_the_power_law_through_its_last_two_answers():
-    """On an exact power law F = c d^p (p in [1, 4]) the aim is the depth itself; from rest,
-    Hertz's exponent 1.5; a steeper law is aimed at as p = 4.
-    """
-    for p in (1.0, 1.5, 2.7):
-        a, b = (Pressed(True, "", d, reaction=3.0 * d**p) for d in (1e-3, 2e-3))
-        assert _aim(a, b, 3.0 * 5e-3**p) == pytest.approx(5e-3, rel=1e-9)
-    rest, b = Pressed(True, "", 0.0, reaction=0.0), Pressed(True, "", 1e-3, reaction=0.2)
-    assert _aim(rest, b, 0.2 * 8**1.5) == pytest.approx(8e-3, rel=1e-9)
-    a, b = (Pressed(True, "", d, reaction=d**6) for d in (1.0, 2.0))
-    assert _aim(a, b, 3.0**6) == pytest.approx(2.0 * (3**6 / 2**6) ** 0.25)
-
-
 def test_a_press_answered_from_a_deeper_state_is_the_same_answer():
     """The tissue is elastic and the contact frictionless: marching back from a deeper answer
     (what force control does when it overshoots) lands where pressing from rest does.
     """
-    solver, a, h = _slab(2.0, spacing=0.25, order=1)
+    solver, a, h = punch_slab(2.0, spacing=0.25, order=1)
     punch = Punch([0, 0, 0], [0, 0, -1], a)
     shallow, deep = press(solver, punch, [0, 0, -1], [0.006 * h, 0.01 * h])
     assert shallow.ok and deep.ok, (shallow.reason, deep.reason)
-    with _Pressing(solver, punch, np.array([0, 0, -1.0]), None, 2e-3, 20, 0.001) as go:
+    with Pressing(solver, punch, np.array([0, 0, -1.0]), None, 2e-3, 20, 0.001) as go:
         back = go.to(0.006 * h, deep)
     assert back.ok, back.reason
     assert back.reaction == pytest.approx(shallow.reaction, rel=2e-3)
     gap = np.abs(back.displacement - shallow.displacement).max()
     assert gap <= 2e-3 * np.abs(shallow.displacement).max()
-
-
-def test_force_control_steps_back_inside_the_trust_bounds():
-    """A tissue trusted to twice the target's compression: force control's first step
-    lands past it, is shortened, and meets the force; a force that needs more is failed with
-    the bound named.
-    """
-    solver, a, h = _slab(2.0, spacing=0.25)
-    punch = Punch([0, 0, 0], [0, 0, -1], a)
-    (known,) = press(solver, punch, [0, 0, -1], [0.008 * h])
-    assert known.ok, known.reason
-    layer = np.zeros(len(solver.mesh.tets), dtype=int)
-    limits = Limits(0.0, 2 * known.compression, "test")
-    bounded = Solver(
-        solver.mesh,
-        Layered((solver.material,), layer, limits),
-        options=solver.options,
-        order=2,
-    )
-    found = press_to_force(bounded, punch, [0, 0, -1], known.reaction, step=0.025 * h)
-    assert found.ok, found.reason
-    assert found.reaction == pytest.approx(known.reaction, rel=0.01)
-    failed = press_to_force(bounded, punch, [0, 0, -1], 3 * known.reaction, step=0.003 * h)
-    assert not failed.ok and "not trusted" in failed.reason and "trusted up to" in failed.reason
 
 
 def test_nearly_incompressible_layers_lock_with_linear_elements_not_quadratic_ones():
@@ -194,7 +114,7 @@ def test_nearly_incompressible_layers_lock_with_linear_elements_not_quadratic_on
     kappa = hayes_kappa(2.0, 0.49)
     found = {}
     for order in (1, 2):
-        solver, a, h = _slab(2.0, spacing=0.07, order=order, nu=0.49)
+        solver, a, h = punch_slab(2.0, spacing=0.07, order=order, nu=0.49)
         (r,) = press(solver, Punch([0, 0, 0], [0, 0, -1], a), [0, 0, -1], [0.01 * h])
         assert r.ok, r.reason
         found[order] = 4 * r.reaction / (2 * 1000.0 / (1 - 0.49**2) * a * 0.01 * h) / kappa
@@ -208,7 +128,7 @@ def test_quadratic_displacement_elements_drift_stiff_as_the_layer_nears_incompre
     (+0.8 % at 0.4999; at 0.499999 the solve fails; 85 s).
     """
     nu = 0.49999
-    solver, a, h = _slab(2.0, spacing=0.07, order=2, nu=nu)
+    solver, a, h = punch_slab(2.0, spacing=0.07, order=2, nu=nu)
     assert _kappa(solver, a, h, nu) == pytest.approx(1.0, abs=0.03)
 
 
@@ -218,7 +138,9 @@ def test_mean_dilatation_frees_quadratic_elements_of_locking():
     coarse slab, which the slow version refines), where the quadratic displacement elements
     alone drift from -4.3 % to +1.1 % and take ten times as long.
     """
-    errors = [_kappa(*_slab(2.0, spacing=0.12, nu=nu, volume="mean"), nu) for nu in (0.45, 0.49999)]
+    errors = [
+        _kappa(*punch_slab(2.0, spacing=0.12, nu=nu, volume="mean"), nu) for nu in (0.45, 0.49999)
+    ]
     assert errors[0] == pytest.approx(errors[1], abs=0.003)
     assert errors[1] == pytest.approx(1.0, abs=0.07)
 
@@ -229,7 +151,7 @@ def test_mean_dilatation_meets_hayes_at_any_bulk_modulus():
     (-2.4 %) and 0.499999 (K / mu 500000) alike (about 20 s each).
     """
     for nu in (0.45, 0.499999):
-        assert _kappa(*_slab(2.0, spacing=0.05, nu=nu, volume="mean"), nu) == pytest.approx(
+        assert _kappa(*punch_slab(2.0, spacing=0.05, nu=nu, volume="mean"), nu) == pytest.approx(
             1.0, abs=0.03
         )
 
@@ -304,98 +226,3 @@ def test_a_mesh_presses_as_the_shape_it_approximates():
     with pytest.raises(ValueError, match="a direction is needed"):
         press(solver, surface, None, [depth])
     assert solver.options.stagnation == SolverOptions().stagnation  # patience only while pressing
-
-
-def test_force_control_shortens_a_try_whose_march_fails(monkeypatch):
-    """A march that cannot go further than 1.5 steps past its start (as a closing grip's line
-    search may stall): force control halves the failed try, aims no further than that, and
-    still meets the force.
-    """
-    solver, a, h = _slab(2.0, spacing=0.25, order=1)
-    punch = Punch([0, 0, 0], [0, 0, -1], a)
-    (known,) = press(solver, punch, [0, 0, -1], [0.008 * h])
-    assert known.ok, known.reason
-    step, to, tries = 0.001 * h, _Pressing.to, []
-
-    def stalling(self, depth, start):
-        tries.append(depth)
-        if abs(depth - (start.depth if start else 0.0)) > 1.5 * step:
-            return Pressed(False, "line search failed (test)", depth)
-        return to(self, depth, start)
-
-    monkeypatch.setattr(_Pressing, "to", stalling)
-    found = press_to_force(solver, punch, [0, 0, -1], known.reaction, step=step)
-    assert found.ok, found.reason
-    assert found.reaction == pytest.approx(known.reaction, rel=0.01)
-    assert any(t > 1.5 * step for t in tries)  # the aim first reached further, and was shortened
-
-
-def test_force_control_says_when_the_force_falls_as_the_object_goes_deeper(monkeypatch):
-    """A grip whose fingers slip round the limb squeezes less as it closes further: force
-    control stops there and says so, instead of chasing the force through the whole tissue.
-    """
-    solver, a, h = _slab(2.0, spacing=0.25, order=1)
-
-    def slipping(self, depth, start):
-        squeeze = 1.0 * depth / h if depth < 0.3 * h else 0.3 - 0.5 * (depth / h - 0.3)
-        return Pressed(True, "", depth, reaction=squeeze)
-
-    monkeypatch.setattr(_Pressing, "to", slipping)
-    punch = Punch([0, 0, 0], [0, 0, -1], a)
-    failed = press_to_force(solver, punch, [0, 0, -1], 0.5, step=0.1 * h)
-    assert not failed.ok and failed.displacement is None
-    assert "the force falls as the object goes deeper" in failed.reason
-
-
-def test_force_control_steps_past_a_depth_where_the_march_stalls(monkeypatch):
-    """A Newton solve that stalls at one band of depths only (as a contact whose nodes come and
-    go may): force control closes in on the band, then tries once a step that lands past it,
-    and meets the force beyond; a band it cannot step past still ends the search, saying where.
-    """
-    solver, a, h = _slab(2.0, spacing=0.25, order=1)
-    band, tries = (0.245 * h, 0.255 * h), []
-
-    def stalling(self, depth, start):
-        tries.append(depth)
-        if band[0] <= depth <= band[1]:
-            return Pressed(False, "line search failed to lower the energy (test)", depth)
-        return Pressed(True, "", depth, reaction=(depth / h) ** 1.5)
-
-    monkeypatch.setattr(_Pressing, "to", stalling)
-    punch = Punch([0, 0, 0], [0, 0, -1], a)
-    found = press_to_force(solver, punch, [0, 0, -1], 0.4**1.5, step=0.05 * h)
-    assert found.ok, found.reason
-    assert found.depth == pytest.approx(0.4 * h, rel=0.01)
-    assert any(band[0] <= t <= band[1] for t in tries)  # it met the band on the way
-
-    band = (0.245 * h, 0.5 * h)  # too wide to step past
-    failed = press_to_force(solver, punch, [0, 0, -1], 0.25, step=0.05 * h)
-    assert not failed.ok and failed.reason.startswith("cannot carry 0.25 N: line search failed")
-    stalled = float(failed.reason.split("at depth ")[1].split(" mm")[0])
-    assert 0.245 * h <= 1e-3 * stalled <= 0.25 * h  # where it stalled, not where it jumped
-
-
-def test_forces_in_turn_each_from_the_last_and_the_rest_skipped_after_a_failure(monkeypatch):
-    import fem.contact
-
-    starts = []
-
-    def fake(solver, shape, direction, force, start=None):
-        starts.append(None if start is None else start.reaction)
-        if force > 4:
-            return Pressed(False, f"cannot carry {force:g} N: not trusted", 0.005)
-        return Pressed(True, "", 1e-3 * force, reaction=force)
-
-    monkeypatch.setattr(fem.contact, "press_to_force", fake)
-    seen = []
-    out = fem.contact.press_to_forces(
-        None, None, None, [1.0, 2.0, 5.0, 10.0], lambda f, a: seen.append((f, a.ok))
-    )
-    assert starts == [None, 1.0, 2.0]  # each from the last answer; none after the failure
-    assert [a.ok for a in out] == [True, True, False, False]
-    assert out[3].reason == "skipped: 5 N failed" and seen == [
-        (1.0, True),
-        (2.0, True),
-        (5.0, False),
-        (10.0, False),
-    ]

@@ -373,7 +373,7 @@ def test_a_dataset_of_pressed_objects_holds_force_controlled_answers(tmp_path):
     the object reaches in) come with it, the same as one press solved alone, and the card
     names the tissue and the force range.
     """
-    from fem.contact import press_to_force
+    from fem.force_control import press_to_force
     from fem.objects import placed
     from fem.simulate import resolution, tissue_mesh
     from fem.solver import Solver
@@ -413,6 +413,20 @@ def test_a_dataset_of_pressed_objects_holds_force_controlled_answers(tmp_path):
     first = press_to_force(solver, shape, direction, 0.2)
     alone = press_to_force(solver, shape, direction, 0.5, start=first)
     np.testing.assert_allclose(a["displacement"][sphere], alone.displacement, atol=1e-7)
+
+
+def test_pressed_objects_keep_clear_of_the_held_rims():
+    """A press's centre keeps its radius plus twice the deepest tissue from the part's cut
+    rims (held in place by the FEM), and a part too small for the centres asked is refused.
+    """
+    cfg = read_config(_cfg(placements={"press_disk": {"centres": 6, "radii": [0.01]}}))
+    p = plan(cfg)
+    rims = p.part.vertices[np.concatenate(p.part.rims)]
+    at = p.part.vertices[[q["params"]["at"] for q in p.placements]]
+    assert len(set(q["params"]["at"] for q in p.placements)) == 6
+    assert np.linalg.norm(at[:, None] - rims[None], axis=2).min() >= 0.01 + 2 * 0.010
+    with pytest.raises(ValueError, match="mm or more from its cut rims"):
+        plan(read_config(_cfg(placements={"press_disk": {"centres": 6, "radii": [0.08]}})))
 
 
 def test_presses_are_solved_on_the_whole_part():

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from fem import local
-from fem.contact import press_to_force
+from fem.force_control import press_to_force
 from fem.material import NeoHookean
 from fem.shapes import Punch
 from fem.simulate import simulate, tissue_mesh
