@@ -1,6 +1,7 @@
 """The contact wing's objects as the FEM's rigid shapes: a posed mesh
-(:class:`~stmpl.contact.pressing.Pressing`: a disk, a box, a user's file, a posed hand),
-anny's hand closing in a grip (:func:`grip`) and a dataset's pressed objects (:func:`placed`).
+(:class:`~stmpl.contact.pressing.Pressing`: a disk, a box, a user's file, a posed hand), a
+scene's pose (:func:`at_pose`), anny's hand closing in a grip (:func:`grip`) and a dataset's
+pressed objects (:func:`placed`).
 """
 
 from __future__ import annotations
@@ -8,10 +9,21 @@ from __future__ import annotations
 import numpy as np
 from trimesh.remesh import subdivide_loop
 
-from fem.shapes import PRESSES, ROUNDING, Punch, Sphere, Surface, skin_near, touching
+from fem.shapes import (
+    PRESSES,
+    ROUNDING,
+    Punch,
+    Sphere,
+    Surface,
+    clearance,
+    skin_near,
+    touching,
+    unit,
+)
 from stmpl.contact.hand import Hand, SkinDistance, grasp
 from stmpl.contact.pressing import Pressing
 from stmpl.part import BodyPart
+from stmpl.pose import Pose
 
 OPEN = 0.01
 """m: how far back along its path a grip may open to clear the skin."""
@@ -21,6 +33,29 @@ def surface(pressing: Pressing, rounding: float = ROUNDING) -> Surface:
     """The object of ``pressing`` in body coordinates, as a rigid :class:`Surface`."""
     m = pressing.posed()
     return Surface(np.asarray(m.vertices), np.asarray(m.faces), rounding, name=pressing.name)
+
+
+def at_pose(part: BodyPart, pose: Pose, rounding: float = ROUNDING) -> tuple[Surface, float]:
+    """``(shape, depth)``: a scene's posed objects as one rigid :class:`Surface` (rounded by
+    ``rounding``, m) moved back along the pose's direction to first contact with the skin, and
+    the depth (m) that presses it to the pose: where the objects' own faces lie (the rounded
+    surface stands ``rounding`` outside them). Depth 0 when the objects do not reach the skin.
+    """
+    vertices, faces, start = [], [], 0
+    for o in pose.objects:
+        vertices.append(o.vertices)
+        faces.append(o.faces + start)
+        start += len(o.vertices)
+    name = " + ".join(pose.names())
+    shape = Surface(np.concatenate(vertices), np.concatenate(faces), rounding, name=name)
+    d = unit(pose.direction)
+    near = np.flatnonzero(pose.gap < rounding + 0.002)
+    if not len(near):
+        return shape, 0.0
+    centre = part.vertices[near].mean(0)
+    reach = float(np.linalg.norm(part.vertices[near] - centre, axis=1).max()) + 0.01
+    back = clearance(shape, d, skin_near(part, centre, reach))
+    return shape.moved(-back * d), max(back - rounding, 0.0)
 
 
 def grip(

@@ -8,11 +8,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fem.contact import press
 from fem.layers import preset
 from fem.local import simulate_local
+from fem.material import NeoHookean
 from fem.mesh import ShellMesh
-from fem.simulate import resolution, simulate
-from fem.solver import Solution
+from fem.objects import at_pose
+from fem.simulate import resolution, simulate, tissue_mesh
+from fem.solver import Solution, Solver
 from stmpl.predictor import BasePredictor, PredictionFailed, check_fidelity
 from stmpl.scene import Scene
 
@@ -48,6 +51,11 @@ class FEMPredictor(BasePredictor):
         tissue: ``"paper"`` (the gel) or a layered preset of :mod:`fem.layers`, its layers
             shaped by anny's ``phenotype``.
 
+    A scene given by a pose (:mod:`stmpl.pose`) is answered by pressing its objects, from first
+    contact, to that pose in frictionless contact with the skin (:func:`fem.contact.press`, on
+    the whole part at either fidelity): the answer carries the contact force on each vertex and
+    the objects' reaction.
+
     A failed solve raises :class:`FEMFailed` (never a displacement). ``Deformation.info`` holds
     the last level's diagnostics and ``levels``, one diagnostics dict per continuation level;
     :attr:`last_shell` keeps the last scene's mesh and solutions.
@@ -55,6 +63,7 @@ class FEMPredictor(BasePredictor):
 
     name = "fem"
     batched = False
+    takes = ("force", "pose")
 
     def __init__(
         self,
@@ -79,6 +88,9 @@ class FEMPredictor(BasePredictor):
     def predict_batch(self, scenes: list[Scene]) -> list[np.ndarray]:
         out = []
         for s in scenes:
+            if s.pose is not None:
+                out.append(self._pressed(s))
+                continue
             total = float(s.force.sum())
             if total <= 0:
                 out.append(np.zeros((s.part.n_vertices, 3)))
@@ -107,6 +119,42 @@ class FEMPredictor(BasePredictor):
             u = sol.part_displacement(mesh)
             out.append(u if local is None else local.patch.lift(u, s.part.n_vertices))
         return out
+
+    def _pressed(self, s: Scene) -> dict:
+        """The answer to a posed scene: its objects pressed to their pose."""
+        n = s.part.n_vertices
+        shape, depth = at_pose(s.part, s.pose)
+        if depth == 0.0:
+            self._last[id(s)] = {"fem": "no contact: the objects do not reach the skin"}
+            return {"displacement": np.zeros((n, 3)), "force": np.zeros(n), "reaction": 0.0}
+        near = s.part.vertices[s.pose.gap <= s.pose.gap.min() + 0.005]  # refined round these
+        try:
+            mesh, material = tissue_mesh(
+                s.part, s.thickness, self.res, self.tissue, self.phenotype, near
+            )
+        except ValueError as e:
+            raise FEMFailed(f"the FEM cannot build the tissue for this scene: {e}") from e
+        if material is None:
+            material = self.material if self.material is not None else NeoHookean()
+        solver = Solver(mesh, material, options=self.options, order=self.res.order)
+        (a,) = press(solver, shape, s.pose.direction, [depth])
+        if not a.ok:
+            raise FEMFailed(f"the FEM press failed at {1e3 * depth:.3g} mm deep: {a.reason}")
+        self.last_shell = None  # a press keeps no continuation levels
+        self._last[id(s)] = {
+            "depth": depth,
+            "reaction": a.reaction,
+            "contact_area": a.area,
+            "penetration": a.penetration,
+            "min_det_F": a.min_det_F,
+            "compression": a.compression,
+            "iterations": a.iterations,
+            "updates": a.updates,
+            "fidelity": "full (a pose is pressed on the whole part)",
+            "mesh": {"nodes": mesh.n_nodes, "tets": int(len(mesh.tets))},
+        }
+        force = a.pressure * s.part.vertex_areas
+        return {"displacement": a.displacement, "force": force, "reaction": a.reaction}
 
     def info(self, scene: Scene) -> dict:
         return {

@@ -17,6 +17,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.spatial import cKDTree
 
+from stmpl.geometry import closest_points
+
 
 def unit(v) -> np.ndarray:
     v = np.asarray(v, dtype=float)
@@ -183,13 +185,10 @@ NEAREST = 8
 they do not settle is checked against every triangle within reach."""
 
 
-def touching(shape, direction: np.ndarray, points: np.ndarray, tolerance: float = 1e-6):
-    """``shape`` moved back against ``direction`` ``(3,)`` (the way it presses) just far enough
-    that none of ``points`` ``(K, 3)`` (m; the skin around where it presses) lies inside it:
-    placed at first contact, from where a press's depth counts. A flat punch set on a vertex in
-    a hollow of the skin would otherwise start pressed into the skin around that vertex, and
-    carry a force at depth 0. Found by bisection to ``tolerance`` (m); the shape itself if
-    nothing lies inside it.
+def clearance(shape, direction: np.ndarray, points: np.ndarray, tolerance: float = 1e-6) -> float:
+    """How far (m) ``shape`` must move back against ``direction`` ``(3,)`` (the way it presses)
+    for none of ``points`` ``(K, 3)`` (m; the skin around where it presses) to lie inside it:
+    0 if none does. Found by bisection to ``tolerance`` (m).
     """
     d = unit(direction)
     x = np.asarray(points, dtype=float).reshape(-1, 3)
@@ -198,7 +197,7 @@ def touching(shape, direction: np.ndarray, points: np.ndarray, tolerance: float 
         return bool(shape.moved(-back * d).distance(x)[0].min() < 0.0)
 
     if len(x) == 0 or not inside(0.0):
-        return shape
+        return 0.0
     hi = float(np.ptp(x @ d)) + tolerance
     if inside(hi):
         raise ValueError("the points lie inside the shape however far it moves back")
@@ -206,7 +205,17 @@ def touching(shape, direction: np.ndarray, points: np.ndarray, tolerance: float 
     while hi - lo > tolerance:
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if inside(mid) else (lo, mid)
-    return shape.moved(-hi * d)
+    return hi
+
+
+def touching(shape, direction: np.ndarray, points: np.ndarray, tolerance: float = 1e-6):
+    """``shape`` moved back against ``direction`` by its :func:`clearance` from ``points``:
+    placed at first contact, from where a press's depth counts. A flat punch set on a vertex in
+    a hollow of the skin would otherwise start pressed into the skin around that vertex, and
+    carry a force at depth 0. The shape itself if nothing lies inside it.
+    """
+    back = clearance(shape, direction, points, tolerance)
+    return shape if back == 0.0 else shape.moved(-back * unit(direction))
 
 
 def skin_near(part, p: np.ndarray, radius: float, k: int = 8) -> np.ndarray:
@@ -219,43 +228,6 @@ def skin_near(part, p: np.ndarray, radius: float, k: int = 8) -> np.ndarray:
     w = np.column_stack([i[keep], j[keep], k - i[keep] - j[keep]]) / k  # (P, 3)
     x = np.einsum("pc,fcd->fpd", w, part.vertices[part.faces]).reshape(-1, 3)
     return x[np.linalg.norm(x - p, axis=1) < radius]
-
-
-def closest_points(tri: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """``(c (K, 3), weights (K, 3))``: the point of each triangle ``tri`` ``(K, 3, 3)``
-    closest to ``x`` ``(K, 3)`` and its barycentric weights: the projection on the plane if it
-    falls inside, else the nearest point of the three edges. Exact at any scale (no absolute
-    tolerances: a millimetre triangle is as good as a metre one).
-    """
-    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
-    ab, ac, ap = b - a, c - a, x - a
-    d00 = np.einsum("ki,ki->k", ab, ab)
-    d01 = np.einsum("ki,ki->k", ab, ac)
-    d11 = np.einsum("ki,ki->k", ac, ac)
-    d20 = np.einsum("ki,ki->k", ap, ab)
-    d21 = np.einsum("ki,ki->k", ap, ac)
-    den = d00 * d11 - d01**2
-    ok = den > 1e-12 * np.maximum(d00 * d11, 1e-300)
-    den = np.where(ok, den, 1.0)
-    v = (d11 * d20 - d01 * d21) / den
-    w = (d00 * d21 - d01 * d20) / den
-    weights = np.stack([1 - v - w, v, w], axis=1)
-    best = np.einsum("kj,kji->ki", weights, tri)
-    inside = ok & (weights.min(axis=1) >= 0)
-    dist = np.where(inside, np.linalg.norm(x - best, axis=1), np.inf)
-    for i, j in ((0, 1), (1, 2), (2, 0)):
-        s0, s1 = tri[:, i], tri[:, j]
-        e = s1 - s0
-        t = np.einsum("ki,ki->k", x - s0, e) / np.maximum(np.einsum("ki,ki->k", e, e), 1e-300)
-        t = np.clip(t, 0.0, 1.0)
-        q = s0 + t[:, None] * e
-        d = np.linalg.norm(x - q, axis=1)
-        closer = d < dist
-        best[closer], dist[closer] = q[closer], d[closer]
-        wq = np.zeros((int(closer.sum()), 3))
-        wq[:, i], wq[:, j] = 1 - t[closer], t[closer]
-        weights[closer] = wq
-    return best, weights
 
 
 @dataclass(frozen=True, eq=False)

@@ -1,5 +1,5 @@
 """Plain functions over triangle meshes (points ``(N, 3)``, faces ``(M, 3)``): normals, areas,
-boundary loops, connected pieces, projection on a polyline.
+boundary loops, connected pieces, projection on a polyline, closest points on triangles.
 """
 
 import numpy as np
@@ -66,3 +66,40 @@ def triangle_areas_of(tri: np.ndarray) -> np.ndarray:
 def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """``(M,)`` areas of triangles ``faces`` ``(M, 3)`` over ``vertices`` ``(N, 3)``, m^2."""
     return triangle_areas_of(np.asarray(vertices)[faces])
+
+
+def closest_points(tri: np.ndarray, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``(c (K, 3), weights (K, 3))``: the point of each triangle ``tri`` ``(K, 3, 3)``
+    closest to ``x`` ``(K, 3)`` and its barycentric weights: the projection on the plane if it
+    falls inside, else the nearest point of the three edges. Exact at any scale (no absolute
+    tolerances: a millimetre triangle is as good as a metre one).
+    """
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    ab, ac, ap = b - a, c - a, x - a
+    d00 = np.einsum("ki,ki->k", ab, ab)
+    d01 = np.einsum("ki,ki->k", ab, ac)
+    d11 = np.einsum("ki,ki->k", ac, ac)
+    d20 = np.einsum("ki,ki->k", ap, ab)
+    d21 = np.einsum("ki,ki->k", ap, ac)
+    den = d00 * d11 - d01**2
+    ok = den > 1e-12 * np.maximum(d00 * d11, 1e-300)
+    den = np.where(ok, den, 1.0)
+    v = (d11 * d20 - d01 * d21) / den
+    w = (d00 * d21 - d01 * d20) / den
+    weights = np.stack([1 - v - w, v, w], axis=1)
+    best = np.einsum("kj,kji->ki", weights, tri)
+    inside = ok & (weights.min(axis=1) >= 0)
+    dist = np.where(inside, np.linalg.norm(x - best, axis=1), np.inf)
+    for i, j in ((0, 1), (1, 2), (2, 0)):
+        s0, s1 = tri[:, i], tri[:, j]
+        e = s1 - s0
+        t = np.einsum("ki,ki->k", x - s0, e) / np.maximum(np.einsum("ki,ki->k", e, e), 1e-300)
+        t = np.clip(t, 0.0, 1.0)
+        q = s0 + t[:, None] * e
+        d = np.linalg.norm(x - q, axis=1)
+        closer = d < dist
+        best[closer], dist[closer] = q[closer], d[closer]
+        wq = np.zeros((int(closer.sum()), 3))
+        wq[:, i], wq[:, j] = 1 - t[closer], t[closer]
+        weights[closer] = wq
+    return best, weights

@@ -108,10 +108,15 @@ class BasePredictor:
     """Shared plumbing: single or batch input, validation, timing in ``Deformation.info``.
 
     Subclasses implement :meth:`predict_batch` on a non-empty list of scenes and return one
-    ``(N, 3)`` displacement (m) per scene.
+    ``(N, 3)`` displacement (m) per scene; for a scene given by a pose (a predictor whose
+    :attr:`takes` has ``"pose"``), a dict of its ``displacement``, ``force`` ``(N,)`` (N) and
+    ``reaction`` (N).
     """
 
     name = "base"
+    takes: tuple = ("force",)
+    """What scenes the predictor answers: given by their ``"force"``, by an object's ``"pose"``
+    (:attr:`stmpl.scene.Scene.given`), or both. Any other is refused by name."""
     envelope = None
     """The :class:`~stmpl.envelope.Envelope` of the data behind the answers, or ``None`` (the
     FEM, which fails loudly instead)."""
@@ -157,6 +162,8 @@ class BasePredictor:
         for i, s in enumerate(batch):
             if not isinstance(s, Scene):
                 raise TypeError(f"scene {i} is a {type(s).__name__}, not a Scene")
+            if s.given not in self.takes:
+                raise ValueError(_refusal(self, i, s.given))
         self.check(batch)
         outside = self.outside(batch)
         strict = self.strict if strict is None else strict
@@ -175,7 +182,8 @@ class BasePredictor:
         dt = (time.perf_counter() - t0) / len(batch)
         result = []
         for s, u, why in zip(batch, out, outside):
-            u = np.asarray(u, dtype=float)
+            answer = u if isinstance(u, dict) else {"displacement": u}
+            u = np.asarray(answer["displacement"], dtype=float)
             if not np.all(np.isfinite(u)):
                 raise PredictionFailed(f"{self.name} predicted non-finite displacements")
             compression = float((-np.einsum("ij,ij->i", u, s.part.normals) / s.thickness).max())
@@ -203,6 +211,8 @@ class BasePredictor:
                         else {"inside": not why, "outside": why},
                         **self.info(s),
                     },
+                    answer.get("force"),
+                    answer.get("reaction"),
                 )
             )
         return result[0] if single else result
@@ -235,3 +245,17 @@ class BasePredictor:
 
     def predict_batch(self, scenes: list[Scene]) -> list[np.ndarray]:
         raise NotImplementedError
+
+
+def _refusal(predictor, i: int, given: str) -> str:
+    """Why ``predictor`` refuses scene ``i``, given by its ``given`` (force or pose)."""
+    if given == "pose":
+        return (
+            f"{predictor.name} answers a force given on the skin, and scene {i} gives an "
+            "object's pose (its force is what is asked): use a predictor that takes a pose, "
+            "the FEM or a model trained on pressed objects"
+        )
+    return (
+        f"{predictor.name} answers an object's pose, and scene {i} gives a force on the skin: "
+        "use a predictor that takes a force"
+    )

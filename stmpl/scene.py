@@ -1,5 +1,7 @@
-"""What a predictor takes and gives: a :class:`Scene` (a part, its tissue thickness and the
-external normal force) and a :class:`Deformation` (a displacement per vertex).
+"""What a predictor takes and gives: a :class:`Scene` (a part, its tissue thickness, and either
+the external normal force or the pose of the objects pressing on it) and a
+:class:`Deformation` (a displacement per vertex; for a posed scene also the contact force on
+each vertex and the objects' reaction).
 
 Both are frozen and validated on construction; errors name the field and the bad value. Both save
 to one ``.npz`` (arrays, the part included, so a file is self-contained) with a JSON header.
@@ -17,32 +19,42 @@ from stmpl import tissue
 from stmpl.files import atomic_savez
 from stmpl.loads import FORCE_RANGE, Load
 from stmpl.part import BodyPart
+from stmpl.pose import Pose
 
 FORMAT = "stmpl-scene/1"
 
 
 @dataclass(frozen=True, eq=False)
 class Scene:
-    """A body part under load.
+    """A body part under load: given by the force on the skin, or by where objects are.
 
     Attributes:
         part: the body part (rest pose).
         thickness: ``(N,)`` soft-tissue thickness per vertex, m, in ``tissue.THICKNESS_RANGE``.
-        force: ``(N,)`` normal force per vertex, N, >= 0, pushing along ``-part.normals``.
+        force: ``(N,)`` normal force per vertex, N, >= 0, pushing along ``-part.normals``;
+            ``None`` when the scene gives a ``pose`` instead (the force is then what is asked).
         load: the load that made ``force`` (optional, for reports).
         meta: free JSON-serialisable notes (e.g. phenotype, placement id).
+        pose: the objects at their pose (:class:`~stmpl.pose.Pose`), for a scene given by
+            where the objects are; ``None`` for a scene given by its force.
     """
 
     part: BodyPart
     thickness: np.ndarray
-    force: np.ndarray
+    force: np.ndarray | None = None
     load: Load | None = None
     meta: dict = field(default_factory=dict)
+    pose: Pose | None = None
 
     def __post_init__(self) -> None:
         t = tissue.check(self.part, self.thickness)
-        f = np.asarray(self.force, dtype=float)
         n = self.part.n_vertices
+        if self.pose is not None:
+            self._check_pose(t)
+            return
+        if self.force is None:
+            raise ValueError("a Scene needs a force per vertex or an object's pose")
+        f = np.asarray(self.force, dtype=float)
         if f.shape != (n,):
             raise ValueError(
                 f"Scene.force must have shape ({n},) for part {self.part.name!r}, got {f.shape}"
@@ -76,19 +88,53 @@ class Scene:
         object.__setattr__(self, "thickness", t)
         object.__setattr__(self, "force", f)
 
+    def _check_pose(self, thickness: np.ndarray) -> None:
+        if self.force is not None or self.load is not None:
+            raise ValueError(
+                "a Scene gives a force or an object's pose, not both: the force on a posed "
+                "object is what a predictor answers"
+            )
+        if not isinstance(self.pose, Pose):
+            raise TypeError(f"Scene.pose must be a Pose, got {type(self.pose).__name__}")
+        n = self.part.n_vertices
+        if self.pose.gap.shape != (n,):
+            raise ValueError(
+                f"Scene.pose.gap must have shape ({n},) for part {self.part.name!r}, got "
+                f"{self.pose.gap.shape}"
+            )
+        object.__setattr__(self, "thickness", thickness)
+
     @classmethod
     def from_load(cls, part: BodyPart, thickness, load: Load, **meta) -> "Scene":
         return cls(part, thickness, load.force, load, dict(meta))
 
+    @classmethod
+    def posed(cls, part: BodyPart, thickness, pose: Pose, **meta) -> "Scene":
+        """A scene given by where objects are (see :mod:`stmpl.pose`)."""
+        return cls(part, thickness, None, None, dict(meta), pose)
+
+    @property
+    def given(self) -> str:
+        """``"force"`` or ``"pose"``: what the scene gives (the other is what is asked)."""
+        return "force" if self.pose is None else "pose"
+
+    def _force(self) -> np.ndarray:
+        if self.force is None:
+            raise ValueError(
+                "this scene gives an object's pose, not a force: the force is in its answer "
+                "(Deformation.force, Deformation.reaction)"
+            )
+        return self.force
+
     @property
     def total_force(self) -> float:
         """Sum of the per-vertex forces, N."""
-        return float(self.force.sum())
+        return float(self._force().sum())
 
     @property
     def force_vectors(self) -> np.ndarray:
         """``(N, 3)`` force vectors, N (along the inward normal)."""
-        return -self.force[:, None] * self.part.normals
+        return -self._force()[:, None] * self.part.normals
 
     def header(self) -> dict:
         return {
@@ -97,13 +143,22 @@ class Scene:
             "source": self.part.source,
             "load": self.load.to_dict() if self.load else None,
             "meta": self.meta,
+            "pose": None if self.pose is None else {"objects": self.pose.names()},
         }
+
+    def arrays(self) -> dict:
+        """The scene's arrays for a file: the part's, the thickness, the force or the pose."""
+        arrays = {f"part/{k}": v for k, v in self.part.arrays().items()}
+        arrays["thickness"] = self.thickness
+        if self.pose is None:
+            arrays["force"] = self.force
+        else:
+            arrays.update({f"pose/{k}": v for k, v in self.pose.arrays().items()})
+        return arrays
 
     def save(self, path) -> pathlib.Path:
         """Write the scene to ``path`` (``.npz``); :meth:`read` reads it back."""
-        arrays = {f"part/{k}": v for k, v in self.part.arrays().items()}
-        arrays.update(thickness=self.thickness, force=self.force)
-        return _save(path, arrays, self.header())
+        return _save(path, self.arrays(), self.header())
 
     @classmethod
     def read(cls, path) -> "Scene":
@@ -115,7 +170,12 @@ class Scene:
                 {k[5:]: v for k, v in arrays.items() if k.startswith("part/")},
                 header.get("source"),
             )
-            return cls(part, arrays["thickness"], arrays["force"], None, header.get("meta", {}))
+            meta = header.get("meta", {})
+            if header.get("pose"):
+                got = {k[5:]: v for k, v in arrays.items() if k.startswith("pose/")}
+                pose = Pose.from_arrays(got, header["pose"]["objects"])
+                return cls.posed(part, arrays["thickness"], pose, **meta)
+            return cls(part, arrays["thickness"], arrays["force"], None, meta)
         except KeyError as exc:
             raise ValueError(f"scene file {path} lacks {exc}") from exc
 
@@ -124,12 +184,19 @@ class Scene:
 class Deformation:
     """The response of a scene: ``displacement`` ``(N, 3)`` m per vertex of ``scene.part``.
 
+    For a scene given by a pose, also ``force`` ``(N,)``: the contact force the objects put on
+    each vertex, N (the contact pressure times the vertex's area, along the inward normal), and
+    ``reaction``: the force the objects must be pushed with along the pose's direction, N. For
+    a scene given by its force both are ``None`` (the force is the scene's).
+
     ``info`` carries diagnostics (predictor name, timings, solver residuals).
     """
 
     scene: Scene
     displacement: np.ndarray
     info: dict = field(default_factory=dict)
+    force: np.ndarray | None = None
+    reaction: float | None = None
 
     def __post_init__(self) -> None:
         u = np.asarray(self.displacement, dtype=float)
@@ -141,6 +208,34 @@ class Deformation:
         u = u.copy()
         u.setflags(write=False)
         object.__setattr__(self, "displacement", u)
+        if self.scene.pose is None:
+            if self.force is not None or self.reaction is not None:
+                raise ValueError(
+                    "a scene given by its force has no answered force or reaction (they are "
+                    "the scene's own)"
+                )
+            return
+        if self.force is None or self.reaction is None:
+            raise ValueError("the answer to a posed scene needs its force and its reaction")
+        f = np.asarray(self.force, dtype=float)
+        if f.shape != (n,) or not np.isfinite(f).all() or (f < 0).any():
+            raise ValueError(
+                f"Deformation.force must be ({n},) finite forces >= 0 N, got shape {f.shape}"
+            )
+        r = float(self.reaction)
+        if not np.isfinite(r):
+            raise ValueError(f"Deformation.reaction must be finite, got {self.reaction!r}")
+        f = f.copy()
+        f.setflags(write=False)
+        object.__setattr__(self, "force", f)
+        object.__setattr__(self, "reaction", r)
+
+    @property
+    def pressure(self) -> np.ndarray:
+        """``(N,)`` contact pressure on each vertex, Pa (a posed scene's answer only)."""
+        if self.force is None:
+            raise ValueError("only the answer to a posed scene has a contact pressure")
+        return self.force / self.scene.part.vertex_areas
 
     @property
     def vertices(self) -> np.ndarray:
@@ -157,11 +252,12 @@ class Deformation:
         return self.scene.part.mesh(self.vertices)
 
     def save(self, path) -> pathlib.Path:
-        arrays = {f"part/{k}": v for k, v in self.scene.part.arrays().items()}
-        arrays.update(
-            thickness=self.scene.thickness, force=self.scene.force, displacement=self.displacement
-        )
-        return _save(path, arrays, {**self.scene.header(), "info": self.info})
+        arrays = {**self.scene.arrays(), "displacement": self.displacement}
+        header = {**self.scene.header(), "info": self.info}
+        if self.force is not None:
+            arrays["answer/force"] = self.force
+            header["reaction"] = self.reaction
+        return _save(path, arrays, header)
 
     @classmethod
     def read(cls, path) -> "Deformation":
@@ -170,7 +266,10 @@ class Deformation:
         if "displacement" not in arrays:
             raise ValueError(f"{path} holds a scene, not a deformation (no displacement)")
         scene = Scene.read(path)
-        return cls(scene, arrays["displacement"], header.get("info", {}))
+        force = arrays.get("answer/force")
+        return cls(
+            scene, arrays["displacement"], header.get("info", {}), force, header.get("reaction")
+        )
 
 
 def _save(path, arrays: dict, header: dict) -> pathlib.Path:

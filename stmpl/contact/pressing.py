@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
+from stmpl.geometry import closest_points
 from stmpl.loads import Load, _check_force, _check_total
 from stmpl.part import BodyPart
 
@@ -302,8 +303,6 @@ def distance_to_surface(mesh, points: np.ndarray, upto: float = np.inf) -> np.nd
     vertices all lie farther than ``d + L`` (``L`` the longest edge) holds no point nearer than
     ``d``. So only the triangles at a vertex within ``d + L`` are searched, exactly.
     """
-    from trimesh.triangles import closest_point  # deferred: object meshes and closest points only
-
     points = np.asarray(points, dtype=float).reshape(-1, 3)
     vertices, faces = np.asarray(mesh.vertices), np.asarray(mesh.faces)
     tri = vertices[faces]
@@ -323,7 +322,7 @@ def distance_to_surface(mesh, points: np.ndarray, upto: float = np.inf) -> np.nd
         rows.append(np.full(len(near), k))
         cols.append(near)
     rows, cols = np.concatenate(rows), np.concatenate(cols)
-    q = closest_point(tri[cols], points[rows])
+    q, _ = closest_points(tri[cols], points[rows])
     d = np.linalg.norm(q - points[rows], axis=1)
     out[need] = np.inf
     np.minimum.at(out, rows, d)

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from fem.shapes import BAND, Box, Punch, Sphere, Surface, closest_points, skin_near, touching
+from fem.shapes import BAND, Box, Punch, Sphere, Surface, skin_near, touching
 
 
 def test_signed_distances_of_the_shapes():
@@ -41,27 +41,6 @@ def test_a_rounded_punch_is_the_sharp_one_with_its_rim_rounded():
     assert phi[0] > sharp.distance(corner)[0][0]
     with pytest.raises(ValueError, match="rounding must be >= 0 and below the radius"):
         Punch([0, 0, 0], down, 1.0, rounding=1.0)
-
-
-@pytest.mark.parametrize("scale", [1.0, 1e-3])
-def test_closest_points_on_triangles_at_any_scale(scale):
-    """Against a dense sampling of each triangle (the nearest sample is never closer), at a
-    metre's scale and a millimetre's.
-    """
-    rng = np.random.default_rng(2)
-    tri = scale * rng.normal(size=(300, 3, 3))
-    x = scale * rng.normal(size=(300, 3))
-    c, w = closest_points(tri, x)
-    np.testing.assert_allclose(np.einsum("kj,kji->ki", w, tri), c, atol=1e-12 * scale)
-    assert w.min() >= 0 and np.allclose(w.sum(1), 1)
-    s = np.linspace(0, 1, 60)
-    a, b = np.meshgrid(s, s)
-    keep = a + b <= 1
-    bary = np.stack([1 - a[keep] - b[keep], a[keep], b[keep]], 1)  # (S, 3)
-    samples = np.einsum("sj,kji->ksi", bary, tri)
-    sampled = np.linalg.norm(samples - x[:, None], axis=2).min(1)
-    found = np.linalg.norm(c - x, axis=1)
-    assert np.all(found <= sampled + 1e-12 * scale)
 
 
 def _points(rng, n, half):

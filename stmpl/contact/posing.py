@@ -1,0 +1,68 @@
+"""Scenes given by where objects are (:class:`~stmpl.pose.Pose`): the objects' meshes at their
+pose, and the gap field a learned model reads, each rest skin vertex's signed distance to them.
+
+>>> tip = objects.sphere(0.008)
+>>> scene = posed(arm, thickness, tip, objects.press(arm, tip, uv=(0.5, 0.5), depth=0.002))
+>>> answer = stmpl.predictor.create("fem", tissue="forearm").predict(scene)
+>>> answer.reaction, answer.force          # N, and N on each vertex
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from stmpl.contact.pressing import check_pose, distance_to_surface, winding_number
+from stmpl.part import BodyPart
+from stmpl.pose import GAP_REACH, Pose, Rigid
+from stmpl.scene import Scene
+
+
+def signed_distance(mesh, points: np.ndarray, upto: float = GAP_REACH) -> np.ndarray:
+    """``(P,)`` each point's signed distance to a triangle mesh (m; negative inside it, inside
+    where its generalized winding number exceeds 1/2), cut at ``upto`` outside.
+    """
+    points = np.asarray(points, dtype=float).reshape(-1, 3)
+    lo, hi = np.asarray(mesh.bounds)
+    box = np.linalg.norm(np.maximum(0, np.maximum(lo - points, points - hi)), axis=1)
+    out = np.full(len(points), float(upto))
+    near = np.flatnonzero(box < upto)  # a point farther from the box is farther from the mesh
+    if not len(near):
+        return out
+    d = np.minimum(distance_to_surface(mesh, points[near], upto=upto), upto)
+    inside = winding_number(mesh, points[near]) > 0.5
+    d[inside] = -distance_to_surface(mesh, points[near][inside])
+    out[near] = d
+    return out
+
+
+def posed(
+    part: BodyPart,
+    thickness,
+    mesh,
+    pose=None,
+    direction=None,
+    name: str = "object",
+    **meta,
+) -> Scene:
+    """The scene of ``mesh`` (a ``trimesh.Trimesh`` in its own frame, m, pressing along its
+    local ``-z`` as :mod:`stmpl.contact.objects` makes them) set by ``pose`` ``(4, 4)`` (default
+    none) on ``part`` with tissue ``thickness`` ``(N,)`` (m). ``direction`` ``(3,)``: the way
+    it presses, default its local ``-z`` in body coordinates. Several objects: a list of
+    ``(mesh, pose, name)``, pressing along one ``direction``.
+    """
+    items = mesh if isinstance(mesh, list) else [(mesh, pose, name)]
+    rigid, gap = [], np.full(part.n_vertices, GAP_REACH)
+    for m, p, n in items:
+        P = np.eye(4) if p is None else check_pose(p)
+        at = m.copy().apply_transform(P)
+        if len(at.faces) == 0 or not np.isfinite(at.vertices).all():
+            raise ValueError(f"object {n!r}: the mesh has no faces or non-finite vertices")
+        rigid.append(Rigid(n, np.asarray(at.vertices), np.asarray(at.faces)))
+        gap = np.minimum(gap, signed_distance(at, part.vertices))
+    if direction is None:
+        first = np.eye(4) if items[0][1] is None else check_pose(items[0][1])
+        direction = first[:3, :3] @ np.array([0.0, 0.0, -1.0])
+    d = np.asarray(direction, dtype=float)
+    if d.shape != (3,) or not np.isfinite(d).all() or not np.linalg.norm(d) > 0:
+        raise ValueError(f"direction must be a finite nonzero 3-vector, got {direction!r}")
+    return Scene.posed(part, thickness, Pose(gap, d / np.linalg.norm(d), tuple(rigid)), **meta)

@@ -1,0 +1,121 @@
+"""A scene given by where an object is rather than by the force on the skin: what a VR, haptics
+or robotics application knows. The answer to such a scene carries the deformation **and** the
+force the object meets (per vertex, and its reaction).
+
+A :class:`Pose` holds the rigid objects at their pose in the part's body coordinates
+(:class:`Rigid`: a triangle mesh, m), the direction they press along, and the ``gap`` field the
+learned models read: each rest skin vertex's signed distance to the objects (m; negative where
+an object reaches into the rest skin, cut at :data:`GAP_REACH` away from them). The contact wing
+computes it (:func:`stmpl.contact.posing.posed`); this module only holds and checks it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+GAP_REACH = 0.02
+"""m: the gap field is cut at this distance from the objects (a skin vertex farther away is
+not near any contact, and its distance carries no information)."""
+
+
+@dataclass(frozen=True, eq=False)
+class Rigid:
+    """A rigid object at its pose: ``vertices`` ``(V, 3)`` in the part's body coordinates (m),
+    ``faces`` ``(F, 3)`` with outward normals, and a ``name``.
+    """
+
+    name: str
+    vertices: np.ndarray
+    faces: np.ndarray
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name.strip():
+            raise ValueError(f"an object's name must be a non-empty string, got {self.name!r}")
+        v = np.asarray(self.vertices, dtype=float)
+        f = np.asarray(self.faces)
+        if v.ndim != 2 or v.shape[1] != 3 or len(v) < 3:
+            raise ValueError(f"object {self.name!r}: vertices must be (V >= 3, 3), got {v.shape}")
+        if not np.isfinite(v).all():
+            i = int(np.argmax(~np.isfinite(v).all(axis=1)))
+            raise ValueError(f"object {self.name!r}: vertex {i} is not finite")
+        if f.ndim != 2 or f.shape[1] != 3 or len(f) == 0 or f.dtype.kind not in "iu":
+            raise ValueError(f"object {self.name!r}: faces must be a non-empty (F, 3) int array")
+        if f.min() < 0 or f.max() >= len(v):
+            raise ValueError(f"object {self.name!r}: faces index vertices outside 0..{len(v) - 1}")
+        v, f = v.copy(), f.astype(np.int64)
+        v.setflags(write=False)
+        f.setflags(write=False)
+        object.__setattr__(self, "vertices", v)
+        object.__setattr__(self, "faces", f)
+
+
+@dataclass(frozen=True, eq=False)
+class Pose:
+    """Where the pressing objects are (see the module docstring).
+
+    Attributes:
+        gap: ``(N,)`` each rest skin vertex's signed distance to the objects, m (negative
+            inside one), at most :data:`GAP_REACH`.
+        direction: ``(3,)`` unit vector the objects press along (into the skin).
+        objects: the :class:`Rigid` objects at their pose (at least one).
+    """
+
+    gap: np.ndarray
+    direction: np.ndarray
+    objects: tuple
+
+    def __post_init__(self) -> None:
+        g = np.asarray(self.gap, dtype=float)
+        if g.ndim != 1:
+            raise ValueError(f"Pose.gap must be one distance per vertex (N,), got {g.shape}")
+        if not np.isfinite(g).all():
+            i = int(np.argmax(~np.isfinite(g)))
+            raise ValueError(f"Pose.gap is not finite at vertex {i} (value {g[i]})")
+        if g.max(initial=0.0) > GAP_REACH * (1 + 1e-6):
+            raise ValueError(
+                f"Pose.gap must be cut at {1e3 * GAP_REACH:g} mm (GAP_REACH), got up to "
+                f"{1e3 * g.max():.3g} mm"
+            )
+        d = np.asarray(self.direction, dtype=float)
+        n = np.linalg.norm(d) if d.shape == (3,) else np.nan
+        if not (np.isfinite(n) and abs(n - 1) < 1e-6):
+            raise ValueError(f"Pose.direction must be a unit 3-vector, got {d.tolist()}")
+        objects = tuple(self.objects)
+        if not objects or not all(isinstance(o, Rigid) for o in objects):
+            raise ValueError("Pose.objects must be one or more Rigid objects")
+        for a in (g, d):
+            a.setflags(write=False)
+        object.__setattr__(self, "gap", g)
+        object.__setattr__(self, "direction", d)
+        object.__setattr__(self, "objects", objects)
+
+    @property
+    def depth(self) -> float:
+        """How far the objects reach into the rest skin at its deepest, m (0 if they do not)."""
+        return float(max(-self.gap.min(), 0.0))
+
+    @property
+    def touched(self) -> np.ndarray:
+        """``(K,)`` the rest skin vertices inside an object."""
+        return np.flatnonzero(self.gap < 0)
+
+    def arrays(self) -> dict:
+        """The pose as named arrays (for a scene file); :meth:`from_arrays` reads them."""
+        out = {"gap": self.gap, "direction": self.direction}
+        for k, o in enumerate(self.objects):
+            out[f"object{k}/vertices"] = o.vertices
+            out[f"object{k}/faces"] = o.faces
+        return out
+
+    def names(self) -> list[str]:
+        return [o.name for o in self.objects]
+
+    @classmethod
+    def from_arrays(cls, arrays: dict, names: list[str]) -> "Pose":
+        objects = tuple(
+            Rigid(n, arrays[f"object{k}/vertices"], arrays[f"object{k}/faces"])
+            for k, n in enumerate(names)
+        )
+        return cls(arrays["gap"], arrays["direction"], objects)

@@ -1,0 +1,57 @@
+"""Scenes given by where objects are: the gap field against a sphere's exact distance, the
+direction a posed object presses along, and several objects at once.
+"""
+
+import numpy as np
+import pytest
+
+from stmpl import tissue
+from stmpl.body import tube
+from stmpl.contact import objects
+from stmpl.contact.posing import posed, signed_distance
+from stmpl.pose import GAP_REACH
+
+
+@pytest.fixture(scope="module")
+def part():
+    return tube(radius=0.04, length=0.12, n_around=32, n_along=16)
+
+
+def test_the_signed_distance_is_a_spheres_own_within_its_facets():
+    ball = objects.sphere(0.01, subdivisions=4)  # centred at (0, 0, 0.01)
+    x = np.random.default_rng(0).uniform(-0.02, 0.04, size=(400, 3))
+    exact = np.linalg.norm(x - [0, 0, 0.01], axis=1) - 0.01
+    got = signed_distance(ball, x, upto=GAP_REACH)
+    near = exact < GAP_REACH - 1e-4
+    np.testing.assert_allclose(got[near], exact[near], atol=5e-5)  # facets of 10 mm / 100
+    assert (got[~near] >= GAP_REACH - 1e-4).all() and got.max() <= GAP_REACH
+    assert (got[exact < -1e-4] < 0).all() and (got[exact > 1e-4] > 0).all()
+
+
+def test_a_posed_fingertip_gives_the_gap_field_and_its_direction(part):
+    tip = objects.sphere(0.008)
+    pose = objects.press(part, tip, uv=(0.5, 0.5), depth=0.003)
+    s = posed(part, tissue.constant(part, 0.0075), tip, pose, name="fingertip")
+    assert s.given == "pose" and s.pose.names() == ["fingertip"]
+    np.testing.assert_allclose(s.pose.direction, pose[:3, :3] @ [0, 0, -1], atol=1e-12)
+    centre = (pose @ [0, 0, 0.008, 1.0])[:3]
+    exact = np.linalg.norm(part.vertices - centre, axis=1) - 0.008
+    near = exact < 0.01
+    np.testing.assert_allclose(s.pose.gap[near], exact[near], atol=2e-4)  # 8 mm icosphere
+    assert 0 < s.pose.depth <= 0.003 + 2e-4 and len(s.pose.touched) >= 1
+    np.testing.assert_allclose(
+        s.pose.objects[0].vertices, tip.copy().apply_transform(pose).vertices
+    )
+
+
+def test_two_objects_give_the_nearer_distance_and_one_direction(part):
+    tip = objects.sphere(0.008)
+    a = objects.press(part, tip, uv=(0.3, 0.5), depth=0.002)
+    b = objects.press(part, tip, uv=(0.7, 0.5), depth=0.002)
+    one = posed(part, tissue.constant(part, 0.0075), tip, a)
+    two = posed(part, tissue.constant(part, 0.0075), [(tip, a, "index"), (tip, b, "thumb")])
+    assert two.pose.names() == ["index", "thumb"]
+    assert (two.pose.gap <= one.pose.gap + 1e-12).all()
+    assert (two.pose.gap < one.pose.gap - 1e-3).any()  # the thumb's side
+    with pytest.raises(ValueError, match="finite nonzero 3-vector"):
+        posed(part, tissue.constant(part, 0.0075), tip, a, direction=[0, 0, 0])
