@@ -74,3 +74,50 @@ def test_the_fem_predictor_solves_a_layered_preset():
         predictor.create("fem", tissue="gel")
     with pytest.raises(ValueError, match="brings its own laws"):
         simulate(part, scene.thickness, scene.force, material=NeoHookean(), tissue="forearm")
+
+
+def test_the_fem_answers_a_pose_with_its_force_and_reaction_and_others_refuse_it():
+    """A fingertip mesh set 2 mm into a tube: the FEM presses it from first contact to the pose
+    and answers the dent, the contact force on each vertex and the reaction, as the exact sphere
+    pressed as deep does (within the icosphere's facets); a pose short of the skin is no
+    contact; a force-in predictor refuses the scene by name.
+    """
+    from fem.contact import press
+    from fem.objects import at_pose
+    from fem.shapes import Sphere, clearance, skin_near
+    from fem.simulate import tissue_mesh
+    from fem.solver import Solver
+    from stmpl.contact import objects
+    from stmpl.contact.posing import posed
+
+    part = tube(radius=0.04, length=0.12, n_around=24, n_along=10)
+    th = tissue.constant(part, 0.0075)
+    res = {"subdivisions": 1, "layers": 2, "refine_radius": 0.03, "order": 1}
+    tip = objects.sphere(0.008)
+    pose = objects.press(part, tip, uv=(0.5, 0.5), depth=0.002)
+    scene = posed(part, th, tip, pose, name="fingertip")
+    d = predictor.create("fem", res=res).predict(scene)
+    assert d.info["depth"] == pytest.approx(0.002, abs=5e-5)
+    centre = (pose @ [0, 0, 0.008, 1.0])[:3]
+    ball = Sphere(centre, 0.008)
+    back = clearance(ball, scene.pose.direction, skin_near(part, centre, 0.03))
+    near = part.vertices[scene.pose.gap <= scene.pose.gap.min() + 0.005]
+    mesh, _ = tissue_mesh(part, th, res, "paper", None, near)
+    (exact,) = press(
+        Solver(mesh, NeoHookean(), order=1),
+        ball.moved(-back * scene.pose.direction),
+        scene.pose.direction,
+        [back],
+    )
+    assert d.reaction == pytest.approx(exact.reaction, rel=0.03)
+    peak = np.linalg.norm(exact.displacement, axis=1).max()
+    error = np.linalg.norm(d.displacement - exact.displacement, axis=1)
+    assert error.mean() <= 0.01 * peak and error.max() <= 0.15 * peak, (error.max(), peak)
+    assert d.force.sum() == pytest.approx(d.reaction, rel=0.05) and d.force.min() >= 0
+    np.testing.assert_allclose(d.pressure, d.force / part.vertex_areas)
+    assert at_pose(part, scene.pose)[1] == pytest.approx(d.info["depth"])
+    short = posed(part, th, tip, objects.press(part, tip, uv=(0.5, 0.5), depth=-0.003))
+    none = predictor.create("fem", res=res).predict(short)
+    assert none.reaction == 0.0 and not none.displacement.any() and not none.force.any()
+    with pytest.raises(ValueError, match="naive answers a force given on the skin, and scene 0"):
+        predictor.create("naive", part).predict(scene)
