@@ -41,6 +41,10 @@ def at_pose(part: BodyPart, pose: Pose, rounding: float = ROUNDING) -> tuple[Sur
     the depth (m) that presses it to the pose: where the objects' own faces lie (the rounded
     surface stands ``rounding`` outside them). Depth 0 when the objects do not reach the skin.
     """
+    if not pose.objects:
+        raise ValueError(
+            "the FEM presses the objects themselves, and this pose gives only its gap field"
+        )
     vertices, faces, start = [], [], 0
     for o in pose.objects:
         vertices.append(o.vertices)

@@ -123,7 +123,10 @@ class FEMPredictor(BasePredictor):
     def _pressed(self, s: Scene) -> dict:
         """The answer to a posed scene: its objects pressed to their pose."""
         n = s.part.n_vertices
-        shape, depth = at_pose(s.part, s.pose)
+        try:
+            shape, depth = at_pose(s.part, s.pose)
+        except ValueError as e:
+            raise FEMFailed(f"the FEM cannot press this pose: {e}") from e
         if depth == 0.0:
             self._last[id(s)] = {"fem": "no contact: the objects do not reach the skin"}
             return {"displacement": np.zeros((n, 3)), "force": np.zeros(n), "reaction": 0.0}

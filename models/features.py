@@ -1,11 +1,13 @@
 """Input features every learned model shares, defined once: the load as pressure (or, per
-newton, its pattern and the total force), the thickness normalised over the tissue range, and
-the scale of the linear prior's displacement as an input. Torch tensors, SI units in.
+newton, its pattern and the total force), or an object's pose as the gap field, the thickness
+normalised over the tissue range, and the scale of the linear prior's displacement as an input.
+Torch tensors, SI units in.
 """
 
 from __future__ import annotations
 
 from stmpl import tissue
+from stmpl.pose import GAP_REACH
 
 PRESSURE_SCALE = 1000.0
 """Pa: pressure inputs are divided by this (the tissue's Young's modulus in the paper)."""
@@ -48,3 +50,31 @@ def load_channels(force, inv_area, per_newton: bool) -> list:
 def normalised_thickness(thickness):
     """``(B, N)`` thickness (m) over the tissue range, 0..1 (:func:`stmpl.tissue.normalise`)."""
     return tissue.normalise(thickness)
+
+
+GAP_SCALE = 0.01
+"""m: how deep an object reaches into the rest skin enters over this (a pose's input)."""
+
+PRESSURE_OUT_SCALE = 1e4
+"""Pa: a pose model answers the contact pressure in units of this (10 kPa: a few newtons on a
+square centimetre)."""
+
+CONTACT_BAND = 0.005
+"""m: a pose model's contact force is answered on the vertices within this of an object at rest
+(the skin moves in under a press, never 5 mm out towards the object); zero farther away."""
+
+
+def gap_channels(gap) -> list:
+    """An object's pose as two ``(B, N)`` input channels from the gap field ``gap`` ``(B, N)``
+    (m, negative inside an object): how deep each vertex lies inside (m), and how far outside,
+    cut at :data:`stmpl.pose.GAP_REACH` (m).
+    """
+    return [(-gap).clamp_min(0.0), gap.clamp(0.0, GAP_REACH)]
+
+
+def near_objects(gap):
+    """``(B, N)`` a field that is positive on the vertices within :data:`CONTACT_BAND` of an
+    object (m): where a pose loads the skin, as a force field marks it for the regions of
+    :mod:`stmpl.reach`.
+    """
+    return (CONTACT_BAND - gap).clamp_min(0.0)

@@ -12,13 +12,19 @@ import numpy as np
 import torch
 
 from models.compiled import TOLERANCE, compile_module, uncompiled
-from models.features import MIN_TOTAL_N, total_force
+from models.features import (
+    CONTACT_BAND,
+    MIN_TOTAL_N,
+    PRESSURE_OUT_SCALE,
+    total_force,
+)
 from stmpl import checkpoint, loads, tissue
 from stmpl import config as checked
 from stmpl.body.mirror import MIRROR, mirror_twin
 from stmpl.data.dataset import same_mesh
 from stmpl.envelope import Envelope
 from stmpl.part import BodyPart, difference
+from stmpl.pose import Pose, Rigid
 from stmpl.predictor import BasePredictor, check_fidelity
 from stmpl.reach import REGION_TOLERANCE
 from stmpl.scene import Deformation, Scene
@@ -37,6 +43,9 @@ CHUNK_SCENES = 32
 """A batch at fidelity ``auto`` is answered in calls of this many scenes."""
 
 LOSSES = ("mse", "relative", "pooled")
+GIVEN = ("force", "pose")
+"""What a learned model takes (option ``given``): the force on the skin, or an object's pose
+(the gap field; it then answers the contact pressure as well, :mod:`stmpl.pose`)."""
 LOSS_EPS = 1e-6
 """Regularises the ``relative`` loss's norms (units of :meth:`LearnedPredictor.raw`, so about
 1e-6 of the full scale, well under any error that counts)."""
@@ -89,6 +98,8 @@ class LearnedPredictor(BasePredictor):
     defaults: dict = {}
     counts: tuple = ()
     """The options that are counts (integers >= 1): a network's width, depth, steps..."""
+    poses = False
+    """Whether the model can be given an object's pose (option ``given: pose``)."""
 
     def __init__(
         self,
@@ -104,6 +115,7 @@ class LearnedPredictor(BasePredictor):
         """``fidelity="auto"``: the network answers where the prior moves the tissue by more
         than this share of its deepest (:func:`stmpl.reach.moved`)."""
         self.config = self.options(config)
+        self.takes = (self.config["given"],)
         self.per_newton = bool(self.config.get("per_newton", False))
         self.scale = float(self.config["disp_scale_mm"]) * 1e-3
         self.device = torch_device(device)
@@ -120,7 +132,7 @@ class LearnedPredictor(BasePredictor):
         """The model options ``config`` over the defaults, checked (unknown keys, the loss, the
         displacement scale) without building anything; raises ``ValueError``.
         """
-        allowed = {**cls.defaults, "disp_scale_mm": DISP_SCALE_MM}
+        allowed = {**cls.defaults, "disp_scale_mm": DISP_SCALE_MM, "given": "force"}
         unknown = set(config or {}) - set(allowed)
         if unknown:
             raise ValueError(
@@ -130,9 +142,27 @@ class LearnedPredictor(BasePredictor):
         if out.get("loss", "mse") not in LOSSES:
             raise ValueError(f"loss must be one of {LOSSES}, got {out['loss']!r}")
         checked.number(out["disp_scale_mm"], "disp_scale_mm", 0, low_open=True, unit="mm")
+        if out["given"] not in GIVEN:
+            raise ValueError(f"given must be one of {GIVEN}, got {out['given']!r}")
+        if out["given"] == "pose" and not cls.poses:
+            raise ValueError(f"the {cls.name} model takes a force only (given: force)")
+        if out["given"] == "pose" and out.get("per_newton"):
+            raise ValueError("a model given a pose knows no force to answer per newton of")
         for key in cls.counts:
             checked.integer(out[key], key, 1)
         return out
+
+    @property
+    def posed(self) -> bool:
+        """Whether the model takes an object's pose (option ``given: pose``): its input is the
+        gap field, and its output the displacement and the contact pressure.
+        """
+        return self.config["given"] == "pose"
+
+    @property
+    def out_channels(self) -> int:
+        """The network's outputs per vertex: the displacement, and for a pose the pressure."""
+        return 4 if self.posed else 3
 
     # -- bodies
     any_body = False
@@ -221,7 +251,13 @@ class LearnedPredictor(BasePredictor):
         return r * total_force(force)[:, None, None] if self.per_newton else r
 
     def normalised(self, target, force):
-        """The target ``(B, N, 3)`` (m) in the units of :meth:`raw`."""
+        """The target ``(B, N, 3)`` (m) in the units of :meth:`raw`; of a pose model ``(B, N,
+        4)``: the displacement (m) and the contact pressure (Pa).
+        """
+        if self.posed:
+            return torch.cat(
+                [target[..., :3] / self.scale, target[..., 3:] / PRESSURE_OUT_SCALE], -1
+            )
         t = target / self.scale
         if self.per_newton:
             t = t / total_force(force).clamp_min(MIN_TOTAL_N)[:, None, None]
@@ -234,11 +270,16 @@ class LearnedPredictor(BasePredictor):
         newton, so a light press weighs as much as a heavy one); ``relative``, each sample's
         mean Euclidean error over its peak displacement (the relative MEE the targets use);
         ``pooled``, the batch's mean Euclidean errors over its peaks, summed before the ratio
-        (:func:`pooled_loss`: heavier presses weigh more).
+        (:func:`pooled_loss`: heavier presses weigh more). A pose model (``force`` then the gap
+        field, ``target`` the displacement and the contact pressure, :meth:`normalised`) adds
+        the pressure's mean squared error to the other two.
         """
         pred, tgt = self.raw(thickness, force, body, base), self.normalised(target, force)
         if self.config.get("loss", "mse") == "mse":
             return ((pred - tgt) ** 2).mean()
+        if self.posed:
+            pressure = ((pred[..., 3] - tgt[..., 3]) ** 2).mean()
+            return self.euclidean_loss(pred[..., :3], tgt[..., :3], force) + pressure
         return self.euclidean_loss(pred, tgt, force)
 
     def euclidean_loss(self, pred, tgt, force):
@@ -266,15 +307,14 @@ class LearnedPredictor(BasePredictor):
         twins = [mirror_twin(s.part, self.part) if isinstance(s, Scene) else None for s in batch]
         if not any(t is not None for t in twins):
             return super().predict(scenes, strict)
-        seen = [
-            s if t is None else Scene(t, s.thickness, s.force, meta=s.meta)
-            for s, t in zip(batch, twins)
-        ]
+        seen = [s if t is None else _mirrored(s, t) for s, t in zip(batch, twins)]
         out = super().predict(seen, strict)
         back = [
             d
             if t is None
-            else Deformation(s, d.displacement * MIRROR, {**d.info, "mirrored": True})
+            else Deformation(
+                s, d.displacement * MIRROR, {**d.info, "mirrored": True}, d.force, d.reaction
+            )
             for s, t, d in zip(batch, twins, out)
         ]
         return back[0] if single else back
@@ -334,20 +374,23 @@ class LearnedPredictor(BasePredictor):
         prior's columns: one solve for the batch, not one per chunk). Nothing by default.
         """
 
-    def _answers(self, scenes) -> list[np.ndarray]:
+    def _answers(self, scenes) -> list:
         """:meth:`predict_batch` of one network call."""
         t = torch.tensor(
             np.stack([s.thickness for s in scenes]), dtype=torch.float32, device=self.device
         )
-        f = torch.tensor(
-            np.stack([s.force for s in scenes]), dtype=torch.float32, device=self.device
-        )
+        given = [s.pose.gap if self.posed else s.force for s in scenes]
+        f = torch.tensor(np.stack(given), dtype=torch.float32, device=self.device)
         body = None
         if self.general and any(s.part is not self.part for s in scenes):
             body = self.bodies_of([s.part for s in scenes])
         with torch.no_grad():
-            u = self.forward(t, f, body) * self.scale
-        return list(u.double().cpu().numpy())
+            out = self.forward(t, f, body)
+        u = list((out[..., :3] * self.scale).double().cpu().numpy())
+        if not self.posed:
+            return u
+        pressure = out[..., 3].clamp_min(0.0).double().cpu().numpy() * PRESSURE_OUT_SCALE
+        return [_posed_answer(s, x, p) for s, x, p in zip(scenes, u, pressure)]
 
     def network(self) -> torch.nn.Module:
         """The module :meth:`compile` compiles: the network without its prior (by default the
@@ -440,3 +483,27 @@ class LearnedPredictor(BasePredictor):
             except ValueError as e:
                 raise ValueError(f"checkpoint {path}: {e}") from e
         return p
+
+
+def _posed_answer(scene: Scene, u: np.ndarray, pressure: np.ndarray) -> dict:
+    """A pose model's answer to ``scene``: displacement ``u`` ``(N, 3)`` m, the contact force on
+    each vertex from ``pressure`` ``(N,)`` Pa (the network's, negative read as none: contact
+    pushes only; zero farther than :data:`~models.features.CONTACT_BAND` from the objects),
+    and the reaction: those forces along the inward normals, projected on the pose's direction.
+    """
+    part = scene.part
+    force = np.where(scene.pose.gap <= CONTACT_BAND, pressure, 0.0) * part.vertex_areas
+    reaction = float(force @ (-part.normals @ scene.pose.direction))
+    return {"displacement": u, "force": force, "reaction": reaction}
+
+
+def _mirrored(scene: Scene, twin) -> Scene:
+    """``scene`` on its mirror twin ``twin``: the thickness and the force (or the pose's gap)
+    vertex for vertex, a pose's objects and direction mirrored.
+    """
+    if scene.pose is None:
+        return Scene(twin, scene.thickness, scene.force, meta=scene.meta)
+    pose = scene.pose
+    objects = tuple(Rigid(o.name, o.vertices * MIRROR, o.faces[:, ::-1]) for o in pose.objects)
+    mirrored = Pose(pose.gap, pose.direction * MIRROR, objects)
+    return Scene.posed(twin, scene.thickness, mirrored, **scene.meta)

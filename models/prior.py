@@ -42,6 +42,10 @@ class LinearPrior:
         if out["prior"] not in PRIORS:
             raise ValueError(f"prior must be one of {PRIORS}, got {out['prior']!r}")
         check_operator(out.get("operator", "stored"))
+        if out.get("given") == "pose" and out["prior"] == "linear":
+            raise ValueError(
+                "the linear prior answers a force; a model given a pose takes prior: none"
+            )
         if out.get("geometry") and out["prior"] == "linear" and out["operator"] != "on_demand":
             raise ValueError(
                 "a model of every body (geometry: true) with the linear prior "

@@ -59,12 +59,13 @@ class Pose:
         gap: ``(N,)`` each rest skin vertex's signed distance to the objects, m (negative
             inside one), at most :data:`GAP_REACH`.
         direction: ``(3,)`` unit vector the objects press along (into the skin).
-        objects: the :class:`Rigid` objects at their pose (at least one).
+        objects: the :class:`Rigid` objects at their pose; none where only the gap field is
+            known (a dataset's sample: a learned model needs no more, the FEM refuses it).
     """
 
     gap: np.ndarray
     direction: np.ndarray
-    objects: tuple
+    objects: tuple = ()
 
     def __post_init__(self) -> None:
         g = np.asarray(self.gap, dtype=float)
@@ -83,8 +84,8 @@ class Pose:
         if not (np.isfinite(n) and abs(n - 1) < 1e-6):
             raise ValueError(f"Pose.direction must be a unit 3-vector, got {d.tolist()}")
         objects = tuple(self.objects)
-        if not objects or not all(isinstance(o, Rigid) for o in objects):
-            raise ValueError("Pose.objects must be one or more Rigid objects")
+        if not all(isinstance(o, Rigid) for o in objects):
+            raise ValueError("Pose.objects must be Rigid objects")
         for a in (g, d):
             a.setflags(write=False)
         object.__setattr__(self, "gap", g)

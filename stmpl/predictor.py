@@ -165,21 +165,22 @@ class BasePredictor:
             if s.given not in self.takes:
                 raise ValueError(_refusal(self, i, s.given))
         self.check(batch)
-        outside = self.outside(batch)
         strict = self.strict if strict is None else strict
-        bad = [i for i, why in enumerate(outside) if why]
-        if bad:
-            first = outside[bad[0]]
-            which = f"{len(bad)} of {len(batch)} scenes lie" if len(batch) > 1 else "the scene lies"
-            msg = f"{self.name}: {which} outside the data its answers are backed by: " + "; ".join(
-                first
-            )
-            if strict:
-                raise PredictionFailed(msg + " (strict: refused)")
-            warnings.warn(msg, OutsideEnvelope, stacklevel=2)
+        outside = self.outside(batch)
+        self._judge(outside, strict)
         t0 = time.perf_counter()
         out = self.predict_batch(batch)
         dt = (time.perf_counter() - t0) / len(batch)
+        if self.envelope is not None and any(s.pose is not None for s in batch):
+            # a posed scene: where the contact its answer describes lies among the data's
+            answered = [
+                self.envelope.reasons(part=s.part, thickness=s.thickness, force=u["force"])
+                if s.pose is not None
+                else []
+                for s, u in zip(batch, out)
+            ]
+            self._judge(answered, strict, "the contact it answers lies")
+            outside = [a or b for a, b in zip(outside, answered)]
         result = []
         for s, u, why in zip(batch, out, outside):
             answer = u if isinstance(u, dict) else {"displacement": u}
@@ -217,11 +218,32 @@ class BasePredictor:
             )
         return result[0] if single else result
 
+    def _judge(self, outside: list[list[str]], strict: bool, what: str = "") -> None:
+        """Warn once (:class:`OutsideEnvelope`) when a scene lies outside the envelope, or with
+        ``strict`` refuse (:class:`PredictionFailed`); ``outside``: per scene, why.
+        """
+        bad = [i for i, why in enumerate(outside) if why]
+        if not bad:
+            return
+        n = len(outside)
+        which = f"{len(bad)} of {n} scenes lie" if n > 1 else "the scene lies"
+        if what:
+            which = f"for {len(bad)} of {n} scenes {what}" if n > 1 else what
+        msg = f"{self.name}: {which} outside the data its answers are backed by: " + "; ".join(
+            outside[bad[0]]
+        )
+        if strict:
+            raise PredictionFailed(msg + " (strict: refused)")
+        warnings.warn(msg, OutsideEnvelope, stacklevel=3)
+
     def outside(self, scenes: list[Scene]) -> list[list[str]]:
-        """Per scene, why it lies outside :attr:`envelope` (``[]`` inside or without one)."""
+        """Per scene, why it lies outside :attr:`envelope` (``[]`` inside or without one). A
+        scene given by a pose is judged by its answer instead: whether the contact the answer
+        describes (its contact forces, the data's as the FEM answered them) lies inside.
+        """
         if self.envelope is None:
             return [[] for _ in scenes]
-        return [self.envelope.reasons(s) for s in scenes]
+        return [self.envelope.reasons(s) if s.pose is None else [] for s in scenes]
 
     def check(self, scenes: list[Scene]) -> None:
         """Raise if the predictor cannot take these scenes (e.g. another body part)."""

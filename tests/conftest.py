@@ -74,6 +74,29 @@ def tiny_dataset(tmp_path_factory):
     return out
 
 
+TINY_PRESSES = {
+    **{k: v for k, v in TINY_DATA.items() if k not in ("placements", "forces", "thickness_mm")},
+    "name": "tiny_presses",
+    "resolution": {"subdivisions": 1, "layers": 2, "refine_radius": 0.03, "order": 2},
+    "thickness_mm": [7.5],
+    "forces": [0.3],
+    "tissue": "forearm",
+    "placements": {"press_sphere": {"centres": 3, "radii": [0.008]}},
+}
+
+
+@pytest.fixture(scope="session")
+def tiny_presses(tmp_path_factory):
+    """A real FEM dataset of an 8 mm ball pressed by force control into the tube at three places
+    (0.3 N on 7.5 mm of the layered forearm; one for each split), made once per session.
+    """
+    from fem.generate import generate
+
+    out = tmp_path_factory.mktemp("data") / "tiny_presses"
+    generate(TINY_PRESSES, out, progress=False)
+    return out
+
+
 TINY_MODELS = {
     "naive": {},
     "linear": {},

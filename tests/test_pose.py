@@ -46,7 +46,7 @@ def test_a_posed_scene_gives_its_pose_and_asks_for_its_force(part):
         (dict(gap=np.array([0.0, np.nan])), "gap is not finite at vertex 1"),
         (dict(gap=np.array([0.0, 0.05])), "cut at 20 mm"),
         (dict(direction=[0.0, 0.0, 2.0]), "unit 3-vector"),
-        (dict(objects=()), "one or more Rigid objects"),
+        (dict(objects=("box",)), "must be Rigid objects"),
     ],
 )
 def test_a_bad_pose_is_named(change, message):

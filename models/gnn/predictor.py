@@ -5,7 +5,9 @@ outward normal. Edge inputs: the rest-pose offset ``x_j - x_i`` over the mean ed
 its length. Output: the displacement over ``disp_scale_mm``. A seam vertex is one node, so there
 is no seam by construction. With ``prior: linear`` the precomputed linear FEM's displacement is
 three more node inputs and the output is a correction to it
-(:class:`~models.prior.LinearPrior`).
+(:class:`~models.prior.LinearPrior`). With ``given: pose`` the load's inputs are an object's
+pose instead (how deep each vertex lies inside it, over 10 mm, and how far outside, over 20 mm:
+:func:`~models.features.gap_channels`) and a fourth output is the contact pressure.
 """
 
 from __future__ import annotations
@@ -15,11 +17,14 @@ import torch
 from torch import nn
 
 from models.features import (
+    GAP_SCALE,
     PRESSURE_SCALE,
     PRIOR_SCALE,
     THICKNESS_SCALE,
     THICKNESS_SHIFT,
+    gap_channels,
     load_channels,
+    near_objects,
 )
 from models.gnn.network import MeshGraphNet, NormalisedGraphNet, Normaliser
 from models.gnn.subgraph import compiled, mesh, subgraph
@@ -27,6 +32,7 @@ from models.learned import LearnedPredictor
 from models.linear.operator import ComplianceOperator
 from models.prior import CORRECTION_SCALE, LinearPrior
 from stmpl import reach
+from stmpl.pose import GAP_REACH
 
 
 class GNNPredictor(LinearPrior, LearnedPredictor):
@@ -52,6 +58,7 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         "geometry": False,
     }
     counts = ("latent", "steps")
+    poses = True
 
     def network(self):
         """The graph network itself (:class:`MeshGraphNet`): normalisers and prior stay eager."""
@@ -93,6 +100,8 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         self.inv_area = torch.tensor(1.0 / part.vertex_areas, dtype=torch.float32, device=dev)
         # node features: pressure (Pa, or Pa per N), [total force N], thickness m, normal
         load = ([0.0, 0.0], [PRESSURE_SCALE, 1.0]) if self.per_newton else ([0.0], [PRESSURE_SCALE])
+        if self.posed:  # how deep inside an object, how far outside (m)
+            load = ([0.0, 0.0], [GAP_SCALE, GAP_REACH])
         node = Normaliser(
             load[0] + [THICKNESS_SHIFT, 0, 0, 0], load[1] + [THICKNESS_SCALE, 1, 1, 1]
         )
@@ -102,7 +111,11 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
             prior = ComplianceOperator()
             node = Normaliser(list(node.shift) + [0.0] * 3, list(node.scale) + [PRIOR_SCALE] * 3)
         net = MeshGraphNet(
-            len(node.shift), 4, 3, int(self.config["latent"]), int(self.config["steps"])
+            len(node.shift),
+            4,
+            self.out_channels,
+            int(self.config["latent"]),
+            int(self.config["steps"]),
         )
         if prior is not None:  # start from the linear FEM's answer: a silent decoder
             nn.init.zeros_(net.decoder[-1].weight)
@@ -118,7 +131,10 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
                 self.body_tensor("inv_area", body),
                 self.body_tensor("normals", body),
             )
-        load = torch.stack(load_channels(force, inv_area, self.per_newton), -1)
+        if self.posed:
+            load = torch.stack(gap_channels(force), -1)
+        else:
+            load = torch.stack(load_channels(force, inv_area, self.per_newton), -1)
         base = self.base(thickness, force, body, base)
         extra = [] if base is None else [base]
         x = torch.cat([load, thickness[..., None], normals, *extra], -1)
@@ -129,7 +145,7 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         offs = (torch.arange(B, device=x.device) * N).repeat_interleave(E)
         ei = self.edge_index.repeat(1, B) + offs
         return self.corrected(
-            base, self.model(x, None, ei, self.batch_edges(body, B)).reshape(B, N, 3)
+            base, self.model(x, None, ei, self.batch_edges(body, B)).reshape(B, N, -1)
         )
 
     def batch_edges(self, body, B: int, keep=None) -> torch.Tensor:
@@ -203,7 +219,7 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         """
         B, N = thickness.shape
         steps = int(self.config["steps"])
-        f = force.cpu().numpy()
+        f = (near_objects(force) if self.posed else force).cpu().numpy()
         if base is not None:  # the region: where the linear FEM moves the tissue, a ring wider
             seeds, grow = reach.moving(f, base.detach().cpu().numpy(), self.region_tolerance), 1
         else:
@@ -215,6 +231,7 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         idx = torch.as_tensor(g.nodes, device=dev)
         y = self.model(x.index_select(0, idx), None, sub_ei, sub_e, sizes=g.sizes(steps))
         if base is None:  # the network inside, zero outside
-            return y.new_zeros(B * N, 3).index_copy_(0, idx[: len(y)], y).reshape(B, N, 3)
+            out = y.new_zeros(B * N, y.shape[-1]).index_copy_(0, idx[: len(y)], y)
+            return out.reshape(B, N, -1)
         out = base.reshape(B * N, 3).clone()  # the prior, corrected inside
         return out.index_add_(0, idx[: len(y)], y, alpha=CORRECTION_SCALE).reshape(B, N, 3)

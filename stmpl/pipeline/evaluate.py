@@ -15,12 +15,16 @@ from stmpl.data.format import at_levels
 from stmpl.envelope import breaks_promise
 from stmpl.failures import ImpossibleAnswer
 from stmpl.metrics import honesty, sample_metrics, seam_gap, summarise, table
+from stmpl.pose import GAP_REACH, Pose
 from stmpl.predictor import OutsideEnvelope, PredictionFailed
 from stmpl.scene import Scene
 
 
-def scenes_of(ds, split: str, thickness_mm=None, limit: int | None = None):
-    """``(scenes, true displacements (S, N, 3) m)`` of a dataset split."""
+def scenes_of(ds, split: str, thickness_mm=None, limit: int | None = None, given: str = "force"):
+    """``(scenes, true displacements (S, N, 3) m)`` of a dataset split. ``given="pose"``: each
+    scene given by its object's pose (the sample's gap field and direction; a dataset of
+    pressed objects), the sample's reaction (N) in ``meta["reaction"]``.
+    """
     if limit is not None and (isinstance(limit, bool) or not isinstance(limit, int) or limit < 1):
         raise ValueError(f"limit must be a number of samples >= 1, got {limit!r}")
     a = ds.arrays(split)
@@ -31,6 +35,8 @@ def scenes_of(ds, split: str, thickness_mm=None, limit: int | None = None):
         keep = keep[:limit]
     parts = getattr(ds, "parts", [ds.part])
     body = a.get("body", np.zeros(len(a["total"]), int))
+    if given == "pose":
+        return _posed_scenes(ds, a, keep, parts, body), a["displacement"][keep].astype(float)
     scenes = [
         Scene(
             parts[body[i]],
@@ -41,6 +47,25 @@ def scenes_of(ds, split: str, thickness_mm=None, limit: int | None = None):
         for i in keep
     ]
     return scenes, a["displacement"][keep].astype(float)
+
+
+def _posed_scenes(ds, a: dict, keep, parts, body) -> list[Scene]:
+    """The samples ``keep`` of arrays ``a`` as scenes given by their object's pose."""
+    if "gap" not in a:
+        raise ValueError(
+            f"{ds.folder} holds no poses (gap field): it is not a dataset of pressed objects"
+        )
+    out = []
+    for i in keep:
+        params = a["params"][i]
+        pose = Pose(np.minimum(a["gap"][i].astype(float), GAP_REACH), params["direction"])
+        meta = {
+            "placement": int(a["placement"][i]),
+            "total": float(a["total"][i]),
+            "reaction": float(params["reaction"]),
+        }
+        out.append(Scene.posed(parts[body[i]], a["thickness"][i].astype(float), pose, **meta))
+    return out
 
 
 def evaluate_dataset(
@@ -66,7 +91,8 @@ def evaluate_dataset(
     """
     import torch  # deferred: about a second to import; the core's types do not need it
 
-    scenes, truth = scenes_of(ds, split, thickness_mm, limit)
+    given = "pose" if "force" not in getattr(predictor, "takes", ("force",)) else "force"
+    scenes, truth = scenes_of(ds, split, thickness_mm, limit, given)
     if not scenes:
         raise ValueError(f"split {split!r} of {ds.folder} has no samples")
     part = ds.part
@@ -106,6 +132,9 @@ def evaluate_dataset(
         for d, u, c in zip(out, truth[i : i + batch], corners):
             env = d.info.get("envelope")
             m = sample_metrics(u, d.displacement, seam)
+            if d.reaction is not None:  # a pose's answer: its reaction against the FEM's, %
+                true = d.scene.meta["reaction"]
+                m["reaction_err"] = 100.0 * (d.reaction - true) / true
             enveloped |= env is not None
             if env is not None and env["inside"] and np.isfinite(m["rel_mee"]):
                 inside_broken += breaks_promise(m["rel_mee"], m["peak_err"])
@@ -152,6 +181,8 @@ def on_unsolved(predictor, ds, split: str = "test", thickness_mm=None, batch: in
     }
     if not getattr(predictor, "batched", True) or len(keep) == 0:
         return out
+    if "force" not in getattr(predictor, "takes", ("force",)):
+        return out  # a failed press keeps no pose to ask a pose model about: counted only
     parts = getattr(ds, "parts", [ds.part])
     scenes = [
         Scene(

@@ -32,7 +32,8 @@ from stmpl.envelope import Envelope
 from stmpl.failures import ImpossibleAnswer, OutsideEnvelope
 from stmpl.files import atomic_path
 from stmpl.metrics import sample_metrics
-from stmpl.pipeline.evaluate import evaluate_dataset
+from stmpl.pipeline.evaluate import evaluate_dataset, scenes_of
+from stmpl.pose import GAP_REACH
 from stmpl.scene import Scene
 
 DEFAULTS = {
@@ -112,9 +113,10 @@ def read_config(source) -> dict:
 
 def _split_tensors(ds, split, cfg, device, p=None):
     """A split's ``thickness``, ``force``, ``displacement``, ``body`` (slot of each sample's
-    body) and the prior's answers (m; None unless the model has a prior and the data carry
-    ``linear`` answers or span several bodies: then every sample's is at hand, the missing ones
-    solved on its body once here).
+    body) and the prior's answers; for a model given a pose, the ``gap`` field in the place of
+    the force and the contact ``pressure`` beside the displacement. The prior's answers are in
+    m; None unless the model has a prior and the data carry ``linear`` answers or span several
+    bodies (then every sample's is at hand, the missing ones solved on its body once here).
     """
     import torch  # deferred: about a second to import; the core's types do not need it
 
@@ -131,6 +133,15 @@ def _split_tensors(ds, split, cfg, device, p=None):
     base = None
     if getattr(p, "prior", False) and ("linear" in a or len(ds.parts) > 1):
         base = _prior_answers(p, a, keep, torch.as_tensor(a["body"][keep], device=device), device)
+    if getattr(p, "posed", False):  # given the pose: answers the displacement and the pressure
+        if "gap" not in a or "pressure" not in a:
+            raise ValueError(
+                f"a model given a pose learns from pressed objects: dataset {cfg['data']} has "
+                "no gap and pressure arrays (make one with press_disk or press_sphere placements)"
+            )
+        gap = np.minimum(a["gap"], GAP_REACH)
+        target = np.concatenate([a["displacement"], a["pressure"][..., None]], -1)
+        return t(a["thickness"]), t(gap), t(target), body, base
     return t(a["thickness"]), t(a["force"]), t(a["displacement"]), body, base
 
 
@@ -209,14 +220,22 @@ def evidence(p, ds, cfg) -> dict:
     a, keep = _selection(ds, "val", cfg)
     source = f"{ds.card['name']} ({ds.card['hash']}), validation split"
     rel, peak = [], []
+    posed = None
+    if getattr(p, "posed", False):
+        posed = scenes_of(ds, "val", cfg["thickness_mm"], given="pose")[0]
     for i in range(0, len(keep), 64):
         at = keep[i : i + 64]
-        scenes = [
-            Scene(
-                ds.parts[a["body"][k]], a["thickness"][k].astype(float), a["force"][k].astype(float)
-            )
-            for k in at
-        ]
+        if posed is not None:  # the same samples, given by their poses
+            scenes = posed[i : i + 64]
+        else:
+            scenes = [
+                Scene(
+                    ds.parts[a["body"][k]],
+                    a["thickness"][k].astype(float),
+                    a["force"][k].astype(float),
+                )
+                for k in at
+            ]
         with warnings.catch_warnings():  # measured, not warned
             warnings.simplefilter("ignore", OutsideEnvelope)
             warnings.simplefilter("ignore", ImpossibleAnswer)
