@@ -21,6 +21,8 @@ from models.features import (
 from stmpl import checkpoint, loads, tissue
 from stmpl import config as checked
 from stmpl.body.mirror import MIRROR, mirror_twin
+from stmpl.contact import objects
+from stmpl.contact.posing import posed
 from stmpl.data.dataset import same_mesh
 from stmpl.envelope import Envelope
 from stmpl.part import BodyPart, difference
@@ -401,7 +403,8 @@ class LearnedPredictor(BasePredictor):
     def compile(self, scene: Scene | None = None) -> float:
         """Compile the network (:func:`models.compiled.compile_module`) and answer ``scene``
         both ways, at this predictor's fidelity (default scene: a 1.5 cm disk of 0.2 N on
-        7.5 mm at the vertex nearest the part's centre). Returns the seconds the compiled answer
+        7.5 mm at the vertex nearest the part's centre; of a pose model, an 8 mm ball 2 mm into
+        the skin there). Returns the seconds the compiled answer
         took (the compilation). A compiled answer farther than
         :data:`models.compiled.TOLERANCE` of the deepest displacement from the eager one, or a
         compilation that fails, leaves the network eager and raises ``RuntimeError``.
@@ -410,9 +413,12 @@ class LearnedPredictor(BasePredictor):
         if scene is None:
             part = self.part
             at = int(np.argmin(np.linalg.norm(part.vertices - part.vertices.mean(0), axis=1)))
-            scene = Scene.from_load(
-                part, tissue.constant(part, 0.0075), loads.disk(part, at, radius=0.015, total=0.2)
-            )
+            t = tissue.constant(part, 0.0075)
+            if self.posed:  # an 8 mm ball 2 mm into the skin there
+                ball = objects.sphere(0.008)
+                scene = posed(part, t, ball, objects.press(part, ball, at, depth=0.002))
+            else:
+                scene = Scene.from_load(part, t, loads.disk(part, at, radius=0.015, total=0.2))
         with warnings.catch_warnings():  # the warm-up scene's place in the envelope is moot
             warnings.simplefilter("ignore")
             eager = self.predict(scene).displacement
