@@ -18,12 +18,20 @@ import numpy as np
 import torch
 from torch import nn
 
-from models.features import PRESSURE_SCALE, PRIOR_SCALE, load_channels, normalised_thickness
+from models.features import (
+    GAP_SCALE,
+    PRESSURE_SCALE,
+    PRIOR_SCALE,
+    gap_channels,
+    load_channels,
+    normalised_thickness,
+)
 from models.learned import LearnedPredictor
 from models.linear.operator import ComplianceOperator
 from models.prior import CORRECTION_SCALE, LinearPrior
 from models.uv_unet.network import UNet, WithPrior
 from stmpl import reach
+from stmpl.pose import GAP_REACH
 from stmpl.uv import UVMap
 
 
@@ -37,7 +45,9 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
     channels, the output images hold only the correction, added to the linear answer at the
     vertices, so the prior itself has no seam gap; :meth:`fit` computes the operator). With the
     prior, ``fidelity="auto"`` runs the network on the window of the chart the load needs
-    (:meth:`_sample_cropped`).
+    (:meth:`_sample_cropped`). With ``given: pose`` the load's channels are an object's pose
+    instead (how deep inside it, over 10 mm, how far outside, over 20 mm) and a fourth output
+    image is the contact pressure.
     """
 
     name = "uv_unet"
@@ -54,6 +64,7 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
         "operator": "stored",
     }
     counts = ("size", "width", "depth")
+    poses = True
 
     def network(self) -> nn.Module:
         """The UNet itself (the prior beside it stays eager)."""
@@ -77,9 +88,11 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
         self._inv_area = torch.tensor(
             1.0 / part.vertex_areas / PRESSURE_SCALE, dtype=torch.float32, device=self.device
         )
-        c_in = 2 + (1 if c["per_newton"] else 0) + (6 if c["geometry"] else 0)
+        c_in = 2 + (1 if c["per_newton"] or self.posed else 0) + (6 if c["geometry"] else 0)
         if not self.prior:
-            return UNet(c_in, 3, int(c["width"]), int(c["depth"]), float(c["dropout"]))
+            return UNet(
+                c_in, self.out_channels, int(c["width"]), int(c["depth"]), float(c["dropout"])
+            )
         net = UNet(c_in + 3, 3, int(c["width"]), int(c["depth"]), float(c["dropout"]))
         last = net.up[-1][-1]  # start from the linear FEM: a silent output
         nn.init.zeros_(last.weight)
@@ -108,7 +121,12 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
         inv_area = (
             self._inv_area if body is None else self.body_tensor("inv_area", body) / PRESSURE_SCALE
         )
-        chans = [*load_channels(force, inv_area, self.per_newton), normalised_thickness(thickness)]
+        if self.posed:  # ``force`` is the gap field (m)
+            inside, outside = gap_channels(force)
+            load = [inside / GAP_SCALE, outside / GAP_REACH]
+        else:
+            load = load_channels(force, inv_area, self.per_newton)
+        chans = [*load, normalised_thickness(thickness)]
         x = torch.stack(chans, -1)
         if self.config["geometry"]:
             geo = (
@@ -177,7 +195,11 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
                 None if base is None else base[:, self._corner_vertex],
                 self.uvmap.sample_corners(out),
             )
-            return self.euclidean_loss(pred, tgt[:, self._corner_vertex], force) + self._tv(out)
+            tgt = tgt[:, self._corner_vertex]
+            loss = self.euclidean_loss(pred[..., :3], tgt[..., :3], force) + self._tv(out)
+            if self.posed:
+                loss = loss + ((pred[..., 3] - tgt[..., 3]) ** 2).mean()
+            return loss
         if base is not None:  # the correction's image
             tgt = (tgt - base) / CORRECTION_SCALE
         tgt = self.uvmap.rasterise(tgt)
@@ -195,10 +217,12 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
         return self.config["tv"] * (dx.mean() + dy.mean())
 
     def corner_displacement(self, thickness, force, body=None) -> np.ndarray:
-        """``(B, T, 3)`` displacement (m) at every UV corner, seam copies apart."""
+        """``(B, T, 3)`` displacement (m) at every UV corner, seam copies apart (``force``: a
+        pose model's gap field).
+        """
         self.model.eval()
         with torch.no_grad():
             base = self.base(thickness, force, body)
             c = self.uvmap.sample_corners(self.model(self.images(thickness, force, base, body)))
             c = self.corrected(None if base is None else base[:, self._corner_vertex], c)
-            return (self.denormalised(c, force) * self.scale).double().cpu().numpy()
+            return (self.denormalised(c, force)[..., :3] * self.scale).double().cpu().numpy()

@@ -114,12 +114,11 @@ def evaluate_dataset(
                 continue
         if hasattr(predictor, "corner_displacement"):
             t, f = (
-                torch.tensor(
-                    np.stack([getattr(s, k) for s in chunk]),
-                    dtype=torch.float32,
-                    device=predictor.device,
+                torch.tensor(np.stack(x), dtype=torch.float32, device=predictor.device)
+                for x in (
+                    [s.thickness for s in chunk],
+                    [s.force if s.pose is None else s.pose.gap for s in chunk],
                 )
-                for k in ("thickness", "force")
             )
             body = (
                 predictor.bodies_of([s.part for s in chunk])

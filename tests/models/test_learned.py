@@ -121,3 +121,44 @@ def test_a_batch_answered_in_chunks_is_answered_as_one(name, fidelity, ds, make,
     assert p.chunk() == 2
     for a, b in zip(p.predict(scenes), whole):
         np.testing.assert_allclose(a.displacement, b, rtol=1e-5, atol=1e-10)
+
+
+@pytest.mark.parametrize("kind", ["gnn", "uv_unet"])
+def test_a_model_given_a_pose_answers_the_force_near_the_object_and_its_reaction(
+    ds, tmp_path, kind
+):
+    """Option ``given: pose``: the model reads the gap field, and its answer carries a contact
+    force only near the object (where its pressure output is positive) and the reaction from
+    it; the option travels in the checkpoint; the combinations that cannot be are refused by
+    name.
+    """
+    import torch
+
+    from stmpl import tissue
+    from stmpl.contact import objects
+    from stmpl.contact.posing import posed
+
+    torch.manual_seed(0)
+    p = predictor.create(kind, ds.part, {**TINY_MODELS[kind], "given": "pose"})
+    ball = objects.sphere(0.008)
+    at = int(np.argmax(ds.part.rim_distance))
+    pose = objects.press(ds.part, ball, at, depth=3e-3)
+    scene = posed(ds.part, tissue.constant(ds.part, 0.0075), ball, pose)
+    d = p.predict(scene)
+    near = scene.pose.gap <= 0.005
+    assert not d.force[~near].any() and d.force.min() >= 0
+    normal = -ds.part.normals @ scene.pose.direction
+    assert d.reaction == pytest.approx(float(d.force @ normal))
+    q = predictor.read(p.save(tmp_path / "m.safetensors"))
+    assert q.takes == ("pose",)
+    np.testing.assert_allclose(q.predict(scene).displacement, d.displacement, atol=1e-9)
+    np.testing.assert_allclose(q.predict(scene).force, d.force, rtol=1e-6)
+    for options, message in [
+        ({"given": "pose", "per_newton": True}, "knows no force to answer per newton"),
+        ({"given": "pose", "prior": "linear"}, "a model given a pose takes prior: none"),
+        ({"given": "both"}, "given must be one of"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            predictor.create(kind, ds.part, {**TINY_MODELS[kind], **options})
+    with pytest.raises(ValueError, match="the naive model takes a force only"):
+        predictor.create("naive", ds.part, {"given": "pose"})

@@ -212,11 +212,15 @@ def test_a_model_trains_on_two_datasets_at_once(tiny_dataset, tmp_path, tiny_con
         read_config({**_cfg(None, tmp_path / "x"), "data": [data[0], 3]})
 
 
-def test_a_gnn_given_the_pose_learns_the_dent_and_the_force_of_pressed_balls(
-    tiny_presses, tiny_dataset, tmp_path
+@pytest.mark.parametrize(
+    "kind, options",
+    [("gnn", {"latent": 16, "steps": 2}), ("uv_unet", {"size": 64, "width": 4, "depth": 3})],
+)
+def test_a_model_given_the_pose_learns_the_dent_and_the_force_of_pressed_balls(
+    tiny_presses, tiny_dataset, tmp_path, kind, options
 ):
-    """A GNN given the object's pose (the gap field) trains on pressed balls (its loss falls)
-    and answers each test scene with the dent, the contact force on each vertex and the
+    """A GNN or a UV-UNet given the object's pose (the gap field) trains on pressed balls (its
+    loss falls) and answers each test scene with the dent, the contact force on each vertex and the
     reaction, scored against the FEM's (a plumbing test: three samples teach a network little);
     the gap a user's posed ball mesh gives is the dataset's own within the mesh's facets; a
     force-given scene, and a set without poses to train on, are refused by name.
@@ -228,9 +232,9 @@ def test_a_gnn_given_the_pose_learns_the_dent_and_the_force_of_pressed_balls(
     cfg = _cfg(
         tiny_presses,
         tmp_path / "run",
-        name="gnn_pose",
-        model="gnn",
-        options={"latent": 16, "steps": 2, "given": "pose"},
+        name=f"{kind}_pose",
+        model=kind,
+        options={**options, "given": "pose"},
         epochs=60,
         batch=4,
         lr=0.01,
@@ -257,7 +261,7 @@ def test_a_gnn_given_the_pose_learns_the_dent_and_the_force_of_pressed_balls(
     user = posed(ds.part, a["thickness"][k].astype(float), ball, pose, direction=direction)
     near = a["gap"][k] < 0.01
     np.testing.assert_allclose(user.pose.gap[near], a["gap"][k][near], atol=5e-5)
-    with pytest.raises(ValueError, match="gnn answers an object's pose, and scene 0 gives a"):
+    with pytest.raises(ValueError, match=f"{kind} answers an object's pose, and scene 0 gives a"):
         p.predict(scenes_of(ds, "test")[0][:1])
     with pytest.raises(ValueError, match="no gap and pressure arrays"):
         train({**cfg, "data": str(tiny_dataset), "out": str(tmp_path / "r2")}, progress=False)
