@@ -16,7 +16,7 @@ from fem.bodies import check_bodies
 from fem.layers import preset, read_tissue
 from fem.material import material
 from fem.shapes import PRESSES
-from fem.simulate import resolution
+from fem.simulate import check_order, resolution
 from fem.solver import SolverOptions
 from stmpl import config as checked
 from stmpl.body.spec import check_spec
@@ -239,6 +239,7 @@ def _check_tissue(cfg: dict) -> None:
         )
     if cfg["linear"]:
         raise ValueError(f"linear: the linear FEM of the layered {stack.name} tissue is not built")
+    check_order(stack, cfg["resolution"])
 
 
 def config_hash(cfg: dict) -> str:

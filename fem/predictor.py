@@ -14,7 +14,7 @@ from fem.local import simulate_local
 from fem.material import NeoHookean
 from fem.mesh import ShellMesh
 from fem.objects import at_pose
-from fem.simulate import resolution, simulate, tissue_mesh
+from fem.simulate import check_order, resolution, simulate, tissue_mesh
 from fem.solver import Solution, Solver
 from stmpl.predictor import BasePredictor, PredictionFailed, check_fidelity
 from stmpl.scene import Scene
@@ -77,6 +77,7 @@ class FEMPredictor(BasePredictor):
     ):
         self.res = resolution(res)
         preset(tissue)  # an unknown name is refused here, not at the first scene
+        check_order(tissue, self.res)
         self.tissue, self.phenotype = tissue, dict(phenotype or {})
         if isinstance(levels, bool) or int(levels) != levels or levels < 1:
             raise ValueError(f"levels must be an integer >= 1, got {levels!r}")

@@ -80,6 +80,19 @@ def mesh_for_load(
     return tissue_mesh(part, thickness, res, near=part.vertices[loaded])[0]
 
 
+def check_order(tissue: str, res) -> None:
+    """Refuse linear elements for a layered preset: its nearly incompressible layers lock in
+    them (``ValueError`` naming the fix).
+    """
+    stack = preset(tissue)
+    if stack is not None and resolution(res).order == 1:
+        raise ValueError(
+            f"the {stack.name} tissue's nearly incompressible layers lock in linear (order 1) "
+            "elements, an answer many times too stiff: use a resolution of order 2 (medium, "
+            "fine, finest or reference)"
+        )
+
+
 def tissue_mesh(
     part: BodyPart,
     thickness: np.ndarray,
@@ -92,7 +105,9 @@ def tissue_mesh(
     ``(K, 3)`` (m), and its material. ``tissue``: a preset of :mod:`fem.layers`; ``paper``
     meshes ``thickness`` ``(N,)`` (m) in the resolution's even layers of neo-Hookean gel (the
     material is then ``None``: the solver's default), a layered preset meshes its skin, fat and
-    muscle (the scene's thickness being the skin and fat) with its own element layers.
+    muscle (the scene's thickness being the skin and fat) with its own element layers, in
+    quadratic elements only (linear ones lock: a fingertip 3 mm into the forearm carried 6.2 N
+    in them against 0.41 N in quadratic ones).
     """
     r = resolution(res)
     refine = dict(
@@ -103,6 +118,7 @@ def tissue_mesh(
     stack = preset(tissue)
     if stack is None:
         return shell_mesh(part, thickness, layers=r.layers, **refine), None
+    check_order(tissue, r)
     layers = stack.thicknesses(thickness, phenotype, room(part))
     mesh = shell_mesh(
         part,

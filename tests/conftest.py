@@ -81,14 +81,18 @@ TINY_PRESSES = {
     "thickness_mm": [7.5],
     "forces": [0.3],
     "tissue": "forearm",
-    "placements": {"press_sphere": {"centres": 3, "radii": [0.008]}},
+    "placements": {
+        "press_sphere": {"centres": 2, "radii": [0.008]},
+        "press_disk": {"centres": 1, "radii": [0.01], "rounding": 0.001},
+    },
 }
 
 
 @pytest.fixture(scope="session")
 def tiny_presses(tmp_path_factory):
-    """A real FEM dataset of an 8 mm ball pressed by force control into the tube at three places
-    (0.3 N on 7.5 mm of the layered forearm; one for each split), made once per session.
+    """A real FEM dataset of objects pressed by force control into the tube: an 8 mm ball at
+    two places and a 10 mm rounded disk at a third (0.3 N on 7.5 mm of the layered forearm; a
+    place for each split), made once per session.
     """
     from fem.generate import generate
 

@@ -121,3 +121,13 @@ def test_the_fem_answers_a_pose_with_its_force_and_reaction_and_others_refuse_it
     assert none.reaction == 0.0 and not none.displacement.any() and not none.force.any()
     with pytest.raises(ValueError, match="naive answers a force given on the skin, and scene 0"):
         predictor.create("naive", part).predict(scene)
+
+
+def test_a_layered_tissue_in_linear_elements_is_refused():
+    """Linear tetrahedra lock in the layered presets' nearly incompressible layers (a fingertip
+    3 mm into the forearm carried 6.2 N in them against 0.41 N in quadratic ones): refused when
+    the predictor is made, naming the fix.
+    """
+    with pytest.raises(ValueError, match="lock in linear .* use a resolution of order 2"):
+        predictor.create("fem", res="coarse", tissue="forearm")
+    assert predictor.create("fem", res="coarse", tissue="paper").tissue == "paper"

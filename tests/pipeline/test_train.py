@@ -216,10 +216,10 @@ def test_a_model_trains_on_two_datasets_at_once(tiny_dataset, tmp_path, tiny_con
     "kind, options",
     [("gnn", {"latent": 16, "steps": 2}), ("uv_unet", {"size": 64, "width": 4, "depth": 3})],
 )
-def test_a_model_given_the_pose_learns_the_dent_and_the_force_of_pressed_balls(
+def test_a_model_given_the_pose_learns_the_dent_and_the_force_of_pressed_objects(
     tiny_presses, tiny_dataset, tmp_path, kind, options
 ):
-    """A GNN or a UV-UNet given the object's pose (the gap field) trains on pressed balls (its
+    """A GNN or a UV-UNet given the object's pose (the gap field) trains on pressed objects (its
     loss falls) and answers each test scene with the dent, the contact force on each vertex and the
     reaction, scored against the FEM's (a plumbing test: three samples teach a network little);
     the gap a user's posed ball mesh gives is the dataset's own within the mesh's facets; a
@@ -252,8 +252,8 @@ def test_a_model_given_the_pose_learns_the_dent_and_the_force_of_pressed_balls(
         assert not d.force[s.pose.gap > 0.005].any()  # none far from the object
     got = evaluate_dataset(p, ds, "test")
     assert got["samples"] == len(scenes) and np.isfinite(got["reaction_err"][0])
-    a = ds.arrays("test")
-    k = 0
+    a = ds.arrays()
+    k = list(a["kind"]).index("press_sphere")
     centre, direction = np.array(a["params"][k]["centre"]), np.array(a["params"][k]["direction"])
     ball = objects.sphere(0.008, subdivisions=4)
     pose = np.eye(4)
