@@ -64,7 +64,9 @@ def test_api_page_examples_run_and_hold(arm, tmp_path, monkeypatch):
     assert pressed.scene.load.source is touch and touch.objects[0].name == "bar"
     glb = trimesh.load(tmp_path / "pressed_by_bar.glb", force="mesh", process=False)
     assert len(glb.vertices) == arm.n_vertices
-    assert len(spaces) == 3 and spaces[2]["gnn"].part.n_vertices == arm.n_vertices
+    posing = spaces[2]  # a fingertip given by its pose, answered by the FEM with its force
+    assert posing["scene"].given == "pose" and posing["answer"].reaction > 0.1
+    assert len(spaces) == 4 and spaces[3]["gnn"].part.n_vertices == arm.n_vertices
 
 
 def test_the_two_setup_commands():
