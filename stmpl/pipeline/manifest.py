@@ -93,7 +93,8 @@ def _column(key: str) -> str:
 
 
 def brief(path=None) -> str:
-    """The zoo in a table under 100 columns: each model's kind, part, size, and its relative
+    """The zoo in a table under 100 columns: each model's kind, part, tissue (the preset of its
+    data; "pose in" for a model given an object's pose), size, and its relative
     MEE (%) on its in-distribution test split and over the other sets it was measured on (the
     range); ``stmpl zoo show NAME`` gives every figure.
     """
@@ -102,18 +103,22 @@ def brief(path=None) -> str:
         metrics = {k: v for k, v in (e.get("metrics") or {}).items() if k != "val"}
         test = (metrics.pop("test", None) or {}).get("rel_mee", [None])[0]
         other = [v["rel_mee"][0] for v in metrics.values() if "rel_mee" in v]
+        tissue = (e.get("dataset") or {}).get("tissue", "paper")
+        if (e.get("config") or {}).get("given") == "pose":
+            tissue += ", pose in"
         rows.append(
             [
                 n,
                 e["kind"],
                 str(e.get("part") or "–"),
+                tissue,
                 f"{e['bytes'] / 1e6:.2f}",
                 "–" if test is None else f"{test:.2f}",
                 "–" if not other else f"{min(other):.2f}-{max(other):.2f} ({len(other)} sets)",
             ]
         )
-    head = ["model", "kind", "part", "MB", "test rel. MEE %", "other sets rel. MEE %"]
-    return markdown(head, rows, "lllrrr")
+    head = ["model", "kind", "part", "tissue", "MB", "test rel. MEE %", "other sets rel. MEE %"]
+    return markdown(head, rows, "llllrrr")
 
 
 def show(name: str, path=None) -> str:
@@ -127,6 +132,8 @@ def show(name: str, path=None) -> str:
         f"{name}: {e['kind']}, {e.get('parameters') or 0:,} parameters, "
         f"{e['bytes'] / 1e6:.2f} MB ({e['file']})",
         f"  part: {e.get('part')}",
+        f"  tissue: {ds.get('tissue', 'paper')}; takes "
+        + ("an object's pose" if (e.get("config") or {}).get("given") == "pose" else "a force"),
         f"  trained on: {ds.get('name')} (content hash {ds.get('hash')})",
     ]
     lines += [f"  {k}: {v}" for k, v in trained.items() if v]
@@ -135,9 +142,12 @@ def show(name: str, path=None) -> str:
             continue
         peak = t.get("peak_err", [float("nan")])[0]
         label = LABELS.get(_column(k), k)
+        reaction = t.get("reaction_err", [None])[0]  # a pose model's reaction against the FEM's
         lines.append(
             f"  {label if label == k else f'{label} ({k})'}: MEE {t['mee'][0]:.4f} mm, relative "
-            f"{t['rel_mee'][0]:.2f} %, peak " + ("–" if peak != peak else f"{peak:+.1f} %")
+            f"{t['rel_mee'][0]:.2f} %, peak "
+            + ("–" if peak != peak else f"{peak:+.1f} %")
+            + ("" if reaction is None else f", reaction {reaction:+.1f} %")
         )
     for axis, lim in (e.get("limits") or {}).items():
         lines.append(f"  capped: {axis} <= {lim['max']:g} ({lim.get('source', '')})")

@@ -469,6 +469,7 @@ def _write_checkpoint(p, cfg, ds, out, history, best, extra) -> pathlib.Path:
             "hash": ds.card["hash"],
             "name": ds.card["name"],
             "samples": ds.card["samples_per_split"],
+            "tissue": ds.card.get("tissue", "paper"),
             **({"datasets": ds.card["datasets"]} if "datasets" in ds.card else {}),
         },
         "training": {

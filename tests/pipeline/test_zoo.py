@@ -48,6 +48,8 @@ def test_add_list_load_round_trip(zoo_dir):
     assert "unet_tiny | uv_unet" in manifest.table(
         folder
     ) and "| 0.5000 / 10.00 / – |" in manifest.table(folder)
+    assert "| unet_tiny | uv_unet | tube | paper |" in manifest.brief(folder)
+    assert "  tissue: paper; takes a force\n" in manifest.show("unet_tiny", folder)
     tiny = e["metrics"]["tiny"]  # measured on add: the same numbers evaluate gives
     from stmpl.pipeline.evaluate import evaluate_dataset
 
