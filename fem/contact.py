@@ -197,6 +197,9 @@ class Pressed:
         total: the sum of the normal contact forces over the skin, N (a grip's squeeze).
         force: ``(3,)`` the force the skin exerts on the object, N.
         pressure: ``(N,)`` contact pressure on the part's vertices, Pa.
+        push: ``(N,)`` the contact pressure's part along the press direction on the part's
+            vertices, Pa: the reaction's density (times the vertices' areas it sums to
+            ``reaction``; a grip's, the pressure itself).
         area: contact area, m^2 (the skin area the object presses).
         penetration: the deepest a skin node lies inside the object, m.
         min_det_F: the smallest volume ratio in the tissue; ``compression``: how far the skin
@@ -214,6 +217,7 @@ class Pressed:
     total: float = float("nan")
     force: np.ndarray | None = None
     pressure: np.ndarray | None = None
+    push: np.ndarray | None = None
     area: float = float("nan")
     penetration: float = float("nan")
     min_det_F: float = float("nan")
@@ -375,15 +379,16 @@ def _march(
     return {**res, "u": u, "iterations": iters, "updates": updates}
 
 
-def _vertex_pressure(solver, contact, u) -> np.ndarray:
-    """``(N,)`` contact pressure on the part's vertices, Pa: each skin node's contact force
-    (an edge node's shared by its edge's two ends, a node of the refined skin by the part's
-    vertices it is interpolated from: the transpose of ``mesh.interp``, which keeps the total)
-    over the vertex's share of the skin.
+def _on_vertices(solver, contact, share: np.ndarray) -> np.ndarray:
+    """``(N,)`` a per-skin-node contact quantity ``share`` ``(K,)`` (N: a force on each of
+    :attr:`Contact.nodes`) as a pressure on the part's vertices, Pa: an edge node's shared by
+    its edge's two ends, a node of the refined skin by the part's vertices it is interpolated
+    from (the transpose of ``mesh.interp``, which keeps the total), over the vertex's share of
+    the skin.
     """
     mesh = solver.mesh
     f = np.zeros(solver.n_all)
-    f[contact.nodes] = contact.weights * contact.pressures()
+    f[contact.nodes] = share
     if solver.order == 2:
         mid = f[mesh.n_nodes :]
         f = f[: mesh.n_nodes].copy()
@@ -398,7 +403,10 @@ def _answer(solver, contact, u, depth, direction, res, seconds) -> Pressed:
     n = mesh.part.n_vertices
     detF, compression = solver.measures(u)
     checked = solver.distrust(detF, compression)
-    pressure = _vertex_pressure(solver, contact, u)
+    nodal = contact.weights * contact.multipliers  # each skin node's contact force, N
+    pressure = _on_vertices(solver, contact, nodal)
+    along = nodal if direction is None else nodal * (contact._normals @ direction)
+    push = _on_vertices(solver, contact, along)  # the reaction's density: sums to it
     force = contact.force()
     total = float(np.sum(contact.weights * contact.multipliers))
     reaction = total if direction is None else float(-force @ direction)
@@ -415,6 +423,7 @@ def _answer(solver, contact, u, depth, direction, res, seconds) -> Pressed:
         total=total,
         force=force,
         pressure=pressure,
+        push=push,
         area=float(mesh.part.vertex_areas[pressure > 0].sum()),
         penetration=res["penetration"],
         min_det_F=detF,

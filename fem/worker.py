@@ -112,7 +112,7 @@ def solve_shard(payload: dict) -> dict:
     if cfg.get("linear"):
         rec["linear"] = []
     if any(t[2]["kind"] in PRESSES for t in payload["tasks"]):
-        rec["pressure"], rec["gap"] = [], []
+        rec["pressure"], rec["push"], rec["gap"] = [], [], []
     tell = payload.get("tell")
     if tell is not None and not callable(tell):  # a queue from another process
         tell = tell.put
@@ -180,7 +180,8 @@ def _press(shard: _Shard, t: _Task) -> None:
     turn (each from the last one's answer, :func:`fem.force_control.press_to_force`, within
     1 %) into the tissue of the whole part. Each answer is a sample: its ``force`` the contact
     force on each vertex (N: the contact pressure times the vertex's area, summing to the total
-    normal contact force), ``pressure`` (Pa), ``gap`` (m: each vertex's signed distance at rest
+    normal contact force), ``pressure`` (Pa), ``push`` (Pa: the pressure's part along the press
+    direction, the reaction's density), ``gap`` (m: each vertex's signed distance at rest
     to the object at its answer's pose, negative where the object reaches into the rest skin:
     the pose as the part sees it) and in ``params`` the object, its depth and its reaction. A level
     that fails is a failure with its reason (its input: the object's footprint carrying the
@@ -208,6 +209,7 @@ def _press(shard: _Shard, t: _Task) -> None:
             return
         posed = shape.pushed(a.depth, direction)
         shard.rec["pressure"].append(a.pressure.astype(np.float32))
+        shard.rec["push"].append(a.push.astype(np.float32))
         shard.rec["gap"].append(posed.distance(part.vertices)[0].astype(np.float32))
         params = {
             **t.spec["params"],

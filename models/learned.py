@@ -163,8 +163,10 @@ class LearnedPredictor(BasePredictor):
 
     @property
     def out_channels(self) -> int:
-        """The network's outputs per vertex: the displacement, and for a pose the pressure."""
-        return 4 if self.posed else 3
+        """The network's outputs per vertex: the displacement, and for a pose the contact
+        pressure and its part along the press direction (the reaction's density).
+        """
+        return 5 if self.posed else 3
 
     # -- bodies
     any_body = False
@@ -254,7 +256,7 @@ class LearnedPredictor(BasePredictor):
 
     def normalised(self, target, force):
         """The target ``(B, N, 3)`` (m) in the units of :meth:`raw`; of a pose model ``(B, N,
-        4)``: the displacement (m) and the contact pressure (Pa).
+        5)``: the displacement (m), the contact pressure and its push along the press (Pa).
         """
         if self.posed:
             return torch.cat(
@@ -273,14 +275,14 @@ class LearnedPredictor(BasePredictor):
         mean Euclidean error over its peak displacement (the relative MEE the targets use);
         ``pooled``, the batch's mean Euclidean errors over its peaks, summed before the ratio
         (:func:`pooled_loss`: heavier presses weigh more). A pose model (``force`` then the gap
-        field, ``target`` the displacement and the contact pressure, :meth:`normalised`) adds
-        the pressure's mean squared error to the other two.
+        field, ``target`` the displacement, the contact pressure and its push, :meth:`normalised`)
+        adds the pressures' mean squared error to the other two.
         """
         pred, tgt = self.raw(thickness, force, body, base), self.normalised(target, force)
         if self.config.get("loss", "mse") == "mse":
             return ((pred - tgt) ** 2).mean()
         if self.posed:
-            pressure = ((pred[..., 3] - tgt[..., 3]) ** 2).mean()
+            pressure = ((pred[..., 3:] - tgt[..., 3:]) ** 2).mean()
             return self.euclidean_loss(pred[..., :3], tgt[..., :3], force) + pressure
         return self.euclidean_loss(pred, tgt, force)
 
@@ -391,8 +393,8 @@ class LearnedPredictor(BasePredictor):
         u = list((out[..., :3] * self.scale).double().cpu().numpy())
         if not self.posed:
             return u
-        pressure = out[..., 3].clamp_min(0.0).double().cpu().numpy() * PRESSURE_OUT_SCALE
-        return [_posed_answer(s, x, p) for s, x, p in zip(scenes, u, pressure)]
+        pressures = out[..., 3:].double().cpu().numpy() * PRESSURE_OUT_SCALE
+        return [_posed_answer(s, x, p[:, 0], p[:, 1]) for s, x, p in zip(scenes, u, pressures)]
 
     def network(self) -> torch.nn.Module:
         """The module :meth:`compile` compiles: the network without its prior (by default the
@@ -491,15 +493,17 @@ class LearnedPredictor(BasePredictor):
         return p
 
 
-def _posed_answer(scene: Scene, u: np.ndarray, pressure: np.ndarray) -> dict:
+def _posed_answer(scene: Scene, u: np.ndarray, pressure: np.ndarray, push: np.ndarray) -> dict:
     """A pose model's answer to ``scene``: displacement ``u`` ``(N, 3)`` m, the contact force on
     each vertex from ``pressure`` ``(N,)`` Pa (the network's, negative read as none: contact
-    pushes only; zero farther than :data:`~models.features.CONTACT_BAND` from the objects),
-    and the reaction: those forces along the inward normals, projected on the pose's direction.
+    pushes only) and the reaction from ``push`` ``(N,)`` Pa (the network's pressure along the
+    press direction, the reaction's density), both only within
+    :data:`~models.features.CONTACT_BAND` of the objects.
     """
-    part = scene.part
-    force = np.where(scene.pose.gap <= CONTACT_BAND, pressure, 0.0) * part.vertex_areas
-    reaction = float(force @ (-part.normals @ scene.pose.direction))
+    area = scene.part.vertex_areas
+    near = scene.pose.gap <= CONTACT_BAND
+    force = np.where(near, np.maximum(pressure, 0.0), 0.0) * area
+    reaction = float(np.sum(np.where(near, push, 0.0) * area))
     return {"displacement": u, "force": force, "reaction": reaction}
 
 

@@ -7,7 +7,8 @@ is no seam by construction. With ``prior: linear`` the precomputed linear FEM's 
 three more node inputs and the output is a correction to it
 (:class:`~models.prior.LinearPrior`). With ``given: pose`` the load's inputs are an object's
 pose instead (how deep each vertex lies inside it, over 10 mm, and how far outside, over 20 mm:
-:func:`~models.features.gap_channels`) and a fourth output is the contact pressure.
+:func:`~models.features.gap_channels`) and two more outputs are the contact pressure and its
+push along the press (the reaction's density).
 """
 
 from __future__ import annotations

@@ -46,8 +46,8 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
     vertices, so the prior itself has no seam gap; :meth:`fit` computes the operator). With the
     prior, ``fidelity="auto"`` runs the network on the window of the chart the load needs
     (:meth:`_sample_cropped`). With ``given: pose`` the load's channels are an object's pose
-    instead (how deep inside it, over 10 mm, how far outside, over 20 mm) and a fourth output
-    image is the contact pressure.
+    instead (how deep inside it, over 10 mm, how far outside, over 20 mm) and two more output
+    images are the contact pressure and its push along the press (the reaction's density).
     """
 
     name = "uv_unet"
@@ -198,7 +198,7 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
             tgt = tgt[:, self._corner_vertex]
             loss = self.euclidean_loss(pred[..., :3], tgt[..., :3], force) + self._tv(out)
             if self.posed:
-                loss = loss + ((pred[..., 3] - tgt[..., 3]) ** 2).mean()
+                loss = loss + ((pred[..., 3:] - tgt[..., 3:]) ** 2).mean()
             return loss
         if base is not None:  # the correction's image
             tgt = (tgt - base) / CORRECTION_SCALE

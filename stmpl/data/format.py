@@ -45,12 +45,14 @@ FLOATS = ("thickness", "force", "displacement")
 INTS = ("task", "placement", "thickness_level", "split", "iterations")
 DOUBLES = ("total", "residual", "solve_time", "min_det_F", "max_compression")
 STRINGS = ("kind", "params")
-OPTIONAL = ("linear", "pressure", "gap")
+OPTIONAL = ("linear", "pressure", "push", "gap")
 """Per-sample arrays a dataset may hold: ``linear`` ``(S, N, 3)`` m, the linear FEM's answer to
 the same load on the same body (config ``linear: true``; the columns are solved as the on-demand
 operator solves them, :func:`fem.compliance.local_compliance`); of a dataset of pressed objects,
-``pressure`` ``(S, N)`` Pa, the contact pressure on each vertex, and ``gap`` ``(S, N)`` m, each
-vertex's signed distance at rest to the object at its pose (the pose as the part sees it).
+``pressure`` ``(S, N)`` Pa, the contact pressure on each vertex, ``push`` ``(S, N)`` Pa, its part
+along the press direction (times the vertex areas it sums to the reaction), and ``gap``
+``(S, N)`` m, each vertex's signed distance at rest to the object at its pose (the pose as the
+part sees it).
 Hashed when present; in :class:`Datasets` whose members differ, NaN for the samples of the
 members without it."""
 

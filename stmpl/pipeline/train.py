@@ -114,9 +114,10 @@ def read_config(source) -> dict:
 def _split_tensors(ds, split, cfg, device, p=None):
     """A split's ``thickness``, ``force``, ``displacement``, ``body`` (slot of each sample's
     body) and the prior's answers; for a model given a pose, the ``gap`` field in the place of
-    the force and the contact ``pressure`` beside the displacement. The prior's answers are in
-    m; None unless the model has a prior and the data carry ``linear`` answers or span several
-    bodies (then every sample's is at hand, the missing ones solved on its body once here).
+    the force and the contact ``pressure`` and ``push`` beside the displacement. The prior's
+    answers are in m; None unless the model has a prior and the data carry ``linear`` answers or
+    span several bodies (then every sample's is at hand, the missing ones solved on its body
+    once here).
     """
     import torch  # deferred: about a second to import; the core's types do not need it
 
@@ -134,13 +135,16 @@ def _split_tensors(ds, split, cfg, device, p=None):
     if getattr(p, "prior", False) and ("linear" in a or len(ds.parts) > 1):
         base = _prior_answers(p, a, keep, torch.as_tensor(a["body"][keep], device=device), device)
     if getattr(p, "posed", False):  # given the pose: answers the displacement and the pressure
-        if "gap" not in a or "pressure" not in a:
+        if any(k not in a for k in ("gap", "pressure", "push")):
             raise ValueError(
                 f"a model given a pose learns from pressed objects: dataset {cfg['data']} has "
-                "no gap and pressure arrays (make one with press_disk or press_sphere placements)"
+                "no gap, pressure and push arrays (make one with press_disk or press_sphere "
+                "placements)"
             )
         gap = np.minimum(a["gap"], GAP_REACH)
-        target = np.concatenate([a["displacement"], a["pressure"][..., None]], -1)
+        target = np.concatenate(
+            [a["displacement"], a["pressure"][..., None], a["push"][..., None]], -1
+        )
         return t(a["thickness"]), t(gap), t(target), body, base
     return t(a["thickness"]), t(a["force"]), t(a["displacement"]), body, base
 

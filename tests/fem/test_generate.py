@@ -396,6 +396,8 @@ def test_a_dataset_of_pressed_objects_holds_force_controlled_answers(tiny_presse
         np.testing.assert_allclose(
             a["force"][i], a["pressure"][i] * ds.part.vertex_areas, rtol=1e-5
         )
+        pushed = float(np.sum(a["push"][i] * ds.part.vertex_areas))
+        assert pushed == pytest.approx(params[i]["reaction"], rel=1e-5)  # the reaction's density
         touched = a["pressure"][i] > 0
         assert a["gap"][i][touched].min() < 0 < a["gap"][i].max()
         assert params[i]["depth"] > 0

@@ -128,12 +128,13 @@ def test_a_model_given_a_pose_answers_the_force_near_the_object_and_its_reaction
     ds, tmp_path, kind
 ):
     """Option ``given: pose``: the model reads the gap field, and its answer carries a contact
-    force only near the object (where its pressure output is positive) and the reaction from
-    it; the option travels in the checkpoint; the combinations that cannot be are refused by
-    name.
+    force only near the object (where its pressure output is positive) and the reaction, its
+    push output summed there; the option travels in the checkpoint; the combinations that
+    cannot be are refused by name.
     """
     import torch
 
+    from models.features import PRESSURE_OUT_SCALE
     from stmpl import tissue
     from stmpl.contact import objects
     from stmpl.contact.posing import posed
@@ -147,8 +148,12 @@ def test_a_model_given_a_pose_answers_the_force_near_the_object_and_its_reaction
     d = p.predict(scene)
     near = scene.pose.gap <= 0.005
     assert not d.force[~near].any() and d.force.min() >= 0
-    normal = -ds.part.normals @ scene.pose.direction
-    assert d.reaction == pytest.approx(float(d.force @ normal))
+    t, g = (torch.tensor(x[None], dtype=torch.float32) for x in (scene.thickness, scene.pose.gap))
+    with torch.no_grad():
+        out = p.forward(t, g)[0].double().numpy() * PRESSURE_OUT_SCALE  # pressure, push: Pa
+    area = ds.part.vertex_areas
+    np.testing.assert_allclose(d.force, np.where(near, np.maximum(out[:, 3], 0), 0) * area)
+    assert d.reaction == pytest.approx(float(np.sum(out[near, 4] * area[near])), rel=1e-6)
     q = predictor.read(p.save(tmp_path / "m.safetensors"))
     assert q.takes == ("pose",)
     np.testing.assert_allclose(q.predict(scene).displacement, d.displacement, atol=1e-9)

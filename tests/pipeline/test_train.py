@@ -263,5 +263,5 @@ def test_a_model_given_the_pose_learns_the_dent_and_the_force_of_pressed_objects
     np.testing.assert_allclose(user.pose.gap[near], a["gap"][k][near], atol=5e-5)
     with pytest.raises(ValueError, match=f"{kind} answers an object's pose, and scene 0 gives a"):
         p.predict(scenes_of(ds, "test")[0][:1])
-    with pytest.raises(ValueError, match="no gap and pressure arrays"):
+    with pytest.raises(ValueError, match="no gap, pressure and push arrays"):
         train({**cfg, "data": str(tiny_dataset), "out": str(tmp_path / "r2")}, progress=False)
