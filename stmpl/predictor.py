@@ -198,6 +198,10 @@ class BasePredictor:
                     ImpossibleAnswer,
                     stacklevel=2,
                 )
+            lacking = _unpushed(s, answer)
+            if lacking:
+                physical = False
+                warnings.warn(f"{self.name}: {lacking}", ImpossibleAnswer, stacklevel=2)
             result.append(
                 Deformation(
                     s,
@@ -281,3 +285,20 @@ def _refusal(predictor, i: int, given: str) -> str:
         f"{predictor.name} answers an object's pose, and scene {i} gives a force on the skin: "
         "use a predictor that takes a force"
     )
+
+
+def _unpushed(scene: Scene, answer: dict) -> str:
+    """Why the answer to a posed scene is impossible ('' when it is not): an object that
+    reaches into the skin pushes it (a force and a reaction above zero), and none pulls.
+    """
+    if scene.pose is None:
+        return ""
+    reaction, total = answer["reaction"], float(np.sum(answer["force"]))
+    if reaction < 0:
+        return f"the object pulls on the skin ({reaction:.3g} N): no answer to trust"
+    if scene.pose.depth > 0 and (total <= 0 or reaction <= 0):
+        return (
+            f"the object reaches {1e3 * scene.pose.depth:.2f} mm into the skin yet the answer "
+            "carries no force: no answer to trust"
+        )
+    return ""

@@ -155,3 +155,40 @@ def test_an_impossible_answer_is_flagged(ds, make):
     with pytest.warns(predictor.ImpossibleAnswer):
         near = p.predict(s)
     assert 0.4 < near.info["max_compression"] < 1.0 and not near.info["physical"]
+
+
+class _Posing(predictor.BasePredictor):
+    """A stand-in pose predictor that answers a fixed reaction and no other force."""
+
+    name, takes = "posing", ("pose",)
+
+    def __init__(self, reaction):
+        self.reaction = reaction
+
+    def predict_batch(self, scenes):
+        n = scenes[0].part.n_vertices
+        return [
+            {"displacement": np.zeros((n, 3)), "force": np.zeros(n), "reaction": self.reaction}
+            for _ in scenes
+        ]
+
+
+def test_a_pose_answered_with_no_force_or_a_pull_is_flagged_impossible():
+    """An object that reaches into the skin pushes it: an answer with no force there, or one
+    whose object pulls, is flagged (physical False, an ImpossibleAnswer warning naming why); a
+    force-given scene goes to a pose predictor refused by name.
+    """
+    from stmpl import tissue
+    from stmpl.failures import ImpossibleAnswer
+    from stmpl.pose import GAP_REACH, Pose
+
+    part = tube(n_around=16, n_along=11)
+    gap = np.full(part.n_vertices, GAP_REACH)
+    gap[5] = -0.001
+    scene = Scene.posed(part, tissue.constant(part, 0.0075), Pose(gap, [0.0, 0.0, -1.0]))
+    with pytest.warns(ImpossibleAnswer, match="reaches 1.00 mm into the skin yet the answer"):
+        assert not _Posing(0.0).predict(scene).info["physical"]
+    with pytest.warns(ImpossibleAnswer, match=r"the object pulls on the skin \(-0.2 N\)"):
+        _Posing(-0.2).predict(scene)
+    with pytest.raises(ValueError, match="posing answers an object's pose, and scene 0 gives a"):
+        _Posing(0.0).predict(Scene(part, scene.thickness, np.zeros(part.n_vertices)))
