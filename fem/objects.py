@@ -23,7 +23,7 @@ from fem.shapes import (
 from stmpl.contact.hand import Hand, SkinDistance, grasp
 from stmpl.contact.pressing import Pressing
 from stmpl.part import BodyPart
-from stmpl.pose import Pose
+from stmpl.pose import GAP_REACH, Pose
 
 OPEN = 0.01
 """m: how far back along its path a grip may open to clear the skin."""
@@ -53,9 +53,9 @@ def at_pose(part: BodyPart, pose: Pose, rounding: float = ROUNDING) -> tuple[Sur
     name = " + ".join(pose.names())
     shape = Surface(np.concatenate(vertices), np.concatenate(faces), rounding, name=name)
     d = unit(pose.direction)
-    near = np.flatnonzero(pose.gap < rounding + 0.002)
-    if not len(near):
+    if pose.gap.min() >= GAP_REACH:  # every vertex far from the objects
         return shape, 0.0
+    near = np.flatnonzero(pose.gap <= pose.gap.min() + 0.005)  # the skin nearest them
     centre = part.vertices[near].mean(0)
     reach = float(np.linalg.norm(part.vertices[near] - centre, axis=1).max()) + 0.01
     back = clearance(shape, d, skin_near(part, centre, reach))

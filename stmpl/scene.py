@@ -231,6 +231,11 @@ class Deformation:
         object.__setattr__(self, "reaction", r)
 
     @property
+    def applied(self) -> np.ndarray:
+        """``(N,)`` the force on each vertex, N: the scene's, or the answer's for a posed scene."""
+        return self.scene.force if self.force is None else self.force
+
+    @property
     def pressure(self) -> np.ndarray:
         """``(N,)`` contact pressure on each vertex, Pa (a posed scene's answer only)."""
         if self.force is None:

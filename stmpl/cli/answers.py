@@ -89,7 +89,7 @@ def answer(scene, specs: list[str], preds: list, strict: bool = False) -> dict:
 def _say(name: str, p, d, first: float | None) -> None:
     slow = first is not None and first > max(0.2, 20 * d.info["seconds"])
     line = f"{name:<{WIDTH}} deepest {1e3 * d.magnitude.max():6.3f} mm  "
-    line += f"{duration(d.info['seconds']):>10}"
+    line += f"{duration(d.info['seconds']):>10}" + _met(d)
     if d.info.get("mirrored"):
         line += f"  (a model of the {p.part.name}, answering in the mirror)"
     if slow:
@@ -135,9 +135,16 @@ def truth(scene, args, failures: dict | None = None):
         return None
     print(
         f"{name:<{WIDTH}} deepest {1e3 * d.magnitude.max():6.3f} mm  "
-        f"{duration(d.info['seconds']):>10}"
+        f"{duration(d.info['seconds']):>10}" + _met(d)
     )
     return d
+
+
+def _met(d) -> str:
+    """What a posed scene's answer met: its reaction and peak contact pressure ('' else)."""
+    if d.reaction is None:
+        return ""
+    return f"  reaction {d.reaction:.3g} N, peak pressure {d.pressure.max() / 1e3:.3g} kPa"
 
 
 def record(out: dict, fem, failures: dict) -> dict:
@@ -155,6 +162,8 @@ def record(out: dict, fem, failures: dict) -> dict:
             "outside_because": env.get("outside", []),
             "physical": bool(d.info.get("physical", True)),
         }
+        if d.reaction is not None:
+            a["reaction_N"] = round(float(d.reaction), 6)
         if fem is not None:
             m = sample_metrics(fem.displacement, d.displacement)
             a["against_fem"] = {k: round(float(m[k]), 6) for k in ("mee", "rel_mee", "peak_err")}
@@ -165,6 +174,8 @@ def record(out: dict, fem, failures: dict) -> dict:
             "deepest_mm": round(1e3 * float(fem.magnitude.max()), 6),
             "seconds": fem.info.get("seconds"),
         }
+        if fem.reaction is not None:
+            fem_record["reaction_N"] = round(float(fem.reaction), 6)
     return {"answers": answers, "fem": fem_record, "failed": dict(failures)}
 
 
@@ -174,7 +185,10 @@ def errors(out: dict, fem) -> None:
     """
     for name, d in out.items():
         m = sample_metrics(fem.displacement, d.displacement)
+        reaction = ""
+        if d.reaction is not None and fem.reaction:
+            reaction = f", reaction {100 * (d.reaction / fem.reaction - 1):+.1f} %"
         print(
             f"  {name}: MEE {m['mee']:.4f} mm = {m['rel_mee']:.2f} % of the deepest, peak "
-            f"{m['peak_err']:+.1f} %, largest error {m['max_err']:.3f} mm"
+            f"{m['peak_err']:+.1f} %, largest error {m['max_err']:.3f} mm{reaction}"
         )

@@ -276,6 +276,15 @@ def simulate_options(sp) -> None:
         default=2.0,
         help="how deep the object reaches into the skin, mm (default 2)",
     )
+    what.add_argument(
+        "--given",
+        choices=("force", "pose"),
+        default="force",
+        help="force (default): --force is shared over the skin the object touches (the "
+        "paper's load model); pose: the object stays where --at/--depth or --pose put it and "
+        "the force it meets is answered (by the FEM, --model fem, or a model trained on "
+        "pressed objects)",
+    )
     load_options(what)
     body_options(sp, smpl=False)
     thickness_option(sp)

@@ -8,6 +8,7 @@ PLY) and a picture, and prints each method's time.
 >>> stmpl simulate --letters ECCV --force 0.3 --model zoo:uv_unet_arm_bodies
 >>> stmpl simulate --weight 0.9 --muscle 0.2 --part right_arm  # another body, its right arm
 >>> stmpl simulate --object tool.stl --at 0.45 0.5 --depth 3
+>>> stmpl simulate --sphere 8 --depth 3 --given pose --model fem --tissue forearm --res medium
 """
 
 from __future__ import annotations
@@ -21,10 +22,11 @@ import numpy as np
 import stmpl.contact.pressing as contact
 from stmpl.body.spec import part_from_spec
 from stmpl.cli import answers
-from stmpl.cli.arguments import default_model
+from stmpl.cli.arguments import FORCE_N, default_model
 from stmpl.cli.options import phenotype_of, thickness_of
 from stmpl.contact import objects
 from stmpl.contact.hand import Hand, cached_grasp, palm_press
+from stmpl.contact.posing import posed
 from stmpl.files import atomic_write_text
 from stmpl.scene import Scene
 from stmpl.viz.figures import export_mesh, mesh_bytes, vertex_colors
@@ -51,6 +53,13 @@ def pressings(args, part) -> list:
         raise ValueError(f"choose one object, got {', '.join('--' + k for k in chosen)}")
     if args.pose is not None and chosen[:1] not in (["object"], ["sphere"], ["letters"]):
         raise ValueError("--pose places an --object, --sphere or --letters")
+    if args.given == "pose" and chosen[:1] not in (["object"], ["sphere"], ["letters"]):
+        raise ValueError(
+            "--given pose presses an --object, --sphere or --letters where it is put (a hand's "
+            "grasp or a strap closes along a path, not to a pose)"
+        )
+    if args.given == "pose" and args.force != FORCE_N:
+        raise ValueError("--given pose answers the force: leave --force out")
     if args.strap:
         return [objects.strap(part, args.along, total=args.force, squeeze=args.depth * mm)]
     if chosen:
@@ -107,12 +116,21 @@ def run(args) -> int:
         {"model": "anny", "subdivisions": sub, "phenotype": phenotype_of(args)}, args.part
     )
     objs = pressings(args, part)
-    touch = contact.contact(part, objs)
     thick = thickness_of(args, part)
-    scene = Scene.from_load(part, thick, touch.load())
+    if args.given == "pose":
+        scene = posed(part, thick, [(o.mesh, o.pose, o.name) for o in objs])
+        g = float(scene.pose.gap.min())
+        said = (
+            f"{objs[0].name} at its pose, the skin vertex nearest it {1e3 * abs(g):.2f} mm "
+            f"{'inside' if g < 0 else 'outside'} it at rest (the force it meets is answered)"
+        )
+    else:
+        touch = contact.contact(part, objs)
+        scene = Scene.from_load(part, thick, touch.load())
+        said = touch.summary()
     print(
         f"{part.name} ({part.n_vertices} vertices), {1e3 * float(thick.mean()):.3g} mm of "
-        f"tissue; {touch.summary()}  [{time.perf_counter() - t0:.1f} s to set up]"
+        f"tissue; {said}  [{time.perf_counter() - t0:.1f} s to set up]"
     )
     out = answers.answer(scene, specs, preds, args.strict)
     failures: dict = {}

@@ -104,9 +104,8 @@ def draw_meshes(ax, basis: np.ndarray, meshes: list) -> None:
 
 def contact_camera(deformation) -> tuple[np.ndarray, np.ndarray, float]:
     """``(basis, centre (3,), reach m)``: a camera on the loaded skin of a deformation's scene."""
-    scene = deformation.scene
-    part = scene.part
-    w = np.asarray(scene.force, float)
+    part = deformation.scene.part
+    w = np.asarray(deformation.applied, float)
     basis = view_basis(part, w if w.sum() > 0 else None)
     centre = (part.vertices * w[:, None]).sum(0) / max(w.sum(), 1e-300)
     loaded = part.vertices[w > 0]
@@ -288,6 +287,8 @@ def _panel_title(name: str, d, truth) -> tuple[str, str]:
         + (f", {duration(ms)}" if ms is not None else "")
     )
     lines = [head, f"deepest {d.magnitude.max() * 1e3:.2f} mm"]
+    if d.reaction is not None:  # a pose's answer: the force it meets
+        lines[-1] += f", reaction {d.reaction:.3g} N"
     if truth is not None and d is not truth:
         m = sample_metrics(truth.displacement, d.displacement)
         lines.append(f"error {m['rel_mee']:.2f} % of the deepest, peak {m['peak_err']:+.1f} %")
@@ -304,11 +305,17 @@ def duration(seconds: float) -> str:
 
 def _title(scene) -> str:
     load = scene.load
-    text = (
-        load.source.summary()
-        if load is not None and load.source is not None
-        else (load.summary() if load is not None else f"{scene.total_force:g} N")
-    )
+    if scene.pose is not None:
+        text = (
+            f"{', '.join(scene.pose.names()) or 'an object'} at its pose, "
+            f"{1e3 * scene.pose.depth:.2f} mm into the skin at rest: the force is answered"
+        )
+    else:
+        text = (
+            load.source.summary()
+            if load is not None and load.source is not None
+            else (load.summary() if load is not None else f"{scene.total_force:g} N")
+        )
     return (
         f"{scene.part.name} ({scene.part.n_vertices} vertices){body_words(scene.part)}, "
         f"{1e3 * float(np.median(scene.thickness)):.1f} mm tissue\n{text}"

@@ -36,13 +36,19 @@ def verdict(info: dict) -> tuple[str, str]:
 
 def facts(deformation, predictor: str) -> dict:
     """What a saved mesh of ``deformation`` says about itself: the predictor, the deepest
-    displacement (mm), the verdict and its words (:func:`verdict`), the total force (N).
+    displacement (mm), the verdict and its words (:func:`verdict`), the total force (N; of a
+    posed scene's answer, the contact force it answers, and its reaction).
     """
     kind, words = verdict(deformation.info)
     return {
         "predictor": predictor,
         "deepest_mm": round(1e3 * float(deformation.magnitude.max()), 4),
-        "force_N": round(float(deformation.scene.force.sum()), 6),
+        "force_N": round(float(deformation.applied.sum()), 6),
+        **(
+            {}
+            if deformation.reaction is None
+            else {"reaction_N": round(float(deformation.reaction), 6)}
+        ),
         "verdict": kind,
         "why": words,
     }

@@ -68,6 +68,9 @@ def test_letters_against_the_fem(tmp_path, capsys, arm):
         (["--object", ""], "--object needs a mesh file's path"),
         (["--sphere", "8", "--grip", "pinch"], "--grip chooses how the hand grasps a limb"),
         (["--part", "belly", "--grip", "pinch"], "the belly has no limb to grasp"),
+        (["--given", "pose"], "--given pose presses an --object, --sphere or --letters"),
+        (["--sphere", "8", "--given", "pose", "--force", "2"], "leave --force out"),
+        (["--sphere", "8", "--given", "pose"], "gnn answers a force given on the skin"),
     ],
 )
 def test_bad_requests_end_in_one_line(tmp_path, capsys, arm, argv, message):
@@ -217,3 +220,22 @@ def test_the_belly_under_an_open_hand(tmp_path, capsys):
     line = [ln for ln in out.splitlines() if ln.startswith("gnn_belly_bodies")][0]
     assert 0.2 < float(line.split("deepest")[1].split("mm")[0]) < 5.0
     assert (tmp_path / "simulate.png").is_file()
+
+
+def test_a_fingertip_given_by_its_pose_answers_the_force_it_meets(tmp_path, capsys, arm):
+    """``--given pose``: the ball stays where --depth puts it and the FEM answers the dent and
+    the force: printed, in the picture's panel, in the meshes' notes and in simulate.json.
+    """
+    argv = ["simulate", "--sphere", "8", "--depth", "2", "--given", "pose", "--model", "fem"]
+    argv += ["--res", "coarse", "--subdivide", "0", "--out-dir", str(tmp_path)]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "at its pose, the skin vertex nearest it" in out
+    assert "(the force it meets is answered)" in out
+    line = next(ln for ln in out.splitlines() if ln.startswith("fem"))
+    reaction = float(line.split("reaction ")[1].split(" N")[0])
+    record = json.loads((tmp_path / "simulate.json").read_text())
+    assert reaction > 0 and record["answers"]["fem"]["reaction_N"] == pytest.approx(
+        reaction, rel=1e-2
+    )
+    assert (tmp_path / "simulate.png").stat().st_size > 10_000
