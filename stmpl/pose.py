@@ -102,6 +102,14 @@ class Pose:
         """``(K,)`` the rest skin vertices inside an object."""
         return np.flatnonzero(self.gap < 0)
 
+    def nearest(self) -> str:
+        """Where the skin's vertex nearest the objects lies, in words (the objects may press
+        between vertices, where no vertex lies inside them).
+        """
+        g = float(self.gap.min())
+        side = "inside" if g < 0 else "outside"
+        return f"the skin vertex nearest it {1e3 * abs(g):.2f} mm {side} it at rest"
+
     def arrays(self) -> dict:
         """The pose as named arrays (for a scene file); :meth:`from_arrays` reads them."""
         out = {"gap": self.gap, "direction": self.direction}

@@ -30,6 +30,7 @@ def test_a_posed_scene_gives_its_pose_and_asks_for_its_force(part):
     s = Scene.posed(part, tissue.constant(part, 0.0075), _pose(part), id=3)
     assert s.given == "pose" and s.force is None and s.meta == {"id": 3}
     assert s.pose.depth == pytest.approx(0.002) and list(s.pose.touched) == [3]
+    assert s.pose.nearest() == "the skin vertex nearest it 2.00 mm inside it at rest"
     with pytest.raises(ValueError, match="gives an object's pose, not a force"):
         s.total_force
     with pytest.raises(ValueError, match="force or an object's pose, not both"):

@@ -119,10 +119,8 @@ def run(args) -> int:
     thick = thickness_of(args, part)
     if args.given == "pose":
         scene = posed(part, thick, [(o.mesh, o.pose, o.name) for o in objs])
-        g = float(scene.pose.gap.min())
         said = (
-            f"{objs[0].name} at its pose, the skin vertex nearest it {1e3 * abs(g):.2f} mm "
-            f"{'inside' if g < 0 else 'outside'} it at rest (the force it meets is answered)"
+            f"{objs[0].name} at its pose, {scene.pose.nearest()} (the force it meets is answered)"
         )
     else:
         touch = contact.contact(part, objs)

@@ -308,7 +308,7 @@ def _title(scene) -> str:
     if scene.pose is not None:
         text = (
             f"{', '.join(scene.pose.names()) or 'an object'} at its pose, "
-            f"{1e3 * scene.pose.depth:.2f} mm into the skin at rest: the force is answered"
+            f"{scene.pose.nearest()}: the force is answered"
         )
     else:
         text = (
