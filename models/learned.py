@@ -323,6 +323,21 @@ class LearnedPredictor(BasePredictor):
         ]
         return back[0] if single else back
 
+    def outside(self, scenes) -> list[list[str]]:
+        """As :meth:`BasePredictor.outside`; a pose also lies outside where its objects reach
+        deeper into the rest skin than any training pose did (``meta["pose_deepest_mm"]``).
+        """
+        out = super().outside(scenes)
+        deepest = self.meta.get("pose_deepest_mm")
+        for i, s in enumerate(scenes):
+            reach = 0.0 if s.pose is None else -1e3 * float(s.pose.gap.min())
+            if deepest is not None and reach > deepest + 0.05:
+                out[i] = out[i] + [
+                    f"its object reaches {reach:.2f} mm into the skin at rest, deeper than any "
+                    f"pose in the data ({deepest:.2f} mm)"
+                ]
+        return out
+
     def check(self, scenes) -> None:
 
         for i, s in enumerate(scenes):

@@ -135,18 +135,22 @@ def _split_tensors(ds, split, cfg, device, p=None):
     if getattr(p, "prior", False) and ("linear" in a or len(ds.parts) > 1):
         base = _prior_answers(p, a, keep, torch.as_tensor(a["body"][keep], device=device), device)
     if getattr(p, "posed", False):  # given the pose: answers the displacement and the pressure
-        if any(k not in a for k in ("gap", "pressure", "push")):
-            raise ValueError(
-                f"a model given a pose learns from pressed objects: dataset {cfg['data']} has "
-                "no gap, pressure and push arrays (make one with press_disk or press_sphere "
-                "placements)"
-            )
+        _require_poses(a, cfg)
         gap = np.minimum(a["gap"], GAP_REACH)
         target = np.concatenate(
             [a["displacement"], a["pressure"][..., None], a["push"][..., None]], -1
         )
         return t(a["thickness"]), t(gap), t(target), body, base
     return t(a["thickness"]), t(a["force"]), t(a["displacement"]), body, base
+
+
+def _require_poses(a: dict, cfg: dict) -> None:
+    """Refuse a dataset without poses (arrays ``a``) for a model given a pose."""
+    if any(k not in a for k in ("gap", "pressure", "push")):
+        raise ValueError(
+            f"a model given a pose learns from pressed objects: dataset {cfg['data']} has no "
+            "gap, pressure and push arrays (make one with press_disk or press_sphere placements)"
+        )
 
 
 def _prior_answers(p, a, keep, body, device):
@@ -371,6 +375,10 @@ def _model(cfg: dict, ds):
         if p.slot(part) != k:
             raise RuntimeError(f"body {k} of the dataset took another slot")
     p.envelope = envelope(ds, cfg)
+    if getattr(p, "posed", False):  # how deep the training poses reach: beyond, outside
+        a, keep = _selection(ds, "train", cfg)
+        _require_poses(a, cfg)
+        p.meta["pose_deepest_mm"] = float(-1e3 * a["gap"][keep].min())
     return p
 
 

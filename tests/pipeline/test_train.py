@@ -5,6 +5,7 @@ import pytest
 
 from stmpl import checkpoint, predictor
 from stmpl.data.dataset import Dataset
+from stmpl.failures import OutsideEnvelope
 from stmpl.pipeline.evaluate import evaluate, scenes_of
 from stmpl.pipeline.train import read_config, train
 
@@ -261,6 +262,12 @@ def test_a_model_given_the_pose_learns_the_dent_and_the_force_of_pressed_objects
     user = posed(ds.part, a["thickness"][k].astype(float), ball, pose, direction=direction)
     near = a["gap"][k] < 0.01
     np.testing.assert_allclose(user.pose.gap[near], a["gap"][k][near], atol=5e-5)
+    deepest = p.meta["pose_deepest_mm"]
+    assert deepest == pytest.approx(-1e3 * ds.arrays("train")["gap"].min())
+    pose[:3, 3] += (deepest + 1.0) * 1e-3 * direction  # a millimetre past the deepest
+    deeper = posed(ds.part, a["thickness"][k].astype(float), ball, pose, direction=direction)
+    with pytest.warns(OutsideEnvelope, match="deeper than any pose in the data"):
+        p.predict(deeper)
     with pytest.raises(ValueError, match=f"{kind} answers an object's pose, and scene 0 gives a"):
         p.predict(scenes_of(ds, "test")[0][:1])
     with pytest.raises(ValueError, match="no gap, pressure and push arrays"):
