@@ -51,8 +51,12 @@ def posed(
     ``(mesh, pose, name)``, pressing along one ``direction``.
     """
     items = mesh if isinstance(mesh, list) else [(mesh, pose, name)]
+    if not items:
+        raise ValueError("a posed scene needs at least one object")
     rigid, gap = [], np.full(part.n_vertices, GAP_REACH)
     for m, p, n in items:
+        if not (hasattr(m, "vertices") and hasattr(m, "faces") and hasattr(m, "copy")):
+            raise TypeError(f"object {n!r}: the mesh must be a trimesh.Trimesh, got {type(m)}")
         P = np.eye(4) if p is None else check_pose(p)
         at = m.copy().apply_transform(P)
         if len(at.faces) == 0 or not np.isfinite(at.vertices).all():

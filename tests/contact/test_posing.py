@@ -55,3 +55,9 @@ def test_two_objects_give_the_nearer_distance_and_one_direction(part):
     assert (two.pose.gap < one.pose.gap - 1e-3).any()  # the thumb's side
     with pytest.raises(ValueError, match="finite nonzero 3-vector"):
         posed(part, tissue.constant(part, 0.0075), tip, a, direction=[0, 0, 0])
+    with pytest.raises(ValueError, match="at least one object"):
+        posed(part, tissue.constant(part, 0.0075), [])
+    with pytest.raises(TypeError, match="'ball': the mesh must be a trimesh.Trimesh"):
+        posed(part, tissue.constant(part, 0.0075), "ball.stl", a, name="ball")
+    with pytest.raises(ValueError, match="not a rigid transform"):
+        posed(part, tissue.constant(part, 0.0075), tip, 2 * a)
