@@ -55,7 +55,7 @@ def at_pose(part: BodyPart, pose: Pose, rounding: float = ROUNDING) -> tuple[Sur
     d = unit(pose.direction)
     if pose.gap.min() >= GAP_REACH:  # every vertex far from the objects
         return shape, 0.0
-    near = np.flatnonzero(pose.gap <= pose.gap.min() + 0.005)  # the skin nearest them
+    near = pose.near()
     centre = part.vertices[near].mean(0)
     reach = float(np.linalg.norm(part.vertices[near] - centre, axis=1).max()) + 0.01
     back = clearance(shape, d, skin_near(part, centre, reach))

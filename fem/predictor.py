@@ -131,7 +131,7 @@ class FEMPredictor(BasePredictor):
         if depth == 0.0:
             self._last[id(s)] = {"fem": "no contact: the objects do not reach the skin"}
             return {"displacement": np.zeros((n, 3)), "force": np.zeros(n), "reaction": 0.0}
-        near = s.part.vertices[s.pose.gap <= s.pose.gap.min() + 0.005]  # refined round these
+        near = s.part.vertices[s.pose.near()]  # the mesh is refined round these
         try:
             mesh, material = tissue_mesh(
                 s.part, s.thickness, self.res, self.tissue, self.phenotype, near

@@ -102,6 +102,12 @@ class Pose:
         """``(K,)`` the rest skin vertices inside an object."""
         return np.flatnonzero(self.gap < 0)
 
+    def near(self, within: float = 0.005) -> np.ndarray:
+        """``(K,)`` the skin vertices within ``within`` (m) of the one nearest the objects: where
+        they press, even between vertices (none inside them).
+        """
+        return np.flatnonzero(self.gap <= self.gap.min() + within)
+
     def nearest(self) -> str:
         """Where the skin's vertex nearest the objects lies, in words (the objects may press
         between vertices, where no vertex lies inside them).

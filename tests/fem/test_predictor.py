@@ -101,7 +101,7 @@ def test_the_fem_answers_a_pose_with_its_force_and_reaction_and_others_refuse_it
     centre = (pose @ [0, 0, 0.008, 1.0])[:3]
     ball = Sphere(centre, 0.008)
     back = clearance(ball, scene.pose.direction, skin_near(part, centre, 0.03))
-    near = part.vertices[scene.pose.gap <= scene.pose.gap.min() + 0.005]
+    near = part.vertices[scene.pose.near()]
     mesh, _ = tissue_mesh(part, th, res, "paper", None, near)
     (exact,) = press(
         Solver(mesh, NeoHookean(), order=1),
