@@ -65,13 +65,15 @@ def test_each_layer_is_meshed_through_its_own_depth_with_its_own_law():
 def test_the_fem_meshes_a_preset_on_a_curved_part():
     part = tube(radius=0.04, length=0.1, n_around=16, n_along=6)
     t = np.full(part.n_vertices, 0.0075)
-    mesh, mat = tissue_mesh(part, t, "coarse", tissue="forearm")
+    mesh, mat = tissue_mesh(part, t, "medium", tissue="forearm")
     assert mesh.layers == PRESETS["forearm"].elements
     assert mesh.thickness.max() == pytest.approx(0.0175, rel=1e-6)
     assert mat.name == "layered" and len(mat.laws) == 3 and len(mat.layer) == len(mesh.tets)
     assert mat.limits == TRUSTED and 0 < TRUSTED.min_det_F < 1 and 0 < TRUSTED.max_compression < 1
     gel, none = tissue_mesh(part, t, "coarse")
     assert none is None and gel.thickness.max() == pytest.approx(0.0075)
+    with pytest.raises(ValueError, match="lock in linear"):  # linear elements lock in it
+        tissue_mesh(part, t, "coarse", tissue="forearm")
 
 
 def test_a_fingertip_on_the_layered_forearm_stiffens_into_newtons():
