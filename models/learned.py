@@ -157,7 +157,8 @@ class LearnedPredictor(BasePredictor):
     @property
     def posed(self) -> bool:
         """Whether the model takes an object's pose (option ``given: pose``): its input is the
-        gap field, and its output the displacement and the contact pressure.
+        gap field, and its outputs the displacement, the contact pressure and its push along
+        the press (the reaction's density).
         """
         return self.config["given"] == "pose"
 
