@@ -154,7 +154,9 @@ class FEMPredictor(BasePredictor):
             "compression": a.compression,
             "iterations": a.iterations,
             "updates": a.updates,
-            "fidelity": "full (a pose is pressed on the whole part)",
+            "fidelity": "full"
+            if self.fidelity == "full"
+            else "full: a pose is pressed on the whole part, whatever the fidelity",
             "mesh": {"nodes": mesh.n_nodes, "tets": int(len(mesh.tets))},
         }
         force = a.pressure * s.part.vertex_areas
