@@ -103,15 +103,12 @@ def brief(path=None) -> str:
         metrics = {k: v for k, v in (e.get("metrics") or {}).items() if k != "val"}
         test = (metrics.pop("test", None) or {}).get("rel_mee", [None])[0]
         other = [v["rel_mee"][0] for v in metrics.values() if "rel_mee" in v]
-        tissue = (e.get("dataset") or {}).get("tissue", "paper")
-        if (e.get("config") or {}).get("given") == "pose":
-            tissue += ", pose in"
         rows.append(
             [
                 n,
                 e["kind"],
                 str(e.get("part") or "–"),
-                tissue,
+                _tissue(e),
                 f"{e['bytes'] / 1e6:.2f}",
                 "–" if test is None else f"{test:.2f}",
                 "–" if not other else f"{min(other):.2f}-{max(other):.2f} ({len(other)} sets)",
@@ -155,9 +152,9 @@ def show(name: str, path=None) -> str:
 
 
 def table(path=None) -> str:
-    """A markdown table of the zoo: name, kind, size, training dataset, and on the test split of
-    every kind of dataset it was measured on the MEE (mm), the relative MEE (%) and the mean
-    error of the peak displacement (%); a set a model was not measured on is a dash.
+    """A markdown table of the zoo: name, kind, size, training dataset, tissue, and on the test
+    split of every kind of dataset it was measured on the MEE (mm), the relative MEE (%) and the
+    mean error of the peak displacement (%); a set a model was not measured on is a dash.
     """
     models = manifest(path)["models"]
     cols = sorted(
@@ -169,7 +166,7 @@ def table(path=None) -> str:
         },
         key=lambda k: (list(LABELS).index(k) if k in LABELS else len(LABELS), k),
     )
-    head = ["model", "kind", "parameters", "MB", "trained on"] + [
+    head = ["model", "kind", "parameters", "MB", "trained on", "tissue"] + [
         f"{LABELS.get(k, k)}: MEE mm / rel. % / peak %" for k in cols
     ]
     rows = []
@@ -194,7 +191,14 @@ def table(path=None) -> str:
                 f"{e.get('parameters') or 0:,}",
                 f"{e['bytes'] / 1e6:.2f}",
                 f"{ds.get('name')} ({ds.get('hash')})",
+                _tissue(e),
                 *cells,
             ]
         )
-    return markdown(head, rows, "llrrl" + "r" * len(cols))
+    return markdown(head, rows, "llrrll" + "r" * len(cols))
+
+
+def _tissue(e: dict) -> str:
+    """A zoo entry's tissue: its data's preset, and whether the model takes a pose."""
+    tissue = (e.get("dataset") or {}).get("tissue", "paper")
+    return tissue + (", pose in" if (e.get("config") or {}).get("given") == "pose" else "")
