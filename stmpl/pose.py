@@ -51,6 +51,13 @@ class Rigid:
         object.__setattr__(self, "faces", f)
 
 
+def cut(gap: np.ndarray) -> np.ndarray:
+    """A gap field (m, any shape) as a :class:`Pose` keeps it: cut at :data:`GAP_REACH` (a
+    dataset keeps each distance as measured).
+    """
+    return np.minimum(gap, GAP_REACH)
+
+
 @dataclass(frozen=True, eq=False)
 class Pose:
     """Where the pressing objects are (see the module docstring).

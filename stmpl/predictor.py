@@ -188,20 +188,11 @@ class BasePredictor:
             if not np.all(np.isfinite(u)):
                 raise PredictionFailed(f"{self.name} predicted non-finite displacements")
             compression = float((-np.einsum("ij,ij->i", u, s.part.normals) / s.thickness).max())
-            physical = compression <= tissue.GEL_TRUSTED_COMPRESSION
-            if not physical:
+            impossible = _impossible(s, answer, compression)
+            for reason in impossible:
                 warnings.warn(
-                    f"{self.name}: the skin moves inward {compression:.2f} x the "
-                    f"tissue's thickness, past {tissue.GEL_TRUSTED_COMPRESSION:g}, where the "
-                    "gel buckles and the FEM itself gives no answer: no answer to trust; the "
-                    "scene lies outside what it can answer",
-                    ImpossibleAnswer,
-                    stacklevel=2,
+                    f"{self.name}: {reason}: no answer to trust", ImpossibleAnswer, stacklevel=2
                 )
-            lacking = _unpushed(s, answer)
-            if lacking:
-                physical = False
-                warnings.warn(f"{self.name}: {lacking}", ImpossibleAnswer, stacklevel=2)
             result.append(
                 Deformation(
                     s,
@@ -210,7 +201,8 @@ class BasePredictor:
                         "predictor": self.name,
                         "seconds": dt,
                         "max_compression": compression,
-                        "physical": physical,
+                        "physical": not impossible,
+                        "impossible": impossible,
                         "envelope": None
                         if self.envelope is None
                         else {"inside": not why, "outside": why},
@@ -287,12 +279,37 @@ def _refusal(predictor, i: int, given: str) -> str:
     )
 
 
-def _unpushed(scene: Scene, answer: dict) -> str:
-    """Why the answer to a posed scene is impossible ('' when it is not): an object that
-    reaches into the skin pushes it (a force and a reaction above zero), and none pulls.
+def given_to(predictor) -> str:
+    """How a scene must be given to ``predictor`` (any object; a :class:`BasePredictor`'s
+    :attr:`~BasePredictor.takes`): ``"pose"`` when it takes no force, else ``"force"``.
     """
+    return "force" if "force" in getattr(predictor, "takes", ("force",)) else "pose"
+
+
+def _impossible(scene: Scene, answer: dict, compression: float) -> list[str]:
+    """Why an answer cannot be true (empty when nothing says so), each reason one clause: skin
+    pushed inward past where the gel buckles (``compression``: the largest inward displacement
+    over the tissue's thickness); for a posed scene, an object that reaches into the skin yet
+    carries no force, or one that pulls.
+    """
+    why = []
+    if compression > tissue.GEL_TRUSTED_COMPRESSION:
+        why.append(
+            f"the skin moves inward {compression:.2f} x the tissue's thickness, past "
+            f"{tissue.GEL_TRUSTED_COMPRESSION:g}, where the gel buckles and the FEM itself gives "
+            "no answer"
+        )
     if scene.pose is None:
-        return ""
+        return why
+    reaction, total = answer["reaction"], float(np.sum(answer["force"]))
+    if reaction < 0:
+        why.append(f"the object pulls on the skin ({reaction:.3g} N)")
+    elif scene.pose.depth > 0 and (total <= 0 or reaction <= 0):
+        why.append(
+            f"the object reaches {1e3 * scene.pose.depth:.2f} mm into the skin yet the answer "
+            "carries no force"
+        )
+    return why
     reaction, total = answer["reaction"], float(np.sum(answer["force"]))
     if reaction < 0:
         return f"the object pulls on the skin ({reaction:.3g} N): no answer to trust"

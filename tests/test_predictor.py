@@ -187,7 +187,11 @@ def test_a_pose_answered_with_no_force_or_a_pull_is_flagged_impossible():
     gap[5] = -0.001
     scene = Scene.posed(part, tissue.constant(part, 0.0075), Pose(gap, [0.0, 0.0, -1.0]))
     with pytest.warns(ImpossibleAnswer, match="reaches 1.00 mm into the skin yet the answer"):
-        assert not _Posing(0.0).predict(scene).info["physical"]
+        info = _Posing(0.0).predict(scene).info
+    assert not info["physical"]
+    assert info["impossible"] == [
+        "the object reaches 1.00 mm into the skin yet the answer carries no force"
+    ]
     with pytest.warns(ImpossibleAnswer, match=r"the object pulls on the skin \(-0.2 N\)"):
         _Posing(-0.2).predict(scene)
     with pytest.raises(ValueError, match="posing answers an object's pose, and scene 0 gives a"):

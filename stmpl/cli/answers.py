@@ -14,8 +14,8 @@ from stmpl.cli.options import phenotype_of
 from stmpl.metrics import sample_metrics
 from stmpl.pipeline.spec import label, predictor_from_spec
 from stmpl.predictor import ImpossibleAnswer, OutsideEnvelope, PredictionFailed
-from stmpl.tissue import GEL_TRUSTED_COMPRESSION
 from stmpl.viz.render import duration
+from stmpl.viz.verdict import impossible
 
 WIDTH = 20
 """Characters of the name column."""
@@ -78,9 +78,7 @@ def answer(scene, specs: list[str], preds: list, strict: bool = False) -> dict:
             out[label(spec)] = d = p.predict(scene)
         if strict and not d.info.get("physical", True):
             raise PredictionFailed(
-                f"{label(spec)} pushes the skin {d.info['max_compression']:.2f} x the tissue's "
-                f"thickness inward, past {GEL_TRUSTED_COMPRESSION:g} where the gel buckles and "
-                "the FEM gives no answer; --strict refuses the answer"
+                f"{label(spec)}: {'; '.join(impossible(d.info))}; --strict refuses the answer"
             )
         _say(label(spec), p, d, first)
     return out
@@ -104,12 +102,8 @@ def _say(name: str, p, d, first: float | None) -> None:
             f"  NOTE: {name} answers outside the data it was trained and checked on: "
             f"{'; '.join(env['outside'])}. Check it with --compare"
         )
-    if not d.info.get("physical", True):
-        print(
-            f"  WARNING: {name} pushes the skin {d.info['max_compression']:.2f} x the tissue's "
-            f"thickness inward, past {GEL_TRUSTED_COMPRESSION:g} where the gel buckles and the "
-            "FEM gives no answer: do not use this answer"
-        )
+    for why in impossible(d.info):
+        print(f"  WARNING: {name}: {why}: do not use this answer")
 
 
 def truth(scene, args, failures: dict | None = None):
@@ -161,6 +155,7 @@ def record(out: dict, fem, failures: dict) -> dict:
             "inside_envelope": env.get("inside", True),
             "outside_because": env.get("outside", []),
             "physical": bool(d.info.get("physical", True)),
+            "impossible_because": impossible(d.info),
         }
         if d.reaction is not None:
             a["reaction_N"] = round(float(d.reaction), 6)

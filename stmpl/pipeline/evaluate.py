@@ -15,8 +15,8 @@ from stmpl.data.format import at_levels
 from stmpl.envelope import breaks_promise
 from stmpl.failures import ImpossibleAnswer
 from stmpl.metrics import honesty, sample_metrics, seam_gap, summarise, table
-from stmpl.pose import GAP_REACH, Pose
-from stmpl.predictor import OutsideEnvelope, PredictionFailed
+from stmpl.pose import Pose, cut
+from stmpl.predictor import OutsideEnvelope, PredictionFailed, given_to
 from stmpl.scene import Scene
 
 
@@ -58,7 +58,7 @@ def _posed_scenes(ds, a: dict, keep, parts, body) -> list[Scene]:
     out = []
     for i in keep:
         params = a["params"][i]
-        pose = Pose(np.minimum(a["gap"][i].astype(float), GAP_REACH), params["direction"])
+        pose = Pose(cut(a["gap"][i].astype(float)), params["direction"])
         meta = {
             "placement": int(a["placement"][i]),
             "total": float(a["total"][i]),
@@ -91,8 +91,7 @@ def evaluate_dataset(
     """
     import torch  # deferred: about a second to import; the core's types do not need it
 
-    given = "pose" if "force" not in getattr(predictor, "takes", ("force",)) else "force"
-    scenes, truth = scenes_of(ds, split, thickness_mm, limit, given)
+    scenes, truth = scenes_of(ds, split, thickness_mm, limit, given_to(predictor))
     if not scenes:
         raise ValueError(f"split {split!r} of {ds.folder} has no samples")
     part = ds.part
@@ -180,7 +179,7 @@ def on_unsolved(predictor, ds, split: str = "test", thickness_mm=None, batch: in
     }
     if not getattr(predictor, "batched", True) or len(keep) == 0:
         return out
-    if "force" not in getattr(predictor, "takes", ("force",)):
+    if given_to(predictor) == "pose":
         return out  # a failed press keeps no pose to ask a pose model about: counted only
     parts = getattr(ds, "parts", [ds.part])
     scenes = [

@@ -33,7 +33,7 @@ from stmpl.failures import ImpossibleAnswer, OutsideEnvelope
 from stmpl.files import atomic_path
 from stmpl.metrics import sample_metrics
 from stmpl.pipeline.evaluate import evaluate_dataset, scenes_of
-from stmpl.pose import GAP_REACH
+from stmpl.pose import cut
 from stmpl.scene import Scene
 
 DEFAULTS = {
@@ -136,7 +136,7 @@ def _split_tensors(ds, split, cfg, device, p=None):
         base = _prior_answers(p, a, keep, torch.as_tensor(a["body"][keep], device=device), device)
     if getattr(p, "posed", False):  # given the pose: answers the displacement and the pressure
         _require_poses(a, cfg)
-        gap = np.minimum(a["gap"], GAP_REACH)
+        gap = cut(a["gap"])
         target = np.concatenate(
             [a["displacement"], a["pressure"][..., None], a["push"][..., None]], -1
         )

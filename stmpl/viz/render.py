@@ -15,6 +15,7 @@ import numpy as np
 
 from stmpl.metrics import sample_metrics
 from stmpl.viz.figures import pyplot, view_basis
+from stmpl.viz.verdict import impossible
 
 
 def refine(triangles: np.ndarray, values: np.ndarray, levels: int = 2):
@@ -163,8 +164,11 @@ def fitted_window(triangles: list, basis: np.ndarray, centre, reach: float):
 def _warning(d) -> str | None:
     """The line a panel adds in red when its answer is impossible or outside its envelope."""
     env = d.info.get("envelope")
-    if not d.info.get("physical", True):
-        return "past where the gel buckles: do not use"
+    why = impossible(d.info)
+    if why:
+        return textwrap.fill(
+            why[0].split(" and the FEM")[0] + ": do not use", 46, break_on_hyphens=False
+        )
     if env and not env["inside"]:
         why = env["outside"][0].split(" (")[0].split(": the nearest")[0]
         return textwrap.fill("outside its envelope: " + why, 46, break_on_hyphens=False)

@@ -7,17 +7,29 @@ from __future__ import annotations
 from stmpl.tissue import GEL_TRUSTED_COMPRESSION
 
 
+def impossible(info: dict) -> list[str]:
+    """Why a :class:`~stmpl.scene.Deformation`'s ``info`` says its answer cannot be true, each
+    reason one clause (empty for a possible answer); an answer saved before the reasons were
+    kept says its compression.
+    """
+    if info.get("physical", True):
+        return []
+    if info.get("impossible"):
+        return list(info["impossible"])
+    c = info.get("max_compression", float("nan"))
+    return [
+        f"the skin moves inward {c:.2f} x the tissue's thickness, past "
+        f"{GEL_TRUSTED_COMPRESSION:g}, where the gel buckles and the FEM itself gives no answer"
+    ]
+
+
 def verdict(info: dict) -> tuple[str, str]:
     """``(kind, words)`` of a :class:`~stmpl.scene.Deformation`'s ``info``: ``impossible``
     (past where the gel buckles), ``outside`` (another model standing in for the chosen one,
     or the envelope's first reasons) or ``inside``.
     """
     if not info.get("physical", True):
-        c = info.get("max_compression", float("nan"))
-        return "impossible", (
-            f"the skin moves in {c:.2f} x the tissue's depth, past {GEL_TRUSTED_COMPRESSION:g} "
-            "where the gel buckles and the FEM gives no answer: do not use"
-        )
+        return "impossible", "; ".join(impossible(info)) + ": do not use"
     stand_in = info.get("stand_in")  # another model's answer while the chosen one prepares
     if stand_in:
         return "outside", (

@@ -180,7 +180,7 @@ def test_predict_says_when_a_scene_lies_outside_the_models_data(capsys, arm):
     assert len(notes) == 2, out
     assert "answers outside the data it was trained and checked on" in notes[0]
     assert "force of a contact 5 N > 0.5 N" in notes[0] and "kPa" in notes[0]
-    assert "past 0.4 where the gel buckles" in notes[1] and "do not use this answer" in notes[1]
+    assert "past 0.4, where the gel buckles" in notes[1] and "do not use this answer" in notes[1]
     assert main(["predict", "--force", "0.3", "--thickness", "7.5"]) == 0
     out = capsys.readouterr().out
     assert "NOTE" not in out and "WARNING" not in out

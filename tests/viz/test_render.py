@@ -67,9 +67,14 @@ def test_contact_figure(tmp_path, arm):
     title = fig.axes[0].get_title()
     assert " ".join(title.split()).endswith("combines its thickness, force, area and pressures")
     assert max(len(line) for line in title.splitlines()) <= 46
-    d.info["physical"] = False
+    d.info["physical"] = False  # an answer saved before the reasons were kept
     fig = contact_figure({"linear": d}, None, [], tmp_path / "c.png")
-    assert "past where the gel buckles" in fig.axes[0].get_title()
+    title = " ".join(fig.axes[0].get_title().split())
+    assert title.endswith("thickness, past 0.4, where the gel buckles: do not use"), title
+    d.info["impossible"] = ["the object pulls on the skin (-0.2 N)"]
+    fig = contact_figure({"linear": d}, None, [], tmp_path / "c.png")
+    title = " ".join(fig.axes[0].get_title().split())
+    assert title.endswith("the object pulls on the skin (-0.2 N): do not use"), title
     with pytest.raises(ValueError, match="no deformations"):
         contact_figure({})
 
