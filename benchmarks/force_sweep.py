@@ -2,16 +2,18 @@
 to 20 N, on the layered arm and belly; how many solves succeed, and why the others fail.
 
     python benchmarks/force_sweep.py [--out runs/force_sweep.jsonl] [--res medium]
-        [--parts arm belly] [--objects disk fingertip grip] [--report] [--redo CASE ...]
+        [--parts arm belly] [--objects disk fingertip grip] [--only CASE ...]
+        [--friction MU] [--report] [--redo CASE ...]
 
 Each case (part, object, placement) is one mesh and one solver; a disk or a fingertip is set
 on the skin at first contact (``fem.shapes.touching``: where the skin is hollow, a flat disk set
 on its middle vertex would start pressed into the skin around it); its forces are met one after
 the other by force control (``fem.force_control.press_to_force``, within 1 %), each from the last
-one's state. Every answer is a line of ``--out``; a case already there is not solved again (the
-run resumes where it stopped). ``--report`` prints the success table and the force-depth curves'
-convexity from that file without solving. Run it alone, or with ``OMP_NUM_THREADS=1`` beside
-other work: the times are wall-clock.
+one's state; ``--friction MU``: with Coulomb's friction between object and skin
+(``fem.friction``; frictionless by default). Every answer is a line of ``--out``; a case
+already there is not solved again (the run resumes where it stopped). ``--report`` prints the
+success table and the force-depth curves' convexity from that file without solving. Run it
+alone, or with ``OMP_NUM_THREADS=1`` beside other work: the times are wall-clock.
 """
 
 from __future__ import annotations
@@ -64,7 +66,7 @@ def cases(parts, objects):
                 yield f"{name}/{obj} at {uv}", name, obj, uv
 
 
-def solve_case(part_name, obj, where, res, body) -> list[dict]:
+def solve_case(part_name, obj, where, res, body, friction: float = 0.0) -> list[dict]:
     """Every force of one case, as records."""
     anny_part, preset, _ = PARTS[part_name]
     part = body.part(anny_part)
@@ -91,7 +93,7 @@ def solve_case(part_name, obj, where, res, body) -> list[dict]:
     out = []
 
     def record(force: float, answer) -> None:
-        rec = dict(force=force, ok=answer.ok, reason=answer.reason)
+        rec = dict(force=force, ok=answer.ok, reason=answer.reason, friction=friction)
         if not answer.reason.startswith("skipped"):
             rec["dofs"] = len(solver.free)
         if answer.ok:
@@ -111,7 +113,7 @@ def solve_case(part_name, obj, where, res, body) -> list[dict]:
                 flush=True,
             )
 
-    press_to_forces(solver, shape, direction, FORCES[obj], record)
+    press_to_forces(solver, shape, direction, FORCES[obj], record, friction=friction)
     for rec in out:
         rec["setup_s"] = setup
     return out
@@ -151,6 +153,10 @@ def main() -> None:
     ap.add_argument("--parts", nargs="+", default=list(PARTS), choices=list(PARTS))
     ap.add_argument("--objects", nargs="+", default=list(FORCES), choices=list(FORCES))
     ap.add_argument("--weight", type=float, default=0.5, help="anny weight phenotype")
+    ap.add_argument("--only", nargs="+", default=[], metavar="CASE", help="solve these cases only")
+    ap.add_argument(
+        "--friction", type=float, default=0.0, help="Coulomb's coefficient (0: frictionless)"
+    )
     ap.add_argument("--report", action="store_true", help="only print the table of --out")
     ap.add_argument(
         "--redo",
@@ -180,11 +186,11 @@ def main() -> None:
     body = AnnyBody(phenotype={"weight": args.weight})
     print(f"force sweep, {args.res} resolution; {describe()}", flush=True)
     for key, part_name, obj, where in cases(args.parts, args.objects):
-        if key in done:
+        if key in done or (args.only and key not in args.only):
             continue
         print(key, flush=True)
         try:
-            records = solve_case(part_name, obj, where, args.res, body)
+            records = solve_case(part_name, obj, where, args.res, body, args.friction)
         except ValueError as e:  # a case that cannot be set up is a failure with its reason
             records = [dict(force=f, ok=False, reason=f"set-up: {e}") for f in FORCES[obj]]
         with path.open("a") as fh:

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from fem.elements import TRI_EDGES
+from fem.friction import Friction, motion
 from fem.shapes import positive, unit
 
 
@@ -195,7 +196,9 @@ class Pressed:
         reaction: the force the object must be pushed with along its direction, N; for a
             mesh closing along a path (a grip), the total contact force.
         total: the sum of the normal contact forces over the skin, N (a grip's squeeze).
-        force: ``(3,)`` the force the skin exerts on the object, N.
+        force: ``(3,)`` the force the skin exerts on the object, N (its friction's part
+            in).
+        friction: ``(3,)`` the friction's part of ``force``, N (zero without friction).
         pressure: ``(N,)`` contact pressure on the part's vertices, Pa.
         push: ``(N,)`` the contact pressure's part along the press direction on the part's
             vertices, Pa: the reaction's density (times the vertices' areas it sums to
@@ -216,6 +219,7 @@ class Pressed:
     reaction: float = float("nan")
     total: float = float("nan")
     force: np.ndarray | None = None
+    friction: np.ndarray | None = None
     pressure: np.ndarray | None = None
     push: np.ndarray | None = None
     area: float = float("nan")
@@ -228,12 +232,15 @@ class Pressed:
     multipliers: np.ndarray | None = field(default=None, repr=False)
 
 
-def _relax(solver, contact, u, tolerance: float, max_updates: int, on_the_way=False) -> dict:
+def _relax(
+    solver, contact, u, tolerance: float, max_updates: int, on_the_way=False, friction=None
+) -> dict:
     """Equilibrium at the contact's current pose, the multipliers updated until the deepest
     penetration is within ``tolerance`` (m) and the pressure the penetration still holds back
-    is within :data:`FORCE_TOLERANCE` of the contact force. ``on_the_way``: a step towards a
-    deeper pose, solved to :data:`STEP_RTOL` with one multiplier update (what it leaves, the
-    next step's solve removes).
+    is within :data:`FORCE_TOLERANCE` of the contact force (and, with ``friction``, until its
+    lagged pressures change by less than that). ``on_the_way``: a step towards a deeper pose,
+    solved to :data:`STEP_RTOL` with one multiplier update (what it leaves, the next step's
+    solve removes).
     """
     iters = 0
     rtol = max(solver.options.rtol, RTOL, STEP_RTOL if on_the_way else 0.0)
@@ -244,6 +251,8 @@ def _relax(solver, contact, u, tolerance: float, max_updates: int, on_the_way=Fa
             return {**res, "iterations": iters, "updates": k}
         u = res["u"]
         gap, left = contact.update(u)
+        if friction is not None:
+            left = max(left, friction.relag())
         if contact.held_inside > tolerance:
             return {
                 "ok": False,
@@ -274,6 +283,7 @@ def press(
     tolerance: float = 2e-3,
     max_updates: int = 20,
     max_step: float = 0.001,
+    friction: float = 0.0,
 ) -> list[Pressed]:
     """Push ``shape`` (placed by its pose) along ``direction`` ``(3,)`` to each of ``depths``
     (m, rising) into ``solver``'s tissue (a :class:`~fem.shapes.Surface` with a path closes
@@ -282,14 +292,18 @@ def press(
     halvings, and the depths after a failure are reported as skipped.
 
     ``stiffness``: the penalty, Pa/m (default :func:`default_stiffness`); ``tolerance``: the
-    deepest penetration allowed, as a share of the depth (default 0.2 %).
+    deepest penetration allowed, as a share of the depth (default 0.2 %); ``friction``: the
+    coefficient of Coulomb's friction between object and skin (:mod:`fem.friction`; 0, the
+    default, is frictionless).
     """
     depths = [float(d) for d in depths]
     if not depths or any(not np.isfinite(d) or d < 0 for d in depths):
         raise ValueError(f"depths must be finite and >= 0 m, got {depths}")
     if any(b <= a for a, b in zip(depths, depths[1:])):
         raise ValueError(f"depths must rise strictly, got {depths}")
-    with Pressing(solver, shape, direction, stiffness, tolerance, max_updates, max_step) as go:
+    with Pressing(
+        solver, shape, direction, stiffness, tolerance, max_updates, max_step, friction
+    ) as go:
         out, last, failed = [], None, None
         for depth in depths:
             if failed is not None:
@@ -305,12 +319,69 @@ def press(
         return out
 
 
+def slide(
+    solver,
+    shape,
+    direction,
+    depth: float,
+    across,
+    distances,
+    friction: float,
+    stiffness: float | None = None,
+    max_updates: int = 20,
+    max_step: float = 0.001,
+) -> list[Pressed]:
+    """Press ``shape`` ``depth`` (m) along ``direction`` ``(3,)``, then draw it along ``across``
+    ``(3,)`` (a tangent: across the skin) by each of ``distances`` (m, rising), each from the
+    last, with Coulomb's ``friction`` (:mod:`fem.friction`). Each answer's ``depth`` is the
+    distance drawn and its ``reaction`` the pull the object needs along ``across`` (N), its
+    ``total`` the normal contact force; the first answer is the press. A failure skips the rest.
+    """
+    distances = [float(d) for d in distances]
+    if not distances or any(not np.isfinite(d) or d <= 0 for d in distances):
+        raise ValueError(f"distances must be finite and > 0 m, got {distances}")
+    if any(b <= a for a, b in zip(distances, distances[1:])):
+        raise ValueError(f"distances must rise strictly, got {distances}")
+    (pressed,) = press(
+        solver, shape, direction, [depth], stiffness, max_updates=max_updates, friction=friction
+    )
+    out = [pressed]
+    if not pressed.ok:
+        return out + [Pressed(False, "skipped: the press failed", d) for d in distances]
+    at = shape.pushed(depth, unit(direction))
+    tolerance = 2e-3 * depth / distances[-1]  # the press's penetration allowed, as a share
+    with Pressing(
+        solver, at, across, stiffness, min(tolerance, 0.5), max_updates, max_step, friction
+    ) as go:
+        last = replace(pressed, depth=0.0)
+        for d in distances:
+            answer = go.to(d, last) if last is not None else None
+            if answer is None or not answer.ok:
+                out.append(answer or Pressed(False, "skipped: a shorter slide failed", d))
+                last = None
+                continue
+            out.append(answer)
+            last = answer
+    return out
+
+
 class Pressing:
-    """A contact on ``solver`` for the length of a ``with`` block; :meth:`to` answers one
-    depth from a former answer's state.
+    """A contact on ``solver`` for the length of a ``with`` block (with Coulomb's friction of
+    coefficient ``friction`` when it is above zero); :meth:`to` answers one depth from a former
+    answer's state.
     """
 
-    def __init__(self, solver, shape, direction, stiffness, tolerance, max_updates, max_step):
+    def __init__(
+        self,
+        solver,
+        shape,
+        direction,
+        stiffness,
+        tolerance,
+        max_updates,
+        max_step,
+        friction: float = 0.0,
+    ):
         if not 0 < tolerance < 1:
             raise ValueError(f"tolerance is a share of the depth in (0, 1), got {tolerance!r}")
         if direction is None and getattr(shape, "path", None) is None:
@@ -319,9 +390,12 @@ class Pressing:
         self.solver, self.shape = solver, shape
         self.options = (tolerance, max_updates, max_step)
         self.contact = Contact(solver, shape, stiffness or default_stiffness(solver))
+        self.friction = Friction(self.contact, friction) if friction else None
 
     def __enter__(self) -> "Pressing":
         self.solver.potentials.append(self.contact)
+        if self.friction is not None:
+            self.solver.potentials.append(self.friction)
         self.kept = self.solver.options
         self.solver.options = replace(
             self.kept,
@@ -331,6 +405,8 @@ class Pressing:
 
     def __exit__(self, *exc) -> None:
         self.solver.potentials.remove(self.contact)
+        if self.friction is not None:
+            self.solver.potentials.remove(self.friction)
         self.solver.options = self.kept
 
     def to(self, depth: float, start: Pressed | None) -> Pressed:
@@ -343,19 +419,42 @@ class Pressing:
         else:
             u, done = start.state, start.depth
             contact.multipliers = start.multipliers.copy()
-        res = _march(solver, contact, self.shape, self.direction, u, done, depth, *self.options)
+        res = _march(
+            solver,
+            contact,
+            self.shape,
+            self.direction,
+            u,
+            done,
+            depth,
+            *self.options,
+            friction=self.friction,
+        )
         if not res["ok"]:
             reason = res["reason"] + f" (residual {res.get('residual', float('nan')):.2e})"
             return Pressed(False, reason, depth, iterations=res["iterations"])
         seconds = time.perf_counter() - t0
-        return _answer(solver, contact, res["u"], depth, self.direction, res, seconds)
+        return _answer(
+            solver, contact, res["u"], depth, self.direction, res, seconds, self.friction
+        )
 
 
 def _march(
-    solver, contact, shape, direction, u, start, depth, tolerance, max_updates, max_step
+    solver,
+    contact,
+    shape,
+    direction,
+    u,
+    start,
+    depth,
+    tolerance,
+    max_updates,
+    max_step,
+    friction=None,
 ) -> dict:
     """From ``u`` at depth ``start`` to ``depth`` (deeper or shallower) in steps of at most
-    ``max_step``, halving the step when one fails.
+    ``max_step``, halving the step when one fails; ``friction`` (a :class:`~fem.friction.
+    Friction`) is lagged at each step's start.
     """
     sign = 1.0 if depth >= start else -1.0
     s, step, iters, updates, substeps, res = start, abs(depth - start), 0, 0, 0, None
@@ -365,7 +464,10 @@ def _march(
         to = depth if last else s + sign * step
         contact.shape = shape.pushed(to, direction)
         keep = contact.multipliers.copy()
-        res = _relax(solver, contact, u, tolerance * to, max_updates, not last)
+        if friction is not None:
+            x = contact.rest + u[contact.nodes]
+            friction.begin(u, motion(shape, direction, x, to - s))
+        res = _relax(solver, contact, u, tolerance * to, max_updates, not last, friction)
         iters += res["iterations"]
         updates += res.get("updates", 0)
         if res["ok"]:
@@ -398,7 +500,7 @@ def _on_vertices(solver, contact, share: np.ndarray) -> np.ndarray:
     return np.asarray(on_part).ravel() / mesh.part.vertex_areas
 
 
-def _answer(solver, contact, u, depth, direction, res, seconds) -> Pressed:
+def _answer(solver, contact, u, depth, direction, res, seconds, friction=None) -> Pressed:
     mesh = solver.mesh
     n = mesh.part.n_vertices
     detF, compression = solver.measures(u)
@@ -407,7 +509,8 @@ def _answer(solver, contact, u, depth, direction, res, seconds) -> Pressed:
     pressure = _on_vertices(solver, contact, nodal)
     along = nodal if direction is None else nodal * (contact._normals @ direction)
     push = _on_vertices(solver, contact, along)  # the reaction's density: sums to it
-    force = contact.force()
+    rubbed = np.zeros(3) if friction is None else friction.force(u)
+    force = contact.force() + rubbed
     total = float(np.sum(contact.weights * contact.multipliers))
     reaction = total if direction is None else float(-force @ direction)
     common = dict(iterations=res["iterations"], updates=res["updates"], time=seconds)
@@ -422,6 +525,7 @@ def _answer(solver, contact, u, depth, direction, res, seconds) -> Pressed:
         reaction=reaction,
         total=total,
         force=force,
+        friction=rubbed,
         pressure=pressure,
         push=push,
         area=float(mesh.part.vertex_areas[pressure > 0].sum()),

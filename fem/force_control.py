@@ -42,6 +42,7 @@ def press_to_force(
     stiffness: float | None = None,
     max_updates: int = 20,
     start: Pressed | None = None,
+    friction: float = 0.0,
 ) -> Pressed:
     """Push ``shape`` along ``direction`` until the reaction is ``force`` (N) within ``rtol``:
     the depth rises from the placed pose, or from ``start`` (an answer of the same object and
@@ -55,7 +56,8 @@ def press_to_force(
     march that stalled there is first tried once more with one step past it), or
     when the force falls as the object goes deeper (a grip slipping). Inside the bracket a failed
     try is replaced by its middle and quarters. A press that runs through the whole tissue
-    fails too.
+    fails too. ``friction``: Coulomb's coefficient between object and skin
+    (:mod:`fem.friction`; each try's answer then depends on the answer it was marched from).
     The answer's ``time`` is the whole search's.
     """
     force = positive(force, "target force")
@@ -65,20 +67,22 @@ def press_to_force(
         raise ValueError(f"start must be an answer that carries less than {force:g} N")
     t0 = time.perf_counter()
     answer = _force_control(
-        solver, shape, direction, force, rtol, step, stiffness, max_updates, start
+        solver, shape, direction, force, rtol, step, stiffness, max_updates, start, friction
     )
     return replace(answer, time=time.perf_counter() - t0)
 
 
-def press_to_forces(solver, shape, direction, forces, on_answer=None) -> list[Pressed]:
+def press_to_forces(
+    solver, shape, direction, forces, on_answer=None, friction: float = 0.0
+) -> list[Pressed]:
     """:func:`press_to_force` to each of ``forces`` (N, rising) in turn, each from the last
     answer; after a failure the rest are failed as skipped. ``on_answer(force, answer)``: called
-    as each ends (a progress report).
+    as each ends (a progress report); ``friction`` as for :func:`press_to_force`.
     """
     out, last, failed = [], None, None
     for f in forces:
         if failed is None:
-            a = press_to_force(solver, shape, direction, float(f), start=last)
+            a = press_to_force(solver, shape, direction, float(f), start=last, friction=friction)
             last, failed = (a, None) if a.ok else (last, f)
         else:
             a = Pressed(False, f"skipped: {failed:g} N failed", float("nan"))
@@ -105,9 +109,11 @@ def _aim(a: Pressed, b: Pressed, force: float) -> float:
     return float(b.depth * (force / b.reaction) ** (1.0 / p))
 
 
-def _force_control(solver, shape, direction, force, rtol, step, stiffness, max_updates, start):
+def _force_control(
+    solver, shape, direction, force, rtol, step, stiffness, max_updates, start, friction
+):
     """:func:`press_to_force`'s search, its arguments checked."""
-    with Pressing(solver, shape, direction, stiffness, 2e-3, max_updates, step) as go:
+    with Pressing(solver, shape, direction, stiffness, 2e-3, max_updates, step, friction) as go:
         got = _bracket(go, force, rtol, step, start)
         return _between(go, force, rtol, *got) if isinstance(got, tuple) else got
 
