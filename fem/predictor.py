@@ -9,6 +9,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fem.contact import press
+from fem.friction import coefficient
 from fem.layers import preset
 from fem.local import simulate_local
 from fem.material import NeoHookean
@@ -50,11 +51,13 @@ class FEMPredictor(BasePredictor):
             grown until the tissue at its cut stays still (:mod:`fem.local`).
         tissue: ``"paper"`` (the gel) or a layered preset of :mod:`fem.layers`, its layers
             shaped by anny's ``phenotype``.
+        friction: Coulomb's coefficient between a posed scene's objects and the skin
+            (:mod:`fem.friction`; 0, the default, is frictionless).
 
     A scene given by a pose (:mod:`stmpl.pose`) is answered by pressing its objects, from first
-    contact, to that pose in frictionless contact with the skin (:func:`fem.contact.press`, on
-    the whole part at either fidelity): the answer carries the contact force on each vertex and
-    the objects' reaction.
+    contact, to that pose (a grip's hand closing along its path) in contact with the skin
+    (:func:`fem.contact.press`, on the whole part at either fidelity): the answer carries the
+    contact force on each vertex and the objects' reaction (a grip's: its squeeze).
 
     A failed solve raises :class:`FEMFailed` (never a displacement). ``Deformation.info`` holds
     the last level's diagnostics and ``levels``, one diagnostics dict per continuation level;
@@ -74,8 +77,10 @@ class FEMPredictor(BasePredictor):
         fidelity: str = "full",
         tissue: str = "paper",
         phenotype: dict | None = None,
+        friction: float = 0.0,
     ):
         self.res = resolution(res)
+        self.friction = coefficient(friction)
         preset(tissue)  # an unknown name is refused here, not at the first scene
         check_order(tissue, self.res)
         self.tissue, self.phenotype = tissue, dict(phenotype or {})
@@ -131,7 +136,7 @@ class FEMPredictor(BasePredictor):
         if depth == 0.0:
             self._last[id(s)] = {"fem": "no contact: the objects do not reach the skin"}
             return {"displacement": np.zeros((n, 3)), "force": np.zeros(n), "reaction": 0.0}
-        near = s.part.vertices[s.pose.near()]  # the mesh is refined round these
+        near = s.part.vertices[_pressed_skin(s.pose)]  # the mesh is refined round these
         try:
             mesh, material = tissue_mesh(
                 s.part, s.thickness, self.res, self.tissue, self.phenotype, near
@@ -141,7 +146,7 @@ class FEMPredictor(BasePredictor):
         if material is None:
             material = self.material if self.material is not None else NeoHookean()
         solver = Solver(mesh, material, options=self.options, order=self.res.order)
-        (a,) = press(solver, shape, s.pose.direction, [depth])
+        (a,) = press(solver, shape, s.pose.direction, [depth], friction=self.friction)
         if not a.ok:
             raise FEMFailed(f"the FEM press failed at {1e3 * depth:.3g} mm deep: {a.reason}")
         self.last_shell = None  # a press keeps no continuation levels
@@ -168,3 +173,14 @@ class FEMPredictor(BasePredictor):
             "tissue": self.tissue,
             **self._last.pop(id(scene), {}),
         }
+
+
+def _pressed_skin(pose) -> np.ndarray:
+    """``(K,)`` the skin vertices a pose presses, where the FEM refines its mesh: near the
+    objects' nearest point, and for a grip within 5 mm of any finger.
+    """
+    if pose.closing:
+        close = np.flatnonzero(pose.gap < 0.005)
+        if len(close):
+            return close
+    return pose.near()

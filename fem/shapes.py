@@ -185,23 +185,27 @@ NEAREST = 8
 they do not settle is checked against every triangle within reach."""
 
 
-def clearance(shape, direction: np.ndarray, points: np.ndarray, tolerance: float = 1e-6) -> float:
-    """How far (m) ``shape`` must move back against ``direction`` ``(3,)`` (the way it presses)
-    for none of ``points`` ``(K, 3)`` (m; the skin around where it presses) to lie inside it:
-    0 if none does. Found by bisection to ``tolerance`` (m).
+def clearance(shape, direction, points: np.ndarray, tolerance: float = 1e-6) -> float:
+    """How far (m) ``shape`` must move back against ``direction`` ``(3,)`` (the way it presses;
+    ``None`` for a :class:`Surface` closing along its path: back along the path) for none of
+    ``points`` ``(K, 3)`` (m; the skin around where it presses) to lie inside it: 0 if none
+    does. Found by bisection to ``tolerance`` (m).
     """
-    d = unit(direction)
+    d = None if direction is None else unit(direction)
     x = np.asarray(points, dtype=float).reshape(-1, 3)
 
     def inside(back: float) -> bool:
-        return bool(shape.moved(-back * d).distance(x)[0].min() < 0.0)
+        at = shape.pushed(-back, None) if d is None else shape.moved(-back * d)
+        return bool(at.distance(x)[0].min() < 0.0)
 
     if len(x) == 0 or not inside(0.0):
         return 0.0
-    hi = float(np.ptp(x @ d)) + tolerance
-    if inside(hi):
-        raise ValueError("the points lie inside the shape however far it moves back")
-    lo = 0.0
+    far = float(np.ptp(x, axis=0).max() if d is None else np.ptp(x @ d)) + tolerance
+    lo, hi = 0.0, min(0.001, far)  # doubled until clear: objects start a few mm in at most
+    while inside(hi):
+        if hi >= far:
+            raise ValueError("the points lie inside the shape however far it moves back")
+        lo, hi = hi, min(2 * hi, far)
     while hi - lo > tolerance:
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if inside(mid) else (lo, mid)
@@ -223,11 +227,18 @@ def skin_near(part, p: np.ndarray, radius: float, k: int = 8) -> np.ndarray:
     (flat) faces sampled on a barycentric grid of ``k`` steps, where the FEM's refined skin puts
     its nodes (the points :func:`touching` keeps clear of).
     """
+    x = skin_points(part, np.arange(len(part.faces)), k)
+    return x[np.linalg.norm(x - p, axis=1) < radius]
+
+
+def skin_points(part, faces: np.ndarray, k: int = 8) -> np.ndarray:
+    """``(K, 3)`` points of a body part's ``faces`` (indices), each sampled on a barycentric grid
+    of ``k`` steps.
+    """
     i, j = np.meshgrid(np.arange(k + 1), np.arange(k + 1))
     keep = i + j <= k
     w = np.column_stack([i[keep], j[keep], k - i[keep] - j[keep]]) / k  # (P, 3)
-    x = np.einsum("pc,fcd->fpd", w, part.vertices[part.faces]).reshape(-1, 3)
-    return x[np.linalg.norm(x - p, axis=1) < radius]
+    return np.einsum("pc,fcd->fpd", w, part.vertices[part.faces[faces]]).reshape(-1, 3)
 
 
 @dataclass(frozen=True, eq=False)

@@ -530,6 +530,15 @@ def _mirrored(scene: Scene, twin) -> Scene:
     if scene.pose is None:
         return Scene(twin, scene.thickness, scene.force, meta=scene.meta)
     pose = scene.pose
-    objects = tuple(Rigid(o.name, o.vertices * MIRROR, o.faces[:, ::-1]) for o in pose.objects)
-    mirrored = Pose(pose.gap, pose.direction * MIRROR, objects)
+    objects = tuple(
+        Rigid(
+            o.name,
+            o.vertices * MIRROR,
+            o.faces[:, ::-1],
+            None if o.path is None else o.path * MIRROR,
+        )
+        for o in pose.objects
+    )
+    direction = None if pose.closing else pose.direction * MIRROR
+    mirrored = Pose(pose.gap, direction, objects)
     return Scene.posed(twin, scene.thickness, mirrored, **scene.meta)

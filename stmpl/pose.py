@@ -23,12 +23,15 @@ not near any contact, and its distance carries no information)."""
 @dataclass(frozen=True, eq=False)
 class Rigid:
     """A rigid object at its pose: ``vertices`` ``(V, 3)`` in the part's body coordinates (m),
-    ``faces`` ``(F, 3)`` with outward normals, and a ``name``.
+    ``faces`` ``(F, 3)`` with outward normals, and a ``name``. ``path`` ``(V, 3)``, optional:
+    how far each vertex moves per metre as the object closes (a hand's grip, whose fingers
+    close each its own way); without it the object presses along its pose's direction.
     """
 
     name: str
     vertices: np.ndarray
     faces: np.ndarray
+    path: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.strip():
@@ -49,6 +52,14 @@ class Rigid:
         f.setflags(write=False)
         object.__setattr__(self, "vertices", v)
         object.__setattr__(self, "faces", f)
+        if self.path is not None:
+            p = np.array(self.path, dtype=float)
+            if p.shape != v.shape or not np.isfinite(p).all():
+                raise ValueError(
+                    f"object {self.name!r}: path must be a finite {v.shape} array (m per m)"
+                )
+            p.setflags(write=False)
+            object.__setattr__(self, "path", p)
 
 
 def cut(gap: np.ndarray) -> np.ndarray:
@@ -65,7 +76,9 @@ class Pose:
     Attributes:
         gap: ``(N,)`` each rest skin vertex's signed distance to the objects, m (negative
             inside one), at most :data:`GAP_REACH`.
-        direction: ``(3,)`` unit vector the objects press along (into the skin).
+        direction: ``(3,)`` unit vector the objects press along (into the skin); ``None``
+            for objects that close each along its own :attr:`Rigid.path` (a grip, whose
+            reaction is the whole contact force: the squeeze).
         objects: the :class:`Rigid` objects at their pose; none where only the gap field is
             known (a dataset's sample: a learned model needs no more, the FEM refuses it).
     """
@@ -86,15 +99,23 @@ class Pose:
                 f"Pose.gap must be cut at {1e3 * GAP_REACH:g} mm (GAP_REACH), got up to "
                 f"{1e3 * g.max():.3g} mm"
             )
-        d = np.asarray(self.direction, dtype=float)
-        n = np.linalg.norm(d) if d.shape == (3,) else np.nan
-        if not (np.isfinite(n) and abs(n - 1) < 1e-6):
-            raise ValueError(f"Pose.direction must be a unit 3-vector, got {d.tolist()}")
         objects = tuple(self.objects)
         if not all(isinstance(o, Rigid) for o in objects):
             raise ValueError("Pose.objects must be Rigid objects")
-        for a in (g, d):
-            a.setflags(write=False)
+        d = None
+        if self.direction is not None:
+            d = np.array(self.direction, dtype=float)
+            n = np.linalg.norm(d) if d.shape == (3,) else np.nan
+            if not (np.isfinite(n) and abs(n - 1) < 1e-6):
+                raise ValueError(f"Pose.direction must be a unit 3-vector, got {d.tolist()}")
+            d.setflags(write=False)
+        elif any(o.path is None for o in objects):
+            lacking = next(o.name for o in objects if o.path is None)
+            raise ValueError(
+                f"Pose.direction is None (objects closing along their paths), and object "
+                f"{lacking!r} has no path"
+            )
+        g.setflags(write=False)
         object.__setattr__(self, "gap", g)
         object.__setattr__(self, "direction", d)
         object.__setattr__(self, "objects", objects)
@@ -123,12 +144,22 @@ class Pose:
         side = "inside" if g < 0 else "outside"
         return f"the skin vertex nearest it {1e3 * abs(g):.2f} mm {side} it at rest"
 
+    @property
+    def closing(self) -> bool:
+        """Whether the objects close along their own paths (a grip) instead of one direction."""
+        return self.direction is None
+
     def arrays(self) -> dict:
-        """The pose as named arrays (for a scene file); :meth:`from_arrays` reads them."""
-        out = {"gap": self.gap, "direction": self.direction}
+        """The pose as named arrays (for a scene file); :meth:`from_arrays` reads them (a
+        closing pose's direction is kept as an empty array).
+        """
+        d = np.zeros(0) if self.direction is None else self.direction
+        out = {"gap": self.gap, "direction": d}
         for k, o in enumerate(self.objects):
             out[f"object{k}/vertices"] = o.vertices
             out[f"object{k}/faces"] = o.faces
+            if o.path is not None:
+                out[f"object{k}/path"] = o.path
         return out
 
     def names(self) -> list[str]:
@@ -137,7 +168,13 @@ class Pose:
     @classmethod
     def from_arrays(cls, arrays: dict, names: list[str]) -> "Pose":
         objects = tuple(
-            Rigid(n, arrays[f"object{k}/vertices"], arrays[f"object{k}/faces"])
+            Rigid(
+                n,
+                arrays[f"object{k}/vertices"],
+                arrays[f"object{k}/faces"],
+                arrays.get(f"object{k}/path"),
+            )
             for k, n in enumerate(names)
         )
-        return cls(arrays["gap"], arrays["direction"], objects)
+        d = np.asarray(arrays["direction"])
+        return cls(arrays["gap"], None if d.size == 0 else d, objects)

@@ -5,12 +5,16 @@ pose, and the gap field a learned model reads, each rest skin vertex's signed di
 >>> scene = posed(arm, thickness, tip, objects.press(arm, tip, uv=(0.5, 0.5), depth=0.002))
 >>> answer = stmpl.predictor.create("fem", tissue="forearm").predict(scene)
 >>> answer.reaction, answer.force          # N, and N on each vertex
+>>> grip = gripped(arm, thickness, depth=0.003, kind="pinch")   # anny's hand closing on it
 """
 
 from __future__ import annotations
 
 import numpy as np
+import trimesh
 
+from stmpl.contact.closing import closed, closing_grip
+from stmpl.contact.hand import Hand
 from stmpl.contact.pressing import check_pose, distance_to_surface, winding_number
 from stmpl.part import BodyPart
 from stmpl.pose import GAP_REACH, Pose, Rigid
@@ -70,3 +74,27 @@ def posed(
     if d.shape != (3,) or not np.isfinite(d).all() or not np.linalg.norm(d) > 0:
         raise ValueError(f"direction must be a finite nonzero 3-vector, got {direction!r}")
     return Scene.posed(part, thickness, Pose(gap, d / np.linalg.norm(d), tuple(rigid)), **meta)
+
+
+def gripped(
+    part: BodyPart,
+    thickness,
+    depth: float,
+    hand: Hand | None = None,
+    along: float = 0.5,
+    around: float = 0.0,
+    kind: str = "whole",
+    **meta,
+) -> Scene:
+    """The scene of anny's ``hand`` (default her right hand) in a ``kind`` of grip round the
+    limb ``part`` (``along``, ``around`` as for :func:`~stmpl.contact.hand.grasp`), closed
+    ``depth`` (m) along its path from first touch (:func:`~stmpl.contact.closing.closing_grip`):
+    a closing pose (its direction ``None``; its answer's reaction is the squeeze, the whole
+    contact force).
+    """
+    if not (np.isfinite(depth) and depth >= 0):
+        raise ValueError(f"a grip's depth must be >= 0 m, got {depth!r}")
+    grip = closed(closing_grip(part, hand or Hand(side="R"), along, around, kind), depth)
+    mesh = trimesh.Trimesh(grip.vertices, grip.faces, process=False)
+    gap = signed_distance(mesh, part.vertices)
+    return Scene.posed(part, thickness, Pose(gap, None, (grip,)), **meta)

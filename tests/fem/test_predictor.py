@@ -131,3 +131,42 @@ def test_a_layered_tissue_in_linear_elements_is_refused():
     with pytest.raises(ValueError, match="lock in linear .* use a resolution of order 2"):
         predictor.create("fem", res="coarse", tissue="forearm")
     assert predictor.create("fem", res="coarse", tissue="paper").tissue == "paper"
+
+
+def test_the_fem_closes_a_grip_given_by_its_pose(tmp_path):
+    """The pinch of anny's hand on a tube given by its pose 2 mm closed
+    (``stmpl.contact.posing.gripped``): the FEM finds the depth along the grip's path and
+    answers as the grip pressed closed as far from its first touch does, its reaction the
+    squeeze; a scene file keeps the pose.
+    """
+    from fem.contact import press
+    from fem.objects import at_pose
+    from fem.shapes import ROUNDING, Surface
+    from fem.simulate import tissue_mesh
+    from fem.solver import Solver
+    from stmpl.contact.closing import closed
+    from stmpl.contact.hand import Hand
+    from stmpl.contact.posing import gripped
+
+    part = tube(radius=0.035, length=0.22, n_around=24, n_along=22)
+    th = tissue.constant(part, 0.0075)
+    res = {"subdivisions": 0, "layers": 2, "refine_radius": 0.02, "order": 1}
+    scene = gripped(part, th, 0.002, Hand(side="R"), along=0.5, kind="pinch")
+    assert scene.pose.closing and scene.pose.objects[0].path is not None
+    shape, depth = at_pose(part, scene.pose)
+    assert depth == pytest.approx(0.002, abs=3e-4)
+    d = predictor.create("fem", res=res).predict(scene)
+    hand = closed(scene.pose.objects[0], -0.002)  # at first touch, as fem.objects.grip sets it
+    closing = Surface(hand.vertices, hand.faces, ROUNDING, hand.path)
+    near = part.vertices[scene.pose.gap < 0.005]
+    mesh, _ = tissue_mesh(part, th, res, "paper", None, near)
+    # the pose's faces, where the FEM's rounded surface presses them to: closed 2 mm less the
+    # rounding from where the unrounded hand first touches
+    (direct,) = press(Solver(mesh, NeoHookean(), order=1), closing, None, [0.002 - ROUNDING])
+    assert direct.ok and d.reaction == pytest.approx(direct.reaction, rel=0.02)
+    assert d.reaction == pytest.approx(d.force.sum(), rel=1e-6)  # a grip's reaction: squeeze
+    scene.save(tmp_path / "grip.npz")
+    back = Scene.read(tmp_path / "grip.npz")
+    assert back.pose.closing and np.array_equal(
+        back.pose.objects[0].path, scene.pose.objects[0].path
+    )

@@ -1,0 +1,83 @@
+"""anny's hand closing on a limb: a grip as a rigid mesh that closes along a path.
+
+The hand is set around the limb as in the paper's grasps (:func:`stmpl.contact.hand.grasp`),
+smoothed by Loop's subdivision (anny's hand has edges of 1.5-11 mm), and closes along a path:
+each vertex on the straight line between the hand set 1 mm and ``reach`` deep, carried back
+until the hand clears the skin. Its pose at a depth ``d`` is that hand closed ``d`` (m) further.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from trimesh.remesh import subdivide_loop
+
+from stmpl.contact.hand import Hand, SkinDistance, grasp
+from stmpl.part import BodyPart
+from stmpl.pose import Rigid
+
+OPEN = 0.01
+"""m: how far back along its path a grip may open to clear the skin."""
+
+
+def closing_grip(
+    part: BodyPart,
+    hand: Hand,
+    along: float = 0.5,
+    around: float = 0.0,
+    kind: str = "whole",
+    reach: float = 0.008,
+    subdivisions: int = 2,
+) -> Rigid:
+    """The ``hand`` of anny set around the limb ``part`` in a ``kind`` of grip (``along`` and
+    ``around`` as for :func:`~stmpl.contact.hand.grasp`), at first touch (its nearest point on
+    the skin) with the :attr:`~stmpl.pose.Rigid.path` it closes along (m per m). ``reach``: how
+    deep (m, in [2, 10) mm) the straight path is drawn to; ``subdivisions``: Loop's, each
+    quartering the hand's edges' length, so that the skin slides over rounded fingers. A hand
+    that cuts into the limb however far it opens (a finger the grasp could not stretch clear)
+    is refused, with the finger's name and depth.
+    """
+    if not (np.isfinite(reach) and 0.002 <= reach < 0.01):
+        raise ValueError(f"reach must lie in [2, 10) mm, got {1e3 * reach:g} mm")
+    first = 0.001
+    near = grasp(part, hand, along, around, kind, depth=first)
+    deep = grasp(part, hand, along, around, kind, depth=reach)
+    # Loop's subdivision is linear in the vertices: the smoothed path is the path smoothed
+    closer, faces = subdivide_loop(near.vertices, near.faces, iterations=subdivisions)
+    path, _ = subdivide_loop(
+        (deep.vertices - near.vertices) / (reach - first), near.faces, iterations=subdivisions
+    )
+    skin = SkinDistance(part)
+
+    def clearance(back: float) -> np.ndarray:
+        return skin(closer - back * path)
+
+    lo, hi = 0.0, None
+    for back in np.arange(0.0, OPEN + 1e-9, 0.0005):
+        if clearance(back).min() >= 0:
+            hi = back
+            break
+        lo = back
+    if hi is None:
+        d = clearance(OPEN)
+        worst = int(np.argmin(d))
+        j = int(np.argmin(np.linalg.norm(near.vertices - closer[worst], axis=1)))
+        finger = next((f for f, ids in hand.finger_of.items() if j in ids), "palm")
+        raise ValueError(
+            f"the hand's {finger} lies {-1e3 * d[worst]:.1f} mm inside the skin however far the "
+            f"{kind} grip opens (at {along:g} along, {around:g} around): choose another place "
+            "or grip"
+        )
+    if hi > 0:
+        for _ in range(20):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if clearance(mid).min() < 0 else (lo, mid)
+    return Rigid(f"hand ({kind} grip)", closer - hi * path, faces, path)
+
+
+def closed(grip: Rigid, depth: float) -> Rigid:
+    """``grip`` closed ``depth`` (m) along its path."""
+    if grip.path is None:
+        raise ValueError(f"object {grip.name!r} has no path to close along")
+    if not np.isfinite(depth):
+        raise ValueError(f"a grip's depth must be finite (m), got {depth!r}")
+    return Rigid(grip.name, grip.vertices + depth * grip.path, grip.faces, grip.path)
