@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 from trimesh.remesh import subdivide_loop
 
+from stmpl.contact.grips import GRIPS
 from stmpl.contact.hand import Hand, SkinDistance, grasp
 from stmpl.part import BodyPart
 from stmpl.pose import Rigid
@@ -31,7 +32,10 @@ def closing_grip(
     """The ``hand`` of anny set around the limb ``part`` in a ``kind`` of grip (``along`` and
     ``around`` as for :func:`~stmpl.contact.hand.grasp`), at first touch (its nearest point on
     the skin) with the :attr:`~stmpl.pose.Rigid.path` it closes along (m per m). ``reach``: how
-    deep (m, in [2, 10) mm) the straight path is drawn to; ``subdivisions``: Loop's, each
+    deep (m, in [2, 10) mm) the straight path is drawn to, or less where a finger of the grip
+    cannot curl that deep (its joints run out: the tripod's middle finger on anny's left arm
+    reaches 4 mm, and set 5 mm deep it stayed open 20 mm off the skin, so that a path drawn
+    to it drew the finger back out of the limb); ``subdivisions``: Loop's, each
     quartering the hand's edges' length, so that the skin slides over rounded fingers. A hand
     that cuts into the limb however far it opens (a finger the grasp could not stretch clear)
     is refused, with the finger's name and depth.
@@ -40,7 +44,8 @@ def closing_grip(
         raise ValueError(f"reach must lie in [2, 10) mm, got {1e3 * reach:g} mm")
     first = 0.001
     near = grasp(part, hand, along, around, kind, depth=first)
-    deep = grasp(part, hand, along, around, kind, depth=reach)
+    deep = _deepest(part, hand, along, around, kind, reach)
+    reach = deep.depth
     # Loop's subdivision is linear in the vertices: the smoothed path is the path smoothed
     closer, faces = subdivide_loop(near.vertices, near.faces, iterations=subdivisions)
     path, _ = subdivide_loop(
@@ -81,3 +86,21 @@ def closed(grip: Rigid, depth: float) -> Rigid:
     if not np.isfinite(depth):
         raise ValueError(f"a grip's depth must be finite (m), got {depth!r}")
     return Rigid(grip.name, grip.vertices + depth * grip.path, grip.faces, grip.path)
+
+
+def _deepest(part, hand, along, around, kind, reach):
+    """The grasp ``reach`` (m) deep, or the deepest in 1 mm steps down to 2 mm at which every
+    finger of the grip reaches its depth; none: refused, naming the finger that does not.
+    """
+    depth = reach
+    while True:
+        g = grasp(part, hand, along, around, kind, depth=depth)
+        short = [f for f in GRIPS[kind] if f not in g.reached]
+        if not short:
+            return g
+        if depth - 0.001 < 0.002 - 1e-12:
+            raise ValueError(
+                f"the {kind} grip's {short[0]} cannot curl 2 mm into the limb at {along:g} "
+                f"along, {around:g} around: choose another place or grip"
+            )
+        depth -= 0.001
