@@ -9,7 +9,7 @@ from stmpl.contact.hand import Hand, SkinDistance
 
 
 def test_every_finger_of_a_tripod_grip_closes_into_the_limb(arm):
-    """anny's tripod on her left arm: its middle finger cannot curl more than 4 mm into the
+    """Anny's tripod on her left arm: its middle finger cannot curl more than 4 mm into the
     forearm, so the path is drawn to that depth, and along it each of the three fingers goes
     steadily deeper (a path drawn to 8 mm drew the middle finger back out from 3 mm on).
     """
