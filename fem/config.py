@@ -42,8 +42,15 @@ DEFAULTS = {
     "parallel": {"backend": "processes", "workers": 2, "scheduler": None},
     "linear": False,
     "bodies": None,
+    "friction": 0.0,
 }
-OPTIONAL = {"fidelity": "full", "linear": False, "bodies": None, "tissue": "paper"}
+OPTIONAL = {
+    "fidelity": "full",
+    "linear": False,
+    "bodies": None,
+    "tissue": "paper",
+    "friction": 0.0,
+}
 """Keys whose default leaves a config's hash as it was before the key existed."""
 """``bodies``: ``phenotypes`` (a list of anny phenotypes), ``sample`` (``{count, seed, age}``:
 that many drawn from anny's shape distribution, adults of ``age`` [lo, hi] years), or for an
@@ -61,6 +68,7 @@ PLACEMENT_KEYS = {
     "palm": {"uv", "spins", "hand_heights", "depth"},
     "press_disk": {"centres", "radii", "rounding"},
     "press_sphere": {"centres", "radii"},
+    "press_grip": {"along", "around", "grips"},
 }
 PLACEMENT_VALUES = {
     "centres": "count",
@@ -150,6 +158,12 @@ def check(cfg: dict) -> None:
         raise ValueError(
             f"fidelity {cfg['fidelity']}: {', '.join(presses)} are solved on the whole part "
             "(fidelity: full)"
+        )
+    checked.number(cfg["friction"], "friction", 0, unit="(Coulomb's coefficient, fem.friction)")
+    if cfg["friction"] and not presses:
+        raise ValueError(
+            f"friction {cfg['friction']:g}: only pressed objects ({', '.join(PRESSES)}) rub on "
+            "the skin; the config has none"
         )
     if presses and cfg["linear"]:
         raise ValueError(f"linear: {', '.join(presses)} have no linear FEM answer (linear: false)")

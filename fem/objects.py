@@ -86,13 +86,18 @@ def grip(
     return Surface(g.vertices, g.faces, rounding, path=g.path, name=g.name)
 
 
-def placed(part: BodyPart, kind: str, params: dict):
+def placed(part: BodyPart, kind: str, params: dict, hand: Hand | None = None):
     """``(shape, direction (3,))``: the rigid object of a press placement (``kind`` one of
     :data:`PRESSES`, ``params`` its ``at``, ``radius`` and for a disk ``rounding``) over vertex
     ``at`` of ``part``, facing along the inward normal there, moved back to first contact with
     the skin around it (:func:`fem.shapes.touching`): depth 0 touches, depth ``d`` presses
-    ``d`` (m) in.
+    ``d`` (m) in. A ``press_grip`` (``params`` its ``grip``, ``along`` and ``around``): anny's
+    ``hand`` (default her right hand) closing from first touch, direction ``None``.
     """
+    if kind == "press_grip":
+        hand = hand if hand is not None else Hand(side="R")
+        shape = grip(part, hand, params["along"], params["around"], params["grip"])
+        return shape, None
     at, radius = int(params["at"]), float(params["radius"])
     p, n = part.vertices[at], part.normals[at]
     if kind == "press_disk":

@@ -18,6 +18,9 @@ from stmpl.body.spec import part_from_spec
 from stmpl.contact.hand import Hand, grasp, palm_press
 from stmpl.part import BodyPart
 
+CENTRED = ("press_disk", "press_sphere")
+"""The presses placed at a vertex (their centres spread over the part, clear of its rims)."""
+
 
 def farthest_points(part: BodyPart, count: int, clearance: float = 0.0) -> np.ndarray:
     """``count`` vertex indices spread evenly over the part (farthest-point sampling from the
@@ -61,8 +64,8 @@ def placements(cfg: dict, part: BodyPart) -> list[dict]:
     out = []
     for kind in sorted(cfg["placements"]):  # canonical order: a YAML round trip keeps task ids
         spec = cfg["placements"][kind]
-        if kind in ("disk", "ellipse", "spots", *PRESSES):
-            away = press_clearance(spec, cfg["thickness_mm"]) if kind in PRESSES else 0.0
+        if kind in ("disk", "ellipse", "spots", *CENTRED):
+            away = press_clearance(spec, cfg["thickness_mm"]) if kind in CENTRED else 0.0
             centres = [int(v) for v in farthest_points(part, int(spec.get("centres", 8)), away)]
         if kind == "disk":
             out += [
@@ -70,7 +73,14 @@ def placements(cfg: dict, part: BodyPart) -> list[dict]:
                 for c in centres
                 for r in spec.get("radii", [0.02])
             ]
-        elif kind in PRESSES:
+        elif kind == "press_grip":
+            out += [
+                {"kind": kind, "params": {"along": float(a), "around": float(r), "grip": str(g)}}
+                for a in spec.get("along", [0.5])
+                for r in spec.get("around", [0.0])
+                for g in spec.get("grips", ["whole"])
+            ]
+        elif kind in CENTRED:
             rounding = {}
             if kind == "press_disk":
                 rounding = {"rounding": float(spec.get("rounding", 0.0))}
@@ -174,12 +184,12 @@ def make_load(part: BodyPart, placement: dict, total: float = 1.0):
     disk of its radius where it first touches); names the placement if it is impossible.
     """
     params = dict(placement["params"])
+    if placement["kind"] in HANDS:  # the touched vertices were found by plan()
+        return loads.from_vertices(part, placement["touched"], total, placement["kind"], params)
     if placement["kind"] in PRESSES:  # the object's footprint: where it presses at first
         params.pop("rounding", None)
         params["at"] = int(params["at"])
         return loads.disk(part, total=total, **params)
-    if placement["kind"] in HANDS:  # the touched vertices were found by plan()
-        return loads.from_vertices(part, placement["touched"], total, placement["kind"], params)
     if "uv" in params:
         params["uv"] = tuple(params["uv"])
     try:
@@ -279,9 +289,20 @@ def palm_contact(part: BodyPart, params: dict, hands: dict) -> list[int]:
     return [int(v) for v in contact.contact(part, p).vertices]
 
 
+def grip_contact(part: BodyPart, params: dict, hands: dict) -> list[int]:
+    """The footprint of anny's right hand closing in a grip (a ``press_grip``): the vertices the
+    grip touches set 2 mm deep; ``ValueError`` when it touches none.
+    """
+    if "grip" not in hands:
+        hands["grip"] = Hand(side="R")
+    g = grasp(part, hands["grip"], params["along"], params["around"], params["grip"], 0.002)
+    return [int(v) for v in contact.contact(part, g.pressing(1.0)).vertices]
+
+
 HANDS = {
     "grasp": lambda part, params, hands: grasp_contact(part, params, hands),
     "palm": lambda part, params, hands: palm_contact(part, params, hands),
+    "press_grip": lambda part, params, hands: grip_contact(part, params, hands),
 }
 """Placement kinds whose load is the skin anny's hand touches, found once in :func:`plan`
 (looked up at call time, so a test can stand in for the hand)."""

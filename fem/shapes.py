@@ -168,10 +168,11 @@ class Box(Centred):
         return phi, g @ self.rotation.T, None
 
 
-PRESSES = ("press_disk", "press_sphere")
+PRESSES = ("press_disk", "press_sphere", "press_grip")
 """A dataset's placement kinds that press a rigid object into the tissue: a flat disk (its rim
 rounded by ``rounding``, m) face-on, and a ball (a fingertip), each of ``radius`` (m) at vertex
-``at`` of the part, pushed along the inward normal there."""
+``at`` of the part, pushed along the inward normal there; and anny's right hand closing in a
+``grip`` round the limb at ``along`` and ``around`` (:func:`fem.objects.grip`)."""
 
 ROUNDING = 5e-4
 """m: the default rounding of a :class:`Surface` (its faces offset outward by half a mm)."""

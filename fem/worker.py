@@ -12,6 +12,7 @@ import time
 from dataclasses import dataclass, field
 
 import numpy as np
+import trimesh
 
 from fem.compliance import local_compliance
 from fem.force_control import press_to_forces
@@ -22,6 +23,8 @@ from fem.placements import Plan, make_load
 from fem.shapes import PRESSES
 from fem.simulate import resolution, simulate, tissue_mesh
 from fem.solver import Solver, SolverOptions
+from stmpl.contact.hand import SkinDistance
+from stmpl.contact.posing import signed_distance
 from stmpl.data.format import DOUBLES, FLOATS, INTS, STRINGS
 from stmpl.part import BodyPart
 
@@ -185,14 +188,16 @@ def _press(shard: _Shard, t: _Task) -> None:
     to the object at its answer's pose, negative where the object reaches into the rest skin:
     the pose as the part sees it) and in ``params`` the object, its depth and its reaction. A level
     that fails is a failure with its reason (its input: the object's footprint carrying the
-    force), and the levels after it are failures as skipped.
+    force), and the levels after it are failures as skipped. A grip (``press_grip``) closes
+    along its path: its force and reaction are the squeeze, its ``push`` its pressure, and its
+    ``direction`` ``None``. The config's ``friction`` is Coulomb's between object and skin.
     """
     cfg, part = shard.cfg, shard.part
     load = make_load(part, t.spec)
     thickness = np.full(part.n_vertices, t.thickness_mm * 1e-3)
     try:
         shape, direction = placed(part, t.spec["kind"], t.spec["params"])
-        near = part.vertices[[int(t.spec["params"]["at"])]]
+        near = _pressed_at(part, shape, t.spec)
         mesh, mat = tissue_mesh(
             part, thickness, cfg["resolution"], shard.tissue, shard.phenotype, near=near
         )
@@ -210,21 +215,40 @@ def _press(shard: _Shard, t: _Task) -> None:
         posed = shape.pushed(a.depth, direction)
         shard.rec["pressure"].append(a.pressure.astype(np.float32))
         shard.rec["push"].append(a.push.astype(np.float32))
-        shard.rec["gap"].append(posed.distance(part.vertices)[0].astype(np.float32))
-        params = {
-            **t.spec["params"],
-            "depth": a.depth,
-            "reaction": a.reaction,
-            "direction": direction.tolist(),
-            "centre": posed.centre.tolist(),
-        }
+        shard.rec["gap"].append(_gap(part, posed).astype(np.float32))
+        params = {**t.spec["params"], "depth": a.depth, "reaction": a.reaction}
+        if direction is None:  # a grip closes along its path
+            params["direction"] = None
+        else:
+            params.update(direction=direction.tolist(), centre=posed.centre.tolist())
         # force control answers within its force tolerance: no Newton residual of its own
         diagnostics = (a.iterations, float("nan"), a.time, a.min_det_F, a.compression)
         shard.add(
             t, thickness, a.pressure * part.vertex_areas, a.displacement, f, params, diagnostics
         )
 
-    press_to_forces(solver, shape, direction, shard.forces, record)
+    press_to_forces(solver, shape, direction, shard.forces, record, friction=cfg["friction"])
+
+
+def _pressed_at(part, shape, spec: dict) -> np.ndarray:
+    """``(K, 3)`` where a press presses, round which the FEM refines its mesh: the vertex it is
+    set on; a grip's hand vertices inside the skin once closed 5 mm.
+    """
+    if spec["kind"] != "press_grip":
+        return part.vertices[[int(spec["params"]["at"])]]
+    closed = shape.pushed(0.005, None).vertices
+    return closed[SkinDistance(part)(closed) < 0]
+
+
+def _gap(part, posed) -> np.ndarray:
+    """``(N,)`` each rest skin vertex's signed distance to a posed object (m): the exact
+    distance of a disk or a ball, uncut; a hand's (a mesh) as a scene's pose has it, cut at
+    :data:`~stmpl.pose.GAP_REACH`.
+    """
+    if getattr(posed, "path", None) is None:
+        return posed.distance(part.vertices)[0]
+    mesh = trimesh.Trimesh(posed.vertices, posed.faces, process=False)
+    return signed_distance(mesh, part.vertices)
 
 
 def _failure(failures: list, failed: dict, where: tuple, thickness, force, total, reason) -> None:

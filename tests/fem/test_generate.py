@@ -411,6 +411,45 @@ def test_a_dataset_of_pressed_objects_holds_force_controlled_answers(tiny_presse
     np.testing.assert_allclose(a["displacement"][sphere], alone.displacement, atol=1e-7)
 
 
+def test_a_dataset_of_grips_holds_the_hand_s_squeeze_and_pose(tmp_path):
+    """``press_grip``: anny's pinch closing on a tube by force control, with Coulomb's friction.
+    Its sample's force is the squeeze (the contact forces summed, within force control's 1 %),
+    its push the pressure itself, its pose the rest skin's distance to the hand (cut as a
+    scene's is) with no direction; a scene made from it is a closing pose; a friction the config
+    cannot use is refused by name.
+    """
+    from stmpl.pipeline.evaluate import scenes_of
+    from stmpl.pose import GAP_REACH
+
+    body = {"model": "tube", "radius": 0.035, "length": 0.22, "n_around": 24, "n_along": 22}
+    cfg = _cfg(
+        body=body,
+        thickness_mm=[7.5],
+        forces=[0.05],
+        resolution={"subdivisions": 0, "layers": 2, "refine_radius": 0.02, "order": 1},
+        placements={"press_grip": {"along": [0.5], "grips": ["pinch"]}},
+        splits=[0.0, 0.0, 1.0],
+        friction=0.5,
+    )
+    generate(cfg, tmp_path / "grips", progress=False)
+    ds = Dataset(tmp_path / "grips")
+    assert ds.card["samples"] == 1, ds.card["failures_by_reason"]
+    assert ds.card["config"]["friction"] == 0.5
+    a = ds.arrays()
+    params = a["params"][0]
+    assert params["grip"] == "pinch" and params["direction"] is None and params["depth"] > 0
+    assert params["reaction"] == pytest.approx(0.05, rel=0.011)
+    assert a["force"][0].sum() == pytest.approx(params["reaction"], rel=1e-5)
+    np.testing.assert_allclose(a["push"][0], a["pressure"][0])
+    assert a["gap"][0].min() < 0 and a["gap"][0].max() == pytest.approx(GAP_REACH)
+    (scene,), _ = scenes_of(ds, "test", given="pose")
+    assert scene.pose.closing and not scene.pose.objects
+    with pytest.raises(ValueError, match="only pressed objects"):
+        read_config(_cfg(friction=0.5))
+    with pytest.raises(ValueError, match="friction must be a number >= 0"):
+        read_config(_cfg(placements={"press_grip": {"along": [0.5]}}, friction=-1))
+
+
 def test_pressed_objects_keep_clear_of_the_held_rims():
     """A press's centre keeps its radius plus twice the deepest tissue from the part's cut
     rims (held in place by the FEM), and a part too small for the centres asked is refused.
