@@ -10,12 +10,14 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+import trimesh
 
 import stmpl.contact.pressing as contact
 from fem.shapes import PRESSES
 from stmpl import loads
 from stmpl.body.spec import part_from_spec
 from stmpl.contact.hand import Hand, grasp, palm_press
+from stmpl.contact.posing import signed_distance
 from stmpl.part import BodyPart
 
 CENTRED = ("press_disk", "press_sphere")
@@ -290,13 +292,18 @@ def palm_contact(part: BodyPart, params: dict, hands: dict) -> list[int]:
 
 
 def grip_contact(part: BodyPart, params: dict, hands: dict) -> list[int]:
-    """The footprint of anny's right hand closing in a grip (a ``press_grip``): the vertices the
-    grip touches set 2 mm deep; ``ValueError`` when it touches none.
+    """The footprint of anny's right hand closing in a grip (a ``press_grip``): the vertices
+    within 5 mm of the grip set 2 mm deep (its fingers may press between the vertices of a
+    coarse part); ``ValueError`` when none is.
     """
     if "grip" not in hands:
         hands["grip"] = Hand(side="R")
     g = grasp(part, hands["grip"], params["along"], params["around"], params["grip"], 0.002)
-    return [int(v) for v in contact.contact(part, g.pressing(1.0)).vertices]
+    mesh = trimesh.Trimesh(g.vertices, g.faces, process=False)
+    near = np.flatnonzero(signed_distance(mesh, part.vertices) < 0.005)
+    if not len(near):
+        raise ValueError("no contact: the grip comes within 5 mm of no vertex")
+    return [int(v) for v in near]
 
 
 HANDS = {
