@@ -9,6 +9,7 @@ PLY) and a picture, and prints each method's time.
 >>> stmpl simulate --weight 0.9 --muscle 0.2 --part right_arm  # another body, its right arm
 >>> stmpl simulate --object tool.stl --at 0.45 0.5 --depth 3
 >>> stmpl simulate --sphere 8 --depth 3 --given pose --model fem --tissue forearm --res medium
+>>> stmpl simulate --grip pinch --depth 2 --given pose --model fem --tissue forearm --res medium
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ import pathlib
 import time
 
 import numpy as np
+import trimesh
 
 import stmpl.contact.pressing as contact
 from stmpl.body.spec import part_from_spec
@@ -26,7 +28,7 @@ from stmpl.cli.arguments import FORCE_N, default_model
 from stmpl.cli.options import phenotype_of, thickness_of
 from stmpl.contact import objects
 from stmpl.contact.hand import Hand, cached_grasp, palm_press
-from stmpl.contact.posing import posed
+from stmpl.contact.posing import gripped, posed
 from stmpl.files import atomic_write_text
 from stmpl.scene import Scene
 from stmpl.viz.figures import export_mesh, mesh_bytes, vertex_colors
@@ -53,10 +55,10 @@ def pressings(args, part) -> list:
         raise ValueError(f"choose one object, got {', '.join('--' + k for k in chosen)}")
     if args.pose is not None and chosen[:1] not in (["object"], ["sphere"], ["letters"]):
         raise ValueError("--pose places an --object, --sphere or --letters")
-    if args.given == "pose" and chosen[:1] not in (["object"], ["sphere"], ["letters"]):
+    if args.given == "pose" and (args.strap or (not chosen and part.axis is None)):
         raise ValueError(
-            "--given pose presses an --object, --sphere or --letters where it is put (a hand's "
-            "grasp or a strap closes along a path, not to a pose)"
+            "--given pose presses an --object, --sphere or --letters where it is put, or closes "
+            "the hand's grasp round a limb (a strap or the open hand has no pose to press to)"
         )
     if args.given == "pose" and args.force != FORCE_N:
         raise ValueError("--given pose answers the force: leave --force out")
@@ -106,6 +108,12 @@ def pressings(args, part) -> list:
     return [g.pressing(args.force, f"right hand ({kind})")]
 
 
+def grasping(args, part) -> bool:
+    """Whether the options grasp the limb with anny's hand (no object, strap or open hand)."""
+    chosen = any(getattr(args, k) is not None for k in ("object", "sphere", "letters"))
+    return not chosen and not args.strap and part.axis is not None
+
+
 def run(args) -> int:
     """``stmpl simulate``: build the scene, predict, compare, write and print."""
     t0 = time.perf_counter()
@@ -117,7 +125,18 @@ def run(args) -> int:
     )
     objs = pressings(args, part)
     thick = thickness_of(args, part)
-    if args.given == "pose":
+    drawn = [o.posed() for o in objs]
+    if args.given == "pose" and grasping(args, part):
+        kind = args.grip or "whole"
+        hand = Hand(phenotype={"height": args.hand_height}, side="R")
+        scene = gripped(part, thick, args.depth * 1e-3, hand, args.along, args.around, kind)
+        grip = scene.pose.objects[0]
+        drawn = [trimesh.Trimesh(grip.vertices, grip.faces, process=False)]
+        said = (
+            f"right hand ({kind}) closed {args.depth:g} mm from first touch, "
+            f"{scene.pose.nearest()} (the squeeze it meets is answered)"
+        )
+    elif args.given == "pose":
         scene = posed(part, thick, [(o.mesh, o.pose, o.name) for o in objs])
         said = (
             f"{objs[0].name} at its pose, {scene.pose.nearest()} (the force it meets is answered)"
@@ -138,8 +157,8 @@ def run(args) -> int:
     folder = pathlib.Path(args.out_dir)
     folder.mkdir(parents=True, exist_ok=True)
     name, first = next(iter(out.items()))
-    write_meshes(first, [o.posed() for o in objs], folder / "pressed", facts(first, name))
-    contact_figure(out, fem, [o.posed() for o in objs], folder / "simulate.png", failed=failures)
+    write_meshes(first, drawn, folder / "pressed", facts(first, name))
+    contact_figure(out, fem, drawn, folder / "simulate.png", failed=failures)
     atomic_write_text(
         folder / "simulate.json", json.dumps(answers.record(out, fem, failures), indent=1)
     )

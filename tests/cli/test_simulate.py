@@ -68,7 +68,7 @@ def test_letters_against_the_fem(tmp_path, capsys, arm):
         (["--object", ""], "--object needs a mesh file's path"),
         (["--sphere", "8", "--grip", "pinch"], "--grip chooses how the hand grasps a limb"),
         (["--part", "belly", "--grip", "pinch"], "the belly has no limb to grasp"),
-        (["--given", "pose"], "--given pose presses an --object, --sphere or --letters"),
+        (["--given", "pose", "--part", "belly"], "the open hand has no pose to press to"),
         (["--sphere", "8", "--given", "pose", "--force", "2"], "leave --force out"),
         (["--sphere", "8", "--given", "pose"], "gnn answers a force given on the skin"),
     ],
@@ -239,3 +239,23 @@ def test_a_fingertip_given_by_its_pose_answers_the_force_it_meets(tmp_path, caps
         reaction, rel=1e-2
     )
     assert (tmp_path / "simulate.png").stat().st_size > 10_000
+
+
+def test_a_grasp_given_by_its_pose_answers_the_squeeze(tmp_path, capsys, arm):
+    """``--given pose`` with the hand's grasp: the pinch closes 2 mm from first touch and the
+    FEM answers the dent and the squeeze it meets (printed and in simulate.json); a strap has
+    no pose to press to.
+    """
+    argv = ["simulate", "--grip", "pinch", "--along", "0.6", "--depth", "2", "--given", "pose"]
+    argv += ["--model", "fem", "--res", "coarse", "--subdivide", "0", "--out-dir", str(tmp_path)]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "right hand (pinch) closed 2 mm from first touch" in out
+    line = next(ln for ln in out.splitlines() if ln.startswith("fem"))
+    reaction = float(line.split("reaction ")[1].split(" N")[0])
+    record = json.loads((tmp_path / "simulate.json").read_text())
+    assert reaction > 0 and record["answers"]["fem"]["reaction_N"] == pytest.approx(
+        reaction, rel=1e-2
+    )
+    assert main(["simulate", "--strap", "--given", "pose", "--out-dir", str(tmp_path)]) == 2
+    assert "a strap or the open hand has no pose" in capsys.readouterr().err
