@@ -27,6 +27,7 @@ from stmpl.cli import answers
 from stmpl.cli.arguments import FORCE_N, default_model
 from stmpl.cli.options import phenotype_of, thickness_of
 from stmpl.contact import objects
+from stmpl.contact.grips import GRIPS
 from stmpl.contact.hand import Hand, cached_grasp, palm_press
 from stmpl.contact.posing import gripped, posed
 from stmpl.files import atomic_write_text
@@ -105,6 +106,13 @@ def pressings(args, part) -> list:
         ]
     kind = args.grip or "whole"
     g = cached_grasp(part, hand, args.along, args.around, kind, args.depth * mm)
+    short = [f if f == "thumb" else f"{f} finger" for f in GRIPS[kind] if f not in g.reached]
+    if short:
+        print(
+            f"note: the {kind} grip's {' and '.join(short)} cannot curl {args.depth:g} mm into "
+            f"the limb at {args.along:g} along: {'they carry' if len(short) > 1 else 'it carries'}"
+            " only what it touches (try another --along or --grip)"
+        )
     return [g.pressing(args.force, f"right hand ({kind})")]
 
 

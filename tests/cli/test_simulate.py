@@ -259,3 +259,14 @@ def test_a_grasp_given_by_its_pose_answers_the_squeeze(tmp_path, capsys, arm):
     )
     assert main(["simulate", "--strap", "--given", "pose", "--out-dir", str(tmp_path)]) == 2
     assert "a strap or the open hand has no pose" in capsys.readouterr().err
+
+
+def test_a_finger_that_cannot_curl_as_deep_is_said(tmp_path, capsys, arm):
+    """The tripod 6 mm deep at 0.45 along anny's left arm: its middle finger cannot curl that
+    far, and the run says so instead of sharing the force over two fingers unsaid.
+    """
+    argv = ["simulate", "--grip", "tripod", "--along", "0.45", "--depth", "6"]
+    argv += ["--out-dir", str(tmp_path)]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "note: the tripod grip's middle finger cannot curl 6 mm into the limb" in out
