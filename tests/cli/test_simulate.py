@@ -222,6 +222,15 @@ def test_the_belly_under_an_open_hand(tmp_path, capsys):
     assert (tmp_path / "simulate.png").is_file()
 
 
+def _reaction_said_and_kept(out: str, folder) -> None:
+    """The FEM's line gives a reaction above zero, and simulate.json keeps the same."""
+    line = next(ln for ln in out.splitlines() if ln.startswith("fem"))
+    reaction = float(line.split("reaction ")[1].split(" N")[0])
+    record = json.loads((folder / "simulate.json").read_text())
+    assert reaction > 0
+    assert record["answers"]["fem"]["reaction_N"] == pytest.approx(reaction, rel=1e-2)
+
+
 def test_a_fingertip_given_by_its_pose_answers_the_force_it_meets(tmp_path, capsys, arm):
     """``--given pose``: the ball stays where --depth puts it and the FEM answers the dent and
     the force: printed, in the picture's panel, in the meshes' notes and in simulate.json.
@@ -232,12 +241,7 @@ def test_a_fingertip_given_by_its_pose_answers_the_force_it_meets(tmp_path, caps
     out = capsys.readouterr().out
     assert "at its pose, the skin vertex nearest it" in out
     assert "(the force it meets is answered)" in out
-    line = next(ln for ln in out.splitlines() if ln.startswith("fem"))
-    reaction = float(line.split("reaction ")[1].split(" N")[0])
-    record = json.loads((tmp_path / "simulate.json").read_text())
-    assert reaction > 0 and record["answers"]["fem"]["reaction_N"] == pytest.approx(
-        reaction, rel=1e-2
-    )
+    _reaction_said_and_kept(out, tmp_path)
     assert (tmp_path / "simulate.png").stat().st_size > 10_000
 
 
@@ -251,12 +255,7 @@ def test_a_grasp_given_by_its_pose_answers_the_squeeze(tmp_path, capsys, arm):
     assert main(argv) == 0
     out = capsys.readouterr().out
     assert "right hand (pinch) closed 2 mm from first touch" in out
-    line = next(ln for ln in out.splitlines() if ln.startswith("fem"))
-    reaction = float(line.split("reaction ")[1].split(" N")[0])
-    record = json.loads((tmp_path / "simulate.json").read_text())
-    assert reaction > 0 and record["answers"]["fem"]["reaction_N"] == pytest.approx(
-        reaction, rel=1e-2
-    )
+    _reaction_said_and_kept(out, tmp_path)
     assert main(["simulate", "--strap", "--given", "pose", "--out-dir", str(tmp_path)]) == 2
     assert "a strap or the open hand has no pose" in capsys.readouterr().err
 
