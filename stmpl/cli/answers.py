@@ -32,6 +32,7 @@ def predictors(args, specs: list[str]) -> list:
             fidelity=args.fidelity,
             tissue=args.tissue,
             phenotype=phenotype_of(args),
+            friction=args.friction,
         )
         for spec in specs
     ]
@@ -119,6 +120,7 @@ def truth(scene, args, failures: dict | None = None):
         fidelity=args.fidelity,
         tissue=args.tissue,
         phenotype=phenotype_of(args),
+        friction=args.friction,
     )
     try:
         d = fem.predict(scene)

@@ -41,6 +41,17 @@ def default_model(part: str) -> str:
     return PART_MODELS.get(part, DEFAULT_MODEL)
 
 
+def coefficient(text: str) -> float:
+    """An argparse type: a finite number >= 0 (a friction coefficient)."""
+    try:
+        x = float(text)
+    except ValueError:
+        x = float("nan")
+    if not (x >= 0 and x != float("inf")):
+        raise argparse.ArgumentTypeError(f"must be a number >= 0, got {text!r}")
+    return x
+
+
 def positive(text: str) -> int:
     """An argparse type: an integer >= 1."""
     try:
@@ -194,6 +205,14 @@ def fem_options(parser) -> None:
         help="the FEM's tissue: paper (the paper's 1 kPa gel) or a layered preset of skin, fat "
         f"and muscle (forearm, upper_arm, abdomen), or a YAML file of layers (docs/tissue.md); "
         f"default {TISSUE}",
+    )
+    parser.add_argument(
+        "--friction",
+        type=coefficient,
+        default=0.0,
+        metavar="MU",
+        help="Coulomb's friction between an object given by its pose (--given pose) and the "
+        "skin in the FEM (default 0: frictionless; dry skin on a smooth solid about 0.5)",
     )
 
 

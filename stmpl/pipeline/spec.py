@@ -19,11 +19,13 @@ def predictor_from_spec(
     fidelity: str = "full",
     tissue: str = "paper",
     phenotype: dict | None = None,
+    friction: float = 0.0,
     **options,
 ):
     """The predictor ``spec`` names (see the module docstring); ``res`` and ``levels`` are the
     FEM's resolution (unless the spec names one) and continuation levels, ``tissue`` its tissue
-    preset (its layers shaped by anny's ``phenotype``); ``fidelity``
+    preset (its layers shaped by anny's ``phenotype``) and ``friction`` its Coulomb coefficient
+    between a posed object and the skin; ``fidelity``
     (``full`` or ``auto``, :data:`stmpl.fidelity.FIDELITIES`) how much of the part it models;
     ``options`` go to a learned model's constructor (e.g. ``region_tolerance``).
     """
@@ -33,7 +35,13 @@ def predictor_from_spec(
     if spec == "fem" or spec.startswith("fem:"):
         res = spec.split(":", 1)[1] if ":" in spec else res
         return predictor.create(
-            "fem", res=res, levels=levels, fidelity=fidelity, tissue=tissue, phenotype=phenotype
+            "fem",
+            res=res,
+            levels=levels,
+            fidelity=fidelity,
+            tissue=tissue,
+            phenotype=phenotype,
+            friction=friction,
         )
     if pathlib.Path(spec).suffix == ".safetensors" or pathlib.Path(spec).exists():
         return predictor.read(spec, device=device, fidelity=fidelity, **options)

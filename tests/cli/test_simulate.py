@@ -69,6 +69,7 @@ def test_letters_against_the_fem(tmp_path, capsys, arm):
         (["--sphere", "8", "--grip", "pinch"], "--grip chooses how the hand grasps a limb"),
         (["--part", "belly", "--grip", "pinch"], "the belly has no limb to grasp"),
         (["--given", "pose", "--part", "belly"], "the open hand has no pose to press to"),
+        (["--friction", "-1"], "argument --friction: must be a number >= 0, got '-1'"),
         (["--sphere", "8", "--given", "pose", "--force", "2"], "leave --force out"),
         (["--sphere", "8", "--given", "pose"], "gnn answers a force given on the skin"),
     ],
@@ -247,11 +248,12 @@ def test_a_fingertip_given_by_its_pose_answers_the_force_it_meets(tmp_path, caps
 
 def test_a_grasp_given_by_its_pose_answers_the_squeeze(tmp_path, capsys, arm):
     """``--given pose`` with the hand's grasp: the pinch closes 2 mm from first touch and the
-    FEM answers the dent and the squeeze it meets (printed and in simulate.json); a strap has
-    no pose to press to.
+    FEM, with dry skin's friction, answers the dent and the squeeze it meets (printed and in
+    simulate.json); a strap has no pose to press to.
     """
     argv = ["simulate", "--grip", "pinch", "--along", "0.6", "--depth", "2", "--given", "pose"]
-    argv += ["--model", "fem", "--res", "coarse", "--subdivide", "0", "--out-dir", str(tmp_path)]
+    argv += ["--model", "fem", "--res", "coarse", "--subdivide", "0", "--friction", "0.5"]
+    argv += ["--out-dir", str(tmp_path)]
     assert main(argv) == 0
     out = capsys.readouterr().out
     assert "right hand (pinch) closed 2 mm from first touch" in out
