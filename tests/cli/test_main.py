@@ -218,6 +218,8 @@ def test_expected_failures_end_in_one_line(tmp_path, capsys, arm):
         "must be an integer >= 1, got '-1'",
     )
     _fails(["solve", "--tissue", "gel"], capsys, "unknown tissue preset 'gel'")
+    _fails(["simulate", "--friction", "-1"], capsys, "--friction: must be a number >= 0, got '-1'")
+    _fails(["simulate", "--friction", "nan"], capsys, "--friction: must be a number >= 0")
     _fails(["predict", "--device", "tpu"], capsys, "unknown device 'tpu'")
     _fails(["predict", "--device", "cuda:7"], capsys, "device cuda:7 is not available")
     _fails(

@@ -69,7 +69,6 @@ def test_letters_against_the_fem(tmp_path, capsys, arm):
         (["--sphere", "8", "--grip", "pinch"], "--grip chooses how the hand grasps a limb"),
         (["--part", "belly", "--grip", "pinch"], "the belly has no limb to grasp"),
         (["--given", "pose", "--part", "belly"], "the open hand has no pose to press to"),
-        (["--friction", "-1"], "argument --friction: must be a number >= 0, got '-1'"),
         (["--sphere", "8", "--given", "pose", "--force", "2"], "leave --force out"),
         (["--sphere", "8", "--given", "pose"], "gnn answers a force given on the skin"),
     ],
