@@ -27,10 +27,11 @@ from pathlib import Path
 import numpy as np
 
 from fem.force_control import press_to_forces
-from fem.objects import grip, placed
+from fem.objects import closing, placed
 from fem.simulate import resolution, tissue_mesh
 from fem.solver import Solver
 from stmpl import AnnyBody, loads, tissue
+from stmpl.contact.closing import closing_grip
 from stmpl.contact.hand import Hand, SkinDistance
 from stmpl.machine import describe
 from stmpl.table import header, row
@@ -74,7 +75,8 @@ def solve_case(part_name, obj, where, res, body, friction: float = 0.0) -> list[
     t0 = time.perf_counter()
     if obj == "grip":
         kind, along = where
-        shape, direction = grip(part, Hand(side="R"), along=along, kind=kind), None
+        shape = closing(closing_grip(part, Hand(side="R"), along=along, kind=kind))
+        direction = None
         closed = shape.pushed(0.005, None).vertices
         near = closed[SkinDistance(part)(closed) < 0]  # where the grip presses, 5 mm closed
     else:

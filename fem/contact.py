@@ -304,19 +304,7 @@ def press(
     with Pressing(
         solver, shape, direction, stiffness, tolerance, max_updates, max_step, friction
     ) as go:
-        out, last, failed = [], None, None
-        for depth in depths:
-            if failed is not None:
-                reason = f"skipped: a smaller depth ({failed:.3g} m) failed"
-                out.append(Pressed(False, reason, depth))
-                continue
-            answer = go.to(depth, last)
-            out.append(answer)
-            if answer.ok:
-                last = answer
-            else:
-                failed = depth
-        return out
+        return _in_turn(go, depths, None, "skipped: a smaller depth ({:.3g} m) failed")
 
 
 def slide(
@@ -353,15 +341,26 @@ def slide(
     with Pressing(
         solver, at, across, stiffness, min(tolerance, 0.5), max_updates, max_step, friction
     ) as go:
-        last = replace(pressed, depth=0.0)
-        for d in distances:
-            answer = go.to(d, last) if last is not None else None
-            if answer is None or not answer.ok:
-                out.append(answer or Pressed(False, "skipped: a shorter slide failed", d))
-                last = None
-                continue
-            out.append(answer)
-            last = answer
+        start = replace(pressed, depth=0.0)
+        return out + _in_turn(go, distances, start, "skipped: a shorter slide ({:.3g} m) failed")
+
+
+def _in_turn(go: "Pressing", depths: list[float], start, skipped: str) -> list["Pressed"]:
+    """``go``'s answers at each of ``depths`` (m), each marched from the last answer
+    (``start`` before the first; ``None``: rest); after a failure the rest are skipped, each
+    with ``skipped`` formatted with the failed depth.
+    """
+    out, failed = [], None
+    for depth in depths:
+        if failed is not None:
+            out.append(Pressed(False, skipped.format(failed), depth))
+            continue
+        answer = go.to(depth, start)
+        out.append(answer)
+        if answer.ok:
+            start = answer
+        else:
+            failed = depth
     return out
 
 

@@ -31,9 +31,6 @@ Lengths in m, pressures in Pa, forces in N.
 from __future__ import annotations
 
 import numpy as np
-from scipy.spatial import cKDTree
-
-from stmpl.geometry import closest_points
 
 SLIP = 1e-5
 """``eps``, m: the slip in one step below which a node sticks (the friction force grows to
@@ -61,23 +58,12 @@ def coefficient(mu) -> float:
 def motion(shape, direction, x: np.ndarray, step: float) -> np.ndarray:
     """``(K, 3)``: how far the object moves at each point ``x`` ``(K, 3)`` (m, on or near its
     surface) when pushed ``step`` (m) further: along ``direction`` ``(3,)``, or, for a mesh
-    closing along its path (``direction`` ``None``), by its path interpolated at the nearest
-    point of its surface.
+    closing along its path (``direction`` ``None``), by its path at the nearest point of its
+    surface (:meth:`fem.shapes.Surface.path_at`).
     """
     if direction is not None:
         return np.broadcast_to(step * np.asarray(direction, dtype=float), x.shape)
-    tri = shape.vertices[shape.faces]
-    tree = cKDTree(tri.mean(1))
-    k = min(8, len(tri))
-    _, ik = tree.query(x, k=k)
-    ik = ik.reshape(len(x), k)
-    c, bary = closest_points(tri[ik.ravel()], np.repeat(x, k, axis=0))
-    dist = np.linalg.norm(np.repeat(x, k, axis=0) - c, axis=1).reshape(len(x), k)
-    j = np.argmin(dist, axis=1)
-    rows = np.arange(len(x))
-    face = ik[rows, j]
-    w = bary.reshape(len(x), k, 3)[rows, j]
-    return step * np.einsum("kj,kji->ki", w, shape.path[shape.faces[face]])
+    return step * shape.path_at(x)
 
 
 class Friction:

@@ -1,6 +1,6 @@
 """The contact wing's objects as the FEM's rigid shapes: a posed mesh
 (:class:`~stmpl.contact.pressing.Pressing`: a disk, a box, a user's file, a posed hand), a
-scene's pose (:func:`at_pose`), anny's hand closing in a grip (:func:`grip`) and a dataset's
+scene's pose (:func:`at_pose`), anny's hand closing in a grip (:func:`closing`) and a dataset's
 pressed objects (:func:`placed`).
 """
 
@@ -24,7 +24,7 @@ from stmpl.contact.closing import closing_grip
 from stmpl.contact.hand import Hand
 from stmpl.contact.pressing import Pressing
 from stmpl.part import BodyPart
-from stmpl.pose import GAP_REACH, Pose
+from stmpl.pose import GAP_REACH, Pose, Rigid
 
 
 def surface(pressing: Pressing, rounding: float = ROUNDING) -> Surface:
@@ -67,23 +67,12 @@ def at_pose(part: BodyPart, pose: Pose, rounding: float = ROUNDING) -> tuple[Sur
     return moved, max(back - rounding, 0.0)
 
 
-def grip(
-    part: BodyPart,
-    hand: Hand,
-    along: float = 0.5,
-    around: float = 0.0,
-    kind: str = "whole",
-    reach: float = 0.008,
-    rounding: float = ROUNDING,
-    subdivisions: int = 2,
-) -> Surface:
-    """The ``hand`` of anny closing on the limb ``part`` in a ``kind`` of grip
-    (:func:`stmpl.contact.closing.closing_grip`) as a :class:`Surface` with a path: at depth 0
-    clear of the skin (its nearest point touching), at depth ``d`` (m) closed ``d`` further; its
-    faces offset outward by ``rounding`` (m).
+def closing(grip: Rigid, rounding: float = ROUNDING) -> Surface:
+    """A closing grip of anny's hand (:func:`stmpl.contact.closing.closing_grip`) as a rigid
+    :class:`Surface` with its path: at depth 0 clear of the skin (its nearest point touching),
+    at depth ``d`` (m) closed ``d`` further; its faces offset outward by ``rounding`` (m).
     """
-    g = closing_grip(part, hand, along, around, kind, reach, subdivisions)
-    return Surface(g.vertices, g.faces, rounding, path=g.path, name=g.name)
+    return Surface(grip.vertices, grip.faces, rounding, path=grip.path, name=grip.name)
 
 
 def placed(part: BodyPart, kind: str, params: dict, hand: Hand | None = None):
@@ -96,7 +85,8 @@ def placed(part: BodyPart, kind: str, params: dict, hand: Hand | None = None):
     """
     if kind == "press_grip":
         hand = hand if hand is not None else Hand(side="R")
-        shape = grip(part, hand, params["along"], params["around"], params["grip"])
+        g = closing_grip(part, hand, params["along"], params["around"], params["grip"])
+        shape = closing(g)
         return shape, None
     at, radius = int(params["at"]), float(params["radius"])
     p, n = part.vertices[at], part.normals[at]

@@ -172,7 +172,7 @@ PRESSES = ("press_disk", "press_sphere", "press_grip")
 """A dataset's placement kinds that press a rigid object into the tissue: a flat disk (its rim
 rounded by ``rounding``, m) face-on, and a ball (a fingertip), each of ``radius`` (m) at vertex
 ``at`` of the part, pushed along the inward normal there; and anny's right hand closing in a
-``grip`` round the limb at ``along`` and ``around`` (:func:`fem.objects.grip`)."""
+``grip`` round the limb at ``along`` and ``around`` (:func:`fem.objects.closing`)."""
 
 ROUNDING = 5e-4
 """m: the default rounding of a :class:`Surface` (its faces offset outward by half a mm)."""
@@ -314,7 +314,7 @@ class Surface:
         """``(phi (K,), grad (K, 3), None)`` at points ``x`` ``(K, 3)``: exact within
         :data:`BAND` of the mesh; farther points may get :data:`BAND` (a lower bound).
         """
-        tri, vn, tree, reach, normal = self._index
+        _, vn, tree, reach, normal = self._index
         d0, nearest = tree.query(x)
         # far points: BAND, signed by the nearest face's side (no pressure reaches them)
         grad = x - tree.data[nearest]
@@ -326,28 +326,7 @@ class Surface:
         if len(near) == 0:
             return phi, grad, None
         xq = x[near]
-        k = min(NEAREST, len(tri))
-        dk, ik = tree.query(xq, k=k)
-        dk, ik = dk.reshape(len(xq), k), ik.reshape(len(xq), k)
-        c, bary = closest_points(tri[ik.ravel()], np.repeat(xq, k, axis=0))
-        dist = np.linalg.norm(np.repeat(xq, k, axis=0) - c, axis=1).reshape(len(xq), k)
-        j = np.argmin(dist, axis=1)
-        rows = np.arange(len(xq))
-        face, dist = ik[rows, j], dist[rows, j]
-        c, bary = c.reshape(len(xq), k, 3)[rows, j], bary.reshape(len(xq), k, 3)[rows, j]
-        # a point whose k nearest centroids do not settle it: every triangle in reach
-        unsure = np.flatnonzero(dk[:, -1] < dist + reach) if k < len(tri) else []
-        if len(unsure):
-            lists = tree.query_ball_point(xq[unsure], dist[unsure] + reach + 1e-12)
-            counts = np.fromiter((len(c) for c in lists), int, len(lists))
-            point = np.repeat(np.arange(len(unsure)), counts)
-            cand = np.fromiter((t for c in lists for t in c), int, int(counts.sum()))
-            cc, cb = closest_points(tri[cand], xq[unsure][point])
-            cd = np.linalg.norm(xq[unsure][point] - cc, axis=1)
-            order = np.lexsort((cd, point))
-            first = order[np.r_[0, np.flatnonzero(np.diff(point[order])) + 1]]
-            face[unsure], dist[unsure] = cand[first], cd[first]
-            c[unsure], bary[unsure] = cc[first], cb[first]
+        face, dist, c, bary = self._closest(xq)
         at = np.einsum("kj,kji->ki", bary, vn[self.faces[face]])
         side = np.sign(np.einsum("ki,ki->k", xq - c, at))
         side[side == 0] = 1.0
@@ -357,3 +336,43 @@ class Surface:
         phi[near] = side * dist - self.rounding
         grad[near] = g
         return phi, grad, None
+
+    def path_at(self, x: np.ndarray) -> np.ndarray:
+        """``(K, 3)``: the :attr:`path` (m per m of depth) at the point of the mesh nearest to
+        each of ``x`` ``(K, 3)`` (m), interpolated over its triangle.
+        """
+        if self.path is None:
+            raise ValueError(f"{self.name}: the mesh has no path")
+        face, _, _, bary = self._closest(np.asarray(x, dtype=float).reshape(-1, 3))
+        return np.einsum("kj,kji->ki", bary, self.path[self.faces[face]])
+
+    def _closest(self, x: np.ndarray):
+        """``(face (K,), distance (K,) m, point (K, 3), barycentric (K, 3))``: the point of the
+        mesh nearest to each of ``x`` ``(K, 3)``, exactly: among the triangles of the
+        :data:`NEAREST` nearest centroids, and where those do not settle it, among every
+        triangle within reach.
+        """
+        tri, _, tree, reach, _ = self._index
+        k = min(NEAREST, len(tri))
+        dk, ik = tree.query(x, k=k)
+        dk, ik = dk.reshape(len(x), k), ik.reshape(len(x), k)
+        c, bary = closest_points(tri[ik.ravel()], np.repeat(x, k, axis=0))
+        dist = np.linalg.norm(np.repeat(x, k, axis=0) - c, axis=1).reshape(len(x), k)
+        j = np.argmin(dist, axis=1)
+        rows = np.arange(len(x))
+        face, dist = ik[rows, j], dist[rows, j]
+        c, bary = c.reshape(len(x), k, 3)[rows, j], bary.reshape(len(x), k, 3)[rows, j]
+        # a point whose k nearest centroids do not settle it: every triangle in reach
+        unsure = np.flatnonzero(dk[:, -1] < dist + reach) if k < len(tri) else []
+        if len(unsure):
+            lists = tree.query_ball_point(x[unsure], dist[unsure] + reach + 1e-12)
+            counts = np.fromiter((len(c) for c in lists), int, len(lists))
+            point = np.repeat(np.arange(len(unsure)), counts)
+            cand = np.fromiter((t for c in lists for t in c), int, int(counts.sum()))
+            cc, cb = closest_points(tri[cand], x[unsure][point])
+            cd = np.linalg.norm(x[unsure][point] - cc, axis=1)
+            order = np.lexsort((cd, point))
+            first = order[np.r_[0, np.flatnonzero(np.diff(point[order])) + 1]]
+            face[unsure], dist[unsure] = cand[first], cd[first]
+            c[unsure], bary[unsure] = cc[first], cb[first]
+        return face, dist, c, bary

@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from fem.objects import grip, surface
+from fem.objects import closing, surface
 from stmpl.body import tube
+from stmpl.contact.closing import closing_grip
 from stmpl.contact.hand import Hand, SkinDistance
 from stmpl.contact.pressing import Pressing, pose_matrix
 
@@ -32,7 +33,7 @@ def test_a_grip_closes_from_first_touch(limb):
     further, it lies about 3 mm inside (the fingers move 1-1.5 mm per mm of the path).
     """
     hand = Hand()
-    shape = grip(limb, hand, along=0.5, kind="pinch", reach=0.006)
+    shape = closing(closing_grip(limb, hand, along=0.5, kind="pinch", reach=0.006))
     skin = SkinDistance(limb)
     first = skin(shape.pushed(0.0, None).vertices)
     assert 0 <= first.min() < 1e-4
@@ -41,4 +42,4 @@ def test_a_grip_closes_from_first_touch(limb):
     for finger in ("thumb", "index"):
         assert skin(shape.pushed(0.003, None).vertices[hand.finger_of[finger]]).min() < 0
     with pytest.raises(ValueError, match="reach must lie in"):
-        grip(limb, hand, reach=0.02)
+        closing_grip(limb, hand, reach=0.02)

@@ -156,7 +156,7 @@ def test_the_fem_closes_a_grip_given_by_its_pose(tmp_path):
     shape, depth = at_pose(part, scene.pose)
     assert depth == pytest.approx(0.002, abs=3e-4)
     d = predictor.create("fem", res=res).predict(scene)
-    hand = closed(scene.pose.objects[0], -0.002)  # at first touch, as fem.objects.grip sets it
+    hand = closed(scene.pose.objects[0], -0.002)  # at first touch, as fem.objects.closing sets it
     closing = Surface(hand.vertices, hand.faces, ROUNDING, hand.path)
     near = part.vertices[scene.pose.gap < 0.005]
     mesh, _ = tissue_mesh(part, th, res, "paper", None, near)
