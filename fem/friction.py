@@ -90,9 +90,9 @@ class Friction:
         """
         self.start = self.contact.rest + u[self.contact.nodes]
         self.moves = np.array(moves, dtype=float)
-        phi, grad, _ = self.contact.shape.distance(self.start)
-        del phi
-        self.normals = grad
+        # the object's normals taken afresh: the contact's own are those of its last update,
+        # which may belong to another state (a try marched back from a deeper answer)
+        self.normals = self.contact.shape.distance(self.start)[1]
         self.bound = self.mu * self.contact.weights * self.contact.multipliers
 
     def relag(self) -> float:
