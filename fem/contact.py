@@ -480,34 +480,17 @@ def _march(
     return {**res, "u": u, "iterations": iters, "updates": updates}
 
 
-def _on_vertices(solver, contact, share: np.ndarray) -> np.ndarray:
-    """``(N,)`` a per-skin-node contact quantity ``share`` ``(K,)`` (N: a force on each of
-    :attr:`Contact.nodes`) as a pressure on the part's vertices, Pa: an edge node's shared by
-    its edge's two ends, a node of the refined skin by the part's vertices it is interpolated
-    from (the transpose of ``mesh.interp``, which keeps the total), over the vertex's share of
-    the skin.
-    """
-    mesh = solver.mesh
-    f = np.zeros(solver.n_all)
-    f[contact.nodes] = share
-    if solver.order == 2:
-        mid = f[mesh.n_nodes :]
-        f = f[: mesh.n_nodes].copy()
-        np.add.at(f, solver.edges[:, 0], 0.5 * mid)
-        np.add.at(f, solver.edges[:, 1], 0.5 * mid)
-    on_part = mesh.interp.T @ f[: mesh.n_skin]
-    return np.asarray(on_part).ravel() / mesh.part.vertex_areas
-
-
 def _answer(solver, contact, u, depth, direction, res, seconds, friction=None) -> Pressed:
-    mesh = solver.mesh
-    n = mesh.part.n_vertices
+    answers = solver.answers  # the part the answer is given on
     detF, compression = solver.measures(u)
     checked = solver.distrust(detF, compression)
-    nodal = contact.weights * contact.multipliers  # each skin node's contact force, N
-    pressure = _on_vertices(solver, contact, nodal)
-    along = nodal if direction is None else nodal * (contact._normals @ direction)
-    push = _on_vertices(solver, contact, along)  # the reaction's density: sums to it
+    nodal = np.zeros(solver.n_all)  # each skin node's contact force, N
+    nodal[contact.nodes] = contact.weights * contact.multipliers
+    pressure = answers.pressure(nodal)
+    along = nodal.copy()
+    if direction is not None:
+        along[contact.nodes] *= contact._normals @ direction
+    push = answers.pressure(along)  # the reaction's density: sums to it
     rubbed = np.zeros(3) if friction is None else friction.force(u)
     force = contact.force() + rubbed
     total = float(np.sum(contact.weights * contact.multipliers))
@@ -519,7 +502,7 @@ def _answer(solver, contact, u, depth, direction, res, seconds, friction=None) -
         True,
         "",
         depth,
-        displacement=u[:n].copy(),
+        displacement=answers.displacement(u),
         state=u,
         reaction=reaction,
         total=total,
@@ -527,7 +510,7 @@ def _answer(solver, contact, u, depth, direction, res, seconds, friction=None) -
         friction=rubbed,
         pressure=pressure,
         push=push,
-        area=float(mesh.part.vertex_areas[pressure > 0].sum()),
+        area=float(answers.part.vertex_areas[pressure > 0].sum()),
         penetration=res["penetration"],
         min_det_F=detF,
         compression=compression,

@@ -12,11 +12,10 @@ from fem.contact import press
 from fem.friction import coefficient
 from fem.layers import preset
 from fem.local import simulate_local
-from fem.material import NeoHookean
 from fem.mesh import ShellMesh
 from fem.objects import at_pose
-from fem.simulate import check_order, resolution, simulate, tissue_mesh
-from fem.solver import Solution, Solver
+from fem.simulate import check_order, press_solver, resolution, simulate
+from fem.solver import Solution
 from stmpl.predictor import BasePredictor, PredictionFailed, check_fidelity
 from stmpl.scene import Scene
 
@@ -138,14 +137,19 @@ class FEMPredictor(BasePredictor):
             return {"displacement": np.zeros((n, 3)), "force": np.zeros(n), "reaction": 0.0}
         near = s.part.vertices[_pressed_skin(s.pose)]  # the mesh is refined round these
         try:
-            mesh, material = tissue_mesh(
-                s.part, s.thickness, self.res, self.tissue, self.phenotype, near
+            solver = press_solver(
+                s.part,
+                s.thickness,
+                self.res,
+                self.tissue,
+                self.phenotype,
+                near,
+                self.options,
+                self.material,
             )
         except ValueError as e:
             raise FEMFailed(f"the FEM cannot build the tissue for this scene: {e}") from e
-        if material is None:
-            material = self.material if self.material is not None else NeoHookean()
-        solver = Solver(mesh, material, options=self.options, order=self.res.order)
+        mesh = solver.mesh
         (a,) = press(solver, shape, s.pose.direction, [depth], friction=self.friction)
         if not a.ok:
             raise FEMFailed(f"the FEM press failed at {1e3 * depth:.3g} mm deep: {a.reason}")

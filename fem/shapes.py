@@ -326,7 +326,7 @@ class Surface:
         if len(near) == 0:
             return phi, grad, None
         xq = x[near]
-        face, dist, c, bary = self._closest(xq)
+        face, dist, c, bary = self.closest(xq)
         at = np.einsum("kj,kji->ki", bary, vn[self.faces[face]])
         side = np.sign(np.einsum("ki,ki->k", xq - c, at))
         side[side == 0] = 1.0
@@ -343,10 +343,10 @@ class Surface:
         """
         if self.path is None:
             raise ValueError(f"{self.name}: the mesh has no path")
-        face, _, _, bary = self._closest(np.asarray(x, dtype=float).reshape(-1, 3))
+        face, _, _, bary = self.closest(np.asarray(x, dtype=float).reshape(-1, 3))
         return np.einsum("kj,kji->ki", bary, self.path[self.faces[face]])
 
-    def _closest(self, x: np.ndarray):
+    def closest(self, x: np.ndarray):
         """``(face (K,), distance (K,) m, point (K, 3), barycentric (K, 3))``: the point of the
         mesh nearest to each of ``x`` ``(K, 3)``, exactly: among the triangles of the
         :data:`NEAREST` nearest centroids, and where those do not settle it, among every

@@ -9,10 +9,11 @@ element ``order`` 1 (4-node) or 2 (10-node tetrahedra).
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
+from fem.finer import meshed
 from fem.layers import preset
 from fem.material import NeoHookean
 from fem.mesh import ShellMesh, room, shell_mesh
@@ -128,6 +129,33 @@ def tissue_mesh(
         **refine,
     )
     return mesh, stack.material(mesh.tet_layers)
+
+
+def press_solver(
+    part: BodyPart,
+    thickness: np.ndarray,
+    res: str | Resolution | dict,
+    tissue: str,
+    phenotype: dict | None,
+    near: np.ndarray,
+    options: SolverOptions | None = None,
+    material=None,
+) -> Solver:
+    """The solver of an object pressed on ``part`` (thickness ``(N,)`` m), its tissue meshed
+    and refined near the points ``near`` ``(K, 3)`` (m) as :func:`tissue_mesh` does, its
+    answers given on ``part``. Where it answers ``part`` exactly (:func:`fem.finer.meshed`),
+    the tissue is meshed on the part ``part`` was subdivided from, with one level of
+    refinement more: the same mesh near the object, a coarser one where the tissue barely
+    moves. ``material``: for the paper's gel (default neo-Hookean).
+    """
+    r = resolution(res)
+    on, t = meshed(part, thickness, r.order)
+    if on is not part:
+        r = replace(r, subdivisions=r.subdivisions + 1)
+    mesh, layered = tissue_mesh(on, t, r, tissue, phenotype, near)
+    if layered is not None:
+        material = layered
+    return Solver(mesh, material or NeoHookean(), options=options, order=r.order, answer_on=part)
 
 
 def simulate(

@@ -36,11 +36,13 @@ non-physical).
 from __future__ import annotations
 
 import time
+from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
 
 from fem.elements import ELEMENTS, quadratic
+from fem.finer import FinerPart
 from fem.kernel import compiled, element_data, outer_data
 from fem.linear_solvers import make_linear_solver
 from fem.material import NeoHookean, det3, inv3, volume_split, volumetric
@@ -49,6 +51,7 @@ from fem.options import SolverOptions
 from fem.pattern import Pattern
 from fem.solution import Solution
 from fem.tangent import Tangent
+from stmpl.part import BodyPart
 
 
 class Solver:
@@ -65,6 +68,9 @@ class Solver:
             ``False`` leaves it to ``fixed`` (a slab sliding on a rigid base, say).
         options: :class:`SolverOptions`.
         order: element order, 1 (4-node) or 2 (10-node tetrahedra, four quadrature points).
+        answer_on: the part a pressed object's answers (:mod:`fem.contact`) are given on:
+            default the mesh's; or a part subdivided from it whose vertices are all skin nodes
+            (:class:`fem.finer.FinerPart`, :func:`fem.finer.meshed`).
     """
 
     def __init__(
@@ -75,6 +81,7 @@ class Solver:
         options: SolverOptions | None = None,
         order: int = 1,
         hold_inner: bool = True,
+        answer_on: BodyPart | None = None,
     ):
         if order not in ELEMENTS:
             raise ValueError(f"element order must be 1 or 2, got {order!r}")
@@ -123,6 +130,7 @@ class Solver:
         self.linear = make_linear_solver(self.options.linear_solver)
         self.pattern = Pattern.of(self.conn, self.n_all, self.free, upper=self.linear.upper)
         self.tangent = Tangent(self.linear, self.assemble, self.bulk is not None)
+        self.answer_on = answer_on if answer_on is not None else mesh.part
         """The tangent's factorisation Newton's steps keep."""
         self.potentials: list = []
         """Further energies on the nodes (a rigid object's contact, :mod:`fem.contact`), each
@@ -336,6 +344,11 @@ class Solver:
             else:
                 failed = float(total)
         return out
+
+    @cached_property
+    def answers(self) -> FinerPart:
+        """How a contact answer reads on the vertices of :attr:`answer_on`."""
+        return FinerPart(self, self.answer_on)
 
     def _check_force(self, force) -> np.ndarray:
         force = np.asarray(force, dtype=float)

@@ -21,8 +21,8 @@ from fem.material import material
 from fem.objects import placed
 from fem.placements import Plan, make_load
 from fem.shapes import PRESSES
-from fem.simulate import resolution, simulate, tissue_mesh
-from fem.solver import Solver, SolverOptions
+from fem.simulate import press_solver, simulate
+from fem.solver import SolverOptions
 from stmpl.contact.hand import SkinDistance
 from stmpl.contact.posing import signed_distance
 from stmpl.data.format import DOUBLES, FLOATS, INTS, STRINGS
@@ -198,11 +198,16 @@ def _press(shard: _Shard, t: _Task) -> None:
     try:
         shape, direction = placed(part, t.spec["kind"], t.spec["params"])
         near = _pressed_at(part, shape, t.spec)
-        mesh, mat = tissue_mesh(
-            part, thickness, cfg["resolution"], shard.tissue, shard.phenotype, near=near
+        solver = press_solver(
+            part,
+            thickness,
+            cfg["resolution"],
+            shard.tissue,
+            shard.phenotype,
+            near,
+            shard.opts,
+            shard.mat,
         )
-        order = resolution(cfg["resolution"]).order
-        solver = Solver(mesh, mat, options=shard.opts, order=order)
     except ValueError as e:  # a shell that cannot be meshed, an object that cannot be placed
         for f in shard.forces:
             shard.fail(t, thickness, load.force * f, f, f"set-up: {e}")

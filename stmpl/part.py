@@ -40,6 +40,9 @@ class BodyPart:
         axis: ``(K, 3)`` limb centre line from proximal to distal (metres), or ``None``.
         body_index: ``(N,)`` index of each vertex in the full body mesh.
         source: provenance: body model, its options, part name (JSON-serialisable).
+        coarser: the part this one was subdivided from (:func:`subdivide`), else ``None``: its
+            vertices are this one's first, and this one's others its edges' midpoints in the
+            order of its :attr:`edges`.
     """
 
     name: str
@@ -54,6 +57,7 @@ class BodyPart:
     axis: np.ndarray | None = None
     body_index: np.ndarray | None = None
     source: dict = field(default_factory=dict)
+    coarser: "BodyPart | None" = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
         n = len(self.vertices)
@@ -239,7 +243,7 @@ class BodyPart:
     def with_vertices(self, vertices: np.ndarray) -> "BodyPart":
         """A copy with other rest positions (normals recomputed)."""
         return dataclasses.replace(
-            self, vertices=vertices, normals=vertex_normals(vertices, self.faces)
+            self, vertices=vertices, normals=vertex_normals(vertices, self.faces), coarser=None
         )
 
 
@@ -312,6 +316,7 @@ def subdivide(part: BodyPart) -> BodyPart:
         part.axis,
         body_index,
         source,
+        coarser=part,
     )
 
 
