@@ -239,11 +239,12 @@ def generate(
                     f"{shard_path(out, k).name} is unreadable, changed since it was written or "
                     "of another config: solving it again"
                 )
+    on_disk = len(p.tasks) - sum(len(p.shard_tasks(k)) for k in todo)  # tasks already solved
     if max_shards is not None:
         todo = todo[:max_shards]
     runs_path = out / "runs.json"
     runs = json.loads(runs_path.read_text()) if runs_path.exists() else []
-    _solve(out, cfg, p, chash, todo, par, runs, progress)
+    _solve(out, cfg, p, chash, todo, par, runs, progress, on_disk)
     if max_shards is not None and any(
         read_shard_meta(shard_path(out, k), chash) is None for k in range(p.n_shards)
     ):
@@ -293,9 +294,12 @@ def _prepare(out: pathlib.Path, cfg: dict, p: Plan, chash: str) -> None:
         stale.unlink(missing_ok=True)
 
 
-def _solve(out, cfg, p: Plan, chash: str, todo: list, par: dict, runs: list, progress) -> None:
+def _solve(
+    out, cfg, p: Plan, chash: str, todo: list, par: dict, runs: list, progress, on_disk: int
+) -> None:
     """Solve the shards ``todo`` on the backend ``par`` names, writing each as it arrives, with
-    a progress bar of the running totals; the run is added to ``runs.json`` even if it stops.
+    a progress bar of the running totals (from the ``on_disk`` tasks already solved to those and
+    this run's); the run is added to ``runs.json`` even if it stops.
     """
     threads = max(1, (os.cpu_count() or 1) // par["workers"])
     t0 = time.perf_counter()
@@ -305,11 +309,10 @@ def _solve(out, cfg, p: Plan, chash: str, todo: list, par: dict, runs: list, pro
     why: Counter = Counter()  # the failures' reasons, as the progress bar sums them up
     per_task = len(cfg["forces"])
     if progress:  # planned samples: a long shard (a press's forces) moves the bar as it goes
-        total = len(p.tasks) * per_task
         left = sum(len(p.shard_tasks(k)) for k in todo) * per_task
         bar = tqdm(
-            total=total,
-            initial=total - left,
+            total=on_disk * per_task + left,
+            initial=on_disk * per_task,
             unit="sample",
             desc=f"generate {cfg['name']}",
             dynamic_ncols=True,

@@ -2,6 +2,7 @@
 
 import json
 import os
+import re
 import signal
 import subprocess
 import sys
@@ -216,14 +217,19 @@ def test_cli_generate_stops_early_and_finishes(tmp_path, capsys):
     path = tmp_path / "cfg.yaml"
     path.write_text(yaml.safe_dump(_cfg(thickness_mm=[7.5], forces=[0.05, 0.1])))
     out = tmp_path / "cli"
-    assert main(["generate", str(path), "--out", str(out), "--max-shards", "1", "--quiet"]) == 0
-    assert "stopped early" in capsys.readouterr().out
+    assert main(["generate", str(path), "--out", str(out), "--max-shards", "1"]) == 0
+    said = capsys.readouterr()
+    assert "stopped early" in said.out
+    # the bar runs from nothing to this run's shard, not to the whole set
+    bar = re.findall(r"(\d+)/(\d+) \[", said.err)
+    assert bar[0][0] == "0" and bar[-1][0] == bar[-1][1]
     assert len(list(out.glob("shard-*.h5"))) == 1 and not (out / "card.json").exists()
     assert main(["generate", str(path), "--out", str(out), "--quiet"]) == 0
     printed = capsys.readouterr().out
     card = json.loads((out / "card.json").read_text())
     assert f"{card['samples']} samples" in printed
     assert len(card["timing"]["runs"]) == 2
+    assert card["attempted"] > int(bar[-1][1])
     assert main(["generate", str(tmp_path / "missing.yaml")]) == 2
     assert "config file not found" in capsys.readouterr().err
 
