@@ -166,7 +166,11 @@ class FEMPredictor(BasePredictor):
             "fidelity": "full"
             if self.fidelity == "full"
             else "full: a pose is pressed on the whole part, whatever the fidelity",
-            "mesh": {"nodes": mesh.n_nodes, "tets": int(len(mesh.tets))},
+            "mesh": {
+                "nodes": mesh.n_nodes,
+                "tets": int(len(mesh.tets)),
+                "skin_vertices": mesh.part.n_vertices,  # the part meshed (fem.finer)
+            },
         }
         force = a.pressure * s.part.vertex_areas
         return {"displacement": a.displacement, "force": force, "reaction": a.reaction}

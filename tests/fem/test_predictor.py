@@ -123,6 +123,28 @@ def test_the_fem_answers_a_pose_with_its_force_and_reaction_and_others_refuse_it
         predictor.create("naive", part).predict(scene)
 
 
+def test_a_pose_on_a_subdivided_part_is_solved_on_the_part_it_came_from():
+    """The FEM meshes the coarser part (refined once more near the ball) and answers on the
+    finer one: a displacement and a contact force on each of its vertices.
+    """
+    from stmpl.contact import objects
+    from stmpl.contact.posing import posed
+
+    coarse = tube(radius=0.04, length=0.1, n_around=16, n_along=8)
+    part = coarse.subdivided(1)
+    th = tissue.constant(part, 0.0075)
+    tip = objects.sphere(0.008)
+    scene = posed(part, th, tip, objects.press(part, tip, uv=(0.5, 0.5), depth=0.002))
+    res = {"subdivisions": 0, "layers": 2, "refine_radius": 0.03, "order": 2}
+    d = predictor.create("fem", res=res).predict(scene)
+    assert d.info["mesh"]["skin_vertices"] == coarse.n_vertices
+    assert d.displacement.shape == (part.n_vertices, 3)
+    assert np.abs(d.displacement).max() == pytest.approx(0.002, rel=0.05)
+    # the normal forces on the ball's curve sum to a little more than its push along the press
+    assert d.reaction < d.force.sum() < 1.1 * d.reaction and d.force.min() >= 0
+    np.testing.assert_allclose(d.pressure, d.force / part.vertex_areas)
+
+
 def test_a_layered_tissue_in_linear_elements_is_refused():
     """Linear tetrahedra lock in the layered presets' nearly incompressible layers (a fingertip
     3 mm into the forearm carried 6.2 N in them against 0.41 N in quadratic ones): refused when
