@@ -4,9 +4,11 @@ the contact), with one layer's element count raised at a time from the preset's 
 muscle 2; quadratic tetrahedra).
 
     python benchmarks/layer_convergence.py [--depths-mm 2 4] [--tissue forearm]
+        [--counts muscle=1 fat=1]
 
-Each row changes one count; the reactions are compared with the preset's row. Run it alone:
-the times are wall-clock.
+Each row changes one count; the reactions are compared with the preset's row. ``--counts``:
+the preset's row and these in place of the default ones (fewer elements: a cheaper mesh). Run
+it alone: the times are wall-clock.
 """
 
 from __future__ import annotations
@@ -33,7 +35,9 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--depths-mm", type=float, nargs="+", default=[2.0, 4.0])
     ap.add_argument("--tissue", default="forearm")
+    ap.add_argument("--counts", nargs="+", metavar="LAYER=N", help="rows to run, e.g. muscle=1")
     args = ap.parse_args()
+    variants = VARIANTS if not args.counts else [{}] + [_count(c) for c in args.counts]
     warnings.simplefilter("ignore")
     part, thickness, p, n = arm_tube()
     depths = [1e-3 * d for d in args.depths_mm]
@@ -43,7 +47,7 @@ def main() -> None:
     columns += [f"reaction at {d:g} mm, N (change)" for d in args.depths_mm]
     print(header(columns + ["s"], "l" + "r" * (len(columns))))
     reference = None
-    for change in VARIANTS:
+    for change in variants:
         layers = tuple(replace(x, elements=change.get(x.name, x.elements)) for x in base.layers)
         stack = replace(base, layers=layers)
         res = {"subdivisions": 2, "layers": 2, "refine_radius": 0.02, "order": 2}
@@ -60,6 +64,14 @@ def main() -> None:
         counts = ", ".join(str(x.elements) for x in layers)
         seconds = f"{time.perf_counter() - t0:.0f}"
         print(row([counts, len(solver.free), *cells, seconds]), flush=True)
+
+
+def _count(text: str) -> dict:
+    """``{"muscle": 1}`` from ``"muscle=1"``."""
+    name, _, n = text.partition("=")
+    if name not in ("skin", "fat", "muscle") or not n.isdigit() or int(n) < 1:
+        raise SystemExit(f"--counts takes LAYER=N (skin, fat or muscle; N >= 1), got {text!r}")
+    return {name: int(n)}
 
 
 if __name__ == "__main__":
