@@ -8,9 +8,9 @@ solution's own value, no interpolation. So an object pressed on a subdivided par
 on the part it was subdivided from (:func:`meshed`), refined one level more near the object
 (:func:`fem.simulate.press_solver`): the same mesh where the object presses, a coarser one
 where the tissue barely moves, and answered on the finer part by :class:`FinerPart`. The
-layered forearm under a disk on the main job's arm: 115k unknowns in place of 309k. A ball
-pressed 2 mm into a tube of gel answered the same within 3e-6 of its reaction and 1.3e-4 of
-its deepest displacement (38k unknowns in place of 61k).
+layered forearm under a disk on the main job's arm: 115k unknowns in place of 309k. An 8 mm
+ball 4 mm into the forearm preset of a tube answered within 0.11 % of the reaction and 0.26 %
+of the deepest displacement, with 84k unknowns in place of 135k (docs/tissue.md).
 """
 
 from __future__ import annotations
