@@ -84,6 +84,10 @@ class FinerPart:
         off = np.flatnonzero(d > ON_NODE)
         if len(off):
             face, _, _, bary = Surface(part.vertices, part.faces, 0.0).closest(x[off])
+            # a node on an edge gives the third corner nothing, not round-off (the contact
+            # area counts the vertices pressed)
+            bary = np.where(bary < 1e-9, 0.0, bary)
+            bary /= bary.sum(axis=1, keepdims=True)
             rows.append(part.faces[face].ravel())
             cols.append(np.repeat(skin[off], 3))
             vals.append(bary.ravel())
