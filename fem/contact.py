@@ -191,7 +191,8 @@ class Pressed:
         ok: whether the solve converged (and the state is physical); else ``reason`` says why
             and no displacement is given.
         depth: how far the object was pushed from its placed pose, m.
-        displacement: ``(N, 3)`` on the part's vertices, m (``None`` when failed).
+        displacement: ``(N, 3)`` on the vertices of the part the solver answers on
+            (:attr:`fem.solver.Solver.answer_on`), m (``None`` when failed).
         state: ``(n_all, 3)`` every node's displacement, for a warm start.
         reaction: the force the object must be pushed with along its direction, N; for a
             mesh closing along a path (a grip), the total contact force.
@@ -199,8 +200,8 @@ class Pressed:
         force: ``(3,)`` the force the skin exerts on the object, N (its friction's part
             in).
         friction: ``(3,)`` the friction's part of ``force``, N (zero without friction).
-        pressure: ``(N,)`` contact pressure on the part's vertices, Pa.
-        push: ``(N,)`` the contact pressure's part along the press direction on the part's
+        pressure: ``(N,)`` contact pressure on that part's vertices, Pa.
+        push: ``(N,)`` the contact pressure's part along the press direction on that part's
             vertices, Pa: the reaction's density (times the vertices' areas it sums to
             ``reaction``; a grip's, the pressure itself).
         area: contact area, m^2 (the skin area the object presses).
