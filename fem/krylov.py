@@ -24,12 +24,14 @@ class Krylov:
 
 
 def symmetric_matvec(K: sp.csr_matrix, upper: bool) -> Callable[[np.ndarray], np.ndarray]:
-    """``x -> K x`` for a symmetric ``K`` stored whole or, ``upper``, as its upper triangle."""
+    """``x -> K x`` for a symmetric ``K`` stored whole or, ``upper``, as its upper triangle;
+    ``x`` ``(n,)`` or ``(n, k)``.
+    """
     if not upper:
         return K.__matmul__
     diagonal = K.diagonal()
     KT = K.T.tocsr()
-    return lambda x: K @ x + KT @ x - diagonal * x
+    return lambda x: K @ x + KT @ x - (diagonal * x.T).T
 
 
 def pcg(

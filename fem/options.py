@@ -20,7 +20,8 @@ class SolverOptions:
         max_substeps: a failed force increment is halved up to this many times.
         max_compression: reject states whose skin moves inward by more than this share of the
             local thickness (1.0: skin reaches bone).
-        linear_solver: ``"auto"``, ``"pardiso"``, ``"superlu"`` or ``"cg"`` (AMG-preconditioned).
+        linear_solver: ``"auto"``, ``"pardiso"``, ``"pardiso_single"`` (factorised in single
+            precision, solves refined in double), ``"superlu"`` or ``"cg"`` (AMG-preconditioned).
         force_mode: how per-vertex forces become nodal forces, ``"traction"`` or ``"nodal"``
             (see :meth:`ShellMesh.nodal_forces`).
         rims: ``"fixed"`` holds the part's cut rims (all layers) where the tissue would go on

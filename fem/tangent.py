@@ -85,7 +85,7 @@ class Tangent:
         try:
             out = pcg(
                 symmetric_matvec(K, self.linear.upper),
-                self.linear.solve,
+                self.linear.precondition,
                 -rf,
                 KRYLOV_RTOL,
                 KRYLOV_ITERATIONS[1],

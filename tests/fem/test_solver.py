@@ -400,6 +400,7 @@ def test_auto_falls_back_to_superlu_without_pardiso(monkeypatch):
         raise ImportError("no MKL here")
 
     monkeypatch.setitem(fs.LINEAR_SOLVERS, "pardiso", missing)
+    monkeypatch.setitem(fs.LINEAR_SOLVERS, "pardiso_single", missing)
     with pytest.warns(RuntimeWarning, match="SuperLU"):
         solver = fs.make_linear_solver("auto")
     assert solver.name == "superlu"
