@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 import os
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import trimesh
@@ -108,9 +108,7 @@ def solve_shard(payload: dict) -> dict:
 
     t0 = time.perf_counter()
     cfg = payload["cfg"]
-    part = BodyPart.from_arrays(
-        payload["part_name"], payload["part_arrays"], payload["part_source"]
-    )
+    part = part_of(payload)
     rec = {k: [] for k in FLOATS + INTS + DOUBLES + STRINGS}
     if cfg.get("linear"):
         rec["linear"] = []
@@ -290,6 +288,18 @@ def linear_answer(
     return np.einsum("nkc,k->nc", G, pattern[loaded])
 
 
+def part_of(payload: dict) -> BodyPart:
+    """The part of a :func:`payload`, with the part it was subdivided from where it has one."""
+    part = BodyPart.from_arrays(
+        payload["part_name"], payload["part_arrays"], payload["part_source"]
+    )
+    if payload.get("coarser") is None:
+        return part
+    source = {**part.source, "subdivisions": part.source.get("subdivisions", 1) - 1}
+    coarser = BodyPart.from_arrays(part.name, payload["coarser"], source)
+    return replace(part, coarser=coarser)
+
+
 def payload(p: Plan, k: int, threads: int | None, tell=None) -> dict:
     """What a worker needs to solve shard ``k`` of plan ``p`` (plain, picklable data);
     ``tell``: a callable, or a queue whose ``put`` is called, with 1 as each planned sample ends.
@@ -305,6 +315,8 @@ def payload(p: Plan, k: int, threads: int | None, tell=None) -> dict:
         "part_name": p.part.name,
         "part_arrays": p.part.arrays(),
         "part_source": p.part.source,
+        # the part it was subdivided from, on which a press is meshed (fem.finer)
+        "coarser": None if p.part.coarser is None else p.part.coarser.arrays(),
         "tasks": tasks,
         "threads": threads,
         "tell": tell,

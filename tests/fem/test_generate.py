@@ -493,3 +493,17 @@ def test_every_planned_sample_ticks_the_progress_as_it_ends(backend, workers):
     solved = sum(len(r["records"]["task"]) for r in shards)
     failed = sum(len(r["failures"]) for r in shards)
     assert failed >= len(p.tasks) and sum(ticks) == solved + failed == 3 * len(p.tasks)
+
+
+def test_a_worker_knows_the_part_a_subdivided_part_came_from():
+    """So a press on it is meshed on the coarser part (fem.finer), in every worker process."""
+    from fem.worker import part_of, payload
+
+    body = {"model": "tube", "radius": 0.04, "length": 0.2, "n_around": 16, "n_along": 12}
+    p = plan(read_config(_cfg(body={**body, "subdivisions": 1})))
+    part = part_of(payload(p, 0, None))
+    assert part.n_vertices == p.part.n_vertices and part.coarser is not None
+    np.testing.assert_array_equal(part.coarser.vertices, p.part.coarser.vertices)
+    np.testing.assert_array_equal(part.coarser.faces, p.part.coarser.faces)
+    assert part.coarser.source["subdivisions"] == 0
+    assert part_of(payload(plan(read_config(_cfg())), 0, None)).coarser is None
