@@ -65,13 +65,7 @@ class Contact:
         self.multipliers = np.zeros(len(self.nodes))
         self.held = solver.fixed[self.nodes].all(axis=1)  # skin nodes held in place (a rim)
         self.held_inside = 0.0
-        X = np.zeros((solver.n_all, 3))
-        X[: solver.mesh.n_nodes] = solver.mesh.nodes
-        if solver.order == 2:
-            X[solver.mesh.n_nodes :] = 0.5 * (
-                solver.mesh.nodes[solver.edges[:, 0]] + solver.mesh.nodes[solver.edges[:, 1]]
-            )
-        self.rest = X[self.nodes]
+        self.rest = solver.positions[self.nodes]
 
     def _state(self, u: np.ndarray):
         phi, grad, curv = self.shape.distance(self.rest + u[self.nodes])

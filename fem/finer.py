@@ -65,7 +65,7 @@ class FinerPart:
         s = mesh.n_skin
         on_skin = (solver.edges < s).all(axis=1)  # a quadratic element's skin edge nodes
         skin = np.concatenate([np.arange(s), mesh.n_nodes + np.flatnonzero(on_skin)])
-        x = np.concatenate([mesh.nodes[:s], mesh.nodes[solver.edges[on_skin]].mean(1)])
+        x = solver.positions[skin]
         d, j = cKDTree(x).query(part.vertices)
         if d.max() > ON_NODE:
             k = int(np.argmax(d))

@@ -346,6 +346,14 @@ class Solver:
         return out
 
     @cached_property
+    def positions(self) -> np.ndarray:
+        """``(n_all, 3)`` every node's rest position, m (a quadratic element's edge nodes at
+        their edges' midpoints).
+        """
+        nodes = self.mesh.nodes
+        return np.concatenate([nodes, nodes[self.edges].mean(axis=1)])
+
+    @cached_property
     def answers(self) -> FinerPart:
         """How a contact answer reads on the vertices of :attr:`answer_on`."""
         return FinerPart(self, self.answer_on)

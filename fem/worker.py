@@ -295,8 +295,8 @@ def part_of(payload: dict) -> BodyPart:
     )
     if payload.get("coarser") is None:
         return part
-    source = {**part.source, "subdivisions": part.source.get("subdivisions", 1) - 1}
-    coarser = BodyPart.from_arrays(part.name, payload["coarser"], source)
+    arrays, source = payload["coarser"]
+    coarser = BodyPart.from_arrays(part.name, arrays, source)
     return replace(part, coarser=coarser)
 
 
@@ -316,7 +316,9 @@ def payload(p: Plan, k: int, threads: int | None, tell=None) -> dict:
         "part_arrays": p.part.arrays(),
         "part_source": p.part.source,
         # the part it was subdivided from, on which a press is meshed (fem.finer)
-        "coarser": None if p.part.coarser is None else p.part.coarser.arrays(),
+        "coarser": None
+        if p.part.coarser is None
+        else (p.part.coarser.arrays(), p.part.coarser.source),
         "tasks": tasks,
         "threads": threads,
         "tell": tell,

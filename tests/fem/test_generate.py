@@ -505,5 +505,5 @@ def test_a_worker_knows_the_part_a_subdivided_part_came_from():
     assert part.n_vertices == p.part.n_vertices and part.coarser is not None
     np.testing.assert_array_equal(part.coarser.vertices, p.part.coarser.vertices)
     np.testing.assert_array_equal(part.coarser.faces, p.part.coarser.faces)
-    assert part.coarser.source["subdivisions"] == 0
+    assert part.coarser.source == p.part.coarser.source
     assert part_of(payload(plan(read_config(_cfg())), 0, None)).coarser is None
