@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 import os
 import time
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 import numpy as np
 import trimesh
@@ -289,15 +289,12 @@ def linear_answer(
 
 
 def part_of(payload: dict) -> BodyPart:
-    """The part of a :func:`payload`, with the part it was subdivided from where it has one."""
-    part = BodyPart.from_arrays(
+    """The part of a :func:`payload` (a subdivided one knows the part it came from:
+    :func:`stmpl.part.undivide`, on which a press is meshed).
+    """
+    return BodyPart.from_arrays(
         payload["part_name"], payload["part_arrays"], payload["part_source"]
     )
-    if payload.get("coarser") is None:
-        return part
-    arrays, source = payload["coarser"]
-    coarser = BodyPart.from_arrays(part.name, arrays, source)
-    return replace(part, coarser=coarser)
 
 
 def payload(p: Plan, k: int, threads: int | None, tell=None) -> dict:
@@ -315,10 +312,6 @@ def payload(p: Plan, k: int, threads: int | None, tell=None) -> dict:
         "part_name": p.part.name,
         "part_arrays": p.part.arrays(),
         "part_source": p.part.source,
-        # the part it was subdivided from, on which a press is meshed (fem.finer)
-        "coarser": None
-        if p.part.coarser is None
-        else (p.part.coarser.arrays(), p.part.coarser.source),
         "tasks": tasks,
         "threads": threads,
         "tell": tell,

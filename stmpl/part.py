@@ -192,12 +192,16 @@ class BodyPart:
 
     @classmethod
     def from_arrays(cls, name: str, arrays, source: dict | None = None) -> "BodyPart":
+        """The part saved by :meth:`arrays`; a part that ``source`` says was subdivided, and
+        whose arrays are the subdivision of a coarser part, knows that part again
+        (:attr:`coarser`, :func:`undivide`).
+        """
         rims = (
             tuple(np.split(np.asarray(arrays["rims"]), np.cumsum(arrays["rim_lengths"])[:-1]))
             if len(arrays["rim_lengths"])
             else ()
         )
-        return cls(
+        part = cls(
             name=name,
             vertices=np.asarray(arrays["vertices"], float),
             faces=np.asarray(arrays["faces"], np.int64),
@@ -213,6 +217,8 @@ class BodyPart:
             else None,
             source=dict(source or {}),
         )
+        coarser = undivide(part)
+        return part if coarser is None else dataclasses.replace(part, coarser=coarser)
 
     def limb_frame(self, along: float) -> tuple[np.ndarray, np.ndarray, float]:
         """``(centre (3,), direction (3,), arc length s0 m)``: the point of the limb axis at
@@ -318,6 +324,54 @@ def subdivide(part: BodyPart) -> BodyPart:
         source,
         coarser=part,
     )
+
+
+def undivide(part: BodyPart) -> BodyPart | None:
+    """The part that ``part`` was subdivided from (:func:`subdivide`), rebuilt from its arrays
+    alone (its first vertices and UV corners, the outer corners of each face's four), where
+    ``part.source`` counts a subdivision and subdividing that part gives ``part`` exactly;
+    else ``None``. A part saved and read again (a scene file, a dataset) so keeps the part a
+    press is meshed on (:mod:`fem.finer`).
+    """
+    levels = int(part.source.get("subdivisions", 0))
+    if levels < 1 or len(part.faces) % 4:
+        return None
+    m = len(part.faces) // 4
+    f, fu = part.faces, part.face_uv
+    faces = np.stack([f[:m, 0], f[m : 2 * m, 1], f[2 * m : 3 * m, 2]], 1)
+    face_uv = np.stack([fu[:m, 0], fu[m : 2 * m, 1], fu[2 * m : 3 * m, 2]], 1)
+    n, t = int(faces.max(initial=-1)) + 1, int(face_uv.max(initial=-1)) + 1
+    rims = tuple(r[::2] for r in part.rims)
+    if not (0 < n < part.n_vertices and 0 < t < len(part.uv)) or any((r >= n).any() for r in rims):
+        return None
+    source = {**part.source, "subdivisions": levels - 1}
+    if levels == 1:
+        del source["subdivisions"]
+    try:
+        coarse = BodyPart(
+            part.name,
+            part.vertices[:n],
+            faces,
+            part.normals[:n],
+            part.uv[:t],
+            face_uv,
+            part.uv_vertex[:t],
+            part.uv_scale,
+            rims,
+            part.axis,
+            None if part.body_index is None else part.body_index[:n],
+            source,
+        )
+    except ValueError:  # not the first vertices of a subdivision
+        return None
+    again = subdivide(coarse)
+    same = all(
+        np.array_equal(getattr(again, k), getattr(part, k))
+        for k in ("vertices", "faces", "normals", "uv", "face_uv", "uv_vertex")
+    ) and len(again.rims) == len(part.rims)
+    if not same or not all(np.array_equal(a, b) for a, b in zip(again.rims, part.rims)):
+        return None
+    return dataclasses.replace(coarse, coarser=undivide(coarse))
 
 
 def _check_shape(name: str, arr, shape: tuple) -> None:

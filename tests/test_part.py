@@ -114,6 +114,29 @@ def test_finer_anny_arm(arm):
         part_from_spec({"model": "anny", "subdivisions": 9}, "left_arm")
 
 
+def test_a_subdivided_part_read_back_knows_the_part_it_came_from(arm):
+    """Saved and read again (a scene file, a dataset), a subdivided part rebuilds its coarser
+    part from its own arrays, so a press on it is meshed there (fem.finer); a part that only
+    claims a subdivision, or was edited since, does not.
+    """
+    from stmpl.body.spec import part_from_spec
+
+    fine = part_from_spec({"model": "anny", "subdivisions": 2}, "left_arm")
+    back = BodyPart.from_arrays(fine.name, fine.arrays(), fine.source)
+    for got, want in ((back.coarser, fine.coarser), (back.coarser.coarser, arm)):
+        for k in ("vertices", "faces", "normals", "uv", "face_uv", "uv_vertex", "body_index"):
+            np.testing.assert_array_equal(getattr(got, k), getattr(want, k))
+        assert [r.tolist() for r in got.rims] == [r.tolist() for r in want.rims]
+    assert back.coarser.source == fine.coarser.source and back.coarser.coarser.coarser is None
+    assert BodyPart.from_arrays(arm.name, arm.arrays(), arm.source).coarser is None
+    claims = {**arm.source, "subdivisions": 1}
+    assert BodyPart.from_arrays(arm.name, arm.arrays(), claims).coarser is None
+    moved = fine.coarser.arrays()  # one edge's midpoint moved off its edge
+    moved["vertices"] = moved["vertices"].copy()
+    moved["vertices"][-1] += [1e-4, 0, 0]
+    assert BodyPart.from_arrays(arm.name, moved, fine.coarser.source).coarser is None
+
+
 def test_rim_distance_is_zero_on_the_rims_and_half_the_length_midway():
     from stmpl.body.primitives import tube
 
