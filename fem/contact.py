@@ -101,6 +101,23 @@ class Contact:
         cols = (3 * nodes[:, None] + k).ravel()
         return rows, cols, H.reshape(-1)
 
+    def coupling(self, u: np.ndarray, direction: np.ndarray):
+        """The potential's terms in the object's depth ``d`` along ``direction`` ``(3,)`` (the
+        object moved as ``d`` rises: ``phi(x - d e)``), for force control in one Newton system:
+        ``(b (n_all, 3), c, reaction, scale)`` with ``b`` the mixed second derivative
+        ``d^2/du dd`` (N/m), ``c`` the second derivative in ``d`` (N/m; both their positive parts,
+        as :meth:`hessian`), ``reaction = dE/dd`` (N: the force the object must be pushed with)
+        and ``scale`` the norm of the contact forces on the skin's nodes (N).
+        """
+        _, grad, _, p = self._state(u)
+        on = p > 0
+        along = grad[on] @ direction  # each pressed node's normal along the press
+        kw = self.stiffness * self.weights[on]
+        b = np.zeros((self.solver.n_all, 3))
+        b[self.nodes[on]] = -(kw * along)[:, None] * grad[on]
+        reaction = float(np.sum(self.weights[on] * p[on] * along))
+        return b, float(np.sum(kw * along**2)), reaction, float(np.linalg.norm(self.weights * p))
+
     def update(self, u: np.ndarray) -> tuple[float, float]:
         """Uzawa's step at the equilibrium ``u``: the multipliers become the contact pressures
         that hold it (and what :meth:`pressures` and :meth:`force` report). Returns the deepest
@@ -227,20 +244,34 @@ class Pressed:
     multipliers: np.ndarray | None = field(default=None, repr=False)
 
 
-def _relax(
-    solver, contact, u, tolerance: float, max_updates: int, on_the_way=False, friction=None
+def relax(
+    solver,
+    contact,
+    u,
+    tolerance: float,
+    max_updates: int,
+    on_the_way=False,
+    friction=None,
+    solve=None,
 ) -> dict:
     """Equilibrium at the contact's current pose, the multipliers updated until the deepest
     penetration is within ``tolerance`` (m) and the pressure the penetration still holds back
     is within :data:`FORCE_TOLERANCE` of the contact force (and, with ``friction``, until its
     lagged pressures change by less than that). ``on_the_way``: a step towards a deeper pose,
     solved to :data:`STEP_RTOL` with one multiplier update (what it leaves, the next step's
-    solve removes).
+    solve removes). ``solve(u, rtol, floor) -> dict``: the equilibrium at fixed multipliers
+    (default the solver's; force control's moves the object too, leaving the contact at its
+    answer's pose).
     """
     iters = 0
     rtol = max(solver.options.rtol, RTOL, STEP_RTOL if on_the_way else 0.0)
+    if solve is None:
+
+        def solve(u, rtol, floor):
+            return solver.equilibrium(u, np.zeros_like(u), rtol, floor)
+
     for k in range(max_updates + 1):
-        res = solver.equilibrium(u, np.zeros_like(u), rtol, FLOOR)
+        res = solve(u, rtol, FLOOR)
         iters += res["iterations"]
         if not res["ok"]:
             return {**res, "iterations": iters, "updates": k}
@@ -427,9 +458,15 @@ class Pressing:
         if not res["ok"]:
             reason = res["reason"] + f" (residual {res.get('residual', float('nan')):.2e})"
             return Pressed(False, reason, depth, iterations=res["iterations"])
+        return self.answer(res["u"], depth, res, t0)
+
+    def answer(self, u: np.ndarray, depth: float, res: dict, t0: float) -> Pressed:
+        """The answer at state ``u`` with the object at ``depth`` (m), solved as ``res`` says
+        (``iterations``, ``updates``, ``penetration``) since ``time.perf_counter()`` was ``t0``.
+        """
         seconds = time.perf_counter() - t0
         return _answer(
-            solver, contact, res["u"], depth, self.direction, res, seconds, self.friction
+            self.solver, self.contact, u, depth, self.direction, res, seconds, self.friction
         )
 
 
@@ -461,7 +498,7 @@ def _march(
         if friction is not None:
             x = contact.rest + u[contact.nodes]
             friction.begin(u, motion(shape, direction, x, to - s))
-        res = _relax(solver, contact, u, tolerance * to, max_updates, not last, friction)
+        res = relax(solver, contact, u, tolerance * to, max_updates, not last, friction)
         iters += res["iterations"]
         updates += res.get("updates", 0)
         if res["ok"]:

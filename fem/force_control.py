@@ -15,8 +15,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from fem.contact import FORCE_TOLERANCE, HELD, Pressed, Pressing
+from fem.contact import FLOOR, FORCE_TOLERANCE, HELD, Pressed, Pressing, relax
 from fem.shapes import positive
+from fem.tangent import KRYLOV_ITERATIONS
 
 AIM_STEPS = 4
 """Force control aims at most this many marching steps beyond its last answer."""
@@ -43,8 +44,14 @@ def press_to_force(
     max_updates: int = 20,
     start: Pressed | None = None,
     friction: float = 0.0,
+    coupled: bool = True,
 ) -> Pressed:
-    """Push ``shape`` along ``direction`` until the reaction is ``force`` (N) within ``rtol``:
+    """Push ``shape`` along ``direction`` until the reaction is ``force`` (N) within ``rtol``.
+
+    ``coupled`` (frictionless, along a direction): from an answer in contact (``start``, or
+    the first try from rest) the depth is solved together with the displacement in one Newton
+    system (:func:`_coupled`), its equation the reaction equal to ``force``; where that cannot
+    go on, the search below takes over from the last answer it reached. The search:
     the depth rises from the placed pose, or from ``start`` (an answer of the same object and
     solver carrying less than ``force``), each try aimed at the force by the power law through
     the last two answers and at most :data:`AIM_STEPS` steps of ``step`` (m) ahead, until the
@@ -67,7 +74,17 @@ def press_to_force(
         raise ValueError(f"start must be an answer that carries less than {force:g} N")
     t0 = time.perf_counter()
     answer = _force_control(
-        solver, shape, direction, force, rtol, step, stiffness, max_updates, start, friction
+        solver,
+        shape,
+        direction,
+        force,
+        rtol,
+        step,
+        stiffness,
+        max_updates,
+        start,
+        friction,
+        coupled,
     )
     return replace(answer, time=time.perf_counter() - t0)
 
@@ -110,12 +127,193 @@ def _aim(a: Pressed, b: Pressed, force: float) -> float:
 
 
 def _force_control(
-    solver, shape, direction, force, rtol, step, stiffness, max_updates, start, friction
+    solver, shape, direction, force, rtol, step, stiffness, max_updates, start, friction, coupled
 ):
-    """:func:`press_to_force`'s search, its arguments checked."""
+    """:func:`press_to_force`'s work, its arguments checked."""
     with Pressing(solver, shape, direction, stiffness, 2e-3, max_updates, step, friction) as go:
+        if coupled and not friction and direction is not None:
+            if start is None:  # from rest: a step at a time until the object touches
+                start = _first_touch(go, step)
+                if start is not None and abs(start.reaction - force) <= rtol * force:
+                    return start
+                if start is not None and not start.reaction < force:
+                    start = None  # past the force at once: the search brackets it
+            if start is not None and start.reaction > 0:
+                answer, start = _coupled(go, force, start)
+                if answer is not None:
+                    return answer
         got = _bracket(go, force, rtol, step, start)
         return _between(go, force, rtol, *got) if isinstance(got, tuple) else got
+
+
+def _first_touch(go, step: float) -> Pressed | None:
+    """The first answer that carries a force, from rest a ``step`` (m) deeper at a time (an
+    object that touches nothing costs no solve); ``None`` where a try fails or the object
+    reaches the bone first (the search then says why).
+    """
+    deepest = float(go.solver.mesh.thickness.max())
+    depth = 0.0
+    while depth < deepest:
+        depth = min(depth + step, deepest)
+        answer = go.to(depth, None)
+        if not answer.ok:
+            return None
+        if answer.reaction > 0:
+            return answer
+    return None
+
+
+def _coupled(go, force: float, start: Pressed):
+    """Force control in one Newton system: from ``start`` (an answer carrying less than
+    ``force``) the object's depth ``d`` is an unknown beside the displacement, and the energy
+    less ``force d`` is minimised over both (:func:`_newton_on_depth`), so that its stationary
+    point carries ``force`` exactly, its multipliers updated to the contact's tolerance. Where
+    that fails, a nearer force is solved first (with one multiplier update), aimed by the power
+    law ``F = c d^p`` through the last two answers (rest and ``start`` first) half as deep as
+    the last try, and the reach doubles again after each that passes; up to the solver's
+    ``max_substeps`` failures. Returns ``(answer, last)``: the answer (``None`` where the
+    steps failed or the answer is not trusted) and, without one, the last answer reached
+    below ``force`` (the search's start).
+    """
+    solver, contact = go.solver, go.contact
+    tolerance, max_updates, _ = go.options
+    t0 = time.perf_counter()
+    u, depth = start.state, start.depth
+    contact.multipliers = start.multipliers.copy()
+    before, now = (0.0, 0.0), (start.depth, start.reaction)
+    reach, failures, iterations, updates, kept = np.inf, 0, 0, 0, None
+    while True:
+        p = _exponent(before, now)
+        aimed = now[0] * (force / now[1]) ** (1 / p)  # where the power law carries the force
+        target = min(force, now[1] * ((now[0] + reach) / now[0]) ** p)
+        last = target >= force
+        held = (u, depth, contact.multipliers.copy(), getattr(contact, "_normals", None))
+        at = {"depth": depth}
+
+        def solve(v, rtol, floor, at=at, target=target):
+            res = _newton_on_depth(go, v, at["depth"], target, rtol, floor)
+            at["depth"] = res.get("depth", at["depth"])
+            return res
+
+        deep = tolerance * min(aimed, now[0] + reach)  # the penetration allowed, m
+        res = relax(solver, contact, u, deep, max_updates, not last, None, solve)
+        iterations += res["iterations"]
+        updates += res.get("updates", 0)
+        if res["ok"] and last:
+            done = {**res, "iterations": iterations, "updates": updates}
+            answer = go.answer(res["u"], at["depth"], done, t0)
+            if answer.ok:
+                return answer, None
+        if res["ok"] and not last:
+            u, depth, kept = res["u"], at["depth"], res
+            before, now = now, (depth, target)
+            reach *= 2
+            continue
+        u, depth, contact.multipliers, contact._normals = held
+        failures += 1
+        if res["ok"] or failures > solver.options.max_substeps:  # the search goes on
+            if kept is None:
+                return None, start
+            # from the last step solved (loosely: the search's march solves it again)
+            kept = {**kept, "iterations": iterations, "updates": updates}
+            reached = go.answer(u, depth, kept, t0)
+            return None, reached if reached.ok else start
+        reach = 0.5 * min(reach, aimed - now[0])
+
+
+def _exponent(a: tuple[float, float], b: tuple[float, float]) -> float:
+    """The exponent ``p`` of the power law ``F = c d^p`` through ``(depth m, force N)`` points
+    ``a`` and ``b`` (within [1, 4]; Hertz's 1.5 where ``a`` is rest), as :func:`_aim`.
+    """
+    if a[0] > 0 and a[1] > 0 and b[1] > 0 and b[1] != a[1] and b[0] != a[0]:
+        p = np.log(b[1] / a[1]) / np.log(b[0] / a[0])
+    else:
+        p = 1.5
+    return min(max(float(p), 1.0), 4.0)
+
+
+def _newton_on_depth(go, u, depth: float, force: float, rtol: float, floor: float = FLOOR):
+    """Newton's method on the displacement ``u`` and the object's depth ``depth`` (m) together,
+    at fixed contact multipliers: the energy ``Pi(u, d) = W(u) + C(u, d) - force d`` minimised,
+    so that at its answer the tissue is in equilibrium and the reaction ``dC/dd`` is ``force``.
+    Each step solves the bordered system ``[K b; b^T c] [du; dd] = -[r; R - force]`` through
+    the tangent ``K``'s factorisation (two right-hand sides: the residual and ``b``, the
+    contact's mixed derivative; :meth:`fem.contact.Contact.coupling`), and a backtracking line
+    search on ``Pi`` keeps each a descent. Converged where the residual is within ``rtol`` of
+    the contact forces and the reaction within ``rtol`` of ``force``; ``floor`` as for
+    :meth:`fem.solver.Solver.equilibrium`. Returns the solver's dict with ``depth`` beside
+    ``u``; the contact is left at the answer's pose.
+    """
+    solver, contact, shape, e = go.solver, go.contact, go.shape, go.direction
+    free, opt, tangent = solver.free, solver.options, solver.tangent
+    zero = np.zeros_like(u)
+
+    def energy(v, d):
+        contact.shape = shape.pushed(d, e)
+        return solver.energy(v, zero) - force * d
+
+    E, scale, history, definite, factorisations = energy(u, depth), 0.0, [], False, 0
+    krylov = solver.linear.direct and opt.reuse > 0
+    refresh = not (krylov and tangent.factored == "full")
+    for it in range(opt.max_iter + 1):
+        contact.shape = shape.pushed(depth, e)
+        r, K = solver.assemble(u, zero)
+        b, c, reaction, norm = contact.coupling(u, e)
+        scale = max(scale, norm, 1e-30)
+        rf, bf, rd = r.reshape(-1)[free], b.reshape(-1)[free], reaction - force
+        rel = max(float(np.linalg.norm(rf)) / scale, abs(rd) / force)
+        history.append(rel)
+        out = {"iterations": it, "residual": rel, "depth": depth}
+        if rel <= rtol:
+            if definite and tangent.factorise(u, zero, K=K) is not None:
+                reason = "indefinite tangent at the answer: the layer buckles"
+                return {**out, "ok": False, "reason": reason, "iterations": it + 1}
+            return {**out, "ok": True, "u": u, "factorisations": factorisations}
+        if it == opt.max_iter:
+            break
+        if len(history) > opt.stagnation and rel > 0.5 * history[-1 - opt.stagnation]:
+            reason = f"stagnated: residual {rel:.2e} did not halve in {opt.stagnation} iterations"
+            return {**out, "ok": False, "reason": reason}
+        kept = krylov and tangent.factored == "full" and not refresh
+        y, failed, fresh, refresh = _bordered(solver, u, K, np.stack([-rf, bf], axis=1), kept)
+        if failed is not None:
+            return {**out, "ok": False, "reason": failed[0], "iterations": it + failed[1]}
+        factorisations += fresh
+        definite |= tangent.factored == "definite"
+        stiffness = c - bf @ y[:, 1]  # the reaction's rise with depth, N/m (the Schur complement)
+        dd = (-rd - bf @ y[:, 0]) / stiffness if stiffness > 0 else np.nan
+        du = y[:, 0] - y[:, 1] * dd
+        slope = float(rf @ du + rd * dd)
+        if not (np.isfinite(slope) and slope < 0):
+            if not fresh:  # the kept factorisation gave no descent: a fresh one
+                refresh = True
+                continue
+            reason = "indefinite tangent: the reaction does not rise with the depth"
+            return {**out, "ok": False, "reason": reason, "iterations": it + 1}
+        step = np.zeros(u.size)
+        step[free] = du
+        step = step.reshape(-1, 3)
+        alpha, trial = 1.0, None
+        for _ in range(12):
+            Et = energy(u + alpha * step, depth + alpha * dd)
+            if np.isfinite(Et) and (Et <= E + 1e-4 * alpha * slope or Et - E <= 1e-12 * abs(E)):
+                trial = u + alpha * step
+                break
+            alpha *= 0.5
+        if trial is None:
+            contact.shape = shape.pushed(depth, e)
+            if not fresh:
+                refresh = True
+                continue
+            if rel <= floor:
+                return {**out, "ok": True, "u": u, "factorisations": factorisations}
+            reason = "line search failed to lower the energy"
+            return {**out, "ok": False, "reason": reason, "iterations": it + 1}
+        u, depth, E = trial, depth + alpha * dd, Et
+        refresh = refresh or (fresh and alpha < 1.0)
+    out = {"iterations": opt.max_iter, "residual": rel, "depth": depth}
+    reason = f"no convergence in {opt.max_iter} iterations (residual {rel:.2e})"
+    return {**out, "ok": False, "reason": reason}
 
 
 def _bracket(go, force: float, rtol: float, step: float, start: Pressed | None):
@@ -219,3 +417,23 @@ def _stuck(force: float, failure: Pressed, depth: float, last: Pressed) -> Press
         reason=f"cannot carry {force:g} N: {failure.reason} at depth {1e3 * depth:.2f} mm, "
         f"after {last.reaction:.3g} N",
     )
+
+
+def _bordered(solver, u: np.ndarray, K, rhs: np.ndarray, kept: bool):
+    """``K y = rhs`` ``(n, 2)`` for the bordered Newton step of :func:`_newton_on_depth`: by
+    conjugate gradients preconditioned with the kept factorisation where ``kept``, else (or
+    where they fail) with a fresh one. Returns ``(y, failure or None, whether the tangent was
+    factorised, whether CG was slow)``; a failure is ``(reason, iterations it counts)``.
+    """
+    tangent = solver.tangent
+    if kept:
+        y, spent = tangent.krylov(K, rhs)
+        if y is not None:
+            return y, None, False, spent >= KRYLOV_ITERATIONS[0]
+    failed = tangent.refactorise(u, np.zeros_like(u), K)
+    if failed is not None:
+        return None, failed, True, False
+    try:
+        return solver.linear.solve(rhs), None, True, False
+    except RuntimeError as exc:
+        return None, (f"linear solve failed: {exc}", 0), True, False

@@ -1,10 +1,11 @@
-"""Sparse linear solvers for the Newton steps, one interface (``factor(K)``, ``solve(b)``,
+"""Sparse linear solvers for the Newton steps, one interface (``factor(K, confirm)``, ``solve(b)``,
 ``precondition(b)``: a solve as good as a preconditioner needs,
 ``upper``: whether it wants only the upper triangle; ``direct``: whether ``solve`` applies a
 fixed factorisation, which can then precondition later tangents): MKL PARDISO (Cholesky,
 fastest; ``pardiso_single`` factorises in single precision and refines its solves in double),
 SciPy's SuperLU (always there) and AMG-preconditioned conjugate gradients. A
-factorisation that meets a non-positive pivot raises :class:`IndefiniteTangent`.
+factorisation that meets a non-positive pivot raises :class:`IndefiniteTangent`; ``confirm``
+(default): only once a double-precision factorisation has met one too.
 """
 
 from __future__ import annotations
@@ -30,7 +31,7 @@ class _SuperLU:
 
     name, upper, direct = "superlu", False, True
 
-    def factor(self, K):
+    def factor(self, K, confirm: bool = True):
 
         self._lu = splu(
             K.tocsc(),
@@ -87,7 +88,7 @@ class _Pardiso:
         except Exception:  # noqa: BLE001 - interpreter shutdown
             pass
 
-    def factor(self, K):
+    def factor(self, K, confirm: bool = True):
         s = self._solver
         s._check_A(K)
         key = (K.shape, K.nnz)  # one Solver keeps one pattern
@@ -177,7 +178,11 @@ class _PardisoSingle(_Pardiso):
             raise RuntimeError(f"PARDISO (single precision) failed: error {error.value}")
         return x
 
-    def factor(self, K):
+    def factor(self, K, confirm: bool = True):
+        """``confirm=False``: a non-positive pivot in single precision is taken at its word
+        (where a modified tangent stands ready: a Newton step then costs one factorisation
+        less, and at worst descends more slowly); else a double factorisation settles it.
+        """
         K = K.tocsr()
         K.sort_indices()
         self._K, self._single = K, True
@@ -193,6 +198,8 @@ class _PardisoSingle(_Pardiso):
             self._call(22, b)
         except IndefiniteTangent:  # single precision's word alone does not settle it
             self._single = False
+            if not confirm:
+                raise
             super().factor(K)
 
     def precondition(self, b):
@@ -235,7 +242,7 @@ class _AMGCG:
 
     name, upper, direct = "cg", False, False
 
-    def factor(self, K):
+    def factor(self, K, confirm: bool = True):
         import pyamg  # deferred: an optional linear solver
 
         self._K = K

@@ -47,18 +47,19 @@ class Tangent:
         """``"full"`` (the tangent), ``"definite"`` (less its pressure stiffness) or ``None``."""
 
     def factorise(
-        self, u: np.ndarray, f: np.ndarray, definite: bool = False, K=None
+        self, u: np.ndarray, f: np.ndarray, definite: bool = False, K=None, confirm: bool = True
     ) -> tuple[str, int] | None:
         """Assemble and factorise the tangent at ``u``; ``None``, or why it failed and whether
         the iteration counts (``(reason, 1)`` when the tangent itself was built).
         ``definite``: the tangent without the pressure stiffness; ``K``: the full tangent at
-        ``u`` where it is at hand.
+        ``u`` where it is at hand; ``confirm``: as the linear solver's ``factor`` (``False``:
+        a single-precision factorisation's non-positive pivot is not checked in double).
         """
         self.factored = None
         try:
             if K is None or definite:
                 _, K = self.assemble(u, f, definite)
-            self.linear.factor(K)
+            self.linear.factor(K, confirm)
         except IndefiniteTangent:
             return "indefinite tangent: the layer buckles", 1
         except (RuntimeError, ValueError) as e:
@@ -69,9 +70,11 @@ class Tangent:
     def refactorise(self, u: np.ndarray, f: np.ndarray, K=None) -> tuple[str, int] | None:
         """:meth:`factorise` at ``u`` (``K``: the full tangent there, where at hand); an
         indefinite tangent is tried again without its pressure stiffness where it has one
-        (:attr:`factored` then says ``"definite"``).
+        (:attr:`factored` then says ``"definite"``): a step's tangent, so a single-precision
+        factorisation's word that it is indefinite is taken there without a double one (an
+        answer reached with such steps is checked against the full tangent, confirmed).
         """
-        failed = self.factorise(u, f, K=K)
+        failed = self.factorise(u, f, K=K, confirm=not self.can_leave_out)
         if failed is not None and failed[1] and self.can_leave_out:
             return self.factorise(u, f, definite=True)
         return failed
@@ -82,17 +85,25 @@ class Tangent:
         CG iterations, the tangent)``.
         """
         _, K = self.assemble(u, f, False)
-        try:
-            out = pcg(
-                symmetric_matvec(K, self.linear.upper),
-                self.linear.precondition,
-                -rf,
-                KRYLOV_RTOL,
-                KRYLOV_ITERATIONS[1],
-            )
-        except (RuntimeError, ValueError):
-            return None, KRYLOV_ITERATIONS[1], K
-        return out.x, out.iterations, K
+        du, spent = self.krylov(K, -rf[:, None])
+        return (None if du is None else du[:, 0]), spent, K
+
+    def krylov(self, K, rhs: np.ndarray) -> tuple[np.ndarray | None, int]:
+        """``(x (n, k) or None, the most CG iterations a column took)``: conjugate gradients on
+        ``K`` for each column of ``rhs`` ``(n, k)``, preconditioned by the kept factorisation
+        (``None`` where one does not converge within :data:`KRYLOV_ITERATIONS`).
+        """
+        matvec, out, most = symmetric_matvec(K, self.linear.upper), [], 0
+        for b in rhs.T:
+            try:
+                got = pcg(matvec, self.linear.precondition, b, KRYLOV_RTOL, KRYLOV_ITERATIONS[1])
+            except (RuntimeError, ValueError):
+                return None, KRYLOV_ITERATIONS[1]
+            if got.x is None:
+                return None, KRYLOV_ITERATIONS[1]
+            out.append(got.x)
+            most = max(most, got.iterations)
+        return np.stack(out, axis=1), most
 
     def direction(self, u: np.ndarray, f: np.ndarray, rf: np.ndarray, refresh: bool, cg: bool):
         """Newton's step at ``u`` for the free residual ``rf``: by conjugate gradients on the

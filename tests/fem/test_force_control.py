@@ -9,20 +9,20 @@ import fem.force_control
 from fem.contact import Pressed, Pressing, press
 from fem.force_control import _aim, press_to_force
 from fem.material import Layered, Limits
-from fem.shapes import Punch
+from fem.shapes import Punch, Sphere
 from fem.solver import Solver
 from fem.verification import punch_slab
 
 
 def test_force_control_finds_the_depth_that_carries_a_force():
-    """A target reaction met within 1 % (the slab's response is nearly linear here: the depth
-    found lies within 2 % of the one that gave that force).
+    """The search: a target reaction met within 1 % (the slab's response is nearly linear
+    here: the depth found lies within 2 % of the one that gave that force).
     """
     solver, a, h = punch_slab(2.0, spacing=0.12)
     punch = Punch([0, 0, 0], [0, 0, -1], a)
     (known,) = press(solver, punch, [0, 0, -1], [0.008 * h])
     assert known.ok, known.reason
-    found = press_to_force(solver, punch, [0, 0, -1], known.reaction, step=0.003 * h)
+    found = press_to_force(solver, punch, [0, 0, -1], known.reaction, step=0.003 * h, coupled=False)
     assert found.ok, found.reason
     assert found.reaction == pytest.approx(known.reaction, rel=0.01)
     assert found.depth == pytest.approx(0.008 * h, rel=0.02)
@@ -38,6 +38,44 @@ def test_a_force_past_what_the_gel_carries_fails_where_it_stops():
     failed = press_to_force(solver, punch, [0, 0, -1], 1e3, step=0.2 * h)
     assert not failed.ok and failed.reason.startswith("cannot carry 1000 N: not trusted")
     assert "after 0.4" in failed.reason and failed.displacement is None
+
+
+@pytest.mark.parametrize("shape", ["ball", "rounded punch"])
+def test_force_control_in_one_newton_system_meets_the_force_where_the_depth_press_would(
+    monkeypatch, shape
+):
+    """The depth solved with the displacement (the reaction's equation in the Newton system):
+    the force met to the solver's tolerance in one march, no try after the first touch, and
+    the answer the same as a press to the depth it found (a smooth object: no other
+    equilibrium on the way), the second force from the first's answer.
+    """
+    solver, a, h = punch_slab(2.0, spacing=0.25)
+    e = np.array([0.0, 0.0, -1.0])
+    if shape == "ball":  # Hertz: 1e-4 N at some 0.07 mm, 4e-4 N at 0.18 mm
+        obj, forces = Sphere([0.0, 0.0, 0.5 * a], 0.5 * a), [1e-4, 4e-4]
+    else:  # a flat punch on the layer: about 50 N/m
+        obj, forces = Punch([0.0, 0.0, 0.0], e, a, rounding=0.2 * a), [3e-3, 8e-3]
+    tries, to = [], Pressing.to
+
+    def counted(self, depth, start):
+        tries.append(depth)
+        return to(self, depth, start)
+
+    monkeypatch.setattr(Pressing, "to", counted)
+    step = 0.002 * h
+    answers = [press_to_force(solver, obj, e, forces[0], step=step)]
+    answers.append(press_to_force(solver, obj, e, forces[1], step=step, start=answers[0]))
+    assert len(tries) == 1  # the first touch, a step from rest
+    monkeypatch.setattr(Pressing, "to", to)
+    for f, got in zip(forces, answers):
+        assert got.ok, got.reason
+        assert got.reaction == pytest.approx(f, rel=1e-6)
+        (same,) = press(solver, obj, e, [got.depth])
+        assert same.reaction == pytest.approx(f, rel=1e-4)
+        peak = np.abs(same.displacement).max()
+        assert np.abs(got.displacement - same.displacement).max() < 1e-4 * peak
+    searched = press_to_force(solver, obj, e, forces[1], step=step, coupled=False)
+    assert searched.depth == pytest.approx(answers[1].depth, rel=0.01)
 
 
 def test_force_control_aims_by_the_power_law_through_its_last_two_answers():
@@ -97,7 +135,7 @@ def test_force_control_shortens_a_try_whose_march_fails(monkeypatch):
         return to(self, depth, start)
 
     monkeypatch.setattr(Pressing, "to", stalling)
-    found = press_to_force(solver, punch, [0, 0, -1], known.reaction, step=step)
+    found = press_to_force(solver, punch, [0, 0, -1], known.reaction, step=step, coupled=False)
     assert found.ok, found.reason
     assert found.reaction == pytest.approx(known.reaction, rel=0.01)
     assert any(t > 1.5 * step for t in tries)  # the aim first reached further, and was shortened
@@ -115,7 +153,7 @@ def test_force_control_says_when_the_force_falls_as_the_object_goes_deeper(monke
 
     monkeypatch.setattr(Pressing, "to", slipping)
     punch = Punch([0, 0, 0], [0, 0, -1], a)
-    failed = press_to_force(solver, punch, [0, 0, -1], 0.5, step=0.1 * h)
+    failed = press_to_force(solver, punch, [0, 0, -1], 0.5, step=0.1 * h, coupled=False)
     assert not failed.ok and failed.displacement is None
     assert "the force falls as the object goes deeper" in failed.reason
 
@@ -136,13 +174,13 @@ def test_force_control_steps_past_a_depth_where_the_march_stalls(monkeypatch):
 
     monkeypatch.setattr(Pressing, "to", stalling)
     punch = Punch([0, 0, 0], [0, 0, -1], a)
-    found = press_to_force(solver, punch, [0, 0, -1], 0.4**1.5, step=0.05 * h)
+    found = press_to_force(solver, punch, [0, 0, -1], 0.4**1.5, step=0.05 * h, coupled=False)
     assert found.ok, found.reason
     assert found.depth == pytest.approx(0.4 * h, rel=0.01)
     assert any(band[0] <= t <= band[1] for t in tries)  # it met the band on the way
 
     band = (0.245 * h, 0.5 * h)  # too wide to step past
-    failed = press_to_force(solver, punch, [0, 0, -1], 0.25, step=0.05 * h)
+    failed = press_to_force(solver, punch, [0, 0, -1], 0.25, step=0.05 * h, coupled=False)
     assert not failed.ok and failed.reason.startswith("cannot carry 0.25 N: line search failed")
     stalled = float(failed.reason.split("at depth ")[1].split(" mm")[0])
     assert 0.245 * h <= 1e-3 * stalled <= 0.25 * h  # where it stalled, not where it jumped
