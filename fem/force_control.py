@@ -90,16 +90,19 @@ def press_to_force(
 
 
 def press_to_forces(
-    solver, shape, direction, forces, on_answer=None, friction: float = 0.0
+    solver, shape, direction, forces, on_answer=None, friction: float = 0.0, coupled: bool = True
 ) -> list[Pressed]:
     """:func:`press_to_force` to each of ``forces`` (N, rising) in turn, each from the last
     answer; after a failure the rest are failed as skipped. ``on_answer(force, answer)``: called
-    as each ends (a progress report); ``friction`` as for :func:`press_to_force`.
+    as each ends (a progress report); ``friction`` and ``coupled`` as for
+    :func:`press_to_force`.
     """
     out, last, failed = [], None, None
     for f in forces:
         if failed is None:
-            a = press_to_force(solver, shape, direction, float(f), start=last, friction=friction)
+            a = press_to_force(
+                solver, shape, direction, float(f), start=last, friction=friction, coupled=coupled
+            )
             last, failed = (a, None) if a.ok else (last, f)
         else:
             a = Pressed(False, f"skipped: {failed:g} N failed", float("nan"))

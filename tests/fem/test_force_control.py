@@ -190,7 +190,7 @@ def test_forces_in_turn_each_from_the_last_and_the_rest_skipped_after_a_failure(
 
     starts = []
 
-    def fake(solver, shape, direction, force, start=None, friction=0.0):
+    def fake(solver, shape, direction, force, start=None, friction=0.0, coupled=True):
         starts.append(None if start is None else start.reaction)
         if force > 4:
             return Pressed(False, f"cannot carry {force:g} N: not trusted", 0.005)
