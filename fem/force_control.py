@@ -49,9 +49,11 @@ def press_to_force(
     """Push ``shape`` along ``direction`` until the reaction is ``force`` (N) within ``rtol``.
 
     ``coupled`` (frictionless, along a direction): from an answer in contact (``start``, or
-    the first try from rest) the depth is solved together with the displacement in one Newton
-    system (:func:`_coupled`), its equation the reaction equal to ``force``; where that cannot
-    go on, the search below takes over from the last answer it reached. The search:
+    the first from rest that touches) the depth is solved together with the displacement in
+    one Newton system (:func:`_coupled`), its equation the reaction equal to ``force``, which
+    it then meets to the solver's tolerance; where that cannot go on, the search below takes
+    over, its first try at the depth the Newton system had reached (:func:`_searched`). The
+    search:
     the depth rises from the placed pose, or from ``start`` (an answer of the same object and
     solver carrying less than ``force``), each try aimed at the force by the power law through
     the last two answers and at most :data:`AIM_STEPS` steps of ``step`` (m) ahead, until the
@@ -139,12 +141,11 @@ def _force_control(
                 start = _first_touch(go, step)
                 if start is not None and abs(start.reaction - force) <= rtol * force:
                     return start
-                if start is not None and not start.reaction < force:
-                    start = None  # past the force at once: the search brackets it
             if start is not None and start.reaction > 0:
-                answer, start = _coupled(go, force, start)
+                answer, reached = _coupled(go, force, start)
                 if answer is not None:
                     return answer
+                return _searched(go, force, rtol, step, start, reached)
         got = _bracket(go, force, rtol, step, start)
         return _between(go, force, rtol, *got) if isinstance(got, tuple) else got
 
@@ -166,73 +167,65 @@ def _first_touch(go, step: float) -> Pressed | None:
     return None
 
 
-def _coupled(go, force: float, start: Pressed):
-    """Force control in one Newton system: from ``start`` (an answer carrying less than
-    ``force``) the object's depth ``d`` is an unknown beside the displacement, and the energy
-    less ``force d`` is minimised over both (:func:`_newton_on_depth`), so that its stationary
-    point carries ``force`` exactly, its multipliers updated to the contact's tolerance. Where
-    that fails, a nearer force is solved first (with one multiplier update), aimed by the power
-    law ``F = c d^p`` through the last two answers (rest and ``start`` first) half as deep as
-    the last try, and the reach doubles again after each that passes; up to the solver's
-    ``max_substeps`` failures. Returns ``(answer, last)``: the answer (``None`` where the
-    steps failed or the answer is not trusted) and, without one, the last answer reached
-    below ``force`` (the search's start).
+COUPLED_STAGNATION = 10
+"""Newton's method on the depth and the displacement hands over to the search when its residual
+does not halve in this many iterations (a contact node on the edge of touching can hold it near
+1e-3 of the contact force, where a press to a fixed depth still converges)."""
+
+
+def _coupled(go, force: float, start: Pressed) -> tuple[Pressed | None, Pressed | None]:
+    """Force control in one Newton system: from ``start`` (an answer in contact, carrying more
+    or less than ``force``) the object's depth ``d`` is an unknown beside the displacement, and
+    the energy less ``force d`` is minimised over both (:func:`_newton_on_depth`), so that its
+    stationary point carries ``force`` exactly; the multipliers are updated as in a press.
+    Returns ``(answer, reached)``: the answer, or ``None`` and where the solve stopped (its
+    last iterate and depth, a start for a press to that depth; ``None`` if it took no step, or
+    its answer is not trusted: the search then finds where).
     """
     solver, contact = go.solver, go.contact
     tolerance, max_updates, _ = go.options
     t0 = time.perf_counter()
-    u, depth = start.state, start.depth
     contact.multipliers = start.multipliers.copy()
-    before, now = (0.0, 0.0), (start.depth, start.reaction)
-    reach, failures, iterations, updates, kept = np.inf, 0, 0, 0, None
-    while True:
-        p = _exponent(before, now)
-        aimed = now[0] * (force / now[1]) ** (1 / p)  # where the power law carries the force
-        target = min(force, now[1] * ((now[0] + reach) / now[0]) ** p)
-        last = target >= force
-        held = (u, depth, contact.multipliers.copy(), getattr(contact, "_normals", None))
-        at = {"depth": depth}
+    at = {"depth": start.depth, "last": None}
 
-        def solve(v, rtol, floor, at=at, target=target):
-            res = _newton_on_depth(go, v, at["depth"], target, rtol, floor)
-            at["depth"] = res.get("depth", at["depth"])
-            return res
+    def solve(v, rtol, floor):
+        res = _newton_on_depth(go, v, at["depth"], force, rtol, floor)
+        at["depth"], at["last"] = res.get("depth", at["depth"]), res.get("last")
+        return res
 
-        deep = tolerance * min(aimed, now[0] + reach)  # the penetration allowed, m
-        res = relax(solver, contact, u, deep, max_updates, not last, None, solve)
-        iterations += res["iterations"]
-        updates += res.get("updates", 0)
-        if res["ok"] and last:
-            done = {**res, "iterations": iterations, "updates": updates}
-            answer = go.answer(res["u"], at["depth"], done, t0)
-            if answer.ok:
-                return answer, None
-        if res["ok"] and not last:
-            u, depth, kept = res["u"], at["depth"], res
-            before, now = now, (depth, target)
-            reach *= 2
-            continue
-        u, depth, contact.multipliers, contact._normals = held
-        failures += 1
-        if res["ok"] or failures > solver.options.max_substeps:  # the search goes on
-            if kept is None:
-                return None, start
-            # from the last step solved (loosely: the search's march solves it again)
-            kept = {**kept, "iterations": iterations, "updates": updates}
-            reached = go.answer(u, depth, kept, t0)
-            return None, reached if reached.ok else start
-        reach = 0.5 * min(reach, aimed - now[0])
+    aimed = start.depth * (force / start.reaction) ** (2 / 3)  # Hertz's law: the depth's scale
+    deep = tolerance * max(aimed, start.depth)  # the penetration allowed, m
+    res = relax(solver, contact, start.state, deep, max_updates, False, None, solve)
+    if not res["ok"]:
+        if at["last"] is None:
+            return None, None
+        reached = "the last iterate of force control in one system"  # a start, not an answer
+        multipliers = contact.multipliers.copy()
+        return None, Pressed(True, reached, at["depth"], state=at["last"], multipliers=multipliers)
+    answer = go.answer(res["u"], at["depth"], res, t0)
+    return (answer, None) if answer.ok else (None, None)
 
 
-def _exponent(a: tuple[float, float], b: tuple[float, float]) -> float:
-    """The exponent ``p`` of the power law ``F = c d^p`` through ``(depth m, force N)`` points
-    ``a`` and ``b`` (within [1, 4]; Hertz's 1.5 where ``a`` is rest), as :func:`_aim`.
+def _searched(go, force: float, rtol: float, step: float, start: Pressed, reached):
+    """The search over depths where the one system could not answer: first a press to the
+    depth it had ``reached`` (from its last iterate there: nearly in equilibrium), then the
+    bracket from the nearest answers below and above ``force`` (rest below where ``start``
+    already carries more).
     """
-    if a[0] > 0 and a[1] > 0 and b[1] > 0 and b[1] != a[1] and b[0] != a[0]:
-        p = np.log(b[1] / a[1]) / np.log(b[0] / a[0])
-    else:
-        p = 1.5
-    return min(max(float(p), 1.0), 4.0)
+    below = start if start.reaction < force else Pressed(True, "", 0.0, reaction=0.0)
+    above = None if start.reaction < force else start
+    if reached is not None and reached.depth > 0:
+        tried = go.to(reached.depth, reached)
+        if tried.ok and abs(tried.reaction - force) <= rtol * force:
+            return tried
+        if tried.ok and tried.reaction < force and tried.depth > below.depth:
+            below = tried
+        elif tried.ok and tried.reaction > force and (above is None or tried.depth < above.depth):
+            above = tried
+    if above is not None:
+        return _between(go, force, rtol, below, above)
+    got = _bracket(go, force, rtol, step, below if below.depth > 0 else None)
+    return _between(go, force, rtol, *got) if isinstance(got, tuple) else got
 
 
 def _newton_on_depth(go, u, depth: float, force: float, rtol: float, floor: float = FLOOR):
@@ -245,7 +238,8 @@ def _newton_on_depth(go, u, depth: float, force: float, rtol: float, floor: floa
     search on ``Pi`` keeps each a descent. Converged where the residual is within ``rtol`` of
     the contact forces and the reaction within ``rtol`` of ``force``; ``floor`` as for
     :meth:`fem.solver.Solver.equilibrium`. Returns the solver's dict with ``depth`` beside
-    ``u``; the contact is left at the answer's pose.
+    ``u`` (failed: the last iterate as ``last``, and its depth); the contact is left at the
+    answer's pose.
     """
     solver, contact, shape, e = go.solver, go.contact, go.shape, go.direction
     free, opt, tangent = solver.free, solver.options, solver.tangent
@@ -266,7 +260,7 @@ def _newton_on_depth(go, u, depth: float, force: float, rtol: float, floor: floa
         rf, bf, rd = r.reshape(-1)[free], b.reshape(-1)[free], reaction - force
         rel = max(float(np.linalg.norm(rf)) / scale, abs(rd) / force)
         history.append(rel)
-        out = {"iterations": it, "residual": rel, "depth": depth}
+        out = {"iterations": it, "residual": rel, "depth": depth, "last": u}
         if rel <= rtol:
             if definite and tangent.factorise(u, zero, K=K) is not None:
                 reason = "indefinite tangent at the answer: the layer buckles"
@@ -274,8 +268,9 @@ def _newton_on_depth(go, u, depth: float, force: float, rtol: float, floor: floa
             return {**out, "ok": True, "u": u, "factorisations": factorisations}
         if it == opt.max_iter:
             break
-        if len(history) > opt.stagnation and rel > 0.5 * history[-1 - opt.stagnation]:
-            reason = f"stagnated: residual {rel:.2e} did not halve in {opt.stagnation} iterations"
+        patience = COUPLED_STAGNATION
+        if len(history) > patience and rel > 0.5 * history[-1 - patience]:
+            reason = f"stagnated: residual {rel:.2e} did not halve in {patience} iterations"
             return {**out, "ok": False, "reason": reason}
         kept = krylov and tangent.factored == "full" and not refresh
         y, failed, fresh, refresh = _bordered(solver, u, K, np.stack([-rf, bf], axis=1), kept)
@@ -314,7 +309,7 @@ def _newton_on_depth(go, u, depth: float, force: float, rtol: float, floor: floa
             return {**out, "ok": False, "reason": reason, "iterations": it + 1}
         u, depth, E = trial, depth + alpha * dd, Et
         refresh = refresh or (fresh and alpha < 1.0)
-    out = {"iterations": opt.max_iter, "residual": rel, "depth": depth}
+    out = {"iterations": opt.max_iter, "residual": rel, "depth": depth, "last": u}
     reason = f"no convergence in {opt.max_iter} iterations (residual {rel:.2e})"
     return {**out, "ok": False, "reason": reason}
 

@@ -78,6 +78,40 @@ def test_force_control_in_one_newton_system_meets_the_force_where_the_depth_pres
     assert searched.depth == pytest.approx(answers[1].depth, rel=0.01)
 
 
+def test_where_the_one_system_stalls_the_search_starts_at_the_depth_it_reached(monkeypatch):
+    """A Newton system that stagnates (a contact node on the edge of touching) still says how
+    deep it got: the search's first try is a press to that depth, which carries the force
+    within the tolerance there.
+    """
+    solver, a, h = punch_slab(2.0, spacing=0.25)
+    e = np.array([0.0, 0.0, -1.0])
+    ball = Sphere([0.0, 0.0, 0.5 * a], 0.5 * a)
+    (known,) = press(solver, ball, e, [0.012 * h])
+    reached = 0.997 * known.depth
+
+    def stalled(go, u, depth, force, rtol, floor=0.0):
+        return {
+            "ok": False,
+            "reason": "stagnated (test)",
+            "iterations": 10,
+            "depth": reached,
+            "last": u,
+        }
+
+    tries, to = [], Pressing.to
+
+    def counted(self, depth, start):
+        tries.append(depth)
+        return to(self, depth, start)
+
+    monkeypatch.setattr(fem.force_control, "_newton_on_depth", stalled)
+    monkeypatch.setattr(Pressing, "to", counted)
+    found = press_to_force(solver, ball, e, known.reaction, step=0.002 * h)
+    assert found.ok, found.reason
+    assert found.reaction == pytest.approx(known.reaction, rel=0.01)
+    assert tries == [0.002 * h, reached]  # the first touch, then the depth reached
+
+
 def test_force_control_aims_by_the_power_law_through_its_last_two_answers():
     """On an exact power law F = c d^p (p in [1, 4]) the aim is the depth itself; from rest,
     Hertz's exponent 1.5; a steeper law is aimed at as p = 4.
