@@ -173,49 +173,46 @@ does not halve in this many iterations (a contact node on the edge of touching c
 1e-3 of the contact force, where a press to a fixed depth still converges)."""
 
 
-def _coupled(go, force: float, start: Pressed) -> tuple[Pressed | None, Pressed | None]:
+def _coupled(go, force: float, start: Pressed) -> tuple[Pressed | None, float | None]:
     """Force control in one Newton system: from ``start`` (an answer in contact, carrying more
     or less than ``force``) the object's depth ``d`` is an unknown beside the displacement, and
     the energy less ``force d`` is minimised over both (:func:`_newton_on_depth`), so that its
     stationary point carries ``force`` exactly; the multipliers are updated as in a press.
-    Returns ``(answer, reached)``: the answer, or ``None`` and where the solve stopped (its
-    last iterate and depth, a start for a press to that depth; ``None`` if it took no step, or
-    its answer is not trusted: the search then finds where).
+    Returns ``(answer, reached)``: the answer, or ``None`` and the depth (m) the solve had
+    reached where it stopped (``None`` if it took no step, or its answer is not trusted: the
+    search then finds where).
     """
     solver, contact = go.solver, go.contact
     tolerance, max_updates, _ = go.options
     t0 = time.perf_counter()
     contact.multipliers = start.multipliers.copy()
-    at = {"depth": start.depth, "last": None}
+    at = {"depth": start.depth}
 
     def solve(v, rtol, floor):
         res = _newton_on_depth(go, v, at["depth"], force, rtol, floor)
-        at["depth"], at["last"] = res.get("depth", at["depth"]), res.get("last")
+        at["depth"] = res.get("depth", at["depth"])
         return res
 
     aimed = start.depth * (force / start.reaction) ** (2 / 3)  # Hertz's law: the depth's scale
     deep = tolerance * max(aimed, start.depth)  # the penetration allowed, m
     res = relax(solver, contact, start.state, deep, max_updates, False, None, solve)
     if not res["ok"]:
-        if at["last"] is None:
-            return None, None
-        reached = "the last iterate of force control in one system"  # a start, not an answer
-        multipliers = contact.multipliers.copy()
-        return None, Pressed(True, reached, at["depth"], state=at["last"], multipliers=multipliers)
+        return None, (at["depth"] if res["iterations"] else None)
     answer = go.answer(res["u"], at["depth"], res, t0)
     return (answer, None) if answer.ok else (None, None)
 
 
 def _searched(go, force: float, rtol: float, step: float, start: Pressed, reached):
     """The search over depths where the one system could not answer: first a press to the
-    depth it had ``reached`` (from its last iterate there: nearly in equilibrium), then the
+    depth it had ``reached`` (m), marched from ``start`` (from its last iterate, nearly in
+    equilibrium, a press at 10 N on the belly did not converge where the march did), then the
     bracket from the nearest answers below and above ``force`` (rest below where ``start``
     already carries more).
     """
     below = start if start.reaction < force else Pressed(True, "", 0.0, reaction=0.0)
     above = None if start.reaction < force else start
-    if reached is not None and reached.depth > 0:
-        tried = go.to(reached.depth, reached)
+    if reached is not None and reached > 0:
+        tried = go.to(reached, start)
         if tried.ok and abs(tried.reaction - force) <= rtol * force:
             return tried
         if tried.ok and tried.reaction < force and tried.depth > below.depth:
@@ -238,8 +235,7 @@ def _newton_on_depth(go, u, depth: float, force: float, rtol: float, floor: floa
     search on ``Pi`` keeps each a descent. Converged where the residual is within ``rtol`` of
     the contact forces and the reaction within ``rtol`` of ``force``; ``floor`` as for
     :meth:`fem.solver.Solver.equilibrium`. Returns the solver's dict with ``depth`` beside
-    ``u`` (failed: the last iterate as ``last``, and its depth); the contact is left at the
-    answer's pose.
+    ``u`` (failed: the depth it had reached); the contact is left at the answer's pose.
     """
     solver, contact, shape, e = go.solver, go.contact, go.shape, go.direction
     free, opt, tangent = solver.free, solver.options, solver.tangent
@@ -260,7 +256,7 @@ def _newton_on_depth(go, u, depth: float, force: float, rtol: float, floor: floa
         rf, bf, rd = r.reshape(-1)[free], b.reshape(-1)[free], reaction - force
         rel = max(float(np.linalg.norm(rf)) / scale, abs(rd) / force)
         history.append(rel)
-        out = {"iterations": it, "residual": rel, "depth": depth, "last": u}
+        out = {"iterations": it, "residual": rel, "depth": depth}
         if rel <= rtol:
             if definite and tangent.factorise(u, zero, K=K) is not None:
                 reason = "indefinite tangent at the answer: the layer buckles"
@@ -309,7 +305,7 @@ def _newton_on_depth(go, u, depth: float, force: float, rtol: float, floor: floa
             return {**out, "ok": False, "reason": reason, "iterations": it + 1}
         u, depth, E = trial, depth + alpha * dd, Et
         refresh = refresh or (fresh and alpha < 1.0)
-    out = {"iterations": opt.max_iter, "residual": rel, "depth": depth, "last": u}
+    out = {"iterations": opt.max_iter, "residual": rel, "depth": depth}
     reason = f"no convergence in {opt.max_iter} iterations (residual {rel:.2e})"
     return {**out, "ok": False, "reason": reason}
 
