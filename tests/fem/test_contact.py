@@ -42,6 +42,30 @@ def test_the_contact_potential_is_consistent():
     np.testing.assert_allclose(Hd, fd, atol=1e-6 * np.abs(fd).max())
 
 
+def test_the_contact_potential_s_terms_in_the_object_s_depth_are_its_derivatives():
+    """Force control in one Newton system differentiates the potential in the object's depth
+    too: the reaction is the energy's derivative, ``c`` the reaction's and ``b`` the
+    gradient's (finite differences, the punch moved; a flat face has no curvature term).
+    """
+    solver, a, h = punch_slab(2.0, spacing=0.25, order=1)
+    punch, e = Punch([0, 0, 1e-4], [0, 0, -1], a), np.array([0.0, 0.0, -1.0])
+    c = Contact(solver, punch, 1e6)
+    c.multipliers[:] = 5.0
+    u = np.random.default_rng(0).normal(0, 2e-4, (solver.n_all, 3))
+    b, stiff, reaction, scale = c.coupling(u, e)
+    step = 1e-9
+
+    def at(depth):
+        c.shape = punch.pushed(depth, e)
+        return c.energy(u), c.gradient(u), c.coupling(u, e)[2]
+
+    (E1, g1, R1), (E0, g0, R0) = at(step), at(-step)
+    assert reaction > 0 and reaction == pytest.approx((E1 - E0) / (2 * step), rel=1e-5)
+    assert stiff == pytest.approx((R1 - R0) / (2 * step), rel=1e-5)
+    np.testing.assert_allclose(b, (g1 - g0) / (2 * step), atol=1e-5 * np.abs(b).max())
+    assert scale == pytest.approx(np.linalg.norm(g0 + g1) / 2, rel=1e-6)
+
+
 def test_a_flat_punch_on_a_bonded_layer_meets_hayes():
     """A rigid flat punch of radius a = 2 h pushed 1 % of h into a bonded layer (nu = 0.45,
     rings every 0.05 a across the rim: -1.3 %; 0.07 a: -2.8 %; 0.04 a: -0.5 %),
