@@ -17,7 +17,6 @@ import numpy as np
 
 from fem.contact import FLOOR, FORCE_TOLERANCE, HELD, Pressed, Pressing, relax
 from fem.shapes import positive
-from fem.tangent import KRYLOV_ITERATIONS
 
 AIM_STEPS = 4
 """Force control aims at most this many marching steps beyond its last answer."""
@@ -268,10 +267,11 @@ def _newton_on_depth(go, u, depth: float, force: float, rtol: float, floor: floa
         if len(history) > patience and rel > 0.5 * history[-1 - patience]:
             reason = f"stagnated: residual {rel:.2e} did not halve in {patience} iterations"
             return {**out, "ok": False, "reason": reason}
-        kept = krylov and tangent.factored == "full" and not refresh
-        y, failed, fresh, refresh = _bordered(solver, u, K, np.stack([-rf, bf], axis=1), kept)
+        cg = krylov and tangent.factored == "full"
+        rhs = np.stack([-rf, bf], axis=1)
+        y, failed, fresh, refresh = tangent.steps(u, zero, rhs, refresh or not cg, cg, K)
         if failed is not None:
-            return {**out, "ok": False, "reason": failed[0], "iterations": it + failed[1]}
+            return {**out, **failed, "iterations": it + failed["iterations"]}
         factorisations += fresh
         definite |= tangent.factored == "definite"
         stiffness = c - bf @ y[:, 1]  # the reaction's rise with depth, N/m (the Schur complement)
@@ -411,23 +411,3 @@ def _stuck(force: float, failure: Pressed, depth: float, last: Pressed) -> Press
         reason=f"cannot carry {force:g} N: {failure.reason} at depth {1e3 * depth:.2f} mm, "
         f"after {last.reaction:.3g} N",
     )
-
-
-def _bordered(solver, u: np.ndarray, K, rhs: np.ndarray, kept: bool):
-    """``K y = rhs`` ``(n, 2)`` for the bordered Newton step of :func:`_newton_on_depth`: by
-    conjugate gradients preconditioned with the kept factorisation where ``kept``, else (or
-    where they fail) with a fresh one. Returns ``(y, failure or None, whether the tangent was
-    factorised, whether CG was slow)``; a failure is ``(reason, iterations it counts)``.
-    """
-    tangent = solver.tangent
-    if kept:
-        y, spent = tangent.krylov(K, rhs)
-        if y is not None:
-            return y, None, False, spent >= KRYLOV_ITERATIONS[0]
-    failed = tangent.refactorise(u, np.zeros_like(u), K)
-    if failed is not None:
-        return None, failed, True, False
-    try:
-        return solver.linear.solve(rhs), None, True, False
-    except RuntimeError as exc:
-        return None, (f"linear solve failed: {exc}", 0), True, False

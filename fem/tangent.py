@@ -79,15 +79,6 @@ class Tangent:
             return self.factorise(u, f, definite=True)
         return failed
 
-    def krylov_step(self, u: np.ndarray, f: np.ndarray, rf: np.ndarray):
-        """The Newton step ``du`` (free DOFs) for residual ``rf`` at ``u``: conjugate gradients
-        on the full tangent at ``u`` preconditioned by the kept factorisation; ``(du or None,
-        CG iterations, the tangent)``.
-        """
-        _, K = self.assemble(u, f, False)
-        du, spent = self.krylov(K, -rf[:, None])
-        return (None if du is None else du[:, 0]), spent, K
-
     def krylov(self, K, rhs: np.ndarray) -> tuple[np.ndarray | None, int]:
         """``(x (n, k) or None, the most CG iterations a column took)``: conjugate gradients on
         ``K`` for each column of ``rhs`` ``(n, k)``, preconditioned by the kept factorisation
@@ -106,25 +97,37 @@ class Tangent:
         return np.stack(out, axis=1), most
 
     def direction(self, u: np.ndarray, f: np.ndarray, rf: np.ndarray, refresh: bool, cg: bool):
-        """Newton's step at ``u`` for the free residual ``rf``: by conjugate gradients on the
-        current tangent (``cg``, where the full tangent is factorised and ``refresh`` is not
-        asked for), else with the kept factorisation, or with a fresh one (``refresh``, or where
-        CG fails). Returns ``(du, failure or None, whether the tangent was factorised, whether
-        CG was slow)``; a failure's ``iterations`` counts the tangent assembled for it.
+        """Newton's step at ``u`` for the free residual ``rf``: :meth:`steps` for ``-rf``.
+        Returns ``(du, failure or None, whether the tangent was factorised, whether CG was
+        slow)``.
         """
-        du, slow, K = None, False, None
+        x, failure, fresh, slow = self.steps(u, f, -rf[:, None], refresh, cg)
+        return (None if x is None else x[:, 0]), failure, fresh, slow
+
+    def steps(self, u: np.ndarray, f: np.ndarray, rhs: np.ndarray, refresh: bool, cg: bool, K=None):
+        """``x`` ``(n, k)`` with the tangent at ``u`` times ``x`` equal to ``rhs`` ``(n, k)``
+        (free DOFs): by conjugate gradients on the current tangent (``cg``, where the full
+        tangent is factorised and ``refresh`` is not asked for), else with the kept
+        factorisation, or with a fresh one (``refresh``, or where CG fails). ``K``: the full
+        tangent at ``u`` where at hand. Returns ``(x, failure or None, whether the tangent was
+        factorised, whether CG was slow)``; a failure's ``iterations`` counts the tangent
+        assembled for it.
+        """
+        x, slow = None, False
         if cg and not refresh:
-            du, spent, K = self.krylov_step(u, f, rf)
-            refresh, slow = du is None, spent >= KRYLOV_ITERATIONS[0]
+            if K is None:
+                _, K = self.assemble(u, f, False)
+            x, spent = self.krylov(K, rhs)
+            refresh, slow = x is None, spent >= KRYLOV_ITERATIONS[0]
         if refresh:
             failed = self.refactorise(u, f, K)
             if failed is not None:
                 failure = {"ok": False, "reason": failed[0], "iterations": failed[1]}
                 return None, failure, True, False
-        if du is None:
+        if x is None:
             try:
-                du = self.linear.solve(-rf)
+                x = self.linear.solve(rhs)
             except RuntimeError as e:
                 failure = {"ok": False, "reason": f"linear solve failed: {e}", "iterations": 0}
                 return None, failure, refresh, False
-        return du, None, refresh, slow
+        return x, None, refresh, slow
