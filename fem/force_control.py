@@ -168,8 +168,9 @@ def _first_touch(go, step: float) -> Pressed | None:
 
 COUPLED_STAGNATION = 10
 """Newton's method on the depth and the displacement hands over to the search when its residual
-does not halve in this many iterations (a contact node on the edge of touching can hold it near
-1e-3 of the contact force, where a press to a fixed depth still converges)."""
+does not halve in this many iterations (where the skin slips round a rounded rim its tangent,
+the contact's penalty stiffness without the rim's curvature, is stiffer than the energy, and
+the residual creeps from some 1e-3 of the contact force: docs/tissue.md)."""
 
 
 def _coupled(go, force: float, start: Pressed) -> tuple[Pressed | None, float | None]:
