@@ -51,6 +51,19 @@ def test_out_of_range_thickness_is_refused(part, value, message):
         tissue.constant(part, value)
 
 
+def test_a_bound_stored_in_single_precision_is_inside_and_a_micron_past_it_is_not(part):
+    """A dataset stores thickness in float32, where 12.5 mm reads 12.5000002 mm: still the
+    range's top, not past it; a thousandth of a millimetre past it is refused.
+    """
+    for bound in tissue.THICKNESS_RANGE:
+        stored = np.full(part.n_vertices, np.float32(bound))
+        np.testing.assert_array_equal(tissue.check(part, stored), stored.astype(float))
+    with pytest.raises(ValueError, match="must lie in"):
+        tissue.constant(part, tissue.THICKNESS_RANGE[1] + 1e-6)
+    with pytest.raises(ValueError, match="must lie in"):
+        tissue.constant(part, tissue.THICKNESS_RANGE[0] - 1e-6)
+
+
 def test_bad_heuristic_inputs(part):
     with pytest.raises(ValueError, match="weight phenotype"):
         tissue.from_weight(part, 1.2)
