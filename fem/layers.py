@@ -26,6 +26,7 @@ import numpy as np
 import yaml
 
 from fem.material import Demiray, Exponential, Layered, Limits, NeoHookean, Yeoh
+from stmpl.tissue import GEL, Bound
 
 MIN_FAT = 0.0005
 """The thinnest fat layer a preset meshes, m."""
@@ -96,10 +97,26 @@ class Preset:
                 f"least {1e3 * MIN_FAT:g} mm)"
             )
         fat = t - skin
-        muscle = np.full_like(t, self.muscle * (0.8 + 0.4 * ph["muscle"]))
+        muscle = np.full_like(t, self.muscle * _muscle_share(ph["muscle"]))
         if room is not None:
             muscle = np.clip(np.asarray(room, dtype=float) - t, MIN_MUSCLE, muscle)
         return np.stack([skin, fat, muscle])
+
+    @property
+    def bound(self) -> Bound:
+        """How far an answer may compress this tissue (:class:`stmpl.tissue.Bound`): its
+        trusted compression (:attr:`limits`, else :data:`TRUSTED`'s) of the whole depth, the
+        muscle counted at its deepest (anny's most muscular), so that no answer the FEM could
+        give is ever past it.
+        """
+        most = (self.limits or TRUSTED).max_compression
+        below = self.muscle * _muscle_share(1.0)
+        return Bound(
+            most,
+            below,
+            f"whole depth (skin, fat and up to {1e3 * below:.0f} mm of muscle)",
+            f"where the {self.name} tissue's answers are no longer trusted and the FEM gives none",
+        )
 
     def fractions(self, layers: np.ndarray) -> np.ndarray:
         """``(E + 1, N)`` the node layers' depths as shares of the whole depth (each tissue
@@ -170,6 +187,20 @@ tissue's depth, and one step deeper (0.75) the finer mesh finds no answer: past 
 compression an answer is failed. The nearly incompressible fat and muscle keep 0.9 of their
 volume or more there; a volume ratio under 0.8 (a tissue file with softer bulk moduli) is
 failed too (``docs/tissue.md``)."""
+
+
+def _muscle_share(muscle: float) -> float:
+    """The muscle's depth as a share of a preset's base depth at anny's ``muscle`` phenotype."""
+    return 0.8 + 0.4 * float(muscle)
+
+
+def bound(spec) -> Bound:
+    """How far an answer may compress the tissue ``spec`` names (as :func:`preset`): the gel's
+    :data:`stmpl.tissue.GEL`, or a layered preset's :attr:`Preset.bound`.
+    """
+    p = preset(spec)
+    return GEL if p is None else p.bound
+
 
 LAYERS = (SKIN, FAT, MUSCLE)
 PRESETS = {

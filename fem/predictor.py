@@ -10,7 +10,7 @@ import numpy as np
 
 from fem.contact import press
 from fem.friction import coefficient
-from fem.layers import preset
+from fem.layers import bound, preset
 from fem.local import simulate_local
 from fem.mesh import ShellMesh
 from fem.objects import at_pose
@@ -18,6 +18,7 @@ from fem.simulate import check_order, press_solver, resolution, simulate
 from fem.solver import Solution
 from stmpl.predictor import BasePredictor, PredictionFailed, check_fidelity
 from stmpl.scene import Scene
+from stmpl.tissue import Bound
 
 
 class FEMFailed(PredictionFailed):
@@ -66,6 +67,13 @@ class FEMPredictor(BasePredictor):
     name = "fem"
     batched = False
     takes = ("force", "pose")
+
+    @property
+    def bound(self) -> Bound:
+        """How far an answer may compress its tissue (:func:`fem.layers.bound`): where the FEM
+        itself fails an answer.
+        """
+        return bound(self.tissue)
 
     def __init__(
         self,

@@ -11,6 +11,7 @@ import warnings
 import numpy as np
 import torch
 
+from fem.layers import bound as tissue_bound
 from models.compiled import TOLERANCE, compile_module, uncompiled
 from models.features import (
     CONTACT_BAND,
@@ -30,6 +31,7 @@ from stmpl.pose import Pose, Rigid
 from stmpl.predictor import BasePredictor, check_fidelity
 from stmpl.reach import REGION_TOLERANCE
 from stmpl.scene import Deformation, Scene
+from stmpl.tissue import Bound
 
 DISP_SCALE_MM = 10.0
 """Default displacement normalisation, mm: [-10, 10] mm maps to [-1, 1]. The paper's 30 mm
@@ -295,6 +297,13 @@ class LearnedPredictor(BasePredictor):
             return relative_loss(pred, tgt)
         return pooled_loss(pred, tgt, total_force(force) if self.per_newton else None)
 
+    @property
+    def bound(self) -> Bound:
+        """How far an answer may compress the tissue of the data it learned from
+        (:attr:`tissue`; :func:`fem.layers.bound`).
+        """
+        return tissue_bound(self.tissue)
+
     def restored(self) -> None:
         """Called when a checkpoint has been loaded (``self.meta`` set): rebuild what the
         checkpoint does not carry. Nothing by default.
@@ -500,6 +509,7 @@ class LearnedPredictor(BasePredictor):
         except RuntimeError as e:
             raise ValueError(f"checkpoint {path} does not fit its model config: {e}") from e
         p.meta = {k: v for k, v in meta.items() if k not in ("config", "kind", "envelope")}
+        p.tissue = meta.get("dataset", {}).get("tissue", "paper")
         p.restored()
         if "envelope" in meta:
             try:

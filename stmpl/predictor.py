@@ -122,11 +122,21 @@ class BasePredictor:
     FEM, which fails loudly instead)."""
     strict = False
     """Refuse scenes outside the envelope (``PredictionFailed``) instead of warning."""
+    tissue = "paper"
+    """The tissue the answers are for: ``"paper"`` (the gel) or a layered preset's name (or a
+    file of layers; a learned model's is its data's)."""
     batched = True
     """Whether a batch of scenes costs less per scene than one at a time. ``False`` for the FEM,
     which solves them one after the other in seconds each and may fail on one alone: callers
     that measure (evaluation, latency) then give it one scene at a time."""
     _fidelity = "full"
+
+    @property
+    def bound(self) -> tissue.Bound:
+        """How far an answer may compress the tissue (:class:`stmpl.tissue.Bound`): the gel's
+        here; a predictor of layered tissue gives its preset's.
+        """
+        return tissue.GEL
 
     @property
     def fidelity(self) -> str:
@@ -181,14 +191,15 @@ class BasePredictor:
             ]
             self._judge(answered, strict, "the contact it answers lies")
             outside = [a or b for a, b in zip(outside, answered)]
-        result = []
+        result, bound = [], self.bound
         for s, u, why in zip(batch, out, outside):
             answer = u if isinstance(u, dict) else {"displacement": u}
             u = np.asarray(answer["displacement"], dtype=float)
             if not np.all(np.isfinite(u)):
                 raise PredictionFailed(f"{self.name} predicted non-finite displacements")
-            compression = float((-np.einsum("ij,ij->i", u, s.part.normals) / s.thickness).max())
-            impossible = _impossible(s, answer, compression)
+            inward = -np.einsum("ij,ij->i", u, s.part.normals)
+            compression = bound.of(inward, s.thickness)
+            impossible = _impossible(s, answer, compression, bound)
             for reason in impossible:
                 warnings.warn(
                     f"{self.name}: {reason}: no answer to trust", ImpossibleAnswer, stacklevel=2
@@ -286,19 +297,15 @@ def given_to(predictor) -> str:
     return "force" if "force" in getattr(predictor, "takes", ("force",)) else "pose"
 
 
-def _impossible(scene: Scene, answer: dict, compression: float) -> list[str]:
+def _impossible(scene: Scene, answer: dict, compression: float, bound: tissue.Bound) -> list[str]:
     """Why an answer cannot be true (empty when nothing says so), each reason one clause: skin
-    pushed inward past where the gel buckles (``compression``: the largest inward displacement
-    over the tissue's thickness); for a posed scene, an object that reaches into the skin yet
-    carries no force, or one that pulls.
+    pushed inward past the tissue's ``bound`` (``compression``: :meth:`~stmpl.tissue.Bound.of`
+    the answer); for a posed scene, an object that reaches into the skin yet carries no force,
+    or one that pulls.
     """
     why = []
-    if compression > tissue.GEL_TRUSTED_COMPRESSION:
-        why.append(
-            f"the skin moves inward {compression:.2f} x the tissue's thickness, past "
-            f"{tissue.GEL_TRUSTED_COMPRESSION:g}, where the gel buckles and the FEM itself gives "
-            "no answer"
-        )
+    if compression > bound.compression:
+        why.append(bound.reason(compression))
     if scene.pose is None:
         return why
     reaction, total = answer["reaction"], float(np.sum(answer["force"]))

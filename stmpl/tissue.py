@@ -8,6 +8,8 @@ normalised to [0, 1] over :data:`THICKNESS_RANGE`; values outside it are refused
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.sparse as sp
 
@@ -25,6 +27,39 @@ before the gel buckled (19 of 20 on the gel-failure set, 8 of 9 on the honesty s
 (0.35; Hong, Zhao & Suo 2009, Appl. Phys. Lett. 95:111901) and Biot's surface instability
 (0.46) of a compressed neo-Hookean solid bracket it. The FEM fails an answer past it; a
 predictor's answer past it is flagged as no answer to trust."""
+
+
+@dataclass(frozen=True)
+class Bound:
+    """How far an answer may push the skin inward before it is one the FEM itself would not give:
+    ``compression`` of the tissue's whole depth, which is the scene's thickness (skin and fat)
+    and ``below`` (m) under it: 0 for the paper's gel, a layered tissue's muscle at its deepest
+    (so that the bound never fires on an answer the FEM could give). ``depth`` names that depth
+    and ``words`` say what lies past it.
+    """
+
+    compression: float = GEL_TRUSTED_COMPRESSION
+    below: float = 0.0
+    depth: str = "thickness"
+    words: str = "where the gel buckles and the FEM itself gives no answer"
+
+    def of(self, inward: np.ndarray, thickness: np.ndarray) -> float:
+        """The largest of ``inward`` ``(N,)`` (m, the skin's inward displacement) over the
+        whole depth under each vertex, ``thickness`` ``(N,)`` (m) and :attr:`below`.
+        """
+        return float((inward / (thickness + self.below)).max())
+
+    def reason(self, compression: float) -> str:
+        """Why an answer of ``compression`` (:meth:`of`) past the bound cannot be true."""
+        return (
+            f"the skin moves inward {compression:.2f} x the tissue's {self.depth}, past "
+            f"{self.compression:g}, {self.words}"
+        )
+
+
+GEL = Bound()
+"""The paper's gel: past :data:`GEL_TRUSTED_COMPRESSION` of its thickness."""
+
 
 LEVELS = (0.005, 0.00625, 0.0075, 0.00875, 0.010)
 """The paper's five thickness levels, m (thin to thick body)."""

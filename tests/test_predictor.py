@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from stmpl import predictor
+from stmpl import predictor, tissue
 from stmpl.body.primitives import tube
 from stmpl.pipeline.evaluate import scenes_of
 from stmpl.scene import Deformation, Scene
@@ -155,6 +155,45 @@ def test_an_impossible_answer_is_flagged(ds, make):
     with pytest.warns(predictor.ImpossibleAnswer):
         near = p.predict(s)
     assert 0.4 < near.info["max_compression"] < 1.0 and not near.info["physical"]
+
+
+class _Inward(predictor.BasePredictor):
+    """A stand-in predictor that pushes every vertex inward by ``share`` of its thickness,
+    judged by ``bound`` (a :class:`stmpl.tissue.Bound`).
+    """
+
+    name = "inward"
+
+    def __init__(self, share, bound=tissue.GEL):
+        self.share, self._bound = share, bound
+
+    @property
+    def bound(self):
+        return self._bound
+
+    def predict_batch(self, scenes):
+        return [-self.share * s.thickness[:, None] * s.part.normals for s in scenes]
+
+
+def test_an_answer_is_judged_by_its_own_tissue_s_bound():
+    """An answer's compression is measured against the predictor's own bound: a layered
+    tissue's (0.65 of skin, fat and 12 mm of muscle under them) passes an answer pushing the
+    skin in by 0.6 of the skin and fat, which is impossible on the gel (0.4 of its thickness);
+    past the layered bound the flag names its depth and its words.
+    """
+    part = tube(n_around=16, n_along=11)
+    scene = Scene(part, tissue.constant(part, 0.0075), np.zeros(part.n_vertices))
+    with pytest.warns(predictor.ImpossibleAnswer, match="past 0.4, where the gel buckles"):
+        assert not _Inward(0.6).predict(scene).info["physical"]
+    layered = tissue.Bound(0.65, 0.012, "whole depth", "where that tissue is not trusted")
+    info = _Inward(0.6, layered).predict(scene).info
+    assert info["physical"] and info["max_compression"] == pytest.approx(0.6 * 7.5 / 19.5)
+    with pytest.warns(predictor.ImpossibleAnswer, match="0.66 x the tissue's whole depth, past"):
+        info = _Inward(0.66 * 19.5 / 7.5, layered).predict(scene).info
+    assert info["impossible"] == [
+        "the skin moves inward 0.66 x the tissue's whole depth, past 0.65, where that tissue is "
+        "not trusted"
+    ]
 
 
 class _Posing(predictor.BasePredictor):

@@ -365,6 +365,7 @@ def _model(cfg: dict, ds):
     torch.manual_seed(cfg["seed"])
     np.random.seed(cfg["seed"])
     p = predictor.create(cfg["model"], ds.part, cfg["options"], device=cfg["device"])
+    p.tissue = ds.card.get("tissue", "paper")  # its answers are judged by its data's tissue
     if len(ds.parts) > 1 and not p.general:
         raise ValueError(
             f"dataset {cfg['data']} spans {len(ds.parts)} bodies; a {cfg['model']} "

@@ -6,11 +6,13 @@ import numpy as np
 import pytest
 
 from fem.contact import press
-from fem.layers import MIN_FAT, MIN_MUSCLE, PRESETS, TRUSTED, preset
+from fem.layers import MIN_FAT, MIN_MUSCLE, PRESETS, TRUSTED, bound, preset
 from fem.mesh import shell_mesh
+from fem.predictor import FEMPredictor
 from fem.shapes import Sphere
 from fem.simulate import tissue_mesh
 from fem.solver import Solver
+from stmpl import tissue
 from stmpl.body.primitives import sheet, tube
 
 
@@ -177,3 +179,19 @@ def test_a_missing_or_broken_tissue_file_is_named(tmp_path):
         preset(str(tmp_path / "list.yaml"))
     with pytest.raises(ValueError, match="unknown tissue preset 'leg'"):
         preset("leg")
+
+
+def test_a_layered_tissue_s_bound_counts_its_deepest_muscle_under_the_skin_and_fat():
+    """An answer is impossible past the trusted compression of the whole depth; the bound counts
+    the muscle at its deepest over anny's phenotypes (so no answer the FEM could give is past
+    it), and the gel keeps its own (0.4 of its thickness). The FEM predictor and the layers
+    agree.
+    """
+    assert bound("paper") == tissue.GEL
+    t = np.full(5, 0.0075)
+    for name, p in PRESETS.items():
+        b = bound(name)
+        deepest = max(p.thicknesses(t, {"muscle": m})[2].max() for m in (0.0, 0.5, 1.0))
+        assert b.compression == TRUSTED.max_compression and b.below == pytest.approx(deepest)
+        assert f"up to {1e3 * deepest:.0f} mm of muscle" in b.depth
+    assert FEMPredictor(tissue="abdomen", res="medium").bound == bound("abdomen")

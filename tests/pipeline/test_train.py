@@ -3,6 +3,7 @@ import json
 import numpy as np
 import pytest
 
+from fem.layers import bound
 from stmpl import checkpoint, predictor
 from stmpl.data.dataset import Dataset
 from stmpl.failures import OutsideEnvelope
@@ -245,6 +246,7 @@ def test_a_model_given_the_pose_learns_the_dent_and_the_force_of_pressed_objects
     assert history[-1]["train"] < 0.5 * history[0]["train"]  # it learns
     p = predictor.read(path)
     assert p.takes == ("pose",)
+    assert p.tissue == "forearm" and p.bound == bound("forearm")  # judged by its data's tissue
     ds = Dataset(tiny_presses)
     scenes, truth = scenes_of(ds, "test", given="pose")
     for s, d in zip(scenes, p.predict(scenes)):
