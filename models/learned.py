@@ -300,9 +300,14 @@ class LearnedPredictor(BasePredictor):
     @property
     def bound(self) -> Bound:
         """How far an answer may compress the tissue of the data it learned from
-        (:attr:`tissue`; :func:`fem.layers.bound`).
+        (:attr:`tissue`; :func:`fem.layers.bound`). A tissue that is no preset (a file of
+        layers, which the data's card names but does not hold) has no muscle depth to count
+        here: its answers are not judged by compression (their envelope still bounds them).
         """
-        return tissue_bound(self.tissue)
+        try:
+            return tissue_bound(self.tissue)
+        except ValueError:
+            return Bound(np.inf, 0.0, "thickness", f"(tissue {self.tissue!r} is no preset)")
 
     def restored(self) -> None:
         """Called when a checkpoint has been loaded (``self.meta`` set): rebuild what the

@@ -247,6 +247,8 @@ def test_a_model_given_the_pose_learns_the_dent_and_the_force_of_pressed_objects
     p = predictor.read(path)
     assert p.takes == ("pose",)
     assert p.tissue == "forearm" and p.bound == bound("forearm")  # judged by its data's tissue
+    p.tissue = "my_layers"  # a file of layers the card names: no muscle depth to count
+    assert p.bound.compression == np.inf
     ds = Dataset(tiny_presses)
     scenes, truth = scenes_of(ds, "test", given="pose")
     for s, d in zip(scenes, p.predict(scenes)):
