@@ -43,6 +43,7 @@ DEFAULTS = {
     "linear": False,
     "bodies": None,
     "friction": 0.0,
+    "thickness_cycle": False,
 }
 OPTIONAL = {
     "fidelity": "full",
@@ -50,6 +51,7 @@ OPTIONAL = {
     "bodies": None,
     "tissue": "paper",
     "friction": 0.0,
+    "thickness_cycle": False,
 }
 """Keys whose default leaves a config's hash as it was before the key existed."""
 """``bodies``: ``phenotypes`` (a list of anny phenotypes), ``sample`` (``{count, seed, age}``:
@@ -58,20 +60,21 @@ SMPL-format body ``betas`` (a list of shape vectors); ``thickness`` (``from_weig
 paper's heuristic per body through anny's weight or SMPL's beta_2, or ``levels``:
 ``thickness_mm`` on every body); see :mod:`fem.bodies`."""
 PLACEMENT_KEYS = {
-    "disk": {"centres", "radii"},
-    "ellipse": {"centres", "semi_axes", "angles"},
+    "disk": {"centres", "skip", "radii"},
+    "ellipse": {"centres", "skip", "semi_axes", "angles"},
     "seam_disk": {"at", "radii"},
-    "spots": {"centres", "counts", "radii", "spread"},
+    "spots": {"centres", "skip", "counts", "radii", "spread"},
     "band": {"at", "widths"},
     "letter": {"chars", "uv", "heights", "strokes", "angles"},
     "grasp": {"along", "around", "grips", "hand_heights", "depth"},
     "palm": {"uv", "spins", "hand_heights", "depth"},
-    "press_disk": {"centres", "radii", "rounding"},
-    "press_sphere": {"centres", "radii"},
+    "press_disk": {"centres", "skip", "radii", "rounding"},
+    "press_sphere": {"centres", "skip", "radii"},
     "press_grip": {"along", "around", "grips"},
 }
 PLACEMENT_VALUES = {
     "centres": "count",
+    "skip": "skip",
     "spread": "number",
     "depth": "number",
     "rounding": "number",
@@ -167,6 +170,14 @@ def check(cfg: dict) -> None:
         )
     if presses and cfg["linear"]:
         raise ValueError(f"linear: {', '.join(presses)} have no linear FEM answer (linear: false)")
+    if not isinstance(cfg["thickness_cycle"], bool):
+        raise ValueError(f"thickness_cycle must be true or false, got {cfg['thickness_cycle']!r}")
+    for kind, spec in cfg["placements"].items():
+        if spec.get("skip", 0) >= spec.get("centres", 8):
+            raise ValueError(
+                f"placements.{kind}.skip {spec['skip']} leaves none of its "
+                f"{spec.get('centres', 8)} centres"
+            )
     if not isinstance(cfg["linear"], bool):
         raise ValueError(f"linear must be true or false, got {cfg['linear']!r}")
     if cfg["bodies"] is not None:
@@ -197,6 +208,9 @@ def _check_placement_value(value, name: str, holds: str | None) -> None:
         return
     if holds == "number":
         checked.number(value, name)
+        return
+    if holds == "skip":
+        checked.integer(value, name, 0)
         return
     what = {
         "pairs": "[a, b] pairs of numbers",

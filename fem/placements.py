@@ -68,7 +68,8 @@ def placements(cfg: dict, part: BodyPart) -> list[dict]:
         spec = cfg["placements"][kind]
         if kind in ("disk", "ellipse", "spots", *CENTRED):
             away = press_clearance(spec, cfg["thickness_mm"]) if kind in CENTRED else 0.0
-            centres = [int(v) for v in farthest_points(part, int(spec.get("centres", 8)), away)]
+            spread = farthest_points(part, int(spec.get("centres", 8)), away)
+            centres = [int(v) for v in spread[int(spec.get("skip", 0)) :]]
         if kind == "disk":
             out += [
                 {"kind": kind, "params": {"at": c, "radius": float(r)}}
@@ -261,7 +262,11 @@ def plan(cfg: dict, part: BodyPart | None = None) -> Plan:
             f"no placement of the config touches the part ({len(skipped)} grasps found no contact)"
         )
     split = split_of(len(pls), cfg["splits"], cfg["seed"])
-    tasks = [(i, j) for i in range(len(pls)) for j in range(len(cfg["thickness_mm"]))]
+    levels = len(cfg["thickness_mm"])
+    if cfg.get("thickness_cycle"):  # each placement at one level, in turn
+        tasks = [(i, i % levels) for i in range(len(pls))]
+    else:
+        tasks = [(i, j) for i in range(len(pls)) for j in range(levels)]
     return Plan(cfg, part, pls, split, tasks, skipped)
 
 

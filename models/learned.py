@@ -10,6 +10,7 @@ import warnings
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 
 from fem.layers import bound as tissue_bound
 from models.compiled import TOLERANCE, compile_module, uncompiled
@@ -249,7 +250,28 @@ class LearnedPredictor(BasePredictor):
 
     def forward(self, thickness, force, body=None, base=None):
         """``(B, N, 3)`` displacement in units of ``self.scale`` (m)."""
-        return self.denormalised(self.raw(thickness, force, body, base), force)
+        return self.denormalised(self.answered(thickness, force, body, base), force)
+
+    def answered(self, thickness, force, body=None, base=None):
+        """:meth:`raw` with the contact prior added (option ``prior: contact``)."""
+        out = self.raw(thickness, force, body, base)
+        if self.config.get("prior") != "contact":
+            return out
+        return out + F.pad(self.contact_base(force, body), (0, out.shape[-1] - 3))
+
+    def contact_base(self, gap, body=None):
+        """The contact prior (option ``prior: contact``, a model given a pose) ``(B, N, 3)`` in
+        the units of :meth:`raw`: each rest skin vertex inside an object (``gap`` ``(B, N)``, m,
+        negative there) moved out to the object's surface along its inward normal, zero
+        elsewhere. Under a press the skin lies on the object's face, so the prior gives the
+        dent where the object touches and the network learns the rest: the dent round it, the
+        skin's slip along the face and the contact pressure.
+        """
+        if body is None:
+            normals = self._body_data[0]["normals"][None]
+        else:
+            normals = self.body_tensor("normals", body)
+        return normals * gap.clamp_max(0.0)[..., None] / self.scale
 
     def denormalised(self, r, force):
         """Network output ``(B, ..., 3)`` in the units of :meth:`raw` -> units of ``self.scale``
@@ -281,7 +303,7 @@ class LearnedPredictor(BasePredictor):
         field, ``target`` the displacement, the contact pressure and its push, :meth:`normalised`)
         adds the pressures' mean squared error to the other two.
         """
-        pred, tgt = self.raw(thickness, force, body, base), self.normalised(target, force)
+        pred, tgt = self.answered(thickness, force, body, base), self.normalised(target, force)
         if self.config.get("loss", "mse") == "mse":
             return ((pred - tgt) ** 2).mean()
         if self.posed:

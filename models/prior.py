@@ -20,7 +20,10 @@ from models.linear.operator import (
     unsolved,
 )
 
-PRIORS = ("none", "linear")
+PRIORS = ("none", "linear", "contact")
+"""``linear``: the linear FEM's answer to the force (:class:`LinearPrior`); ``contact``: of a
+model given a pose, the skin inside the objects moved out to their surface
+(:meth:`~models.learned.LearnedPredictor.contact_base`)."""
 CORRECTION_SCALE = 0.05
 """On top of the prior the network's output is a correction in units of this share of ``raw``'s:
 corrections are a few per cent of the answer, and at full scale Adam's first steps would throw
@@ -28,7 +31,8 @@ the prediction far from the prior before it learned anything."""
 
 
 class LinearPrior:
-    """Mixin for a :class:`LearnedPredictor` with the option ``prior`` (``none`` or ``linear``)
+    """Mixin for a :class:`LearnedPredictor` with the option ``prior`` (``none``, ``linear`` or
+    ``contact``, which :meth:`~models.learned.LearnedPredictor.answered` adds)
     and ``operator`` (how the prior's operator travels, ``stored`` or ``on_demand``, see
     :data:`models.linear.operator.OPERATORS`):
     with ``linear`` its model holds a :class:`ComplianceOperator` as ``model.prior``,
@@ -44,7 +48,13 @@ class LinearPrior:
         check_operator(out.get("operator", "stored"))
         if out.get("given") == "pose" and out["prior"] == "linear":
             raise ValueError(
-                "the linear prior answers a force; a model given a pose takes prior: none"
+                "the linear prior answers a force; a model given a pose takes prior: none or "
+                "contact"
+            )
+        if out.get("given") != "pose" and out["prior"] == "contact":
+            raise ValueError(
+                "the contact prior moves the skin inside a posed object; a model given a force "
+                "takes prior: none or linear"
             )
         if out.get("geometry") and out["prior"] == "linear" and out["operator"] != "on_demand":
             raise ValueError(

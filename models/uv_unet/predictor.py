@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 from torch import nn
 
 from models.features import (
@@ -190,16 +191,23 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
         base = self.base(thickness, force, body, base)
         out = self.model(self.images(thickness, force, base, body))
         tgt = self.normalised(target, force)
+        contact = None
+        if self.config["prior"] == "contact":
+            contact = F.pad(self.contact_base(force, body), (0, tgt.shape[-1] - 3))
         if self.config["loss"] != "mse":
             pred = self.corrected(
                 None if base is None else base[:, self._corner_vertex],
                 self.uvmap.sample_corners(out),
             )
+            if contact is not None:  # the relative error is of the whole answer
+                pred = pred + contact[:, self._corner_vertex]
             tgt = tgt[:, self._corner_vertex]
             loss = self.euclidean_loss(pred[..., :3], tgt[..., :3], force) + self._tv(out)
             if self.posed:
                 loss = loss + ((pred[..., 3:] - tgt[..., 3:]) ** 2).mean()
             return loss
+        if contact is not None:  # the image of what the prior leaves
+            tgt = tgt - contact
         if base is not None:  # the correction's image
             tgt = (tgt - base) / CORRECTION_SCALE
         tgt = self.uvmap.rasterise(tgt)
@@ -225,4 +233,11 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
             base = self.base(thickness, force, body)
             c = self.uvmap.sample_corners(self.model(self.images(thickness, force, base, body)))
             c = self.corrected(None if base is None else base[:, self._corner_vertex], c)
+            if self.config["prior"] == "contact":
+                c = (
+                    c
+                    + F.pad(self.contact_base(force, body), (0, c.shape[-1] - 3))[
+                        :, self._corner_vertex
+                    ]
+                )
             return (self.denormalised(c, force)[..., :3] * self.scale).double().cpu().numpy()

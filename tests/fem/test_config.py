@@ -49,6 +49,9 @@ def _cfg(**over):
         ({"body": {"model": "tube", "radius": 0.04, "colour": "red"}}, "unknown body keys"),
         ({"material": {"name": "neo_hookean", "G": 3}}, "material:"),
         ({"solver": {"load": "nodal"}}, "solver:"),
+        ({"placements": {"disk": {"centres": 4, "skip": 4}}}, "skip 4 leaves none of its 4"),
+        ({"placements": {"disk": {"skip": -1}}}, "placements.disk.skip must be an integer >= 0"),
+        ({"thickness_cycle": "yes"}, "thickness_cycle must be true or false"),
     ],
 )
 def test_bad_values_are_named(over, message):
@@ -81,6 +84,27 @@ def test_more_centres_than_vertices_is_refused():
         )
         == 192
     )
+
+
+def test_a_set_of_more_places_continues_the_spread_and_may_press_each_on_one_level():
+    """``skip``: the centres after the first ones of the same even spread (a second set adds
+    places, none repeated); ``thickness_cycle``: each place on one thickness level, in turn.
+    """
+    first = plan(read_config(_cfg(placements={"disk": {"centres": 4, "radii": [0.02]}})))
+    more = plan(
+        read_config(
+            _cfg(
+                thickness_mm=[5.0, 7.5, 10.0],
+                thickness_cycle=True,
+                placements={"disk": {"centres": 10, "skip": 4, "radii": [0.02]}},
+            )
+        )
+    )
+    whole = plan(read_config(_cfg(placements={"disk": {"centres": 10, "radii": [0.02]}})))
+    at = [[p["params"]["at"] for p in x.placements] for x in (first, more, whole)]
+    assert at[0] + at[1] == at[2] and len(set(at[1])) == 6
+    assert more.tasks == [(0, 0), (1, 1), (2, 2), (3, 0), (4, 1), (5, 2)]
+    assert len(whole.tasks) == 10  # one level, every place
 
 
 def test_nothing_to_solve_is_refused_before_anything_is_written(tmp_path):

@@ -161,9 +161,89 @@ def test_a_model_given_a_pose_answers_the_force_near_the_object_and_its_reaction
     for options, message in [
         ({"given": "pose", "per_newton": True}, "knows no force to answer per newton"),
         ({"given": "pose", "prior": "linear"}, "a model given a pose takes prior: none"),
+        ({"prior": "contact"}, "a model given a force takes prior: none or linear"),
         ({"given": "both"}, "given must be one of"),
     ]:
         with pytest.raises(ValueError, match=message):
             predictor.create(kind, ds.part, {**TINY_MODELS[kind], **options})
     with pytest.raises(ValueError, match="the naive model takes a force only"):
         predictor.create("naive", ds.part, {"given": "pose"})
+
+
+@pytest.mark.parametrize("kind", ["gnn", "uv_unet"])
+def test_the_contact_prior_lays_the_skin_inside_an_object_on_its_surface(ds, kind):
+    """Option ``prior: contact``: the answer is the network's plus each rest vertex inside the
+    object moved out along its inward normal by how deep it lies (the gap), and nothing more
+    elsewhere; the pressures are the network's own.
+    """
+    import torch
+
+    from stmpl import tissue
+    from stmpl.contact import objects
+    from stmpl.contact.posing import posed
+
+    torch.manual_seed(0)
+    options = {**TINY_MODELS[kind], "given": "pose"}
+    bare = predictor.create(kind, ds.part, options)
+    torch.manual_seed(0)
+    p = predictor.create(kind, ds.part, {**options, "prior": "contact"})
+    ball = objects.sphere(0.05)  # over several of the tube's 2 cm edges
+    at = int(np.argmax(ds.part.rim_distance))
+    scene = posed(
+        ds.part,
+        tissue.constant(ds.part, 0.0075),
+        ball,
+        objects.press(ds.part, ball, at, depth=8e-3),
+    )
+    gap = scene.pose.gap
+    p.model.eval(), bare.model.eval()
+    assert (gap < 0).sum() >= 3  # the ball reaches into a few vertices
+    t, g = (torch.tensor(x[None], dtype=torch.float32) for x in (scene.thickness, gap))
+    with torch.no_grad():
+        a, b = p.forward(t, g)[0].double().numpy(), bare.forward(t, g)[0].double().numpy()
+    moved = ds.part.normals * np.minimum(gap, 0.0)[:, None]  # m, into the skin
+    np.testing.assert_allclose((a[:, :3] - b[:, :3]) * p.scale, moved, atol=1e-8)
+    np.testing.assert_array_equal(a[:, 3:], b[:, 3:])
+    assert np.einsum("ij,ij->i", moved, ds.part.normals)[gap < 0].max() < 0  # inward
+
+
+@pytest.mark.parametrize("kind", ["gnn", "uv_unet"])
+def test_a_model_with_the_contact_prior_learns_only_what_the_prior_leaves(ds, kind):
+    """Training with ``prior: contact`` scores the whole answer, prior included: the model's own
+    answer as the target costs (next to) nothing, that answer less the prior costs as much as
+    the prior's share of the dent.
+    """
+    import torch
+
+    from stmpl import tissue
+    from stmpl.contact import objects
+    from stmpl.contact.posing import posed
+
+    torch.manual_seed(0)
+    options = {**TINY_MODELS[kind], "given": "pose", "prior": "contact", "loss": "relative"}
+    p = predictor.create(kind, ds.part, options)
+    p.model.eval()
+    ball = objects.sphere(0.05)
+    far = ds.part.rim_distance.copy()
+    far[ds.part.seam_vertices] = 0.0  # off the chart's seam: each vertex one corner
+    at = int(np.argmax(far))
+    scene = posed(
+        ds.part,
+        tissue.constant(ds.part, 0.0075),
+        ball,
+        objects.press(ds.part, ball, at, depth=8e-3),
+    )
+    t, g = (torch.tensor(x[None], dtype=torch.float32) for x in (scene.thickness, scene.pose.gap))
+    with torch.no_grad():
+        own = p.forward(t, g)
+        target = torch.cat([own[..., :3] * p.scale, own[..., 3:] * 1e4], -1)  # m, Pa
+        same = float(p.loss(t, g, target))
+        bare = target.clone()
+        bare[..., :3] -= p.contact_base(g) * p.scale
+        less = float(p.loss(t, g, bare))
+        moved = p.contact_base(g)[0].norm(dim=-1)
+        share = float(moved.mean() / (bare[0, :, :3] / p.scale).norm(dim=-1).max())
+    if kind == "gnn":
+        assert less == pytest.approx(share, rel=1e-4) and same < 1e-6
+    else:  # scored at the chart's corners, where a seam's copies sample the image apart
+        assert less > share and same < 0.2 * less
