@@ -158,11 +158,15 @@ COLUMNS = [  # (key, header, scale, decimals)
     ("ee<=5%peak", "EE<=5 % of peak, %", 1, 1),
     ("rel_mee", "rel. MEE %", 1, 2),
     ("peak_err", "peak err %", 1, 1),
+    ("reaction_err", "reaction err %", 1, 1),
     ("max_err", "max err mm", 1, 3),
     ("seam_gap", "seam gap mm", 1, 4),
     ("seconds_per_scene", "ms/scene", 1e3, 2),
     ("inside_envelope", "inside env. %", 1, 0),
 ]
+ANSWERED_BY_SOME = {"reaction_err"}
+"""Columns only some predictors answer (a reaction: a model given a pose, the FEM on pressed
+objects): a table shows them where a row has them."""
 
 
 def _cell(v, scale: float, dec: int) -> str:
@@ -182,13 +186,16 @@ def table(rows: dict, paper: dict | None = None, fmt: str = "markdown") -> str:
     """
     entries = [(name, r, False) for name, r in rows.items()]
     entries += [(name, dict(zip(PAPER_KEYS, vals)), True) for name, vals in (paper or {}).items()]
+    columns = [
+        c for c in COLUMNS if c[0] not in ANSWERED_BY_SOME or any(c[0] in r for _, r, _ in entries)
+    ]
     if fmt == "csv":
-        head = ["setup", "samples"] + [f"{k}_{s}" for k, *_ in COLUMNS for s in ("mean", "std")]
+        head = ["setup", "samples"] + [f"{k}_{s}" for k, *_ in columns for s in ("mean", "std")]
         head += list(COUNTS)
         lines = []
         for name, r, _ in entries:
             vals = [name, str(r.get("samples", ""))]
-            for k, *_ in COLUMNS:
+            for k, *_ in columns:
                 v = r.get(k, (np.nan, np.nan))
                 vals += [
                     f"{float(x):.6g}" for x in (v if isinstance(v, (list, tuple)) else (v, np.nan))
@@ -196,11 +203,11 @@ def table(rows: dict, paper: dict | None = None, fmt: str = "markdown") -> str:
             vals += ["" if r.get(k) is None else f"{r[k]:.6g}" for k in COUNTS]
             lines.append(vals)
         return csv(head, lines)
-    head = ["set-up", "n"] + [h for _, h, *_ in COLUMNS]
+    head = ["set-up", "n"] + [h for _, h, *_ in columns]
     lines = []
     for name, r, reported in entries:
         cells = [
-            _cell(r.get(k), sc, dec) if k in r or not reported else "" for k, _, sc, dec in COLUMNS
+            _cell(r.get(k), sc, dec) if k in r or not reported else "" for k, _, sc, dec in columns
         ]
         label = f"*{name}*" if reported else name
         n = f"{r.get('samples', '')}"
@@ -212,7 +219,7 @@ def table(rows: dict, paper: dict | None = None, fmt: str = "markdown") -> str:
             e = r["seeds"]["rel_mee"]
             n += f" x {len(e)} seeds (rel. MEE {min(e):.2f}-{max(e):.2f} %)"
         lines.append([label, n, *cells])
-    return markdown(head, lines, "lr" + "r" * len(COLUMNS))
+    return markdown(head, lines, "lr" + "r" * len(columns))
 
 
 TITLES = {
