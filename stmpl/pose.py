@@ -4,9 +4,12 @@ force the object meets (per vertex, and its reaction).
 
 A :class:`Pose` holds the rigid objects at their pose in the part's body coordinates
 (:class:`Rigid`: a triangle mesh, m), the direction they press along, and the ``gap`` field the
-learned models read: each rest skin vertex's signed distance to the objects (m; negative where
-an object reaches into the rest skin, cut at :data:`GAP_REACH` away from them). The contact wing
-computes it (:func:`stmpl.contact.posing.posed`); this module only holds and checks it.
+learned models read: each rest skin vertex's signed distance to the objects (m), inside them
+measured along the way they press (negative: how far the skin there must move along the press
+to clear them, however deep; for objects that close each their own way, a grip, the signed
+distance inside too), cut at :data:`GAP_REACH` away from them. The contact wing computes it
+(:mod:`stmpl.contact.gap`, :func:`stmpl.contact.posing.posed`); this module only holds and
+checks it.
 """
 
 from __future__ import annotations
@@ -74,8 +77,9 @@ class Pose:
     """Where the pressing objects are (see the module docstring).
 
     Attributes:
-        gap: ``(N,)`` each rest skin vertex's signed distance to the objects, m (negative
-            inside one), at most :data:`GAP_REACH`.
+        gap: ``(N,)`` each rest skin vertex's signed distance to the objects, inside them
+            along ``direction`` (a closing pose's: its signed distance), m (negative inside
+            one), at most :data:`GAP_REACH`.
         direction: ``(3,)`` unit vector the objects press along (into the skin); ``None``
             for objects that close each along its own :attr:`Rigid.path` (a grip, whose
             reaction is the whole contact force: the squeeze).

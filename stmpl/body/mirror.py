@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from stmpl.part import BodyPart
 
@@ -46,3 +47,19 @@ def mirror_twin(part: BodyPart, template: BodyPart) -> BodyPart | None:
     return dataclasses.replace(
         template, vertices=part.vertices * MIRROR, normals=part.normals * MIRROR, source=src
     )
+
+
+def self_mirror(part: BodyPart, tolerance: float = 1e-6) -> np.ndarray | None:
+    """``(N,)`` int: the vertex each vertex of ``part`` becomes in the mirror, when the part is
+    its own mirror image (anny's belly: every vertex's mirror image is a vertex within
+    ``tolerance`` m, one each, and the triangles map onto triangles); else None. A press
+    mirrored so is a press on the same part, and its answer the mirrored answer.
+    """
+    x = np.asarray(part.vertices, dtype=float)
+    d, twin = cKDTree(x).query(x * MIRROR)
+    if d.max() > tolerance or len(np.unique(twin)) != len(x):
+        return None
+    faces = {tuple(sorted(f)) for f in part.faces.tolist()}
+    if faces != {tuple(sorted(f)) for f in twin[part.faces].tolist()}:
+        return None
+    return twin

@@ -1,5 +1,6 @@
 """Scenes given by where objects are (:class:`~stmpl.pose.Pose`): the objects' meshes at their
-pose, and the gap field a learned model reads, each rest skin vertex's signed distance to them.
+pose, and the gap field a learned model reads: each rest skin vertex's distance to them, inside
+them along the way they press (:mod:`stmpl.contact.gap`; a closing grip: its signed distance).
 
 >>> tip = objects.sphere(0.008)
 >>> scene = posed(arm, thickness, tip, objects.press(arm, tip, uv=(0.5, 0.5), depth=0.002))
@@ -13,6 +14,7 @@ from __future__ import annotations
 import numpy as np
 import trimesh
 
+from stmpl.contact import gap as along
 from stmpl.contact.closing import closed, closing_grip
 from stmpl.contact.hand import Hand
 from stmpl.contact.pressing import check_pose, distance_to_surface, winding_number
@@ -57,6 +59,13 @@ def posed(
     items = mesh if isinstance(mesh, list) else [(mesh, pose, name)]
     if not items:
         raise ValueError("a posed scene needs at least one object")
+    if direction is None:
+        first = np.eye(4) if items[0][1] is None else check_pose(items[0][1])
+        direction = first[:3, :3] @ np.array([0.0, 0.0, -1.0])
+    d = np.asarray(direction, dtype=float)
+    if d.shape != (3,) or not np.isfinite(d).all() or not np.linalg.norm(d) > 0:
+        raise ValueError(f"direction must be a finite nonzero 3-vector, got {direction!r}")
+    d = d / np.linalg.norm(d)
     rigid, gap = [], np.full(part.n_vertices, GAP_REACH)
     for m, p, n in items:
         if not (hasattr(m, "vertices") and hasattr(m, "faces") and hasattr(m, "copy")):
@@ -66,14 +75,9 @@ def posed(
         if len(at.faces) == 0 or not np.isfinite(at.vertices).all():
             raise ValueError(f"object {n!r}: the mesh has no faces or non-finite vertices")
         rigid.append(Rigid(n, np.asarray(at.vertices), np.asarray(at.faces)))
-        gap = np.minimum(gap, signed_distance(at, part.vertices))
-    if direction is None:
-        first = np.eye(4) if items[0][1] is None else check_pose(items[0][1])
-        direction = first[:3, :3] @ np.array([0.0, 0.0, -1.0])
-    d = np.asarray(direction, dtype=float)
-    if d.shape != (3,) or not np.isfinite(d).all() or not np.linalg.norm(d) > 0:
-        raise ValueError(f"direction must be a finite nonzero 3-vector, got {direction!r}")
-    return Scene.posed(part, thickness, Pose(gap, d / np.linalg.norm(d), tuple(rigid)), **meta)
+        inside = along.mesh(at, part.vertices, d)  # the deeper inside, the nearer outside
+        gap = np.minimum(gap, np.minimum(inside, signed_distance(at, part.vertices)))
+    return Scene.posed(part, thickness, Pose(gap, d, tuple(rigid)), **meta)
 
 
 def gripped(

@@ -10,20 +10,21 @@ from collections import Counter
 
 import numpy as np
 
+from stmpl.contact import gap as along
 from stmpl.data.dataset import Dataset, Datasets, open_data
 from stmpl.data.format import at_levels
 from stmpl.envelope import breaks_promise
 from stmpl.failures import ImpossibleAnswer
 from stmpl.metrics import honesty, sample_metrics, seam_gap, summarise, table
-from stmpl.pose import Pose, cut
+from stmpl.pose import Pose
 from stmpl.predictor import OutsideEnvelope, PredictionFailed, given_to
 from stmpl.scene import Scene
 
 
 def scenes_of(ds, split: str, thickness_mm=None, limit: int | None = None, given: str = "force"):
     """``(scenes, true displacements (S, N, 3) m)`` of a dataset split. ``given="pose"``: each
-    scene given by its object's pose (the sample's gap field and direction; a dataset of
-    pressed objects), the sample's reaction (N) in ``meta["reaction"]``.
+    scene given by its object's pose (its gap field, :func:`stmpl.contact.gap.of_sample`, and
+    direction; a dataset of pressed objects), the sample's reaction (N) in ``meta["reaction"]``.
     """
     if limit is not None and (isinstance(limit, bool) or not isinstance(limit, int) or limit < 1):
         raise ValueError(f"limit must be a number of samples >= 1, got {limit!r}")
@@ -57,14 +58,15 @@ def _posed_scenes(ds, a: dict, keep, parts, body) -> list[Scene]:
         )
     out = []
     for i in keep:
-        params = a["params"][i]
-        pose = Pose(cut(a["gap"][i].astype(float)), params["direction"])
+        params, part = a["params"][i], parts[body[i]]
+        gap = along.of_sample(part.vertices, a["kind"][i], params, a["gap"][i])
+        pose = Pose(gap, params["direction"])
         meta = {
             "placement": int(a["placement"][i]),
             "total": float(a["total"][i]),
             "reaction": float(params["reaction"]),
         }
-        out.append(Scene.posed(parts[body[i]], a["thickness"][i].astype(float), pose, **meta))
+        out.append(Scene.posed(part, a["thickness"][i].astype(float), pose, **meta))
     return out
 
 

@@ -3,7 +3,9 @@
 A config (YAML, checked on load) names the model kind and its options, the dataset folder (or a
 list of folders of one part and FEM set-up, read as one: :class:`~stmpl.data.dataset.Datasets`), an
 optional thickness filter (the paper's "seen levels" ablation), an optional share of the training
-placements (``train_fraction``, for learning curves), and the optimiser settings. The loop: Adam
+placements (``train_fraction``, for learning curves), on a part that is its own mirror image every
+training press twice, as solved and mirrored (``mirror``, :mod:`stmpl.pipeline.mirrored`), and
+the optimiser settings. The loop: Adam
 (constant or cosine learning rate), shuffled mini-batches (seeded), validation loss every epoch,
 early stopping with the best weights kept, a progress bar, CPU or CUDA. After every epoch the
 full state goes to ``<out>/state.pt`` atomically, so a killed run resumes where it stopped. At
@@ -26,14 +28,15 @@ from tqdm import tqdm
 
 from stmpl import config as checked
 from stmpl import predictor
+from stmpl.contact import gap as along
 from stmpl.data.dataset import open_data
 from stmpl.data.format import at_levels
 from stmpl.envelope import Envelope
 from stmpl.failures import ImpossibleAnswer, OutsideEnvelope
 from stmpl.files import atomic_path
 from stmpl.metrics import sample_metrics
+from stmpl.pipeline import mirrored
 from stmpl.pipeline.evaluate import evaluate_dataset, scenes_of
-from stmpl.pose import cut
 from stmpl.scene import Scene
 
 DEFAULTS = {
@@ -52,6 +55,7 @@ DEFAULTS = {
     "out": None,
     "max_train": None,
     "train_fraction": 1.0,
+    "mirror": False,
 }
 
 
@@ -98,6 +102,8 @@ def read_config(source) -> dict:
     checked.number(cfg["lr"], "lr", 0, low_open=True)
     checked.number(cfg["train_fraction"], "train_fraction", 0, 1, low_open=True)
     checked.one_of(cfg["schedule"], "schedule", SCHEDULES)
+    if not isinstance(cfg["mirror"], bool):
+        raise ValueError(f"mirror must be true or false, got {cfg['mirror']!r}")
     if cfg["thickness_mm"] is not None and (
         not isinstance(cfg["thickness_mm"], list)
         or not all(checked.number(t, "thickness_mm", 0, low_open=True) for t in cfg["thickness_mm"])
@@ -122,6 +128,13 @@ def _split_tensors(ds, split, cfg, device, p=None):
     import torch  # deferred: about a second to import; the core's types do not need it
 
     a, keep = _selection(ds, split, cfg)
+    if getattr(p, "posed", False):  # the pose a model reads: along the press where it has one
+        _require_poses(a, cfg)
+        a = {**a, "gap": _pose_gaps(ds, a)}
+    if split == "train" and cfg.get(
+        "mirror", False
+    ):  # every training press twice: as solved, mirrored
+        a, keep = mirrored.with_mirrored(a, keep, mirrored.twin_of(ds))
 
     def t(x):
         return torch.tensor(np.asarray(x)[keep], dtype=torch.float32, device=device)
@@ -135,13 +148,25 @@ def _split_tensors(ds, split, cfg, device, p=None):
     if getattr(p, "prior", False) and ("linear" in a or len(ds.parts) > 1):
         base = _prior_answers(p, a, keep, torch.as_tensor(a["body"][keep], device=device), device)
     if getattr(p, "posed", False):  # given the pose: answers the displacement and the pressure
-        _require_poses(a, cfg)
-        gap = cut(a["gap"])
         target = np.concatenate(
             [a["displacement"], a["pressure"][..., None], a["push"][..., None]], -1
         )
-        return t(a["thickness"]), t(gap), t(target), body, base
+        return t(a["thickness"]), t(a["gap"]), t(target), body, base
     return t(a["thickness"]), t(a["force"]), t(a["displacement"]), body, base
+
+
+def _pose_gaps(ds, a: dict) -> np.ndarray:
+    """``(S, N)`` m: each sample's gap field as a pose model reads it
+    (:func:`stmpl.contact.gap.of_sample`: along the press of a disk or a ball).
+    """
+    parts = getattr(ds, "parts", [ds.part])
+    body = a["body"] if "body" in a else np.zeros(len(a["total"]), int)
+    return np.stack(
+        [
+            along.of_sample(parts[b].vertices, k, params, g)
+            for b, k, params, g in zip(body, a["kind"], a["params"], a["gap"])
+        ]
+    ).astype(np.float32)
 
 
 def _require_poses(a: dict, cfg: dict) -> None:
@@ -197,6 +222,8 @@ def _selection(ds, split, cfg):
         keep = keep[np.isin(a["placement"][keep], chosen)]
     if split == "train" and cfg["max_train"]:
         keep = keep[: int(cfg["max_train"])]
+    if split == "train" and cfg.get("mirror", False):  # no place whose twin is validated or tested
+        keep = mirrored.held_out(ds, a, keep, mirrored.twin_of(ds))
     return a, keep
 
 
@@ -379,7 +406,7 @@ def _model(cfg: dict, ds):
     if getattr(p, "posed", False):  # how deep the training poses reach: beyond, outside
         a, keep = _selection(ds, "train", cfg)
         _require_poses(a, cfg)
-        p.meta["pose_deepest_mm"] = float(-1e3 * a["gap"][keep].min())
+        p.meta["pose_deepest_mm"] = float(-1e3 * _pose_gaps(ds, a)[keep].min())
     return p
 
 

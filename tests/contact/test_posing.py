@@ -1,4 +1,4 @@
-"""Scenes given by where objects are: the gap field against a sphere's exact distance, the
+"""Scenes given by where objects are: the gap field against a sphere's closed form, the
 direction a posed object presses along, and several objects at once.
 """
 
@@ -7,7 +7,7 @@ import pytest
 
 from stmpl import tissue
 from stmpl.body import tube
-from stmpl.contact import objects
+from stmpl.contact import gap, objects
 from stmpl.contact.posing import posed, signed_distance
 from stmpl.pose import GAP_REACH
 
@@ -35,8 +35,10 @@ def test_a_posed_fingertip_gives_the_gap_field_and_its_direction(part):
     assert s.given == "pose" and s.pose.names() == ["fingertip"]
     np.testing.assert_allclose(s.pose.direction, pose[:3, :3] @ [0, 0, -1], atol=1e-12)
     centre = (pose @ [0, 0, 0.008, 1.0])[:3]
-    exact = np.linalg.norm(part.vertices - centre, axis=1) - 0.008
+    signed = np.linalg.norm(part.vertices - centre, axis=1) - 0.008
+    exact = np.minimum(gap.ball(part.vertices, centre, 0.008, s.pose.direction), signed)
     near = exact < 0.01
+    assert (exact < signed - 1e-4).sum() >= 1  # inside: the deeper gap along the press
     np.testing.assert_allclose(s.pose.gap[near], exact[near], atol=2e-4)  # 8 mm icosphere
     assert 0 < s.pose.depth <= 0.003 + 2e-4 and len(s.pose.touched) >= 1
     np.testing.assert_allclose(

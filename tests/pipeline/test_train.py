@@ -5,6 +5,7 @@ import pytest
 
 from fem.layers import bound
 from stmpl import checkpoint, predictor
+from stmpl.contact import gap as along
 from stmpl.data.dataset import Dataset
 from stmpl.failures import OutsideEnvelope
 from stmpl.pipeline.evaluate import evaluate, scenes_of
@@ -264,10 +265,16 @@ def test_a_model_given_the_pose_learns_the_dent_and_the_force_of_pressed_objects
     pose = np.eye(4)
     pose[:3, 3] = centre - [0, 0, 0.008]  # the mesh's centre on the ball's
     user = posed(ds.part, a["thickness"][k].astype(float), ball, pose, direction=direction)
-    near = a["gap"][k] < 0.01
-    np.testing.assert_allclose(user.pose.gap[near], a["gap"][k][near], atol=5e-5)
+    sample = along.of_sample(ds.part.vertices, "press_sphere", a["params"][k], a["gap"][k])
+    near = sample < 0.01  # the vertices under the ball, along its press
+    assert near.sum() >= 1
+    np.testing.assert_allclose(user.pose.gap[near], sample[near], atol=5e-5)
     deepest = p.meta["pose_deepest_mm"]
-    assert deepest == pytest.approx(-1e3 * ds.arrays("train")["gap"].min())
+    b = ds.arrays("train")
+    reach = [
+        along.of_sample(ds.part.vertices, *x).min() for x in zip(b["kind"], b["params"], b["gap"])
+    ]
+    assert deepest == pytest.approx(-1e3 * min(reach), rel=1e-5)
     pose[:3, 3] += (deepest + 1.0) * 1e-3 * direction  # a millimetre past the deepest
     deeper = posed(ds.part, a["thickness"][k].astype(float), ball, pose, direction=direction)
     with pytest.warns(OutsideEnvelope, match="deeper than any pose in the data"):
