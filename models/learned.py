@@ -301,15 +301,32 @@ class LearnedPredictor(BasePredictor):
         ``pooled``, the batch's mean Euclidean errors over its peaks, summed before the ratio
         (:func:`pooled_loss`: heavier presses weigh more). A pose model (``force`` then the gap
         field, ``target`` the displacement, the contact pressure and its push, :meth:`normalised`)
-        adds the pressures' mean squared error to the other two.
+        adds the pressures' relative error and the reaction's (:meth:`reaction_loss`).
         """
         pred, tgt = self.answered(thickness, force, body, base), self.normalised(target, force)
         if self.config.get("loss", "mse") == "mse":
             return ((pred - tgt) ** 2).mean()
-        if self.posed:
-            pressure = ((pred[..., 3:] - tgt[..., 3:]) ** 2).mean()
+        if self.posed:  # the pressures' relative error, and the reaction's
+            p, t = pred[..., 3:], tgt[..., 3:]
+            pressure = relative_loss(p, t) + self.reaction_loss(p, t, body)
             return self.euclidean_loss(pred[..., :3], tgt[..., :3], force) + pressure
         return self.euclidean_loss(pred, tgt, force)
+
+    def reaction_loss(self, pred, tgt, body=None):
+        """A pose model's reaction error beside a ``relative`` or ``pooled`` loss: from ``(B, N,
+        2)`` contact pressure and push per vertex (units of :meth:`raw`), the mean over the
+        samples of ``|sum_i A_i (push_i - push*_i)| / sum_i A_i push*_i`` (``A_i`` the vertex
+        areas): each sample's share of its own reaction, as the targets measure it. Beside it
+        the pressures' relative error (over the sample's peak) keeps their map in shape.
+        """
+        inv_area = (
+            self._body_data[0]["inv_area"][None]
+            if body is None
+            else self.body_tensor("inv_area", body)
+        )
+        true = (tgt[..., 1] / inv_area).sum(-1)
+        error = ((pred[..., 1] - tgt[..., 1]) / inv_area).sum(-1).abs()
+        return (error / true.abs().clamp_min(1e-12)).mean()
 
     def euclidean_loss(self, pred, tgt, force):
         """The ``relative`` or ``pooled`` loss of ``(B, N, 3)`` outputs against targets in the

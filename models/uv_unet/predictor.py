@@ -27,7 +27,7 @@ from models.features import (
     load_channels,
     normalised_thickness,
 )
-from models.learned import LearnedPredictor
+from models.learned import LearnedPredictor, relative_loss
 from models.linear.operator import ComplianceOperator
 from models.prior import CORRECTION_SCALE, LinearPrior
 from models.uv_unet.network import UNet, WithPrior
@@ -201,10 +201,12 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
             )
             if contact is not None:  # the relative error is of the whole answer
                 pred = pred + contact[:, self._corner_vertex]
-            tgt = tgt[:, self._corner_vertex]
+            whole, tgt = tgt, tgt[:, self._corner_vertex]
             loss = self.euclidean_loss(pred[..., :3], tgt[..., :3], force) + self._tv(out)
-            if self.posed:
-                loss = loss + ((pred[..., 3:] - tgt[..., 3:]) ** 2).mean()
+            if self.posed:  # the pressures at the corners, the reaction over the vertices
+                vertex = self.uvmap.sample(out)[..., 3:]
+                loss = loss + relative_loss(pred[..., 3:], tgt[..., 3:])
+                loss = loss + self.reaction_loss(vertex, whole[..., 3:], body)
             return loss
         if contact is not None:  # the image of what the prior leaves
             tgt = tgt - contact
