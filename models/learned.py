@@ -308,16 +308,17 @@ class LearnedPredictor(BasePredictor):
             return ((pred - tgt) ** 2).mean()
         if self.posed:  # the pressures' relative error, and the reaction's
             p, t = pred[..., 3:], tgt[..., 3:]
-            pressure = relative_loss(p, t) + self.reaction_loss(p, t, body)
+            pressure = relative_loss(p, t) + self.reaction_loss(p, t, force, body)
             return self.euclidean_loss(pred[..., :3], tgt[..., :3], force) + pressure
         return self.euclidean_loss(pred, tgt, force)
 
-    def reaction_loss(self, pred, tgt, body=None):
+    def reaction_loss(self, pred, tgt, gap, body=None):
         """A pose model's reaction error beside a ``relative`` or ``pooled`` loss: from ``(B, N,
-        2)`` contact pressure and push per vertex (units of :meth:`raw`), the mean over the
-        samples of ``|sum_i A_i (push_i - push*_i)| / sum_i A_i push*_i`` (``A_i`` the vertex
-        areas): each sample's share of its own reaction, as the targets measure it. Beside it
-        the pressures' relative error (over the sample's peak) keeps their map in shape.
+        2)`` contact pressure and push per vertex (units of :meth:`raw`) and the gap field ``gap``
+        ``(B, N)`` (m), the mean over the samples of ``|R - R*| / R*``, the reaction ``R`` the
+        push summed over the vertex areas within :data:`~models.features.CONTACT_BAND` of the
+        object, as an answer sums it, and ``R*`` the true one: each sample's share of its own.
+        Beside it the pressures' relative error (over the sample's peak) keeps their map in shape.
         """
         inv_area = (
             self._body_data[0]["inv_area"][None]
@@ -325,8 +326,8 @@ class LearnedPredictor(BasePredictor):
             else self.body_tensor("inv_area", body)
         )
         true = (tgt[..., 1] / inv_area).sum(-1)
-        error = ((pred[..., 1] - tgt[..., 1]) / inv_area).sum(-1).abs()
-        return (error / true.abs().clamp_min(1e-12)).mean()
+        got = torch.where(gap <= CONTACT_BAND, pred[..., 1], 0.0) / inv_area
+        return ((got.sum(-1) - true).abs() / true.abs().clamp_min(1e-12)).mean()
 
     def euclidean_loss(self, pred, tgt, force):
         """The ``relative`` or ``pooled`` loss of ``(B, N, 3)`` outputs against targets in the

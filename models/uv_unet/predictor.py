@@ -206,7 +206,7 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
             if self.posed:  # the pressures at the corners, the reaction over the vertices
                 vertex = self.uvmap.sample(out)[..., 3:]
                 loss = loss + relative_loss(pred[..., 3:], tgt[..., 3:])
-                loss = loss + self.reaction_loss(vertex, whole[..., 3:], body)
+                loss = loss + self.reaction_loss(vertex, whole[..., 3:], force, body)
             return loss
         if contact is not None:  # the image of what the prior leaves
             tgt = tgt - contact

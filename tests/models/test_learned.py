@@ -223,6 +223,7 @@ def test_a_model_with_the_contact_prior_learns_only_what_the_prior_leaves(ds, ki
     options = {**TINY_MODELS[kind], "given": "pose", "prior": "contact", "loss": "relative"}
     p = predictor.create(kind, ds.part, options)
     p.model.eval()
+    p.reaction_loss = lambda *args: 0.0  # the reaction's term has a test of its own
     ball = objects.sphere(0.05)
     far = ds.part.rim_distance.copy()
     far[ds.part.seam_vertices] = 0.0  # off the chart's seam: each vertex one corner
@@ -250,9 +251,10 @@ def test_a_model_with_the_contact_prior_learns_only_what_the_prior_leaves(ds, ki
 
 
 def test_a_pose_model_s_reaction_error_is_each_sample_s_share_of_its_own(ds):
-    """The reaction term of a pose model's loss: the push summed over the vertex areas, its
-    error over the sample's own reaction (10 % too much push everywhere: 0.1; 30 % too little
-    where half the reaction is: 0.15), whatever the pressure's units or the press's weight.
+    """The reaction term of a pose model's loss: the push summed over the vertex areas near the
+    object, its error over the sample's own reaction (10 % too much push everywhere: 0.1; 30 %
+    too little where half the reaction is: 0.15; pushes far from the object: 1, none counts),
+    whatever the pressure's units or the press's weight.
     """
     import torch
 
@@ -262,11 +264,14 @@ def test_a_pose_model_s_reaction_error_is_each_sample_s_share_of_its_own(ds):
     push = torch.tensor(rng.random((2, ds.part.n_vertices)), dtype=torch.float32)
     push[1] *= 50.0  # a heavier press
     tgt = torch.stack([push, push], -1)  # pressure, push
-    assert float(p.reaction_loss(1.1 * tgt, tgt)) == pytest.approx(0.1, rel=1e-4)
+    gap = torch.zeros(push.shape)  # every vertex touching
+    assert float(p.reaction_loss(1.1 * tgt, tgt, gap)) == pytest.approx(0.1, rel=1e-4)
+    far = gap + 0.01  # a push answered 10 mm from the object counts for nothing
+    assert float(p.reaction_loss(1.1 * tgt, tgt, far)) == pytest.approx(1.0, rel=1e-6)
     half = torch.cumsum(push * area, -1) <= 0.5 * (push * area).sum(-1, keepdim=True)
     less = tgt.clone()
     less[..., 1] = torch.where(half, 0.7 * push, push)
     share = ((push * area * half).sum(-1) / (push * area).sum(-1)).numpy()
     expected = float(np.mean(0.3 * share))
-    assert float(p.reaction_loss(less, tgt)) == pytest.approx(expected, rel=1e-4)
+    assert float(p.reaction_loss(less, tgt, gap)) == pytest.approx(expected, rel=1e-4)
     assert expected == pytest.approx(0.15, abs=0.01)
