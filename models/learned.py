@@ -65,6 +65,17 @@ def relative_loss(pred, target):
     return (norm.mean(-1) / (peak + LOSS_EPS)).mean()
 
 
+def near_loss(pred, target, near):
+    """Mean over samples of the mean Euclidean error over the vertices ``near`` ``(B, N)``
+    (bool) over the sample's peak, for ``(B, N, 3)`` tensors: :func:`relative_loss` on where an
+    object presses (a sample with none such counts zero).
+    """
+    norm = torch.sqrt(((pred - target) ** 2).sum(-1) + LOSS_EPS**2)  # (B, N)
+    peak = target.norm(dim=-1).amax(-1)  # (B,)
+    w = near.to(norm.dtype)
+    return ((norm * w).sum(-1) / w.sum(-1).clamp_min(1.0) / (peak + LOSS_EPS)).mean()
+
+
 def pooled_loss(pred, target, weight=None):
     """The batch's summed mean Euclidean error over its summed peak displacement for ``(B, N, 3)``
     tensors, each sample weighted by ``weight`` ``(B,)`` (per-newton tensors: the total force, so
@@ -301,15 +312,18 @@ class LearnedPredictor(BasePredictor):
         ``pooled``, the batch's mean Euclidean errors over its peaks, summed before the ratio
         (:func:`pooled_loss`: heavier presses weigh more). A pose model (``force`` then the gap
         field, ``target`` the displacement, the contact pressure and its push, :meth:`normalised`)
-        adds the pressures' relative error and the reaction's (:meth:`reaction_loss`).
+        adds the displacement's relative error where the object presses (:func:`near_loss`:
+        over the whole part a dent of a few vertices weighs next to nothing), the pressures'
+        relative error and the reaction's (:meth:`reaction_loss`).
         """
         pred, tgt = self.answered(thickness, force, body, base), self.normalised(target, force)
         if self.config.get("loss", "mse") == "mse":
             return ((pred - tgt) ** 2).mean()
-        if self.posed:  # the pressures' relative error, and the reaction's
+        if self.posed:  # the dent where the object presses, the pressures, the reaction
             p, t = pred[..., 3:], tgt[..., 3:]
             pressure = relative_loss(p, t) + self.reaction_loss(p, t, force, body)
-            return self.euclidean_loss(pred[..., :3], tgt[..., :3], force) + pressure
+            dent = near_loss(pred[..., :3], tgt[..., :3], force <= CONTACT_BAND)
+            return self.euclidean_loss(pred[..., :3], tgt[..., :3], force) + dent + pressure
         return self.euclidean_loss(pred, tgt, force)
 
     def reaction_loss(self, pred, tgt, gap, body=None):

@@ -20,6 +20,7 @@ import torch.nn.functional as F
 from torch import nn
 
 from models.features import (
+    CONTACT_BAND,
     GAP_SCALE,
     PRESSURE_SCALE,
     PRIOR_SCALE,
@@ -27,7 +28,7 @@ from models.features import (
     load_channels,
     normalised_thickness,
 )
-from models.learned import LearnedPredictor, relative_loss
+from models.learned import LearnedPredictor, near_loss, relative_loss
 from models.linear.operator import ComplianceOperator
 from models.prior import CORRECTION_SCALE, LinearPrior
 from models.uv_unet.network import UNet, WithPrior
@@ -203,8 +204,10 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
                 pred = pred + contact[:, self._corner_vertex]
             whole, tgt = tgt, tgt[:, self._corner_vertex]
             loss = self.euclidean_loss(pred[..., :3], tgt[..., :3], force) + self._tv(out)
-            if self.posed:  # the pressures at the corners, the reaction over the vertices
+            if self.posed:  # the dent and the pressures at the corners, the reaction's sum
                 vertex = self.uvmap.sample(out)[..., 3:]
+                near = force[:, self._corner_vertex] <= CONTACT_BAND
+                loss = loss + near_loss(pred[..., :3], tgt[..., :3], near)
                 loss = loss + relative_loss(pred[..., 3:], tgt[..., 3:])
                 loss = loss + self.reaction_loss(vertex, whole[..., 3:], force, body)
             return loss
