@@ -312,17 +312,18 @@ class LearnedPredictor(BasePredictor):
         ``pooled``, the batch's mean Euclidean errors over its peaks, summed before the ratio
         (:func:`pooled_loss`: heavier presses weigh more). A pose model (``force`` then the gap
         field, ``target`` the displacement, the contact pressure and its push, :meth:`normalised`)
-        adds the displacement's relative error where the object presses (:func:`near_loss`:
-        over the whole part a dent of a few vertices weighs next to nothing), the pressures'
-        relative error and the reaction's (:meth:`reaction_loss`).
+        adds, where the object presses (:func:`near_loss`: over the whole part a dent of a few
+        vertices weighs next to nothing; an answer's contact force lives there alone), the
+        displacement's and the pressures' relative errors, and the reaction's
+        (:meth:`reaction_loss`).
         """
         pred, tgt = self.answered(thickness, force, body, base), self.normalised(target, force)
         if self.config.get("loss", "mse") == "mse":
             return ((pred - tgt) ** 2).mean()
-        if self.posed:  # the dent where the object presses, the pressures, the reaction
-            p, t = pred[..., 3:], tgt[..., 3:]
-            pressure = relative_loss(p, t) + self.reaction_loss(p, t, force, body)
-            dent = near_loss(pred[..., :3], tgt[..., :3], force <= CONTACT_BAND)
+        if self.posed:  # where the object presses: the dent, the pressures; the reaction
+            p, t, near = pred[..., 3:], tgt[..., 3:], force <= CONTACT_BAND
+            pressure = near_loss(p, t, near) + self.reaction_loss(p, t, force, body)
+            dent = near_loss(pred[..., :3], tgt[..., :3], near)
             return self.euclidean_loss(pred[..., :3], tgt[..., :3], force) + dent + pressure
         return self.euclidean_loss(pred, tgt, force)
 

@@ -28,7 +28,7 @@ from models.features import (
     load_channels,
     normalised_thickness,
 )
-from models.learned import LearnedPredictor, near_loss, relative_loss
+from models.learned import LearnedPredictor, near_loss
 from models.linear.operator import ComplianceOperator
 from models.prior import CORRECTION_SCALE, LinearPrior
 from models.uv_unet.network import UNet, WithPrior
@@ -208,7 +208,7 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
                 vertex = self.uvmap.sample(out)[..., 3:]
                 near = force[:, self._corner_vertex] <= CONTACT_BAND
                 loss = loss + near_loss(pred[..., :3], tgt[..., :3], near)
-                loss = loss + relative_loss(pred[..., 3:], tgt[..., 3:])
+                loss = loss + near_loss(pred[..., 3:], tgt[..., 3:], near)
                 loss = loss + self.reaction_loss(vertex, whole[..., 3:], force, body)
             return loss
         if contact is not None:  # the image of what the prior leaves
