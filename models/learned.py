@@ -333,7 +333,8 @@ class LearnedPredictor(BasePredictor):
         ``(B, N)`` (m), the mean over the samples of ``|R - R*| / R*``, the reaction ``R`` the
         push summed over the vertex areas within :data:`~models.features.CONTACT_BAND` of the
         object, as an answer sums it, and ``R*`` the true one: each sample's share of its own.
-        Beside it the pressures' relative error (over the sample's peak) keeps their map in shape.
+        Beside it the pressures' relative error where the object presses keeps their map in
+        shape.
         """
         inv_area = (
             self._body_data[0]["inv_area"][None]

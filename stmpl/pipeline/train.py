@@ -3,9 +3,9 @@
 A config (YAML, checked on load) names the model kind and its options, the dataset folder (or a
 list of folders of one part and FEM set-up, read as one: :class:`~stmpl.data.dataset.Datasets`), an
 optional thickness filter (the paper's "seen levels" ablation), an optional share of the training
-placements (``train_fraction``, for learning curves), on a part that is its own mirror image every
-training press twice, as solved and mirrored (``mirror``, :mod:`stmpl.pipeline.mirrored`), and
-the optimiser settings. The loop: Adam
+placements (``train_fraction``, for learning curves), optionally every training press twice on a
+part that is its own mirror image (as solved and mirrored: ``mirror``,
+:mod:`stmpl.pipeline.mirrored`), and the optimiser settings. The loop: Adam
 (constant or cosine learning rate), shuffled mini-batches (seeded), validation loss every epoch,
 early stopping with the best weights kept, a progress bar, CPU or CUDA. After every epoch the
 full state goes to ``<out>/state.pt`` atomically, so a killed run resumes where it stopped. At
@@ -119,11 +119,11 @@ def read_config(source) -> dict:
 
 def _split_tensors(ds, split, cfg, device, p=None):
     """A split's ``thickness``, ``force``, ``displacement``, ``body`` (slot of each sample's
-    body) and the prior's answers; for a model given a pose, the ``gap`` field in the place of
-    the force and the contact ``pressure`` and ``push`` beside the displacement. The prior's
-    answers are in m; None unless the model has a prior and the data carry ``linear`` answers or
-    span several bodies (then every sample's is at hand, the missing ones solved on its body
-    once here).
+    body) and the prior's answers; for a model given a pose, the ``gap`` field
+    (:func:`_pose_gaps`) in the place of the force and the contact ``pressure`` and ``push``
+    beside the displacement. The prior's answers are in m; None unless the model has a prior
+    and the data carry ``linear`` answers or span several bodies (then every sample's is at
+    hand, the missing ones solved on its body once here).
     """
     import torch  # deferred: about a second to import; the core's types do not need it
 
@@ -131,9 +131,8 @@ def _split_tensors(ds, split, cfg, device, p=None):
     if getattr(p, "posed", False):  # the pose a model reads: along the press where it has one
         _require_poses(a, cfg)
         a = {**a, "gap": _pose_gaps(ds, a)}
-    if split == "train" and cfg.get(
-        "mirror", False
-    ):  # every training press twice: as solved, mirrored
+    if split == "train" and cfg.get("mirror", False):
+        # every training press twice: as solved and mirrored
         a, keep = mirrored.with_mirrored(a, keep, mirrored.twin_of(ds))
 
     def t(x):
