@@ -145,8 +145,10 @@ class Pose:
         between vertices, where no vertex lies inside them).
         """
         g = float(self.gap.min())
-        side = "inside" if g < 0 else "outside"
-        return f"the skin vertex nearest it {1e3 * abs(g):.2f} mm {side} it at rest"
+        side = (
+            "outside it" if g >= 0 else "inside it" if self.closing else "inside it along the press"
+        )
+        return f"the skin vertex nearest it {1e3 * abs(g):.2f} mm {side} at rest"
 
     @property
     def closing(self) -> bool:

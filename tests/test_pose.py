@@ -30,7 +30,9 @@ def test_a_posed_scene_gives_its_pose_and_asks_for_its_force(part):
     s = Scene.posed(part, tissue.constant(part, 0.0075), _pose(part), id=3)
     assert s.given == "pose" and s.force is None and s.meta == {"id": 3}
     assert s.pose.depth == pytest.approx(0.002) and list(s.pose.touched) == [3]
-    assert s.pose.nearest() == "the skin vertex nearest it 2.00 mm inside it at rest"
+    assert s.pose.nearest() == (
+        "the skin vertex nearest it 2.00 mm inside it along the press at rest"
+    )
     assert list(s.pose.near(0.001)) == [3] and len(s.pose.near(0.03)) == part.n_vertices
     with pytest.raises(ValueError, match="gives an object's pose, not a force"):
         s.total_force
