@@ -155,6 +155,19 @@ COLUMNS = (
 )
 
 
+REACTION = ("reaction_err", "reaction err %")
+"""The column of the reaction's error against the FEM's, in a table where a row answers one (a
+model given a pose: :func:`stmpl.pipeline.evaluate.evaluate_dataset`), after the peak's."""
+
+
+def columns(results: dict[str, dict]) -> list:
+    """:data:`COLUMNS`, with :data:`REACTION` after the peak's error where a row has it."""
+    if not any(REACTION[0] in s for s in results.values()):
+        return list(COLUMNS)
+    at = [k for k, _ in COLUMNS].index("peak_err") + 1
+    return [*COLUMNS[:at], REACTION, *COLUMNS[at:]]
+
+
 COUNTS = ("unsolved", "unsolved_flagged", "unsolved_silent", "inside_broken")
 """Counts an evaluation adds (:func:`stmpl.pipeline.evaluate.evaluate_dataset`): the CSV's last
 columns, empty where not known."""
@@ -162,21 +175,20 @@ columns, empty where not known."""
 
 def table(results: dict[str, dict], fmt: str = "markdown") -> str:
     """A table of summaries ``{predictor name: summarise(...)}`` as markdown or CSV."""
+    cols = columns(results)
     if fmt == "csv":
-        head = ["predictor", "samples"] + [f"{k}_{s}" for k, _ in COLUMNS for s in ("mean", "std")]
+        head = ["predictor", "samples"] + [f"{k}_{s}" for k, _ in cols for s in ("mean", "std")]
         head += list(COUNTS)
         rows = [
             [name, str(s["samples"])]
-            + [f"{x:.6g}" for k, _ in COLUMNS for x in s.get(k, (np.nan, np.nan))]
+            + [f"{x:.6g}" for k, _ in cols for x in s.get(k, (np.nan, np.nan))]
             + ["" if s.get(k) is None else f"{s[k]:.6g}" for k in COUNTS]
             for name, s in results.items()
         ]
         return csv(head, rows)
     if fmt != "markdown":
         raise ValueError(f"fmt must be markdown or csv, got {fmt!r}")
-    head = ["predictor", "n"] + [
-        label + (" mm" if "%" not in label else "") for _, label in COLUMNS
-    ]
+    head = ["predictor", "n"] + [label + (" mm" if "%" not in label else "") for _, label in cols]
     rows = []
     for name, s in results.items():
         cells = [
@@ -185,10 +197,10 @@ def table(results: dict[str, dict], fmt: str = "markdown") -> str:
             else f"{s[k][0]:.3f} ± {s[k][1]:.3f}"
             if "%" not in label
             else f"{s[k][0]:.1f} ± {s[k][1]:.1f}"
-            for k, label in COLUMNS
+            for k, label in cols
         ]
         rows.append([name, str(s["samples"]), *cells])
-    return markdown(head, rows, "lr" + "r" * len(COLUMNS))
+    return markdown(head, rows, "lr" + "r" * len(cols))
 
 
 def honesty(results: dict[str, dict]) -> str:

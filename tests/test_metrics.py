@@ -46,6 +46,15 @@ def test_summary_and_tables():
     assert md.startswith("| predictor") and "| a | 3 |" in md
     csv = metrics.table({"a": s}, "csv").splitlines()
     assert csv[0].startswith("predictor,samples,mae_x_mean") and csv[1].startswith("a,3,")
+    assert "reaction" not in md  # no row answers a reaction
+    posed = {**s, "reaction_err": (-3.25, 1.5)}
+    md = metrics.table({"pose model": posed, "a": s}).splitlines()
+    head = [c.strip() for c in md[0].split("|")]
+    at = head.index("reaction err %")
+    assert head[at - 1] == "peak err %"
+    assert md[2].split("|")[at].strip() == "-3.2 ± 1.5" and md[3].split("|")[at].strip() == "–"
+    csv = metrics.table({"pose model": posed}, "csv").splitlines()
+    assert "reaction_err_mean" in csv[0] and ",-3.25,1.5," in csv[1]
 
 
 def test_seam_gap():
