@@ -20,6 +20,7 @@ from models.features import (
     PRESSURE_OUT_SCALE,
     total_force,
 )
+from models.losses import near_loss, pooled_loss, relative_loss
 from stmpl import checkpoint, loads, tissue
 from stmpl import config as checked
 from stmpl.body.mirror import MIRROR, mirror_twin
@@ -51,42 +52,6 @@ LOSSES = ("mse", "relative", "pooled")
 GIVEN = ("force", "pose")
 """What a learned model takes (option ``given``): the force on the skin, or an object's pose
 (the gap field; it then answers the contact pressure as well, :mod:`stmpl.pose`)."""
-LOSS_EPS = 1e-6
-"""Regularises the ``relative`` loss's norms (units of :meth:`LearnedPredictor.raw`, so about
-1e-6 of the full scale, well under any error that counts)."""
-
-
-def relative_loss(pred, target):
-    """Mean over samples of ``mean_i |pred_i - target_i| / max_i |target_i|`` for ``(B, N, 3)``
-    tensors: the relative MEE, smooth at zero error (``LOSS_EPS``).
-    """
-    norm = torch.sqrt(((pred - target) ** 2).sum(-1) + LOSS_EPS**2)  # (B, N)
-    peak = target.norm(dim=-1).amax(-1)  # (B,)
-    return (norm.mean(-1) / (peak + LOSS_EPS)).mean()
-
-
-def near_loss(pred, target, near):
-    """Mean over samples of the mean Euclidean error over the vertices ``near`` ``(B, N)``
-    (bool) over the sample's peak, for ``(B, N, 3)`` tensors: :func:`relative_loss` on where an
-    object presses (a sample with none such counts zero).
-    """
-    norm = torch.sqrt(((pred - target) ** 2).sum(-1) + LOSS_EPS**2)  # (B, N)
-    peak = target.norm(dim=-1).amax(-1)  # (B,)
-    w = near.to(norm.dtype)
-    return ((norm * w).sum(-1) / w.sum(-1).clamp_min(1.0) / (peak + LOSS_EPS)).mean()
-
-
-def pooled_loss(pred, target, weight=None):
-    """The batch's summed mean Euclidean error over its summed peak displacement for ``(B, N, 3)``
-    tensors, each sample weighted by ``weight`` ``(B,)`` (per-newton tensors: the total force, so
-    the sums are of absolute displacements): ``sum_b w_b MEE_b / sum_b w_b max_i |target_bi|``.
-    Unlike :func:`relative_loss`, a heavy press weighs more than a light one, as it does in the
-    mean MEE over a test set (and in its ratio to Naive's).
-    """
-    norm = torch.sqrt(((pred - target) ** 2).sum(-1) + LOSS_EPS**2)  # (B, N)
-    peak = target.norm(dim=-1).amax(-1)  # (B,)
-    w = torch.ones_like(peak) if weight is None else weight
-    return (w * norm.mean(-1)).sum() / ((w * peak).sum() + LOSS_EPS)
 
 
 def torch_device(name):

@@ -28,8 +28,9 @@ from models.features import (
     load_channels,
     normalised_thickness,
 )
-from models.learned import LearnedPredictor, near_loss
+from models.learned import LearnedPredictor
 from models.linear.operator import ComplianceOperator
+from models.losses import near_loss
 from models.prior import CORRECTION_SCALE, LinearPrior
 from models.uv_unet.network import UNet, WithPrior
 from stmpl import reach

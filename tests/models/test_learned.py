@@ -285,7 +285,7 @@ def test_the_dent_s_error_is_its_own_share_of_the_peak():
     """
     import torch
 
-    from models.learned import near_loss
+    from models.losses import near_loss
 
     target = torch.zeros(2, 4, 3)
     target[:, 0, 2] = 2.0  # a 2-unit dent at vertex 0
