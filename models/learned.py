@@ -15,6 +15,7 @@ import torch.nn.functional as F
 from fem.layers import bound as tissue_bound
 from models.compiled import TOLERANCE, compile_module, uncompiled
 from models.features import (
+    pressure_out,
     CONTACT_BAND,
     MIN_TOTAL_N,
     PRESSURE_OUT_SCALE,
@@ -229,11 +230,21 @@ class LearnedPredictor(BasePredictor):
         return self.denormalised(self.answered(thickness, force, body, base), force)
 
     def answered(self, thickness, force, body=None, base=None):
-        """:meth:`raw` with the contact prior added (option ``prior: contact``)."""
-        out = self.raw(thickness, force, body, base)
+        """:meth:`raw` with a pose model's pressures read (:meth:`with_pressures`) and the
+        contact prior added (option ``prior: contact``).
+        """
+        out = self.with_pressures(self.raw(thickness, force, body, base))
         if self.config.get("prior") != "contact":
             return out
         return out + F.pad(self.contact_base(force, body), (0, out.shape[-1] - 3))
+
+    def with_pressures(self, out):
+        """A network's output ``(..., C)`` with a pose model's two pressure channels read from
+        their logarithm (:func:`~models.features.pressure_out`); a force model's as it is.
+        """
+        if not self.posed:
+            return out
+        return torch.cat([out[..., :3], pressure_out(out[..., 3:])], -1)
 
     def contact_base(self, gap, body=None):
         """The contact prior (option ``prior: contact``, a model given a pose) ``(B, N, 3)`` in

@@ -160,12 +160,24 @@ REACTION = ("reaction_err", "reaction err %")
 model given a pose: :func:`stmpl.pipeline.evaluate.evaluate_dataset`), after the peak's."""
 
 
+ANSWERED_BY_SOME = frozenset({REACTION[0]})
+"""Columns only some predictors answer (a reaction: a model given a pose, the FEM on pressed
+objects): a table shows them where a row has them (:func:`shown`)."""
+
+
+def shown(cols, rows) -> list:
+    """The columns ``cols`` (tuples whose first item is the key) that a table of the summaries
+    ``rows`` shows: every one, except that one of :data:`ANSWERED_BY_SOME` only where a row has
+    it.
+    """
+    rows = list(rows)
+    return [c for c in cols if c[0] not in ANSWERED_BY_SOME or any(c[0] in r for r in rows)]
+
+
 def columns(results: dict[str, dict]) -> list:
     """:data:`COLUMNS`, with :data:`REACTION` after the peak's error where a row has it."""
-    if not any(REACTION[0] in s for s in results.values()):
-        return list(COLUMNS)
     at = [k for k, _ in COLUMNS].index("peak_err") + 1
-    return [*COLUMNS[:at], REACTION, *COLUMNS[at:]]
+    return shown([*COLUMNS[:at], REACTION, *COLUMNS[at:]], results.values())
 
 
 COUNTS = ("unsolved", "unsolved_flagged", "unsolved_silent", "inside_broken")

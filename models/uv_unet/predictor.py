@@ -199,14 +199,14 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
         if self.config["loss"] != "mse":
             pred = self.corrected(
                 None if base is None else base[:, self._corner_vertex],
-                self.uvmap.sample_corners(out),
+                self.with_pressures(self.uvmap.sample_corners(out)),
             )
             if contact is not None:  # the relative error is of the whole answer
                 pred = pred + contact[:, self._corner_vertex]
             whole, tgt = tgt, tgt[:, self._corner_vertex]
             loss = self.euclidean_loss(pred[..., :3], tgt[..., :3], force) + self._tv(out)
             if self.posed:  # the dent and the pressures at the corners, the reaction's sum
-                vertex = self.uvmap.sample(out)[..., 3:]
+                vertex = self.with_pressures(self.uvmap.sample(out))[..., 3:]
                 near = force[:, self._corner_vertex] <= CONTACT_BAND
                 loss = loss + near_loss(pred[..., :3], tgt[..., :3], near)
                 loss = loss + near_loss(pred[..., 3:], tgt[..., 3:], near)

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from stmpl.metrics import COUNTS
+from stmpl.metrics import COUNTS, shown
 from stmpl.table import csv, markdown
 
 PAPER = {
@@ -164,9 +164,6 @@ COLUMNS = [  # (key, header, scale, decimals)
     ("seconds_per_scene", "ms/scene", 1e3, 2),
     ("inside_envelope", "inside env. %", 1, 0),
 ]
-ANSWERED_BY_SOME = {"reaction_err"}
-"""Columns only some predictors answer (a reaction: a model given a pose, the FEM on pressed
-objects): a table shows them where a row has them."""
 
 
 def _cell(v, scale: float, dec: int) -> str:
@@ -186,9 +183,7 @@ def table(rows: dict, paper: dict | None = None, fmt: str = "markdown") -> str:
     """
     entries = [(name, r, False) for name, r in rows.items()]
     entries += [(name, dict(zip(PAPER_KEYS, vals)), True) for name, vals in (paper or {}).items()]
-    columns = [
-        c for c in COLUMNS if c[0] not in ANSWERED_BY_SOME or any(c[0] in r for _, r, _ in entries)
-    ]
+    columns = shown(COLUMNS, (r for _, r, _ in entries))
     if fmt == "csv":
         head = ["setup", "samples"] + [f"{k}_{s}" for k, *_ in columns for s in ("mean", "std")]
         head += list(COUNTS)

@@ -25,3 +25,10 @@ def test_thickness_over_its_range():
     np.testing.assert_allclose(features.normalised_thickness(t).numpy(), [[0, 0.5, 1]], atol=1e-6)
     assert features.normalised_thickness(t).dtype == torch.float32
     assert features.THICKNESS_SHIFT == lo and features.THICKNESS_SCALE == pytest.approx(hi - lo)
+
+
+def test_pressures_are_read_from_their_logarithm_and_cannot_overflow():
+    raw = torch.tensor([np.log(25.0), np.log(0.02), 0.0, 1e4])
+    out = features.pressure_out(raw).numpy()
+    np.testing.assert_allclose(out[:3], [25.0, 0.02, 1.0], rtol=1e-5)
+    assert out[3] == pytest.approx(np.exp(features.PRESSURE_LOG_MAX), rel=1e-5)

@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from models import features
 from stmpl import predictor
 
 
@@ -153,6 +154,6 @@ def test_a_gnn_given_a_pose_answers_the_same_at_fidelity_auto_near_the_object(ds
     scene = posed(ds.part, tissue.constant(ds.part, 0.0075), ball, pose)
     d = p.predict(scene)
     auto = p.with_fidelity("auto").predict(scene)
-    near = scene.pose.gap <= 0.005
+    near = scene.pose.gap <= features.CONTACT_BAND
     np.testing.assert_allclose(auto.displacement[near], d.displacement[near], atol=1e-7)
     assert not auto.displacement[~near].all(axis=1).all()  # zero away from the object

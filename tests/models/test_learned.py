@@ -3,6 +3,7 @@
 import numpy as np
 import pytest
 
+from models import features
 from stmpl import predictor
 from stmpl.pipeline.evaluate import scenes_of
 from stmpl.scene import Scene
@@ -134,7 +135,7 @@ def test_a_model_given_a_pose_answers_the_force_near_the_object_and_its_reaction
     """
     import torch
 
-    from models.features import PRESSURE_OUT_SCALE
+    from models.features import CONTACT_BAND, PRESSURE_OUT_SCALE
     from stmpl import tissue
     from stmpl.contact import objects
     from stmpl.contact.posing import posed
@@ -146,7 +147,7 @@ def test_a_model_given_a_pose_answers_the_force_near_the_object_and_its_reaction
     pose = objects.press(ds.part, ball, at, depth=3e-3)
     scene = posed(ds.part, tissue.constant(ds.part, 0.0075), ball, pose)
     d = p.predict(scene)
-    near = scene.pose.gap <= 0.005
+    near = scene.pose.gap <= CONTACT_BAND
     assert not d.force[~near].any() and d.force.min() >= 0
     t, g = (torch.tensor(x[None], dtype=torch.float32) for x in (scene.thickness, scene.pose.gap))
     with torch.no_grad():
@@ -244,7 +245,7 @@ def test_a_model_with_the_contact_prior_learns_only_what_the_prior_leaves(ds, ki
         less = float(p.loss(t, g, bare))
         moved = p.contact_base(g)[0].norm(dim=-1)
         peak = (bare[0, :, :3] / p.scale).norm(dim=-1).max()
-        near = g[0] <= 0.005  # the dent's own term: where the object presses
+        near = g[0] <= features.CONTACT_BAND  # the dent's own term: where the object presses
         share = float(moved.mean() / peak + moved[near].mean() / peak)
     if kind == "gnn":
         assert less == pytest.approx(share, rel=1e-3) and same < 1e-4
