@@ -109,7 +109,12 @@ def parser() -> argparse.ArgumentParser:
         nargs="+",
         help="fem, fem:<resolution>, zoo:<name>, or .safetensors checkpoints",
     )
-    ev.add_argument("--data", required=True, help="dataset folder")
+    ev.add_argument(
+        "--data",
+        required=True,
+        nargs="+",
+        help="dataset folder; several folders of one part and FEM set-up are read as one",
+    )
     ev.add_argument("--split", default="test", choices=["train", "val", "test"])
     ev.add_argument("--limit", type=positive, help="first N samples only")
     device_option(ev)

@@ -298,3 +298,19 @@ def test_any_anny_phenotype_makes_the_scene_and_a_learned_model_refuses_it(tmp_p
     assert "another body part" in capsys.readouterr().err
     assert main(["scene", "--age", "1.5"]) == 2
     assert "age must be in [0, 1]" in capsys.readouterr().err
+
+
+def test_evaluate_reads_several_dataset_folders_as_one(tmp_path, capsys, tiny_dataset, ds, make):
+    """``stmpl evaluate --data A B``: the two folders' splits measured together."""
+    import shutil
+
+    ckpt = make("naive", ds).save(tmp_path / "naive.safetensors")
+    shutil.copytree(tiny_dataset, tmp_path / "again")
+    n = len(ds.arrays("test")["total"])
+    for data, samples in (
+        ([str(tiny_dataset)], n),
+        ([str(tiny_dataset), str(tmp_path / "again")], 2 * n),
+    ):
+        assert main(["evaluate", str(ckpt), "--data", *data, "--split", "test"]) == 0
+        row = [line for line in capsys.readouterr().out.splitlines() if "naive" in line][-1]
+        assert row.split("|")[2].strip() == str(samples)
