@@ -15,13 +15,13 @@ import torch.nn.functional as F
 from fem.layers import bound as tissue_bound
 from models.compiled import TOLERANCE, compile_module, uncompiled
 from models.features import (
-    pressure_out,
     CONTACT_BAND,
     MIN_TOTAL_N,
     PRESSURE_OUT_SCALE,
+    pressure_out,
     total_force,
 )
-from models.losses import near_loss, pooled_loss, relative_loss
+from models.losses import log_near_loss, near_loss, pooled_loss, relative_loss
 from stmpl import checkpoint, loads, tissue
 from stmpl import config as checked
 from stmpl.body.mirror import MIRROR, mirror_twin
@@ -290,15 +290,15 @@ class LearnedPredictor(BasePredictor):
         field, ``target`` the displacement, the contact pressure and its push, :meth:`normalised`)
         adds, where the object presses (:func:`near_loss`: over the whole part a dent of a few
         vertices weighs next to nothing; an answer's contact force lives there alone), the
-        displacement's and the pressures' relative errors, and the reaction's
-        (:meth:`reaction_loss`).
+        displacement's relative error, the pressures' in their logarithm (:func:`log_near_loss`),
+        and the reaction's (:meth:`reaction_loss`).
         """
         pred, tgt = self.answered(thickness, force, body, base), self.normalised(target, force)
         if self.config.get("loss", "mse") == "mse":
             return ((pred - tgt) ** 2).mean()
         if self.posed:  # where the object presses: the dent, the pressures; the reaction
             p, t, near = pred[..., 3:], tgt[..., 3:], force <= CONTACT_BAND
-            pressure = near_loss(p, t, near) + self.reaction_loss(p, t, force, body)
+            pressure = log_near_loss(p, t, near) + self.reaction_loss(p, t, force, body)
             dent = near_loss(pred[..., :3], tgt[..., :3], near)
             return self.euclidean_loss(pred[..., :3], tgt[..., :3], force) + dent + pressure
         return self.euclidean_loss(pred, tgt, force)
@@ -306,11 +306,12 @@ class LearnedPredictor(BasePredictor):
     def reaction_loss(self, pred, tgt, gap, body=None):
         """A pose model's reaction error beside a ``relative`` or ``pooled`` loss: from ``(B, N,
         2)`` contact pressure and push per vertex (units of :meth:`raw`) and the gap field ``gap``
-        ``(B, N)`` (m), the mean over the samples of ``|R - R*| / R*``, the reaction ``R`` the
+        ``(B, N)`` (m), the mean over the samples of ``|log(R / R*)|``, the reaction ``R`` the
         push summed over the vertex areas within :data:`~models.features.CONTACT_BAND` of the
-        object, as an answer sums it, and ``R*`` the true one: each sample's share of its own.
-        Beside it the pressures' relative error where the object presses keeps their map in
-        shape.
+        object, as an answer sums it, and ``R*`` the true one: the relative error where it is
+        small, and an answer ten times too large pulled back by a bounded step (each vertex by
+        its share of ``R``), not by ten times the step. Beside it the pressures' error where the
+        object presses keeps their map in shape.
         """
         inv_area = (
             self._body_data[0]["inv_area"][None]
@@ -319,7 +320,11 @@ class LearnedPredictor(BasePredictor):
         )
         true = (tgt[..., 1] / inv_area).sum(-1)
         got = torch.where(gap <= CONTACT_BAND, pred[..., 1], 0.0) / inv_area
-        return ((got.sum(-1) - true).abs() / true.abs().clamp_min(1e-12)).mean()
+        return (
+            (torch.log(got.sum(-1).clamp_min(1e-12)) - torch.log(true.clamp_min(1e-12)))
+            .abs()
+            .mean()
+        )
 
     def euclidean_loss(self, pred, tgt, force):
         """The ``relative`` or ``pooled`` loss of ``(B, N, 3)`` outputs against targets in the

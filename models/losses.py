@@ -33,6 +33,24 @@ def near_loss(pred, target, near):
     return ((norm * w).sum(-1) / w.sum(-1).clamp_min(1.0) / (peak + LOSS_EPS)).mean()
 
 
+PRESSURE_EPS = 0.01
+"""The smallest pressure :func:`log_near_loss` tells apart from none, in a pose model's pressure
+unit (10 kPa: 100 Pa, a hundredth of a light touch's peak)."""
+
+
+def log_near_loss(pred, target, near):
+    """Mean over samples of the mean ``|log(p + eps) - log(t + eps)|`` over the vertices ``near``
+    ``(B, N)`` (bool) for ``(B, N, C)`` non-negative tensors (a pose model's pressures, units of
+    10 kPa; ``eps`` :data:`PRESSURE_EPS`): each pressure's relative error, as read from the
+    logarithm a network answers it in (:func:`models.features.pressure_out`). An absolute error
+    over the peak would let an answer of nearly none everywhere cost little (most vertices near
+    an object carry none), and its gradient through the exponential fades as the answer does.
+    """
+    err = (torch.log(pred + PRESSURE_EPS) - torch.log(target + PRESSURE_EPS)).abs().mean(-1)
+    w = near.to(err.dtype)
+    return ((err * w).sum(-1) / w.sum(-1).clamp_min(1.0)).mean()
+
+
 def pooled_loss(pred, target, weight=None):
     """The batch's summed mean Euclidean error over its summed peak displacement for ``(B, N, 3)``
     tensors, each sample weighted by ``weight`` ``(B,)`` (per-newton tensors: the total force, so

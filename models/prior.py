@@ -29,6 +29,27 @@ CORRECTION_SCALE = 0.05
 corrections are a few per cent of the answer, and at full scale Adam's first steps would throw
 the prediction far from the prior before it learned anything."""
 
+PRESSURE_START = 0.1
+"""A pose model's contact pressure before it has learned (units of 10 kPa: 1 kPa, a light
+touch's), :func:`start_silent`."""
+
+
+def start_silent(last, posed: bool = False) -> None:
+    """Zero a network's last layer ``last`` (a linear layer or a convolution, one output per
+    channel), so that its answer starts as the prior's (the linear FEM's, or the skin laid on
+    the object) and Adam's first steps correct it rather than throw it far; a pose model's two
+    pressure channels (``posed``) start at :data:`PRESSURE_START` (they are read from their
+    logarithm). From a random start the first answers were tens of times the reaction, and the
+    steps that brought them down left the pressures answering the same at every depth.
+    """
+    import torch  # deferred: about a second to import; the core's types do not need it
+
+    with torch.no_grad():
+        last.weight.zero_()
+        last.bias.zero_()
+        if posed:
+            last.bias[3:] = float(np.log(PRESSURE_START))
+
 
 class LinearPrior:
     """Mixin for a :class:`LearnedPredictor` with the option ``prior`` (``none``, ``linear`` or

@@ -31,7 +31,7 @@ from models.gnn.network import MeshGraphNet, NormalisedGraphNet, Normaliser
 from models.gnn.subgraph import compiled, mesh, subgraph
 from models.learned import LearnedPredictor
 from models.linear.operator import ComplianceOperator
-from models.prior import CORRECTION_SCALE, LinearPrior
+from models.prior import CORRECTION_SCALE, LinearPrior, start_silent
 from stmpl import reach
 from stmpl.pose import GAP_REACH
 
@@ -118,9 +118,8 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
             int(self.config["latent"]),
             int(self.config["steps"]),
         )
-        if prior is not None:  # start from the linear FEM's answer: a silent decoder
-            nn.init.zeros_(net.decoder[-1].weight)
-            nn.init.zeros_(net.decoder[-1].bias)
+        if prior is not None or self.config["prior"] == "contact":  # start from the prior
+            start_silent(net.decoder[-1], self.posed)
         return NormalisedGraphNet(node, edge, net, prior)
 
     def raw(self, thickness, force, body=None, base=None):

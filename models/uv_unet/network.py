@@ -3,8 +3,8 @@ or envelopes (the predictor, :mod:`models.uv_unet.predictor`, builds its inputs)
 
 :class:`UNet`: ``depth`` down-steps of 4x4 convolutions with stride 2 (LeakyReLU 0.2 before each
 but the first, no normalisation), and as many 4x4 transposed convolutions up with skip
-connections (LeakyReLU 0.2 before each, dropout 0.5 on the three innermost), a tanh output.
-Channels double from ``width`` up to ``8 * width``. Images ``(B, C_in, S, S) -> (B, 3, S, S)``.
+connections (LeakyReLU 0.2 before each, dropout 0.5 on the three innermost), a tanh output
+(but on the last ``unbounded`` channels). Channels double from ``width`` up to ``8 * width``. Images ``(B, C_in, S, S) -> (B, 3, S, S)``.
 :class:`WithPrior` keeps a UNet beside a prior module its predictor adds, so one checkpoint
 carries both.
 """
@@ -16,14 +16,23 @@ from torch import nn
 
 
 class UNet(nn.Module):
-    """pix2pix UNet: ``(B, C_in, S, S) -> (B, C_out, S, S)`` in [-1, 1]; ``S`` divisible by
-    ``2 ** depth``.
+    """pix2pix UNet: ``(B, C_in, S, S) -> (B, C_out, S, S)`` in [-1, 1] (the last
+    ``unbounded`` channels unbounded: no tanh); ``S`` divisible by ``2 ** depth``.
     """
 
     def __init__(
-        self, c_in: int, c_out: int = 3, width: int = 16, depth: int = 5, dropout: float = 0.5
+        self,
+        c_in: int,
+        c_out: int = 3,
+        width: int = 16,
+        depth: int = 5,
+        dropout: float = 0.5,
+        unbounded: int = 0,
     ):
         super().__init__()
+        if not 0 <= unbounded <= c_out:
+            raise ValueError(f"unbounded must be 0..{c_out} output channels, got {unbounded}")
+        self.unbounded = unbounded
         ch = [width * 2 ** min(d, 3) for d in range(depth)]
         self.down = nn.ModuleList()
         prev = c_in
@@ -53,7 +62,10 @@ class UNet(nn.Module):
             if i > 0:
                 x = torch.cat([x, skips.pop()], dim=1)
             x = layer(x)
-        return torch.tanh(x)
+        if not self.unbounded:
+            return torch.tanh(x)
+        k = x.shape[1] - self.unbounded
+        return torch.cat([torch.tanh(x[:, :k]), x[:, k:]], 1)
 
 
 class WithPrior(nn.Module):

@@ -30,8 +30,8 @@ from models.features import (
 )
 from models.learned import LearnedPredictor
 from models.linear.operator import ComplianceOperator
-from models.losses import near_loss
-from models.prior import CORRECTION_SCALE, LinearPrior
+from models.losses import log_near_loss, near_loss
+from models.prior import CORRECTION_SCALE, LinearPrior, start_silent
 from models.uv_unet.network import UNet, WithPrior
 from stmpl import reach
 from stmpl.pose import GAP_REACH
@@ -93,13 +93,19 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
         )
         c_in = 2 + (1 if c["per_newton"] or self.posed else 0) + (6 if c["geometry"] else 0)
         if not self.prior:
-            return UNet(
-                c_in, self.out_channels, int(c["width"]), int(c["depth"]), float(c["dropout"])
+            net = UNet(
+                c_in,
+                self.out_channels,
+                int(c["width"]),
+                int(c["depth"]),
+                float(c["dropout"]),
+                unbounded=self.out_channels - 3,  # a pose model's log-pressures
             )
+            if c["prior"] == "contact":  # start from the skin laid on the object
+                start_silent(net.up[-1][-1], self.posed)
+            return net
         net = UNet(c_in + 3, 3, int(c["width"]), int(c["depth"]), float(c["dropout"]))
-        last = net.up[-1][-1]  # start from the linear FEM: a silent output
-        nn.init.zeros_(last.weight)
-        nn.init.zeros_(last.bias)
+        start_silent(net.up[-1][-1])  # start from the linear FEM: a silent output
         return WithPrior(net, ComplianceOperator())
 
     def geometry_channels(self, part) -> torch.Tensor:
@@ -209,7 +215,7 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
                 vertex = self.with_pressures(self.uvmap.sample(out))[..., 3:]
                 near = force[:, self._corner_vertex] <= CONTACT_BAND
                 loss = loss + near_loss(pred[..., :3], tgt[..., :3], near)
-                loss = loss + near_loss(pred[..., 3:], tgt[..., 3:], near)
+                loss = loss + log_near_loss(pred[..., 3:], tgt[..., 3:], near)
                 loss = loss + self.reaction_loss(vertex, whole[..., 3:], force, body)
             return loss
         if contact is not None:  # the image of what the prior leaves
