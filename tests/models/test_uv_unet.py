@@ -1,6 +1,7 @@
 """The UV-UNet: its seam gap, and its relative loss read at the UV corners."""
 
 import numpy as np
+import pytest
 
 from stmpl import predictor
 from stmpl.pipeline.evaluate import scenes_of
@@ -92,3 +93,20 @@ def test_auto_fidelity_runs_on_the_window_the_load_needs(ds, make):
             a.displacement[~inner[b]], l.displacement[~inner[b]], rtol=1e-4, atol=1e-9
         )
         assert not np.allclose(u.displacement, l.displacement, atol=1e-7)  # it does correct
+
+
+def test_the_unet_bounds_only_its_bounded_channels():
+    """The paper's tanh output on the displacement's channels, none on a pose model's
+    log-pressures (``unbounded``): an input scaled up drives those past 1, the others never.
+    """
+    import torch
+
+    from models.uv_unet.network import UNet
+
+    torch.manual_seed(0)
+    net = UNet(2, 5, width=4, depth=2, dropout=0.0, unbounded=2).eval()
+    with torch.no_grad():
+        y = net(1e3 * torch.randn(1, 2, 16, 16))
+    assert y[:, :3].abs().max() <= 1.0 and y[:, 3:].abs().max() > 10.0
+    with pytest.raises(ValueError, match="unbounded must be 0..5 output channels, got 6"):
+        UNet(2, 5, unbounded=6)
