@@ -188,14 +188,15 @@ def same_mesh(a: BodyPart, b: BodyPart) -> str:
 
 
 def _setup(card: dict) -> dict:
-    """A dataset's FEM set-up (:data:`SETUP`), its body's shape left out
-    (:data:`stmpl.body.spec.SHAPE_KEYS`: anny's phenotype, a tube's radius...)."""
+    """A dataset's FEM set-up (:data:`SETUP`, and the card's tissue preset), its body's shape
+    left out (:data:`stmpl.body.spec.SHAPE_KEYS`: anny's phenotype, a tube's radius...)."""
 
     cfg = card["config"]
     out = {k: cfg.get(k) for k in SETUP}
     body = out["body"] or {}
     out["body"] = {k: v for k, v in body.items()
                    if k not in SHAPE_KEYS.get(body.get("model"), set())}
+    out["tissue"] = card.get("tissue", "paper")
     return out
 
 
@@ -226,7 +227,7 @@ class Datasets:
                                  f"meshes ({why}); they cannot be trained on together")
             setup, other = _setup(first.card), _setup(ds.card)
             if setup != other:
-                diff = sorted(k for k in SETUP if setup[k] != other[k])
+                diff = sorted(k for k in setup if setup[k] != other[k])
                 raise ValueError(f"datasets {first.folder} and {ds.folder} differ in their FEM "
                                  f"set-up ({', '.join(diff)}); they cannot be trained on together")
         self.part = first.part
@@ -243,6 +244,7 @@ class Datasets:
             "samples_per_split": {s: sum(int(c["samples_per_split"][s]) for c in cards)
                                   for s in SPLITS},
             "config": {**cards[0]["config"], "thickness_mm": levels},
+            "tissue": cards[0].get("tissue", "paper"),
             "datasets": [{"folder": str(ds.folder), "name": ds.card["name"],
                           "hash": ds.card["hash"]} for ds in self.members]}
         if len(self.parts) > 1:

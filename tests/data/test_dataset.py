@@ -232,3 +232,21 @@ def test_a_broken_set_of_bodies_is_named(tmp_path):
     )
     with pytest.raises(FileNotFoundError, match="missing"):
         open_data(tmp_path)
+
+
+def test_datasets_carry_their_tissue_and_refuse_to_mix_tissues(tmp_path, tiny_dataset):
+    """Several sets read as one keep their tissue preset on the card (a model trained on them
+    is judged by it); sets of two tissues are refused by name."""
+    import json
+    import shutil
+
+    from stmpl.data.dataset import Datasets
+
+    for name, tissue in (("a", "abdomen"), ("b", "abdomen"), ("c", "forearm")):
+        shutil.copytree(tiny_dataset, tmp_path / name)
+        card = json.loads((tmp_path / name / "card.json").read_text())
+        (tmp_path / name / "card.json").write_text(json.dumps({**card, "tissue": tissue}))
+    assert Datasets([tmp_path / "a", tmp_path / "b"]).card["tissue"] == "abdomen"
+    assert Datasets([tiny_dataset, tiny_dataset]).card["tissue"] == "paper"
+    with pytest.raises(ValueError, match=r"differ in their FEM set-up \(tissue\)"):
+        Datasets([tmp_path / "a", tmp_path / "c"])
