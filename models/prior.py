@@ -36,11 +36,12 @@ touch's), :func:`start_silent`."""
 
 def start_silent(last, posed: bool = False) -> None:
     """Zero a network's last layer ``last`` (a linear layer or a convolution, one output per
-    channel), so that its answer starts as the prior's (the linear FEM's, or the skin laid on
-    the object) and Adam's first steps correct it rather than throw it far; a pose model's two
-    pressure channels (``posed``) start at :data:`PRESSURE_START` (they are read from their
-    logarithm). From a random start the first answers were tens of times the reaction, and the
-    steps that brought them down left the pressures answering the same at every depth.
+    channel), so that its answer starts as the prior's (the linear FEM's, the skin laid on the
+    object, or the skin at rest) and Adam's first steps correct it rather than throw it far; a
+    pose model's two pressure channels (``posed``) start at :data:`PRESSURE_START` (they are
+    read from their logarithm). From a random start the first answers were tens of times the
+    reaction, and the steps that brought them down left the pressures answering the same at
+    every depth.
     """
     import torch  # deferred: about a second to import; the core's types do not need it
 

@@ -118,7 +118,7 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
             int(self.config["latent"]),
             int(self.config["steps"]),
         )
-        if prior is not None or self.config["prior"] == "contact":  # start from the prior
+        if prior is not None or self.posed:  # start from the prior (or the rest skin)
             start_silent(net.decoder[-1], self.posed)
         return NormalisedGraphNet(node, edge, net, prior)
 

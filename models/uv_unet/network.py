@@ -4,7 +4,8 @@ or envelopes (the predictor, :mod:`models.uv_unet.predictor`, builds its inputs)
 :class:`UNet`: ``depth`` down-steps of 4x4 convolutions with stride 2 (LeakyReLU 0.2 before each
 but the first, no normalisation), and as many 4x4 transposed convolutions up with skip
 connections (LeakyReLU 0.2 before each, dropout 0.5 on the three innermost), a tanh output
-(but on the last ``unbounded`` channels). Channels double from ``width`` up to ``8 * width``. Images ``(B, C_in, S, S) -> (B, 3, S, S)``.
+(but on the last ``unbounded`` channels). Channels double from ``width`` up to ``8 * width``.
+Images ``(B, C_in, S, S) -> (B, C_out, S, S)``.
 :class:`WithPrior` keeps a UNet beside a prior module its predictor adds, so one checkpoint
 carries both.
 """

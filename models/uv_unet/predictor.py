@@ -101,8 +101,8 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
                 float(c["dropout"]),
                 unbounded=self.out_channels - 3,  # a pose model's log-pressures
             )
-            if c["prior"] == "contact":  # start from the skin laid on the object
-                start_silent(net.up[-1][-1], self.posed)
+            if self.posed:  # start from the skin laid on the object (or the rest skin)
+                start_silent(net.up[-1][-1], posed=True)
             return net
         net = UNet(c_in + 3, 3, int(c["width"]), int(c["depth"]), float(c["dropout"]))
         start_silent(net.up[-1][-1])  # start from the linear FEM: a silent output
