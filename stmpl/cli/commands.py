@@ -110,7 +110,7 @@ def ablate(args) -> int:
 
 def evaluate_models(args) -> int:
     """``stmpl evaluate``: predictors measured on a dataset split."""
-    ds = open_data(args.data[0] if len(args.data) == 1 else args.data)
+    ds = open_data(args.data)  # one folder, or several read as one
     predictors = {
         spec: predictor_from_spec(spec, args.device, fidelity=args.fidelity)
         for spec in args.predictors
