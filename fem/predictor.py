@@ -4,18 +4,22 @@
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
 
 from fem.contact import press
+from fem.force_control import press_to_force
 from fem.friction import coefficient
 from fem.layers import bound, preset
 from fem.local import simulate_local
 from fem.mesh import ShellMesh
 from fem.objects import at_pose
+from fem.shapes import ROUNDING
 from fem.simulate import check_order, press_solver, resolution, simulate
 from fem.solver import Solution
+from stmpl.contact.posing import moved
 from stmpl.predictor import BasePredictor, PredictionFailed, check_fidelity
 from stmpl.scene import Scene
 from stmpl.tissue import Bound
@@ -97,6 +101,7 @@ class FEMPredictor(BasePredictor):
         self.levels, self.material, self.options = int(levels), material, options
         self.last_shell: Shell | None = None
         self._last: dict = {}
+        self._ready: dict = {}  # answers to_force found, by their scene
 
     def predict_batch(self, scenes: list[Scene]) -> list[np.ndarray]:
         out = []
@@ -134,33 +139,23 @@ class FEMPredictor(BasePredictor):
         return out
 
     def _pressed(self, s: Scene) -> dict:
-        """The answer to a posed scene: its objects pressed to their pose."""
+        """The answer to a posed scene: its objects pressed to their pose (or the answer
+        :meth:`to_force` found for it).
+        """
         n = s.part.n_vertices
-        try:
-            shape, depth = at_pose(s.part, s.pose)
-        except ValueError as e:
-            raise FEMFailed(f"the FEM cannot press this pose: {e}") from e
-        if depth == 0.0:
-            self._last[id(s)] = {"fem": "no contact: the objects do not reach the skin"}
-            return {"displacement": np.zeros((n, 3)), "force": np.zeros(n), "reaction": 0.0}
-        near = s.part.vertices[_pressed_skin(s.pose)]  # the mesh is refined round these
-        try:
-            solver = press_solver(
-                s.part,
-                s.thickness,
-                self.res,
-                self.tissue,
-                self.phenotype,
-                near,
-                self.options,
-                self.material,
-            )
-        except ValueError as e:
-            raise FEMFailed(f"the FEM cannot build the tissue for this scene: {e}") from e
+        ready = self._ready.pop(id(s), None)
+        if ready is None:
+            shape, depth = self._at_pose(s)
+            if depth == 0.0:
+                self._last[id(s)] = {"fem": "no contact: the objects do not reach the skin"}
+                return {"displacement": np.zeros((n, 3)), "force": np.zeros(n), "reaction": 0.0}
+            solver = self._solver(s)
+            (a,) = press(solver, shape, s.pose.direction, [depth], friction=self.friction)
+            if not a.ok:
+                raise FEMFailed(f"the FEM press failed at {1e3 * depth:.3g} mm deep: {a.reason}")
+        else:
+            a, solver, depth = ready
         mesh = solver.mesh
-        (a,) = press(solver, shape, s.pose.direction, [depth], friction=self.friction)
-        if not a.ok:
-            raise FEMFailed(f"the FEM press failed at {1e3 * depth:.3g} mm deep: {a.reason}")
         self.last_shell = None  # a press keeps no continuation levels
         self._last[id(s)] = {
             "depth": depth,
@@ -182,6 +177,66 @@ class FEMPredictor(BasePredictor):
         }
         force = a.pressure * s.part.vertex_areas
         return {"displacement": a.displacement, "force": force, "reaction": a.reaction}
+
+    def _at_pose(self, s: Scene):
+        """:func:`fem.objects.at_pose` of a posed scene, a pose it cannot press said so."""
+        try:
+            return at_pose(s.part, s.pose)
+        except ValueError as e:
+            raise FEMFailed(f"the FEM cannot press this pose: {e}") from e
+
+    def _solver(self, s: Scene):
+        """The solver of a posed scene's tissue, its mesh refined where the objects press."""
+        near = s.part.vertices[_pressed_skin(s.pose)]
+        try:
+            return press_solver(
+                s.part,
+                s.thickness,
+                self.res,
+                self.tissue,
+                self.phenotype,
+                near,
+                self.options,
+                self.material,
+            )
+        except ValueError as e:
+            raise FEMFailed(f"the FEM cannot build the tissue for this scene: {e}") from e
+
+    def to_force(self, scene: Scene, force: float, rtol: float = 0.005, strict=None):
+        """The answer to ``scene``'s objects (given by their pose) pressed along their press (a
+        grip: closed along its paths) until their reaction is ``force`` (N) within ``rtol``:
+        the FEM's own force control (:func:`fem.force_control.press_to_force`), from the
+        objects at first contact, instead of a search over whole presses
+        (:func:`stmpl.contact.force_control.to_force`, which hands a FEM predictor here).
+        The answer's scene is the objects at the depth found; ``info["force_control"]`` as
+        there. A force it cannot carry raises :class:`FEMFailed` with the reason.
+        """
+        t0 = time.perf_counter()
+        start, extra = scene, 0.0
+        shape, depth = self._at_pose(scene)
+        if depth == 0.0:  # not yet into the skin: from a pose that is
+            extra = max(float(scene.pose.gap.min()), 0.0) + 2 * ROUNDING
+            start = moved(scene, extra)
+            shape, depth = self._at_pose(start)
+            if depth == 0.0:
+                raise FEMFailed("force control: the objects do not reach the skin along their way")
+        solver = self._solver(start)
+        a = press_to_force(
+            solver, shape, start.pose.direction, force, rtol=rtol, friction=self.friction
+        )
+        if not a.ok:
+            raise FEMFailed(f"the FEM could not press the objects to {force:g} N: {a.reason}")
+        target = moved(start, a.depth - depth)
+        self._ready[id(target)] = (a, solver, a.depth)
+        answer = self.predict(target, strict=strict)
+        answer.info["force_control"] = {
+            "force": float(force),
+            "reaction": float(a.reaction),
+            "moved_mm": 1e3 * (extra + a.depth - depth),
+            "answers": 1,
+            "seconds": time.perf_counter() - t0,
+        }
+        return answer
 
     def info(self, scene: Scene) -> dict:
         return {

@@ -201,8 +201,10 @@ def clearance(shape, direction, points: np.ndarray, tolerance: float = 1e-6) -> 
 
     if len(x) == 0 or not inside(0.0):
         return 0.0
-    far = float(np.ptp(x, axis=0).max() if d is None else np.ptp(x @ d)) + tolerance
-    lo, hi = 0.0, min(0.001, far)  # doubled until clear: objects start a few mm in at most
+    # doubled until clear, at most the points' own extent and 5 cm more (an object may reach
+    # between the vertices of a coarse skin deeper than the skin's own relief)
+    far = float(np.ptp(x, axis=0).max() if d is None else np.ptp(x @ d)) + 0.05
+    lo, hi = 0.0, 0.001
     while inside(hi):
         if hi >= far:
             raise ValueError("the points lie inside the shape however far it moves back")

@@ -11,6 +11,7 @@ import warnings
 
 from stmpl import predictor
 from stmpl.cli.options import phenotype_of
+from stmpl.contact.force_control import to_force
 from stmpl.metrics import sample_metrics
 from stmpl.pipeline.spec import label, predictor_from_spec
 from stmpl.predictor import ImpossibleAnswer, OutsideEnvelope, PredictionFailed
@@ -54,10 +55,12 @@ def skin_of(preds: list, asked: int | None, default: int) -> int:
     )
 
 
-def answer(scene, specs: list[str], preds: list, strict: bool = False) -> dict:
+def answer(scene, specs: list[str], preds: list, strict: bool = False, force=None) -> dict:
     """``{label: Deformation}``: every predictor's answer to ``scene``, printed one line each
     with a note where it lies outside its data or is impossible. ``strict``: such a scene or
-    answer raises :class:`PredictionFailed` instead.
+    answer raises :class:`PredictionFailed` instead. ``force`` (N): a posed scene's objects
+    pressed from their pose until each predictor's answer meets it
+    (:func:`stmpl.contact.force_control.to_force`).
     """
     out = {}
     for spec, p in zip(specs, preds):
@@ -72,11 +75,14 @@ def answer(scene, specs: list[str], preds: list, strict: bool = False) -> dict:
         with warnings.catch_warnings():  # said in the lines below instead
             warnings.simplefilter("ignore", ImpossibleAnswer)
             warnings.simplefilter("ignore", OutsideEnvelope)
-            if getattr(p, "batched", True):  # a learned model: warm up, the first call apart
-                t0 = time.perf_counter()
-                p.predict(scene)
-                first = time.perf_counter() - t0
-            out[label(spec)] = d = p.predict(scene)
+            if force is not None:  # the search's first answers warm it up
+                out[label(spec)] = d = to_force(p, scene, force)
+            else:
+                if getattr(p, "batched", True):  # a learned model: warm up, first call apart
+                    t0 = time.perf_counter()
+                    p.predict(scene)
+                    first = time.perf_counter() - t0
+                out[label(spec)] = d = p.predict(scene)
         if strict and not d.info.get("physical", True):
             raise PredictionFailed(
                 f"{label(spec)}: {'; '.join(impossible(d.info))}; --strict refuses the answer"
@@ -107,10 +113,11 @@ def _say(name: str, p, d, first: float | None) -> None:
         print(f"  WARNING: {name}: {why}: do not use this answer")
 
 
-def truth(scene, args, failures: dict | None = None):
+def truth(scene, args, failures: dict | None = None, force=None):
     """The FEM's answer to ``scene`` at the options' resolution, levels and fidelity, printed;
     ``None`` (and the reason printed, and kept in ``failures`` under the FEM's name) when the
-    solve fails: the models' answers stand.
+    solve fails: the models' answers stand. ``force`` (N): the posed objects pressed until
+    they meet it, by the FEM's own force control.
     """
     name = f"FEM ({args.res})" if args.tissue == "paper" else f"FEM ({args.res}, {args.tissue})"
     fem = predictor.create(
@@ -123,7 +130,7 @@ def truth(scene, args, failures: dict | None = None):
         friction=args.friction,
     )
     try:
-        d = fem.predict(scene)
+        d = fem.predict(scene) if force is None else to_force(fem, scene, force)
     except PredictionFailed as e:
         print(f"{name:<{WIDTH}} failed: {e}; no errors to show")
         if failures is not None:
@@ -137,10 +144,20 @@ def truth(scene, args, failures: dict | None = None):
 
 
 def _met(d) -> str:
-    """What a posed scene's answer met: its reaction and peak contact pressure ('' else)."""
+    """What a posed scene's answer met: its reaction and peak contact pressure, and how force
+    control found it ('' for a scene given by its force).
+    """
     if d.reaction is None:
         return ""
-    return f"  reaction {d.reaction:.3g} N, peak pressure {d.pressure.max() / 1e3:.3g} kPa"
+    line = f"  reaction {d.reaction:.3g} N, peak pressure {d.pressure.max() / 1e3:.3g} kPa"
+    fc = d.info.get("force_control")
+    if fc:
+        n = fc["answers"]
+        line += (
+            f" (pressed {fc['moved_mm']:.2f} mm on from the pose, found in "
+            f"{n} answer{'s' if n > 1 else ''}, {duration(fc['seconds'])} in all)"
+        )
+    return line
 
 
 def record(out: dict, fem, failures: dict) -> dict:

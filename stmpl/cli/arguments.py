@@ -122,11 +122,27 @@ def thickness_option(parser) -> None:
     )
 
 
+class _Given(argparse.Action):
+    """Stores the value and notes that it was given (``force_given``: the default was not
+    taken).
+    """
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        setattr(namespace, self.dest, values)
+        setattr(namespace, f"{self.dest}_given", True)
+
+
 def load_options(parser) -> None:
     """``--force``, ``--at``, ``--along``: how hard and where."""
     parser.add_argument(
-        "--force", type=float, default=FORCE_N, help=f"total force, N (default {FORCE_N:g})"
+        "--force",
+        type=float,
+        default=FORCE_N,
+        action=_Given,
+        help=f"total force, N (default {FORCE_N:g}); with --given pose, the force the object "
+        "is pressed further (or the hand closed) until it meets",
     )
+    parser.set_defaults(force_given=False)
     parser.add_argument(
         "--at",
         type=float,
@@ -302,7 +318,7 @@ def simulate_options(sp) -> None:
         help="force (default): --force is shared over the skin the object touches (the "
         "paper's load model); pose: the object stays where --at/--depth or --pose put it and "
         "the force it meets is answered (by the FEM, --model fem, or a model trained on "
-        "pressed objects)",
+        "pressed objects), or, with --force, it is pressed from there until it meets that force",
     )
     load_options(what)
     body_options(sp, smpl=False)

@@ -10,6 +10,7 @@ PLY) and a picture, and prints each method's time.
 >>> stmpl simulate --object tool.stl --at 0.45 0.5 --depth 3
 >>> stmpl simulate --sphere 8 --depth 3 --given pose --model fem --tissue forearm --res medium
 >>> stmpl simulate --grip pinch --depth 2 --given pose --model fem --tissue forearm --res medium
+>>> stmpl simulate --sphere 8 --depth 1 --given pose --force 5 --model fem --tissue forearm
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ import trimesh
 import stmpl.contact.pressing as contact
 from stmpl.body.spec import part_from_spec
 from stmpl.cli import answers
-from stmpl.cli.arguments import FORCE_N, default_model
+from stmpl.cli.arguments import default_model
 from stmpl.cli.options import phenotype_of, thickness_of
 from stmpl.contact import objects
 from stmpl.contact.grips import GRIPS
@@ -61,8 +62,6 @@ def pressings(args, part) -> list:
             "--given pose presses an --object, --sphere or --letters where it is put, or closes "
             "the hand's grasp round a limb (a strap or the open hand has no pose to press to)"
         )
-    if args.given == "pose" and args.force != FORCE_N:
-        raise ValueError("--given pose answers the force: leave --force out")
     if args.strap:
         return [objects.strap(part, args.along, total=args.force, squeeze=args.depth * mm)]
     if chosen:
@@ -134,20 +133,27 @@ def run(args) -> int:
     objs = pressings(args, part)
     thick = thickness_of(args, part)
     drawn = [o.posed() for o in objs]
+    force = args.force if args.given == "pose" and args.force_given else None
     if args.given == "pose" and grasping(args, part):
         kind = args.grip or "whole"
         hand = Hand(phenotype={"height": args.hand_height}, side="R")
         scene = gripped(part, thick, args.depth * 1e-3, hand, args.along, args.around, kind)
-        grip = scene.pose.objects[0]
-        drawn = [trimesh.Trimesh(grip.vertices, grip.faces, process=False)]
+        drawn = [_mesh(scene.pose.objects[0])]
         said = (
             f"right hand ({kind}) closed {args.depth:g} mm from first touch, "
-            f"{scene.pose.nearest()} (the squeeze it meets is answered)"
+            f"{scene.pose.nearest()} "
+            + (
+                "(the squeeze it meets is answered)"
+                if force is None
+                else f"(then closed until its squeeze is {force:g} N)"
+            )
         )
     elif args.given == "pose":
         scene = posed(part, thick, [(o.mesh, o.pose, o.name) for o in objs])
-        said = (
-            f"{objs[0].name} at its pose, {scene.pose.nearest()} (the force it meets is answered)"
+        said = f"{objs[0].name} at its pose, {scene.pose.nearest()} " + (
+            "(the force it meets is answered)"
+            if force is None
+            else f"(then pressed until it meets {force:g} N)"
         )
     else:
         touch = contact.contact(part, objs)
@@ -157,9 +163,11 @@ def run(args) -> int:
         f"{part.name} ({part.n_vertices} vertices), {1e3 * float(thick.mean()):.3g} mm of "
         f"tissue; {said}  [{time.perf_counter() - t0:.1f} s to set up]"
     )
-    out = answers.answer(scene, specs, preds, args.strict)
+    out = answers.answer(scene, specs, preds, args.strict, force)
     failures: dict = {}
-    fem = answers.truth(scene, args, failures) if args.compare else None
+    fem = answers.truth(scene, args, failures, force) if args.compare else None
+    if force is not None:  # the objects where the first answer pressed them
+        drawn = [_mesh(o) for o in next(iter(out.values())).scene.pose.objects]
     if fem is not None:
         answers.errors(out, fem)
     folder = pathlib.Path(args.out_dir)
@@ -175,6 +183,11 @@ def run(args) -> int:
         f"{folder / 'simulate.png'}, {folder / 'simulate.json'} (every answer and failure)"
     )
     return 0
+
+
+def _mesh(rigid) -> trimesh.Trimesh:
+    """A posed object (:class:`~stmpl.pose.Rigid`) as a mesh to draw."""
+    return trimesh.Trimesh(rigid.vertices, rigid.faces, process=False)
 
 
 def write_meshes(deformation, objects, base, about: dict | None = None) -> None:

@@ -75,9 +75,41 @@ def posed(
         if len(at.faces) == 0 or not np.isfinite(at.vertices).all():
             raise ValueError(f"object {n!r}: the mesh has no faces or non-finite vertices")
         rigid.append(Rigid(n, np.asarray(at.vertices), np.asarray(at.faces)))
-        inside = along.mesh(at, part.vertices, d)  # the deeper inside, the nearer outside
-        gap = np.minimum(gap, np.minimum(inside, signed_distance(at, part.vertices)))
+        gap = np.minimum(gap, _gap(part, at, d))
     return Scene.posed(part, thickness, Pose(gap, d, tuple(rigid)), **meta)
+
+
+def _gap(part: BodyPart, mesh, direction) -> np.ndarray:
+    """``(N,)`` the gap field of one object ``mesh`` (at its pose) on ``part``'s rest skin:
+    inside it along ``direction`` (the deeper), outside its signed distance (the nearer); a
+    closing object's (``direction`` None) its signed distance.
+    """
+    near = signed_distance(mesh, part.vertices)
+    if direction is None:
+        return near
+    return np.minimum(along.mesh(mesh, part.vertices, direction), near)
+
+
+def moved(scene: Scene, distance: float) -> Scene:
+    """``scene`` (given by a pose) with its objects moved ``distance`` (m; negative: back) along
+    the pose's direction, or a closing pose's objects closed that much further along their
+    paths; the gap field measured again.
+    """
+    pose = scene.pose
+    if pose is None or not pose.objects:
+        raise ValueError("only a scene given by objects at their pose can be moved")
+    if not np.isfinite(distance):
+        raise ValueError(f"the distance to move must be finite (m), got {distance!r}")
+    rigid, gap = [], np.full(scene.part.n_vertices, GAP_REACH)
+    for o in pose.objects:
+        step = distance * (o.path if pose.closing else pose.direction)
+        r = Rigid(o.name, o.vertices + step, o.faces, o.path)
+        rigid.append(r)
+        mesh = trimesh.Trimesh(r.vertices, r.faces, process=False)
+        gap = np.minimum(gap, _gap(scene.part, mesh, pose.direction))
+    return Scene.posed(
+        scene.part, scene.thickness, Pose(gap, pose.direction, tuple(rigid)), **scene.meta
+    )
 
 
 def gripped(
@@ -99,6 +131,5 @@ def gripped(
     if not (np.isfinite(depth) and depth >= 0):
         raise ValueError(f"a grip's depth must be >= 0 m, got {depth!r}")
     grip = closed(closing_grip(part, hand or Hand(side="R"), along, around, kind), depth)
-    mesh = trimesh.Trimesh(grip.vertices, grip.faces, process=False)
-    gap = signed_distance(mesh, part.vertices)
+    gap = _gap(part, trimesh.Trimesh(grip.vertices, grip.faces, process=False), None)
     return Scene.posed(part, thickness, Pose(gap, None, (grip,)), **meta)

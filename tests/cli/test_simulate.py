@@ -69,7 +69,6 @@ def test_letters_against_the_fem(tmp_path, capsys, arm):
         (["--sphere", "8", "--grip", "pinch"], "--grip chooses how the hand grasps a limb"),
         (["--part", "belly", "--grip", "pinch"], "the belly has no limb to grasp"),
         (["--given", "pose", "--part", "belly"], "the open hand has no pose to press to"),
-        (["--sphere", "8", "--given", "pose", "--force", "2"], "leave --force out"),
         (["--sphere", "8", "--given", "pose"], "gnn answers a force given on the skin"),
     ],
 )
@@ -244,6 +243,25 @@ def test_a_fingertip_given_by_its_pose_answers_the_force_it_meets(tmp_path, caps
     assert "(the force it meets is answered)" in out
     _reaction_said_and_kept(out, tmp_path)
     assert (tmp_path / "simulate.png").stat().st_size > 10_000
+
+
+def test_a_fingertip_given_by_its_pose_and_a_force_is_pressed_until_it_meets_it(
+    tmp_path, capsys, arm
+):
+    """``--given pose --force``: the ball starts where --depth puts it and the FEM presses it
+    on until its reaction meets the force: said in the set-up line, met in the answer's line
+    (within force control's tolerance) with how far it went, kept in simulate.json.
+    """
+    argv = ["simulate", "--sphere", "8", "--depth", "1", "--given", "pose", "--force", "0.01"]
+    argv += ["--model", "fem", "--res", "coarse", "--subdivide", "0", "--out-dir", str(tmp_path)]
+    assert main(argv) == 0
+    out = capsys.readouterr().out
+    assert "(then pressed until it meets 0.01 N)" in out
+    line = next(ln for ln in out.splitlines() if ln.startswith("fem"))
+    assert float(line.split("reaction ")[1].split(" N")[0]) == pytest.approx(0.01, rel=0.006)
+    moved = float(line.split("(pressed ")[1].split(" mm on from the pose")[0])
+    assert 0 < moved < 10
+    _reaction_said_and_kept(out, tmp_path)
 
 
 def test_a_grasp_given_by_its_pose_answers_the_squeeze(tmp_path, capsys, arm):

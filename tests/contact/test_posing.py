@@ -4,12 +4,14 @@ direction a posed object presses along, and several objects at once.
 
 import numpy as np
 import pytest
+import trimesh
 
 from stmpl import tissue
 from stmpl.body import tube
 from stmpl.contact import gap, objects
-from stmpl.contact.posing import posed, signed_distance
-from stmpl.pose import GAP_REACH
+from stmpl.contact.posing import moved, posed, signed_distance
+from stmpl.pose import GAP_REACH, Pose, Rigid
+from stmpl.scene import Scene
 
 
 @pytest.fixture(scope="module")
@@ -63,3 +65,33 @@ def test_two_objects_give_the_nearer_distance_and_one_direction(part):
         posed(part, tissue.constant(part, 0.0075), "ball.stl", a, name="ball")
     with pytest.raises(ValueError, match="not a rigid transform"):
         posed(part, tissue.constant(part, 0.0075), tip, 2 * a)
+
+
+def test_a_moved_pose_is_the_pose_pressed_that_much_deeper(part):
+    """Moving a posed fingertip 1.5 mm further along its press gives the gap field of the
+    fingertip placed 1.5 mm deeper; moving it back, of the one placed shallower; a closing
+    object moves along its own path.
+    """
+    tip = objects.sphere(0.008)
+    t = tissue.constant(part, 0.0075)
+    at = posed(part, t, tip, objects.press(part, tip, uv=(0.5, 0.5), depth=0.001))
+    deeper = posed(part, t, tip, objects.press(part, tip, uv=(0.5, 0.5), depth=0.0025))
+    np.testing.assert_allclose(moved(at, 0.0015).pose.gap, deeper.pose.gap, atol=1e-9)
+    np.testing.assert_allclose(moved(deeper, -0.0015).pose.gap, at.pose.gap, atol=1e-9)
+    assert moved(at, 0.0015).pose.depth == pytest.approx(deeper.pose.depth, abs=1e-12)
+    assert deeper.pose.depth > 0.001
+    o = at.pose.objects[0]
+    path = np.tile(at.pose.direction, (len(o.vertices), 1))  # closing straight along the press
+    closing = Scene.posed(
+        at.part, t, Pose(at.pose.gap, None, (Rigid(o.name, o.vertices, o.faces, path),))
+    )
+    np.testing.assert_allclose(
+        moved(closing, 0.0015).pose.objects[0].vertices, deeper.pose.objects[0].vertices, atol=1e-12
+    )
+    d = deeper.pose.objects[0]
+    near = signed_distance(trimesh.Trimesh(d.vertices, d.faces), part.vertices)  # its gap
+    np.testing.assert_allclose(moved(closing, 0.0015).pose.gap, near, atol=1e-12)
+    with pytest.raises(ValueError, match="must be finite"):
+        moved(at, float("nan"))
+    with pytest.raises(ValueError, match="only a scene given by objects at their pose"):
+        moved(Scene(part, t, np.zeros(part.n_vertices)), 0.001)

@@ -123,6 +123,35 @@ def test_the_fem_answers_a_pose_with_its_force_and_reaction_and_others_refuse_it
         predictor.create("naive", part).predict(scene)
 
 
+@pytest.mark.parametrize("start", [0.001, -0.003])
+def test_the_fem_presses_a_pose_to_a_force_with_its_own_force_control(start):
+    """Asked for the force a fingertip 2 mm into a tube carries, from a pose 1 mm in or 3 mm
+    off the skin, the FEM (handed the request by :func:`stmpl.contact.force_control.to_force`)
+    meets it within the tolerance at the fingertip's 2 mm pose: the answer's scene is the
+    fingertip there, its dent the 2 mm press's.
+    """
+    from stmpl.contact import objects
+    from stmpl.contact.force_control import to_force
+    from stmpl.contact.posing import posed
+
+    part = tube(radius=0.04, length=0.12, n_around=24, n_along=10)
+    th = tissue.constant(part, 0.0075)
+    res = {"subdivisions": 1, "layers": 2, "refine_radius": 0.03, "order": 1}
+    tip = objects.sphere(0.008)
+    fem = predictor.create("fem", res=res)
+    at = posed(part, th, tip, objects.press(part, tip, uv=(0.5, 0.5), depth=0.002))
+    two = fem.predict(at)
+    begin = posed(part, th, tip, objects.press(part, tip, uv=(0.5, 0.5), depth=start))
+    a = to_force(fem, begin, two.reaction, rtol=0.002)
+    assert a.reaction == pytest.approx(two.reaction, rel=0.002)
+    fc = a.info["force_control"]
+    assert fc["moved_mm"] == pytest.approx(2.0 - 1e3 * start, abs=0.02)
+    assert a.scene.pose.depth == pytest.approx(at.pose.depth, abs=2e-5)
+    assert a.info["depth"] == pytest.approx(two.info["depth"], abs=2e-5)
+    peak = np.linalg.norm(two.displacement, axis=1).max()
+    assert np.abs(a.displacement - two.displacement).max() <= 0.01 * peak
+
+
 def test_a_pose_on_a_subdivided_part_is_solved_on_the_part_it_came_from():
     """The FEM meshes the coarser part (refined once more near the ball) and answers on the
     finer one: a displacement and a contact force on each of its vertices.
