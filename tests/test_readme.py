@@ -9,6 +9,7 @@ import re
 import shlex
 
 import numpy as np
+import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 TEXT = (ROOT / "README.md").read_text()
@@ -66,6 +67,7 @@ def test_api_page_examples_run_and_hold(arm, tmp_path, monkeypatch):
     assert len(glb.vertices) == arm.n_vertices
     posing = spaces[2]  # a fingertip given by its pose, answered by the FEM with its force
     assert posing["scene"].given == "pose" and posing["answer"].reaction > 0.1
+    assert posing["pressed"].reaction == pytest.approx(0.5, rel=0.005)  # force control met it
     assert len(spaces) == 4 and spaces[3]["gnn"].part.n_vertices == arm.n_vertices
 
 
