@@ -317,12 +317,3 @@ def _impossible(scene: Scene, answer: dict, compression: float, bound: tissue.Bo
             "carries no force"
         )
     return why
-    reaction, total = answer["reaction"], float(np.sum(answer["force"]))
-    if reaction < 0:
-        return f"the object pulls on the skin ({reaction:.3g} N): no answer to trust"
-    if scene.pose.depth > 0 and (total <= 0 or reaction <= 0):
-        return (
-            f"the object reaches {1e3 * scene.pose.depth:.2f} mm into the skin yet the answer "
-            "carries no force: no answer to trust"
-        )
-    return ""
