@@ -18,6 +18,7 @@ faces, no area or non-finite vertices is refused.
 
 from __future__ import annotations
 
+import itertools
 import pathlib
 from dataclasses import dataclass, field
 
@@ -236,22 +237,36 @@ LEAF = 48
 """Triangles per cluster of :func:`winding_number`."""
 
 
-def clusters(tri: np.ndarray, leaf: int = LEAF) -> list[np.ndarray]:
+def clusters(tri: np.ndarray, leaf: int = LEAF) -> tuple[np.ndarray, np.ndarray]:
     """Triangles ``(M, 3, 3)`` split at the median of their centroids along the longest side
-    of each box until a part holds at most ``leaf``: a list of index arrays.
+    of each box until a part holds at most ``leaf``, every part of a level at once: ``(order
+    (M,), starts (K + 1,))``, the triangles part after part and where each part starts.
     """
     centroid = tri.mean(1)
-    todo, out = [np.arange(len(tri))], []
-    while todo:
-        idx = todo.pop()
-        if len(idx) <= leaf:
-            out.append(idx)
-            continue
-        c = centroid[idx]
-        axis = int(np.argmax(c.max(0) - c.min(0)))
-        order = idx[np.argsort(c[:, axis], kind="stable")]
-        todo += [order[: len(order) // 2], order[len(order) // 2 :]]
-    return out
+    order, starts = np.arange(len(tri)), np.array([0, len(tri)])
+    while True:
+        sizes = np.diff(starts)
+        split = sizes > leaf
+        if not split.any():
+            return order, starts
+        part = np.repeat(np.arange(len(sizes)), sizes)
+        c = centroid[order]
+        axis = np.argmax(
+            np.maximum.reduceat(c, starts[:-1]) - np.minimum.reduceat(c, starts[:-1]), 1
+        )
+        key = np.where(split[part], c[np.arange(len(c)), axis[part]], 0.0)
+        order = order[np.lexsort((key, part))]  # stable: ties keep their order
+        starts = np.sort(np.concatenate([starts, starts[:-1][split] + sizes[split] // 2]))
+
+
+def _spans(starts: np.ndarray, which: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For ranges ``starts[k] .. starts[k + 1]`` of each ``which`` ``(Q,)``: ``(owner, at)``,
+    the position in ``which`` and the index of every element of every range, range by range.
+    """
+    n = starts[which + 1] - starts[which]
+    owner = np.repeat(np.arange(len(which)), n)
+    at = np.repeat(starts[which] - np.cumsum(n) + n, n) + np.arange(int(n.sum()))
+    return owner, at
 
 
 def winding_number(
@@ -268,17 +283,20 @@ def winding_number(
     points = np.asarray(points, dtype=float).reshape(-1, 3)
     if not len(points) or not len(tri):
         return np.zeros(len(points))
-    groups = clusters(tri)
+    order, starts = clusters(tri)
+    tri = tri[order]  # cluster after cluster
     area = 0.5 * np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # (M, 3)
     size = np.linalg.norm(area, axis=1)
-    dipole = np.stack([area[g].sum(0) for g in groups])  # (K, 3)
-    centre = np.stack([(size[g] @ tri[g].mean(1)) / max(size[g].sum(), 1e-300) for g in groups])
-    radius = np.array(
-        [np.linalg.norm(tri[g].reshape(-1, 3) - c, axis=1).max() for g, c in zip(groups, centre)]
-    )
-    sizes = np.array([len(g) for g in groups])
+    first = starts[:-1]
+    dipole = np.add.reduceat(area, first)  # (K, 3)
+    weight = np.add.reduceat(size, first)
+    moment = np.add.reduceat(size[:, None] * tri.mean(1), first)
+    centre = moment / np.maximum(weight, 1e-300)[:, None]
+    cluster = np.repeat(np.arange(len(first)), np.diff(starts))
+    reach = np.linalg.norm(tri - centre[cluster][:, None], axis=2).max(1)
+    radius = np.maximum.reduceat(reach, first)
     out = np.empty(len(points))
-    step = max(1, chunk // len(groups))  # points at a time: (step, K) pairs in memory
+    step = max(1, chunk // len(first))  # points at a time: (step, K) pairs in memory
     for s in range(0, len(points), step):
         x = points[s : s + step]
         away = centre[None] - x[:, None]  # (p, K, 3)
@@ -288,8 +306,8 @@ def winding_number(
         angle = np.divide(flux, dist**3, out=np.zeros_like(flux), where=~near).sum(1)
         pk = np.argwhere(near)
         if len(pk):
-            rows = np.repeat(pk[:, 0], sizes[pk[:, 1]])
-            cols = np.concatenate([groups[k] for k in pk[:, 1]])
+            pair, cols = _spans(starts, pk[:, 1])
+            rows = pk[pair, 0]
             np.add.at(angle, rows, solid_angles(tri[cols], x[rows]))
         out[s : s + step] = angle / (4 * np.pi)
     return out
@@ -316,12 +334,14 @@ def distance_to_surface(mesh, points: np.ndarray, upto: float = np.inf) -> np.nd
     order = np.argsort(faces.ravel(), kind="stable")  # each vertex's faces, in a row
     start = np.searchsorted(faces.ravel()[order], np.arange(len(vertices) + 1))
     face_of = order // 3
-    rows, cols = [], []
-    for k, ball in zip(need, tree.query_ball_point(points[need], nearest[need] + longest)):
-        near = np.unique(np.concatenate([face_of[start[v] : start[v + 1]] for v in ball]))
-        rows.append(np.full(len(near), k))
-        cols.append(near)
-    rows, cols = np.concatenate(rows), np.concatenate(cols)
+    balls = tree.query_ball_point(points[need], nearest[need] + longest)
+    counts = np.fromiter(map(len, balls), np.int64, len(balls))
+    ball = np.fromiter(itertools.chain.from_iterable(balls), np.int64, int(counts.sum()))
+    owner = np.repeat(need, counts)  # the point of each (point, vertex) pair
+    pair, at = _spans(start, ball)  # each vertex's faces
+    key = np.sort(owner[pair] * len(faces) + face_of[at])
+    key = key[np.concatenate([[True], key[1:] != key[:-1]])]  # each (point, face) once
+    rows, cols = key // len(faces), key % len(faces)
     q, _ = closest_points(tri[cols], points[rows])
     d = np.linalg.norm(q - points[rows], axis=1)
     out[need] = np.inf
