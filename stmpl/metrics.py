@@ -160,18 +160,29 @@ REACTION = ("reaction_err", "reaction err %")
 model given a pose: :func:`stmpl.pipeline.evaluate.evaluate_dataset`), after the peak's."""
 
 
-ANSWERED_BY_SOME = frozenset({REACTION[0]})
-"""Columns only some predictors answer (a reaction: a model given a pose, the FEM on pressed
-objects): a table shows them where a row has them (:func:`shown`)."""
+ANSWERED_BY_SOME = frozenset({REACTION[0], "seam_mee", "seam_gap"})
+"""Columns only some rows answer (a reaction: a model given a pose, the FEM on pressed objects;
+the UV seam's measures: a part with a seam): a table shows them where a row has them
+(:func:`shown`)."""
 
 
 def shown(cols, rows) -> list:
     """The columns ``cols`` (tuples whose first item is the key) that a table of the summaries
     ``rows`` shows: every one, except that one of :data:`ANSWERED_BY_SOME` only where a row has
-    it.
+    a finite value of it.
     """
     rows = list(rows)
-    return [c for c in cols if c[0] not in ANSWERED_BY_SOME or any(c[0] in r for r in rows)]
+    return [c for c in cols if c[0] not in ANSWERED_BY_SOME or any(_has(r, c[0]) for r in rows)]
+
+
+def _has(row: dict, key: str) -> bool:
+    """Whether a summary ``row`` holds a finite value (or mean) of ``key``."""
+    v = row.get(key)
+    v = v[0] if isinstance(v, (list, tuple)) else v
+    try:
+        return v is not None and bool(np.isfinite(float(v)))
+    except (TypeError, ValueError):
+        return False
 
 
 def columns(results: dict[str, dict]) -> list:

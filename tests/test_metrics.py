@@ -47,6 +47,10 @@ def test_summary_and_tables():
     csv = metrics.table({"a": s}, "csv").splitlines()
     assert csv[0].startswith("predictor,samples,mae_x_mean") and csv[1].startswith("a,3,")
     assert "reaction" not in md  # no row answers a reaction
+    assert "seam" not in md  # nor a UV seam's measures (a part without a seam)
+    seamed = {**s, "seam_mee": (0.05, 0.01), "seam_gap": (np.nan, np.nan)}
+    md = metrics.table({"a": seamed})
+    assert "seam MEE" in md and "seam gap" not in md
     posed = {**s, "reaction_err": (-3.25, 1.5)}
     md = metrics.table({"pose model": posed, "a": s}).splitlines()
     head = [c.strip() for c in md[0].split("|")]
