@@ -159,8 +159,12 @@ REACTION = ("reaction_err", "reaction err %")
 """The column of the reaction's error against the FEM's, in a table where a row answers one (a
 model given a pose: :func:`stmpl.pipeline.evaluate.evaluate_dataset`), after the peak's."""
 
+DEPTH = ("depth_err", "depth err")
+"""The column of how much deeper (mm) a model pressing to a force put the object than the FEM
+did (:func:`stmpl.pipeline.evaluate.evaluate_to_force`), after the peak's."""
 
-ANSWERED_BY_SOME = frozenset({REACTION[0], "seam_mee", "seam_gap"})
+
+ANSWERED_BY_SOME = frozenset({REACTION[0], DEPTH[0], "seam_mee", "seam_gap"})
 """Columns only some rows answer (a reaction: a model given a pose, the FEM on pressed objects;
 the UV seam's measures: a part with a seam): a table shows them where a row has them
 (:func:`shown`)."""
@@ -186,9 +190,11 @@ def _has(row: dict, key: str) -> bool:
 
 
 def columns(results: dict[str, dict]) -> list:
-    """:data:`COLUMNS`, with :data:`REACTION` after the peak's error where a row has it."""
+    """:data:`COLUMNS`, with :data:`REACTION` and :data:`DEPTH` after the peak's error where a
+    row has them.
+    """
     at = [k for k, _ in COLUMNS].index("peak_err") + 1
-    return shown([*COLUMNS[:at], REACTION, *COLUMNS[at:]], results.values())
+    return shown([*COLUMNS[:at], REACTION, DEPTH, *COLUMNS[at:]], results.values())
 
 
 COUNTS = ("unsolved", "unsolved_flagged", "unsolved_silent", "inside_broken")

@@ -115,7 +115,7 @@ def evaluate_models(args) -> int:
         spec: predictor_from_spec(spec, args.device, fidelity=args.fidelity)
         for spec in args.predictors
     }
-    print(evaluate(predictors, ds, args.split, args.out, args.limit), end="")
+    print(evaluate(predictors, ds, args.split, args.out, args.limit, args.to_force), end="")
     if args.out:
         print(f"wrote {args.out} (.md, .csv)")
     return 0

@@ -117,6 +117,12 @@ def parser() -> argparse.ArgumentParser:
     )
     ev.add_argument("--split", default="test", choices=["train", "val", "test"])
     ev.add_argument("--limit", type=positive, help="first N samples only")
+    ev.add_argument(
+        "--to-force",
+        action="store_true",
+        help="models given an object's pose: each sample's object pressed from its first touch "
+        "until the model's reaction meets the sample's force (force control), then measured",
+    )
     device_option(ev)
     fidelity_option(ev)
     ev.add_argument("--out", help="write the table here (.md and .csv)")

@@ -10,8 +10,9 @@ trained on pressed objects takes where they are; this finds where they are.
 The search: from the scene's pose, steps of :data:`STEP` (doubling) forward until the
 reaction passes the force, or back until it falls below it; then regula falsi (Illinois)
 between the last two, until the reaction is within ``rtol`` of the force. A predictor whose
-reaction never reaches the force within :data:`REACH` of travel, or that jumps across it
-(a reaction that is not monotone in the depth), is refused by name (:class:`ForceNotMet`):
+reaction never reaches the force within :data:`REACH` of travel or before its answers turn
+impossible (past the tissue's bound), or that jumps across it (a reaction that is not monotone
+in the depth), is refused by name (:class:`ForceNotMet`):
 no answer at another force is returned as one at this force. The answer returned is the
 predictor's own answer to the scene at the depth found (its envelope's verdict, impossible
 flags and warnings as for any answer), with ``info["force_control"]``. A predictor with force
@@ -73,7 +74,14 @@ def to_force(predictor, scene: Scene, force: float, rtol: float = 0.005, strict=
             with warnings.catch_warnings():  # the answer returned is judged, not the tries
                 warnings.simplefilter("ignore", OutsideEnvelope)
                 warnings.simplefilter("ignore", ImpossibleAnswer)
-                seen[d] = float(predictor.predict(moved(scene, d), strict=False).reaction)
+                a = predictor.predict(moved(scene, d), strict=False)
+            seen[d] = float(a.reaction)
+            if seen[d] < force and not a.info.get("physical", True):
+                raise ForceNotMet(
+                    f"{predictor.name}: the reaction reaches only {seen[d]:.3g} N where the "
+                    f"answer is no longer possible ({'; '.join(a.info['impossible'])}): "
+                    f"{force:g} N is not met"
+                )
             if len(seen) > TRIES:
                 raise ForceNotMet(f"{predictor.name}: {force:g} N not met in {TRIES} answers")
         return seen[d]

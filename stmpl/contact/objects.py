@@ -34,6 +34,31 @@ def sphere(radius: float = 0.008, subdivisions: int = 3):
     return m.apply_translation([0, 0, radius])
 
 
+def disk(
+    radius: float = 0.01,
+    rounding: float = 0.001,
+    height: float = 0.01,
+    sections: int = 64,
+    arc: int = 8,
+):
+    """A flat-ended cylinder of ``radius`` and ``height`` (m) standing on its face at ``z = 0``,
+    the face's rim rounded to ``rounding`` (m; 0: sharp), as the presses of the datasets are
+    (:class:`fem.shapes.Punch`): a quarter circle of ``arc`` segments, ``sections`` round.
+    """
+    import trimesh  # deferred: object meshes and closest points only
+
+    r, h = _length("radius", radius), _length("height", height)
+    rho = float(rounding)
+    if not (np.isfinite(rho) and 0 <= rho < min(r, h)):
+        raise ValueError(f"rounding must be >= 0 and below the radius and height, got {rounding!r}")
+    t = np.linspace(0.0, np.pi / 2, arc + 1)
+    rim = np.stack([r - rho + rho * np.sin(t), rho - rho * np.cos(t)], 1)
+    profile = np.vstack([[0.0, 0.0], rim if rho > 0 else [[r, 0.0]], [r, h], [0.0, h]])
+    m = trimesh.creation.revolve(profile, sections=int(sections))
+    m.merge_vertices()
+    return m
+
+
 def rod(radius: float = 0.005, length: float = 0.1, sections: int = 32):
     """A cylinder of ``radius`` and ``length`` (m) lying along the local ``x`` axis on ``z = 0``:
     it presses with its side, a line contact (a tool's edge, a bar).

@@ -15,6 +15,7 @@ import numpy as np
 import trimesh
 
 from stmpl.contact import gap as along
+from stmpl.contact import objects
 from stmpl.contact.closing import closed, closing_grip
 from stmpl.contact.hand import Hand
 from stmpl.contact.pressing import check_pose, distance_to_surface, winding_number
@@ -133,3 +134,43 @@ def gripped(
     grip = closed(closing_grip(part, hand or Hand(side="R"), along, around, kind), depth)
     gap = _gap(part, trimesh.Trimesh(grip.vertices, grip.faces, process=False), None)
     return Scene.posed(part, thickness, Pose(gap, None, (grip,)), **meta)
+
+
+def first_touch(part: BodyPart, thickness, kind: str, params: dict, hand: Hand | None = None):
+    """The scene of a dataset's pressed object (``kind`` ``press_disk``, ``press_sphere`` or
+    ``press_grip``; ``params`` as its samples record them) where the FEM started pressing it:
+    a disk (:func:`~stmpl.contact.objects.disk`) or ball meshed and set at its recorded pose
+    moved back by its recorded ``depth`` along its ``direction``; a grip, anny's ``hand``
+    (default her right hand) at its first touch (closed 0 mm). What force control
+    (:mod:`stmpl.contact.force_control`) starts from to meet a sample's force.
+    """
+    if kind == "press_grip":
+        return gripped(
+            part,
+            thickness,
+            0.0,
+            hand,
+            float(params["along"]),
+            float(params["around"]),
+            params["grip"],
+        )
+    try:
+        centre, d = np.asarray(params["centre"], float), np.asarray(params["direction"], float)
+        radius, depth = float(params["radius"]), float(params["depth"])
+    except (KeyError, TypeError) as e:
+        raise ValueError(f"a {kind} sample does not record its object's pose ({e})") from e
+    if kind == "press_sphere":
+        mesh = objects.sphere(radius, subdivisions=4)  # the ball's lowest point at the origin
+    elif kind == "press_disk":
+        mesh = objects.disk(radius, float(params.get("rounding", 0.0)))  # its face at z = 0
+    else:
+        raise ValueError(f"unknown pressed object {kind!r}: press_disk, press_sphere, press_grip")
+    d = d / np.linalg.norm(d)
+    pose = np.eye(4)  # the local -z along the press, the front (the face, the ball's lowest
+    pose[:3, 2] = -d  # point) at its place at first touch
+    a = np.cross(-d, [1.0, 0.0, 0.0] if abs(d[0]) < 0.9 else [0.0, 1.0, 0.0])
+    pose[:3, 0] = a / np.linalg.norm(a)
+    pose[:3, 1] = np.cross(pose[:3, 2], pose[:3, 0])
+    front = centre + (radius * d if kind == "press_sphere" else 0.0)
+    pose[:3, 3] = front - depth * d
+    return posed(part, thickness, mesh, pose, name=kind.removeprefix("press_"))

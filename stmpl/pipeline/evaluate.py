@@ -1,16 +1,25 @@
 """Evaluate predictors on a dataset split (``stmpl evaluate``): the paper's measures and ours
-(:mod:`stmpl.metrics`), as a markdown table and a CSV file.
+(:mod:`stmpl.metrics`), as a markdown table and a CSV file. A model given an object's pose is
+measured at the sample's pose, or (``--to-force``, :func:`evaluate_to_force`) where the force is
+what is known: each sample's object set where the FEM started pressing it
+(:func:`stmpl.contact.posing.first_touch`) and pressed on by force control
+(:func:`stmpl.contact.force_control.to_force`) until the model's own reaction meets the
+sample's; its dent is then measured against the FEM's at that force, and how deep it put the
+object against the FEM's depth.
 """
 
 from __future__ import annotations
 
 import pathlib
+import time
 import warnings
 from collections import Counter
 
 import numpy as np
 
 from stmpl.contact import gap as along
+from stmpl.contact.force_control import ForceNotMet, to_force
+from stmpl.contact.posing import first_touch
 from stmpl.data.dataset import Dataset, Datasets, open_data
 from stmpl.data.format import at_levels
 from stmpl.envelope import breaks_promise
@@ -213,19 +222,93 @@ def on_unsolved(predictor, ds, split: str = "test", thickness_mm=None, batch: in
     return {**out, "unsolved_flagged": flagged, "unsolved_silent": silent}
 
 
+def evaluate_to_force(
+    predictor, ds, split: str = "test", thickness_mm=None, limit: int | None = None
+) -> dict:
+    """Summary (mean, std per measure; JSON-ready) of a pose model ``predictor`` on a dataset
+    of pressed objects, each sample's force met by force control from the object's first touch.
+    Beside the measures of :func:`stmpl.pipeline.evaluate.evaluate_dataset`: ``depth_err``,
+    how much deeper (mm) the model put the object than the FEM did for the same force (its
+    deepest skin vertex inside the object at rest), and ``answers``, how many answers each
+    search took. A force the model's answers never meet is counted in ``failed`` with the
+    first reason in ``failed_first``, never dropped; ``seconds_per_scene`` is the whole search's.
+    """
+    if given_to(predictor) != "pose":
+        raise ValueError(
+            f"{predictor.name} takes a force: --to-force measures models given an object's pose"
+        )
+    scenes, truth = scenes_of(ds, split, thickness_mm, limit, "pose")
+    if not scenes:
+        raise ValueError(f"split {split!r} of {ds.folder} has no samples")
+    a = ds.arrays(split)
+    keep = np.arange(len(a["total"]))
+    if thickness_mm is not None:
+        keep = keep[at_levels(a, thickness_mm)]
+    keep = keep[: len(scenes)]
+    rows, seconds, failed, inside_broken, enveloped = [], [], [], 0, False
+    for s, u, i in zip(scenes, truth, keep):
+        start = first_touch(s.part, s.thickness, a["kind"][i], a["params"][i])
+        t0 = time.perf_counter()
+        with warnings.catch_warnings():  # measured, not warned: see inside_envelope
+            warnings.simplefilter("ignore", OutsideEnvelope)
+            try:
+                d = to_force(predictor, start, s.meta["reaction"])
+            except (ForceNotMet, PredictionFailed) as e:
+                failed.append(str(e))
+                continue
+        seconds.append(time.perf_counter() - t0)
+        m = sample_metrics(u, d.displacement)
+        m["depth_err"] = 1e3 * (d.scene.pose.depth - s.pose.depth)
+        m["answers"] = d.info["force_control"]["answers"]
+        env = d.info.get("envelope")
+        enveloped |= env is not None
+        if env is not None and env["inside"] and np.isfinite(m["rel_mee"]):
+            inside_broken += breaks_promise(m["rel_mee"], m["peak_err"])
+        m["inside_envelope"] = np.nan if env is None else 100.0 * env["inside"]
+        rows.append(m)
+    if not rows:
+        raise PredictionFailed(
+            f"{predictor.name} met the force of none of the {len(scenes)} samples of "
+            f"{ds.folder} ({split}): {failed[0]}"
+        )
+    out = summarise(rows)
+    out["seconds_per_scene"] = (float(np.mean(seconds)), float(np.std(seconds)))
+    if failed:
+        out["failed"], out["failed_first"] = len(failed), failed[0]
+    out["inside_broken"] = inside_broken if enveloped else float("nan")
+    out.update(on_unsolved(predictor, ds, split, thickness_mm))  # counted: no pose to press
+    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in out.items()}
+
+
 def evaluate(
-    predictors: dict, data, split: str = "test", out=None, limit: int | None = None
+    predictors: dict,
+    data,
+    split: str = "test",
+    out=None,
+    limit: int | None = None,
+    to_force: bool = False,
 ) -> str:
     """Evaluate each predictor (``{label: predictor}``) on ``data``'s split (a dataset folder or
     a :class:`~stmpl.data.dataset.Dataset`); returns the markdown table and, with ``out`` (a path
-    without suffix or ending in .md), writes ``.md`` and ``.csv`` beside it.
+    without suffix or ending in .md), writes ``.md`` and ``.csv`` beside it. ``to_force``: pose
+    models given each sample's force instead of its pose
+    (:func:`evaluate_to_force`).
     """
     ds = data if isinstance(data, (Dataset, Datasets)) else open_data(data)
     results = {}
     for name, p in predictors.items():
-        s = evaluate_dataset(p, ds, split, limit=limit)
+        if to_force:
+            s = evaluate_to_force(p, ds, split, limit=limit)
+        else:
+            s = evaluate_dataset(p, ds, split, limit=limit)
         results[name] = {k: tuple(v) if isinstance(v, list) else v for k, v in s.items()}
     md = table(results) + "\nWhat the answers say about themselves:\n\n" + honesty(results)
+    for name, s in results.items():
+        if s.get("failed"):
+            md += (
+                f"\n{name}: {s['failed']} of {s['samples'] + s['failed']} samples not answered "
+                f"(first: {s['failed_first']})\n"
+            )
     if out is not None:
         out = pathlib.Path(out)
         base = out.with_suffix("") if out.suffix in (".md", ".csv") else out

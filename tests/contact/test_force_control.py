@@ -16,17 +16,18 @@ from stmpl.predictor import BasePredictor
 
 class Hertzian(BasePredictor):
     """Answers a reaction ``k depth^1.5`` (N, depth in m: how deep the object reaches into the
-    rest skin), at most ``most`` N; ``jump``: the reaction steps from 0 to 2 ``force`` there.
+    rest skin), at most ``most`` N; ``jump``: the reaction steps from 1 to 10 N there.
     """
 
     name, takes = "hertzian", ("pose",)
 
     def __init__(self, k=2e4, most=np.inf, jump=None):
         self.k, self.most, self.jump, self.asked = k, most, jump, 0
+        self.dent = False  # answer the skin pushed in as deep as the object reaches
 
     def reaction(self, depth):
         if self.jump is not None:
-            return 0.0 if depth < self.jump else 10.0
+            return 1.0 if depth < self.jump else 10.0
         return min(self.k * depth**1.5, self.most)
 
     def predict_batch(self, scenes):
@@ -36,7 +37,10 @@ class Hertzian(BasePredictor):
             n, r = s.part.n_vertices, self.reaction(s.pose.depth)
             force = np.zeros(n)
             force[np.argmin(s.pose.gap)] = r
-            out.append({"displacement": np.zeros((n, 3)), "force": force, "reaction": r})
+            u = np.zeros((n, 3))
+            if self.dent:
+                u = -np.maximum(-s.pose.gap, 0.0)[:, None] * s.part.normals
+            out.append({"displacement": u, "force": force, "reaction": r})
         return out
 
 
@@ -74,8 +78,18 @@ def test_a_force_the_answers_never_reach_is_refused_by_name(start):
     assert REACH == 0.03
 
 
+def test_a_force_met_only_past_the_tissue_s_bound_is_refused(start):
+    """A model that answers an impossible dent (here past the gel's bound) before its
+    reaction reaches the force is not searched deeper: refused, naming why.
+    """
+    p = Hertzian(k=2e3)
+    p.dent = True
+    with pytest.raises(ForceNotMet, match=r"no longer possible \(the skin moves inward"):
+        to_force(p, start, 5.0)
+
+
 def test_a_reaction_that_jumps_across_the_force_is_refused(start):
-    with pytest.raises(ForceNotMet, match="jumps from 0 to 10 N across 5 N"):
+    with pytest.raises(ForceNotMet, match="jumps from 1 to 10 N across 5 N"):
         to_force(Hertzian(jump=0.002), start, 5.0)
 
 

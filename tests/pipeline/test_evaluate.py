@@ -114,3 +114,55 @@ def _unsolved_scenes(ds):
     return [
         Scene(ds.part, t.astype(float), x.astype(float)) for t, x in zip(f["thickness"], f["force"])
     ]
+
+
+class _Hertzian:
+    """A stand-in pose model whose reaction rises as ``depth^1.5`` through ``(depth, reaction)``
+    (m, N): where the FEM's sample lies. Its dent is the rest skin (zero).
+    """
+
+    from stmpl.predictor import BasePredictor as _Base
+
+    class Model(_Base):
+        name, takes = "hertzian", ("pose",)
+
+        def __init__(self, depth, reaction, most=np.inf):
+            self.depth, self.reaction, self.most = depth, reaction, most
+
+        def predict_batch(self, scenes):
+            out = []
+            for s in scenes:
+                n = s.part.n_vertices
+                r = min(self.reaction * (s.pose.depth / self.depth) ** 1.5, self.most)
+                force = np.zeros(n)
+                force[np.argmin(s.pose.gap)] = r
+                out.append({"displacement": np.zeros((n, 3)), "force": force, "reaction": r})
+            return out
+
+
+def test_a_pose_model_given_the_force_is_measured_where_it_meets_it(tiny_presses, tmp_path):
+    """``--to-force``: each sample's object starts where the FEM started pressing it and is
+    pressed on until the model's reaction meets the sample's: a model whose reaction is the
+    FEM's at the FEM's depth puts it at that depth (depth error within the meshes' facets and
+    force control's tolerance); one whose reaction never reaches the force is counted with why,
+    never dropped; a model that takes a force is refused.
+    """
+    from stmpl import predictor
+    from stmpl.data.dataset import Dataset
+    from stmpl.pipeline.evaluate import evaluate, evaluate_to_force, scenes_of
+
+    ds = Dataset(tiny_presses)
+    (scene,), _ = scenes_of(ds, "test", given="pose")
+    model = _Hertzian.Model(scene.pose.depth, scene.meta["reaction"])
+    s = evaluate_to_force(model, ds, "test")
+    assert s["samples"] == 1 and abs(s["depth_err"][0]) < 0.03  # mm
+    assert 2 <= s["answers"][0] <= 20 and s["peak_err"][0] == pytest.approx(-100.0)  # no dent
+    weak = _Hertzian.Model(
+        scene.pose.depth, scene.meta["reaction"], most=0.5 * scene.meta["reaction"]
+    )
+    with pytest.raises(Exception, match="met the force of none of the 1 samples"):
+        evaluate_to_force(weak, ds, "test")
+    md = evaluate({"strong": model}, ds, "test", out=tmp_path / "t.md", to_force=True)
+    assert "depth err mm" in md and "reaction err" not in md
+    with pytest.raises(ValueError, match="takes a force: --to-force measures models given"):
+        evaluate_to_force(predictor.create("naive", ds.part), ds, "test")
