@@ -251,12 +251,12 @@ def honesty(results: dict[str, dict]) -> str:
     ]
     rows = []
     for name, s in results.items():
-        n, un = int(s["samples"]), s.get("unsolved")
+        n, un = int(s["samples"]) + int(s.get("failed", 0)), s.get("unsolved")  # FEM-solved
         why = ", ".join(f"{c} {r}" for r, c in sorted((s.get("unsolved_why") or {}).items()))
         inside = s.get("inside_envelope", (np.nan, np.nan))
         inside = inside[0] if isinstance(inside, (list, tuple)) else inside
         broken = s.get("inside_broken", np.nan)
-        said_in = int(round(n * inside / 100)) if np.isfinite(inside) else 0
+        said_in = int(round(s["samples"] * inside / 100)) if np.isfinite(inside) else 0
         rows.append(
             [
                 name,
