@@ -153,9 +153,14 @@ def _met(d) -> str:
     fc = d.info.get("force_control")
     if fc:
         n = fc["answers"]
+        how = (
+            "by its own force control"
+            if n is None
+            else f"found in {n} answer{'s' if n > 1 else ''}"
+        )
         line += (
-            f" (pressed {fc['moved_mm']:.2f} mm on from the pose, found in "
-            f"{n} answer{'s' if n > 1 else ''}, {duration(fc['seconds'])} in all)"
+            f" (pressed {fc['moved_mm']:.2f} mm on from the pose, {how}, "
+            f"{duration(fc['seconds'])} in all)"
         )
     return line
 

@@ -259,7 +259,7 @@ def evaluate_to_force(
         seconds.append(time.perf_counter() - t0)
         m = sample_metrics(u, d.displacement)
         m["depth_err"] = 1e3 * (d.scene.pose.depth - s.pose.depth)
-        m["answers"] = d.info["force_control"]["answers"]
+        m["answers"] = d.info["force_control"]["answers"] or np.nan  # the FEM's: its own
         env = d.info.get("envelope")
         enveloped |= env is not None
         if env is not None and env["inside"] and np.isfinite(m["rel_mee"]):

@@ -219,7 +219,7 @@ def contact_figure(
     x0, x1, y0, y1 = window
     panel = 4.4  # inches across a panel
     width = panel * len(rows) + 1.6
-    text = (title or _title(first.scene)) + (
+    text = (title or _title(first.scene, first.info.get("force_control"))) + (
         f"\n(displacements drawn {scale:g}x their size; colours true)"
         if scale > 1
         else "\n(displacements drawn true to scale)"
@@ -307,9 +307,18 @@ def duration(seconds: float) -> str:
     return f"{seconds * 1e3:.1f} ms" if seconds < 1 else f"{seconds:.1f} s"
 
 
-def _title(scene) -> str:
+def _title(scene, forced: dict | None = None) -> str:
+    """The picture's title: the part, its tissue and what presses it; ``forced``: the answer's
+    ``info["force_control"]`` (the object pressed on until it met a force).
+    """
     load = scene.load
-    if scene.pose is not None:
+    if scene.pose is not None and forced:
+        text = (
+            f"{', '.join(scene.pose.names()) or 'an object'} pressed on "
+            f"{forced['moved_mm']:.2f} mm from where it was put, until it meets "
+            f"{forced['force']:g} N"
+        )
+    elif scene.pose is not None:
         text = (
             f"{', '.join(scene.pose.names()) or 'an object'} at its pose, "
             f"{scene.pose.nearest()}: the force is answered"

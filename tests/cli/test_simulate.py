@@ -260,7 +260,9 @@ def test_a_fingertip_given_by_its_pose_and_a_force_is_pressed_until_it_meets_it(
     line = next(ln for ln in out.splitlines() if ln.startswith("fem"))
     assert float(line.split("reaction ")[1].split(" N")[0]) == pytest.approx(0.01, rel=0.006)
     moved = float(line.split("(pressed ")[1].split(" mm on from the pose")[0])
-    assert 0 < moved < 10
+    assert 0 < moved < 10 and "by its own force control" in line
+    took = line.split("mm  ")[1].split("  reaction")[0].strip()  # the whole force control's
+    assert took != "0.0 ms" and float(took.split()[0]) > 0
     _reaction_said_and_kept(out, tmp_path)
 
 

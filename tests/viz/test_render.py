@@ -90,3 +90,21 @@ def test_titles_name_the_body_s_phenotype(arm):
     plain = replace(arm, source={"body": "anny", "options": {"phenotype": {"weight": 0.5}}})
     assert body_words(plain) == " of anny (default body)"
     assert body_words(replace(arm, source={})) == ""
+
+
+def test_a_title_says_an_object_was_pressed_on_until_it_met_a_force():
+    """A posed scene's title says the force is answered; the same scene reached by force
+    control says how far the object was pressed on and to what force.
+    """
+    from stmpl import tissue
+    from stmpl.body import tube
+    from stmpl.contact import objects
+    from stmpl.contact.posing import posed
+    from stmpl.viz.render import _title
+
+    part = tube(n_around=16, n_along=11)
+    tip = objects.sphere(0.008)
+    scene = posed(part, tissue.constant(part, 0.0075), tip, objects.press(part, tip, uv=(0.5, 0.5)))
+    assert _title(scene).endswith("the force is answered")
+    forced = " ".join(_title(scene, {"moved_mm": 4.613, "force": 5.0}).split())
+    assert forced.endswith("object pressed on 4.61 mm from where it was put, until it meets 5 N")
