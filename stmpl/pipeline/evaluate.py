@@ -108,7 +108,6 @@ def evaluate_dataset(
     part = ds.part
     seam = part.seam_vertices
     rows, seconds, failed = [], [], []
-    inside_broken, enveloped = 0, False
     if not getattr(predictor, "batched", True):
         batch = 1  # the FEM: seconds a scene, and a solve may fail alone
     for i in range(0, len(scenes), batch):
@@ -139,34 +138,47 @@ def evaluate_dataset(
         else:
             corners = [d.displacement[part.uv_vertex] for d in out]
         for d, u, c in zip(out, truth[i : i + batch], corners):
-            env = d.info.get("envelope")
             m = sample_metrics(u, d.displacement, seam)
             if d.reaction is not None:  # a pose's answer: its reaction against the FEM's, %
                 true = d.scene.meta["reaction"]
                 m["reaction_err"] = 100.0 * (d.reaction - true) / true
-            enveloped |= env is not None
-            if env is not None and env["inside"] and np.isfinite(m["rel_mee"]):
-                inside_broken += breaks_promise(m["rel_mee"], m["peak_err"])
-            rows.append(
-                {
-                    **m,
-                    "seam_gap": seam_gap(part, c),
-                    "inside_envelope": np.nan if env is None else 100.0 * env["inside"],
-                }
-            )
+            m["seam_gap"] = seam_gap(part, c)
+            rows.append(_judged(m, d))
             seconds.append(d.info.get("seconds", np.nan))
     if not rows:
         raise PredictionFailed(
             f"{getattr(predictor, 'name', 'the predictor')} failed on all "
             f"{len(scenes)} scenes of {ds.folder} ({split}): {failed[0]}"
         )
+    return _summary(rows, seconds, failed, on_unsolved(predictor, ds, split, thickness_mm, batch))
+
+
+def _judged(m: dict, d) -> dict:
+    """A sample's measures ``m`` with what the answer ``d`` said of itself: ``inside_envelope``
+    (100 or 0; NaN without an envelope) and ``broken``, whether it said inside yet breaks the
+    per-scene promise (:func:`~stmpl.envelope.breaks_promise`; NaN without an envelope).
+    """
+    env = d.info.get("envelope")
+    if env is None:
+        return {**m, "inside_envelope": np.nan, "broken": np.nan}
+    broken = bool(env["inside"]) and bool(np.isfinite(m["rel_mee"]))
+    broken = broken and bool(breaks_promise(m["rel_mee"], m["peak_err"]))
+    return {**m, "inside_envelope": 100.0 * env["inside"], "broken": float(broken)}
+
+
+def _summary(rows: list[dict], seconds: list, failed: list[str], unsolved: dict) -> dict:
+    """The JSON-ready summary of judged samples ``rows`` (:func:`_judged`): each measure's mean
+    and spread, the seconds a scene, the answers that failed (counted, the first reason kept),
+    how many said inside broke the promise (NaN without an envelope) and ``unsolved``
+    (:func:`on_unsolved`).
+    """
+    broken = np.array([r.pop("broken") for r in rows], dtype=float)
     s = summarise(rows)
     s["seconds_per_scene"] = (float(np.nanmean(seconds)), float(np.nanstd(seconds)))
     if failed:
-        s["failed"] = len(failed)
-        s["failed_first"] = failed[0]
-    s["inside_broken"] = inside_broken if enveloped else float("nan")
-    s.update(on_unsolved(predictor, ds, split, thickness_mm, batch))
+        s["failed"], s["failed_first"] = len(failed), failed[0]
+    s["inside_broken"] = int(np.nansum(broken)) if np.isfinite(broken).any() else float("nan")
+    s.update(unsolved)
     return {k: (list(v) if isinstance(v, tuple) else v) for k, v in s.items()}
 
 
@@ -245,7 +257,7 @@ def evaluate_to_force(
     if thickness_mm is not None:
         keep = keep[at_levels(a, thickness_mm)]
     keep = keep[: len(scenes)]
-    rows, seconds, failed, inside_broken, enveloped = [], [], [], 0, False
+    rows, seconds, failed = [], [], []
     for s, u, i in zip(scenes, truth, keep):
         start = first_touch(s.part, s.thickness, a["kind"][i], a["params"][i])
         t0 = time.perf_counter()
@@ -260,24 +272,13 @@ def evaluate_to_force(
         m = sample_metrics(u, d.displacement)
         m["depth_err"] = 1e3 * (d.scene.pose.depth - s.pose.depth)
         m["answers"] = d.info["force_control"]["answers"] or np.nan  # the FEM's: its own
-        env = d.info.get("envelope")
-        enveloped |= env is not None
-        if env is not None and env["inside"] and np.isfinite(m["rel_mee"]):
-            inside_broken += breaks_promise(m["rel_mee"], m["peak_err"])
-        m["inside_envelope"] = np.nan if env is None else 100.0 * env["inside"]
-        rows.append(m)
+        rows.append(_judged(m, d))
     if not rows:
         raise PredictionFailed(
             f"{predictor.name} met the force of none of the {len(scenes)} samples of "
             f"{ds.folder} ({split}): {failed[0]}"
         )
-    out = summarise(rows)
-    out["seconds_per_scene"] = (float(np.mean(seconds)), float(np.std(seconds)))
-    if failed:
-        out["failed"], out["failed_first"] = len(failed), failed[0]
-    out["inside_broken"] = inside_broken if enveloped else float("nan")
-    out.update(on_unsolved(predictor, ds, split, thickness_mm))  # counted: no pose to press
-    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in out.items()}
+    return _summary(rows, seconds, failed, on_unsolved(predictor, ds, split, thickness_mm))
 
 
 def evaluate(
