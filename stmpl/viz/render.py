@@ -284,12 +284,14 @@ def _panel_title(name: str, d, truth) -> tuple[str, str]:
     if isinstance(d, str):
         why = textwrap.fill(d, 44, max_lines=3, placeholder=" ...")
         return f"{name}: failed, no answer\n{why}", red
-    ms = d.info.get("seconds")
+    ms, fc = d.info.get("seconds"), d.info.get("force_control")
     head = (
         f"{name}"
         + (" (in the mirror)" if d.info.get("mirrored") else "")
-        + (f", {duration(ms)}" if ms is not None else "")
+        + (f", {duration(ms)}" if ms is not None and not fc else "")
     )
+    if fc:  # the answer's time is the whole search's
+        head += f", {duration(fc['seconds'])} to meet {fc['force']:g} N"
     lines = [head, f"deepest {d.magnitude.max() * 1e3:.2f} mm"]
     if d.reaction is not None:  # a pose's answer: the force it meets
         lines[-1] += f", reaction {d.reaction:.3g} N"
