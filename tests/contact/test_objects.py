@@ -56,3 +56,24 @@ def test_a_strap_squeezes_a_ring_of_the_limb():
         objects.strap(sheet())
     with pytest.raises(ValueError, match="under half the thickness"):
         objects.strap(t, squeeze=0.006, thickness=0.01)
+
+
+def test_a_disk_presses_as_the_rounded_punch_of_the_closed_forms():
+    """The disk mesh stands on its face at z = 0, closed and facing out, and seen along its
+    press it is the rounded punch of :func:`stmpl.contact.gap.disk` within its facets.
+    """
+    from stmpl.contact import gap
+
+    m = objects.disk(0.01, rounding=0.001)
+    assert m.is_watertight and m.is_winding_consistent and m.volume > 0
+    assert m.bounds[0][2] == pytest.approx(0.0) and m.bounds[1][2] == pytest.approx(0.01)
+    rng = np.random.default_rng(0)
+    x = np.column_stack([rng.uniform(-0.012, 0.012, (400, 2)), rng.uniform(-0.01, -0.001, 400)])
+    down = np.array([0.0, 0.0, -1.0])  # it presses down: the points below lie ahead of it
+    exact = gap.disk(x, [0.0, 0.0, 0.0], 0.01, down, rounding=0.001)
+    meshed = gap.mesh(m, x, down)
+    hit = exact < 0.02
+    np.testing.assert_allclose(meshed[hit], exact[hit], atol=1e-4)  # 64 sections, 8 on the arc
+    assert (meshed[~hit] >= 0.02 - 1e-12).all()
+    with pytest.raises(ValueError, match="rounding must be >= 0 and below"):
+        objects.disk(0.01, rounding=0.02)

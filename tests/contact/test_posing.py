@@ -95,3 +95,28 @@ def test_a_moved_pose_is_the_pose_pressed_that_much_deeper(part):
         moved(at, float("nan"))
     with pytest.raises(ValueError, match="only a scene given by objects at their pose"):
         moved(Scene(part, t, np.zeros(part.n_vertices)), 0.001)
+
+
+def test_a_dataset_s_object_at_first_touch_moved_by_its_depth_is_its_sample_s_pose(tiny_presses):
+    """A pressed disk's and ball's recorded pose moved back by its depth and meshed
+    (:func:`first_touch`), then pressed that depth again, gives the gap field the samples
+    record (the closed forms along the press) within the meshes' facets.
+    """
+    from stmpl.contact.posing import first_touch
+    from stmpl.data.dataset import Dataset
+    from stmpl.pipeline.evaluate import scenes_of
+
+    ds = Dataset(tiny_presses)
+    kinds = set()
+    for split in ("train", "val", "test"):
+        a = ds.arrays(split)
+        scenes, _ = scenes_of(ds, split, given="pose")
+        for s, kind, params in zip(scenes, a["kind"], a["params"]):
+            start = first_touch(s.part, s.thickness, kind, params)
+            again = moved(start, float(params["depth"]))
+            near = s.pose.gap < 0.005
+            np.testing.assert_allclose(again.pose.gap[near], s.pose.gap[near], atol=1e-4)
+            kinds.add(kind)
+    assert kinds == {"press_disk", "press_sphere"}
+    with pytest.raises(ValueError, match="does not record its object's pose"):
+        first_touch(s.part, s.thickness, "press_sphere", {"radius": 0.008})
