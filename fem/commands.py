@@ -8,6 +8,7 @@ from __future__ import annotations
 from fem.generate import generate
 from fem.pictures import deformation_figure
 from fem.predictor import FEMPredictor
+from stmpl.cli.arguments import TISSUE
 from stmpl.cli.options import phenotype_of, scene_of
 
 
@@ -64,13 +65,13 @@ def solve_command(args) -> int:
     """
     scene = scene_of(args)
     fem = FEMPredictor(
-        res=args.res, levels=args.levels, tissue=args.tissue, phenotype=phenotype_of(args)
+        res=args.res, levels=args.levels, tissue=args.tissue or TISSUE, phenotype=phenotype_of(args)
     )
     d = fem.predict(scene)
     shell = fem.last_shell
     print(
         f"shell: {d.info['mesh']['nodes']} nodes, {d.info['mesh']['tets']} tets ({args.res}, "
-        f"{args.tissue}); {shell.mesh.quality()}"
+        f"{args.tissue or TISSUE}); {shell.mesh.quality()}"
     )
     for s in d.info["levels"]:
         print(

@@ -10,6 +10,7 @@ import time
 import warnings
 
 from stmpl import predictor
+from stmpl.cli.arguments import TISSUE
 from stmpl.cli.options import phenotype_of
 from stmpl.contact.force_control import to_force
 from stmpl.metrics import sample_metrics
@@ -23,20 +24,41 @@ WIDTH = 20
 
 
 def predictors(args, specs: list[str]) -> list:
-    """The predictors ``specs`` name, at the options' device, fidelity and FEM set-up."""
-    return [
-        predictor_from_spec(
+    """The predictors ``specs`` name, at the options' device, fidelity and FEM set-up. The
+    tissue (``args.tissue``, set here when not given) is the one asked, else the first learned
+    model's (the FEM alone: the paper's gel); a learned model of another tissue is refused by
+    name: it would answer its own tissue's dent for the tissue asked.
+    """
+
+    def made(spec, tissue="paper"):
+        return predictor_from_spec(
             spec,
             args.device,
             res=args.res,
             levels=args.levels,
             fidelity=args.fidelity,
-            tissue=args.tissue,
+            tissue=tissue,
             phenotype=phenotype_of(args),
             friction=args.friction,
         )
-        for spec in specs
-    ]
+
+    fem = [spec == "fem" or spec.startswith("fem:") for spec in specs]
+    learned = {spec: made(spec) for spec, f in zip(specs, fem) if not f}
+    tissue = args.tissue or next((p.tissue for p in learned.values()), TISSUE)
+    for spec, p in learned.items():
+        if p.tissue != tissue:
+            raise ValueError(
+                f"{label(spec)} learned {_tissue(p.tissue)}, and --tissue asks for "
+                f"{_tissue(tissue)}: it would answer the dent of its own; choose a model of "
+                f"that tissue, or --model fem --tissue {tissue}"
+            )
+    args.tissue = tissue
+    return [made(spec, tissue) if f else learned[spec] for spec, f in zip(specs, fem)]
+
+
+def _tissue(name: str) -> str:
+    """A tissue in words: the paper's gel or a preset (or a file of layers) by name."""
+    return "the paper's 1 kPa gel" if name == TISSUE else f"the {name} tissue"
 
 
 def skin_of(preds: list, asked: int | None, default: int) -> int:

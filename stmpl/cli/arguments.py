@@ -217,10 +217,10 @@ def fem_options(parser) -> None:
     )
     parser.add_argument(
         "--tissue",
-        default=TISSUE,
-        help="the FEM's tissue: paper (the paper's 1 kPa gel) or a layered preset of skin, fat "
-        f"and muscle (forearm, upper_arm, abdomen), or a YAML file of layers (docs/tissue.md); "
-        f"default {TISSUE}",
+        help="the tissue: paper (the paper's 1 kPa gel) or a layered preset of skin, fat and "
+        "muscle (forearm, upper_arm, abdomen), or a YAML file of layers (docs/tissue.md); "
+        f"default: the first learned model's, or {TISSUE} for the FEM alone (a learned model "
+        "of another tissue is refused)",
     )
     parser.add_argument(
         "--friction",

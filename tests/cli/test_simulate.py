@@ -70,6 +70,10 @@ def test_letters_against_the_fem(tmp_path, capsys, arm):
         (["--part", "belly", "--grip", "pinch"], "the belly has no limb to grasp"),
         (["--given", "pose", "--part", "belly"], "the open hand has no pose to press to"),
         (["--sphere", "8", "--given", "pose"], "gnn answers a force given on the skin"),
+        (
+            ["--tissue", "forearm"],
+            "learned the paper's 1 kPa gel, and --tissue asks for the forearm",
+        ),
     ],
 )
 def test_bad_requests_end_in_one_line(tmp_path, capsys, arm, argv, message):
