@@ -68,13 +68,15 @@ def to_force(predictor, scene: Scene, force: float, rtol: float = 0.005, strict=
         return own(scene, force, rtol, strict)
     t0 = time.perf_counter()
     seen: dict[float, float] = {}
+    at: dict[float, Scene] = {}  # the scenes tried (the answer's is asked again, judged)
 
     def reaction(d: float) -> float:
         if d not in seen:
+            at[d] = moved(scene, d)
             with warnings.catch_warnings():  # the answer returned is judged, not the tries
                 warnings.simplefilter("ignore", OutsideEnvelope)
                 warnings.simplefilter("ignore", ImpossibleAnswer)
-                a = predictor.predict(moved(scene, d), strict=False)
+                a = predictor.predict(at[d], strict=False)
             seen[d] = float(a.reaction)
             if seen[d] < force and not a.info.get("physical", True):
                 raise ForceNotMet(
@@ -88,7 +90,7 @@ def to_force(predictor, scene: Scene, force: float, rtol: float = 0.005, strict=
 
     lo, hi = _bracket(predictor.name, reaction, force)
     d = _between(predictor.name, reaction, force, rtol, lo, hi)
-    answer = predictor.predict(moved(scene, d), strict=strict)
+    answer = predictor.predict(at[d], strict=strict)
     answer.info["force_control"] = {
         "force": float(force),
         "reaction": float(answer.reaction),
@@ -110,8 +112,8 @@ def _bracket(name: str, reaction, force: float) -> tuple[float, float]:
             if way > 0:
                 raise ForceNotMet(
                     f"{name}: the reaction reaches only {ra:.3g} N with the objects moved "
-                    f"{1e3 * a:.3g} mm from their pose: {force:g} N is not met within "
-                    f"{1e3 * REACH:g} mm"
+                    f"{1e3 * a:.3g} mm on from their pose: {force:g} N is not met within "
+                    f"{1e3 * REACH:g} mm of travel"
                 )
             raise ForceNotMet(
                 f"{name}: the reaction is still {ra:.3g} N with the objects moved "

@@ -73,7 +73,9 @@ def test_a_pose_already_past_the_force_is_moved_back(start):
 
 
 def test_a_force_the_answers_never_reach_is_refused_by_name(start):
-    with pytest.raises(ForceNotMet, match=r"reaches only 2 N .* 5 N is not met within 30 mm"):
+    with pytest.raises(
+        ForceNotMet, match=r"reaches only 2 N .* 5 N is not met within 30 mm of travel"
+    ):
         to_force(Hertzian(most=2.0), start, 5.0)
     assert REACH == 0.03
 
