@@ -228,7 +228,10 @@ class FEMPredictor(BasePredictor):
             raise FEMFailed(f"the FEM could not press the objects to {force:g} N: {a.reason}")
         target = moved(start, a.depth - depth)
         self._ready[id(target)] = (a, solver, a.depth)
-        answer = self.predict(target, strict=strict)
+        try:
+            answer = self.predict(target, strict=strict)
+        finally:  # never left for another scene that might take its id
+            self._ready.pop(id(target), None)
         seconds = time.perf_counter() - t0
         answer.info["seconds"] = seconds  # the answer's time: the whole force control's
         answer.info["force_control"] = {
