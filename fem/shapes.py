@@ -12,6 +12,7 @@ the rigid shapes move along one direction. Lengths in m.
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -368,9 +369,9 @@ class Surface:
         unsure = np.flatnonzero(dk[:, -1] < dist + reach) if k < len(tri) else []
         if len(unsure):
             lists = tree.query_ball_point(x[unsure], dist[unsure] + reach + 1e-12)
-            counts = np.fromiter((len(c) for c in lists), int, len(lists))
+            counts = np.fromiter(map(len, lists), int, len(lists))
             point = np.repeat(np.arange(len(unsure)), counts)
-            cand = np.fromiter((t for c in lists for t in c), int, int(counts.sum()))
+            cand = np.fromiter(itertools.chain.from_iterable(lists), int, int(counts.sum()))
             cc, cb = closest_points(tri[cand], x[unsure][point])
             cd = np.linalg.norm(x[unsure][point] - cc, axis=1)
             order = np.lexsort((cd, point))
