@@ -40,16 +40,19 @@ def _drain(queue, tell) -> None:
         tell(n)
 
 
-def run(p: Plan, todo: list[int], par: dict, threads: int, tell=None):
+def run(p: Plan, todo: list[int], par: dict, threads: int, tell=None, keep=None):
     """Yield solved shards as they finish, from the chosen backend. ``tell(n)``: called in this
     process as planned samples end inside the shards (``serial`` and ``processes``; ``dask``
-    reports none: its shards' samples are counted as each shard arrives).
+    reports none: its shards' samples are counted as each shard arrives). ``keep(k)``: the file
+    in which shard ``k``'s progress is kept as it goes (``serial`` and ``processes``, whose
+    workers share this disk; a stopped shard takes it up again), or ``None``.
     """
+    kept = keep if keep is not None else (lambda k: None)
     if not todo:
         return
     if par["backend"] == "serial" or (par["backend"] == "processes" and par["workers"] == 1):
         for k in todo:
-            yield solve_shard(payload(p, k, None, tell))
+            yield solve_shard(payload(p, k, None, tell, kept(k)))
         return
     if par["backend"] == "processes":
         ctx = mp.get_context("spawn")
@@ -58,7 +61,7 @@ def run(p: Plan, todo: list[int], par: dict, threads: int, tell=None):
         )
         manager = ctx.Manager() if tell is not None else None  # carries the workers' ticks
         queue = manager.Queue() if manager is not None else None
-        futs = [ex.submit(solve_shard, payload(p, k, threads, queue)) for k in todo]
+        futs = [ex.submit(solve_shard, payload(p, k, threads, queue, kept(k))) for k in todo]
         try:
             pending = set(futs)
             while pending:

@@ -91,14 +91,21 @@ def press_to_force(
 
 
 def press_to_forces(
-    solver, shape, direction, forces, on_answer=None, friction: float = 0.0, coupled: bool = True
+    solver,
+    shape,
+    direction,
+    forces,
+    on_answer=None,
+    friction: float = 0.0,
+    coupled: bool = True,
+    start: Pressed | None = None,
 ) -> list[Pressed]:
     """:func:`press_to_force` to each of ``forces`` (N, rising) in turn, each from the last
-    answer; after a failure the rest are failed as skipped. ``on_answer(force, answer)``: called
-    as each ends (a progress report); ``friction`` and ``coupled`` as for
-    :func:`press_to_force`.
+    answer (the first from ``start``: an earlier answer of the same press, or rest); after a
+    failure the rest are failed as skipped. ``on_answer(force, answer)``: called as each ends (a
+    progress report); ``friction`` and ``coupled`` as for :func:`press_to_force`.
     """
-    out, last, failed = [], None, None
+    out, last, failed = [], start, None
     for f in forces:
         if failed is None:
             a = press_to_force(

@@ -39,6 +39,7 @@ from stmpl.data.format import (
     SPLITS,
     content_hash,
     part_hash,
+    progress_path,
     read_shard_meta,
     shard_path,
     write_shard,
@@ -290,7 +291,7 @@ def _prepare(out: pathlib.Path, cfg: dict, p: Plan, chash: str) -> None:
             },
         )
         atomic_write_text(saved, yaml.safe_dump(cfg, sort_keys=False))
-    for stale in out.glob("shard-*.h5.*.tmp"):
+    for stale in [*out.glob("shard-*.h5.*.tmp"), *out.glob("shard-*.progress.*.tmp")]:
         stale.unlink(missing_ok=True)
 
 
@@ -320,7 +321,7 @@ def _solve(
     tell = bar.update if bar is not None and par["backend"] != "dask" else None
     done = 0
     try:
-        for result in run(p, todo, par, threads, tell):
+        for result in run(p, todo, par, threads, tell, lambda k: progress_path(out, k)):
             write_shard(
                 out,
                 result["shard"],
@@ -333,6 +334,7 @@ def _solve(
                 },
                 result.get("failed"),
             )
+            progress_path(out, result["shard"]).unlink(missing_ok=True)
             done += 1
             totals["samples"] += len(result["records"]["task"])
             totals["failed"] += len(result["failures"])

@@ -6,8 +6,12 @@ disk.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
+import pathlib
+import pickle
+import sys
 import time
 from dataclasses import dataclass, field
 
@@ -26,6 +30,7 @@ from fem.solver import SolverOptions
 from stmpl.contact.hand import SkinDistance
 from stmpl.contact.posing import signed_distance
 from stmpl.data.format import DOUBLES, FLOATS, INTS, STRINGS
+from stmpl.files import atomic_path
 from stmpl.part import BodyPart
 
 
@@ -43,6 +48,17 @@ class _Shard:
     failed: dict = field(default_factory=lambda: {"thickness": [], "force": []})
     tell: object = None
     """Called with 1 as each planned sample ends, solved or failed (a progress bar's tick)."""
+    keep: pathlib.Path | None = None
+    """Where the shard's progress is kept as its samples end (:func:`_keep`), or ``None``."""
+    key: str = ""
+    """What the kept progress must have been made for (:func:`_key`)."""
+    done: list = field(default_factory=list)
+    """The tasks ended (their samples in ``rec``)."""
+    current: dict | None = None
+    """The press task under way: ``task``, ``forces`` ended, its ``last`` answer (a warm start,
+    ``None`` from rest) and the force that ``failed`` (or ``None``)."""
+    resumed: dict = field(default_factory=dict)
+    """Kept progress of a task under way when the shard last stopped, by task."""
 
     def __post_init__(self) -> None:
         self.tissue = self.cfg.get("tissue", "paper")
@@ -53,8 +69,7 @@ class _Shard:
     def fail(self, task, thickness, force: np.ndarray, total: float, reason: str) -> None:
         """One planned sample not solved: ``force`` ``(N,)`` (N) its input."""
         _failure(self.failures, self.failed, task.where, thickness, force, total, reason)
-        if self.tell is not None:
-            self.tell(1)
+        self._ended()
 
     def add(self, task, thickness, force, displacement, total, params, diagnostics) -> None:
         """One sample: per-vertex ``thickness`` (m), ``force`` (N), ``displacement`` (m) and
@@ -76,8 +91,59 @@ class _Shard:
             ("iterations", "residual", "solve_time", "min_det_F", "max_compression"), diagnostics
         ):
             r[k].append(v)
+        self._ended()
+
+    def _ended(self) -> None:
+        """A planned sample ended: kept (within a press task: its forces take minutes each) and
+        ticked.
+        """
+        if self.current is not None:
+            self.save()
         if self.tell is not None:
             self.tell(1)
+
+    def save(self) -> None:
+        """Keep what the shard has answered so far, and the task under way, in :attr:`keep`
+        (written whole or not at all).
+        """
+        if self.keep is None:
+            return
+        kept = {
+            "key": self.key,
+            "rec": self.rec,
+            "failures": self.failures,
+            "failed": self.failed,
+            "done": self.done,
+            "current": self.current,
+        }
+        with atomic_path(self.keep) as tmp:
+            tmp.write_bytes(pickle.dumps(kept, protocol=pickle.HIGHEST_PROTOCOL))
+
+    def resume(self) -> int:
+        """Take up the progress kept in :attr:`keep` if it was made for this shard (else say
+        why not, on one line, and start over); returns how many planned samples it had ended.
+        """
+        if self.keep is None or not self.keep.is_file():
+            return 0
+        try:
+            kept = pickle.loads(self.keep.read_bytes())
+            if kept["key"] != self.key:
+                raise ValueError("it was kept for another config or other tasks")
+            rec, failures, failed = kept["rec"], kept["failures"], kept["failed"]
+            done, current = list(kept["done"]), kept["current"]
+        except Exception as e:  # a torn or foreign file: the shard is solved from the start
+            why = str(e) or type(e).__name__
+            print(
+                f"{self.keep.name} not taken up ({why}): solving its shard from the start",
+                file=sys.stderr,
+            )
+            return 0
+        self.rec.update(rec)
+        self.failures[:], self.done[:] = failures, done
+        self.failed.update(failed)
+        if current is not None:
+            self.resumed[current["task"]] = current
+        return len(rec["task"]) + len(failures)
 
 
 @dataclass(frozen=True)
@@ -117,10 +183,27 @@ def solve_shard(payload: dict) -> dict:
     tell = payload.get("tell")
     if tell is not None and not callable(tell):  # a queue from another process
         tell = tell.put
-    shard = _Shard(part, cfg, np.asarray(cfg["forces"], dtype=float), rec, tell=tell)
+    keep = payload.get("keep")
+    shard = _Shard(
+        part,
+        cfg,
+        np.asarray(cfg["forces"], dtype=float),
+        rec,
+        tell=tell,
+        keep=None if keep is None else pathlib.Path(keep),
+        key=_key(payload),
+    )
+    taken_up = shard.resume()
+    if taken_up and tell is not None:
+        tell(taken_up)
     for task, (pi, ti), spec, split in payload["tasks"]:
+        if task in shard.done:
+            continue
         t = _Task(task, pi, ti, split, spec, cfg["thickness_mm"][ti])
         (_press if spec["kind"] in PRESSES else _shared)(shard, t)
+        shard.current = None
+        shard.done.append(task)
+        shard.save()
     return {
         "shard": payload["shard"],
         "records": rec,
@@ -194,6 +277,16 @@ def _press(shard: _Shard, t: _Task) -> None:
     cfg, part = shard.cfg, shard.part
     load = make_load(part, t.spec)
     thickness = np.full(part.n_vertices, t.thickness_mm * 1e-3)
+    kept = shard.resumed.pop(t.task, {"forces": 0, "last": None, "failed": None})
+    forces = shard.forces[kept["forces"] :]
+    shard.current = {"task": t.task, **kept}
+    if kept["failed"] is not None:  # the rest follow a failure: skipped, as they would have been
+        for f in forces:
+            shard.current = {**shard.current, "forces": shard.current["forces"] + 1}
+            shard.fail(t, thickness, load.force * f, f, f"skipped: {kept['failed']:g} N failed")
+        return
+    if len(forces) == 0:
+        return
     try:
         shape, direction = placed(part, t.spec["kind"], t.spec["params"])
         near = _pressed_at(part, shape, t.spec)
@@ -208,11 +301,19 @@ def _press(shard: _Shard, t: _Task) -> None:
             shard.mat,
         )
     except ValueError as e:  # a shell that cannot be meshed, an object that cannot be placed
-        for f in shard.forces:
+        shard.current = None  # nothing solved: a stopped task starts over
+        for f in forces:
             shard.fail(t, thickness, load.force * f, f, f"set-up: {e}")
         return
 
-    def record(f: float, a) -> None:  # each force as it ends: the progress ticks with it
+    def record(f: float, a) -> None:  # each force as it ends: kept, and the progress ticks
+        now = shard.current
+        now = {**now, "forces": now["forces"] + 1}
+        if a.ok:
+            now["last"] = a
+        elif now["failed"] is None:
+            now["failed"] = f
+        shard.current = now
         if not a.ok:
             shard.fail(t, thickness, load.force * f, f, a.reason)
             return
@@ -231,7 +332,9 @@ def _press(shard: _Shard, t: _Task) -> None:
             t, thickness, a.pressure * part.vertex_areas, a.displacement, f, params, diagnostics
         )
 
-    press_to_forces(solver, shape, direction, shard.forces, record, friction=cfg["friction"])
+    press_to_forces(
+        solver, shape, direction, forces, record, friction=cfg["friction"], start=kept["last"]
+    )
 
 
 def _pressed_at(part, shape, spec: dict) -> np.ndarray:
@@ -298,9 +401,17 @@ def part_of(payload: dict) -> BodyPart:
     )
 
 
-def payload(p: Plan, k: int, threads: int | None, tell=None) -> dict:
+def _key(payload: dict) -> str:
+    """What a shard's kept progress is made for: its config and tasks (a digest)."""
+    what = json.dumps([payload["cfg"], payload["shard"], payload["tasks"]], default=str)
+    return hashlib.sha256(what.encode()).hexdigest()[:16]
+
+
+def payload(p: Plan, k: int, threads: int | None, tell=None, keep=None) -> dict:
     """What a worker needs to solve shard ``k`` of plan ``p`` (plain, picklable data);
-    ``tell``: a callable, or a queue whose ``put`` is called, with 1 as each planned sample ends.
+    ``tell``: a callable, or a queue whose ``put`` is called, with 1 as each planned sample ends;
+    ``keep``: a file (on a disk the worker shares) in which it keeps the shard's progress as its
+    samples end, and from which it takes it up again after a stop (``None``: not kept).
     """
     tasks = []
     for t in p.shard_tasks(k):
@@ -316,4 +427,5 @@ def payload(p: Plan, k: int, threads: int | None, tell=None) -> dict:
         "tasks": tasks,
         "threads": threads,
         "tell": tell,
+        "keep": None if keep is None else str(keep),
     }

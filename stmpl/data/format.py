@@ -68,6 +68,11 @@ def shard_path(folder, k: int) -> pathlib.Path:
     return pathlib.Path(folder) / f"shard-{k:05d}.h5"
 
 
+def progress_path(folder, k: int) -> pathlib.Path:
+    """Where shard ``k``'s progress is kept while it is solved (gone once the shard is written)."""
+    return pathlib.Path(folder) / f"shard-{k:05d}.progress.pkl"
+
+
 def _hash_arrays(h, arrays: dict) -> None:
     for k in CONTENT + tuple(k for k in OPTIONAL if k in arrays):
         v = arrays[k]

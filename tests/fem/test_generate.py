@@ -189,7 +189,7 @@ def test_a_killed_run_resumes_without_loss_or_duplicates(tmp_path):
     assert not (out / "card.json").exists()
     (out / "shard-00009.h5.x.tmp").write_bytes(b"half a file")  # a torn write
     generate(path, out, progress=False)
-    assert not list(out.glob("*.tmp"))
+    assert not list(out.glob("*.tmp")) and not list(out.glob("*.progress.pkl"))
     resumed = json.loads((out / "card.json").read_text())
     whole = generate(cfg, tmp_path / "whole", progress=False)
     a, b = _samples(out), _samples(tmp_path / "whole")
@@ -507,3 +507,60 @@ def test_a_worker_knows_the_part_a_subdivided_part_came_from():
     np.testing.assert_array_equal(part.coarser.faces, p.part.coarser.faces)
     assert part.coarser.source == p.part.coarser.source
     assert part_of(payload(plan(read_config(_cfg())), 0, None)).coarser is None
+
+
+class _Stop(Exception):
+    pass
+
+
+def test_a_press_shard_stopped_between_forces_takes_up_its_kept_progress(tmp_path):
+    """A press task's forces take minutes each: a shard stopped after its first force keeps it,
+    and solved again it answers only the rest, warm from the kept answer, the same samples as a
+    shard never stopped (to 1 nm), its resumed sample ticked once more.
+    """
+    from fem.worker import payload, solve_shard
+    from tests.conftest import TINY_PRESSES
+
+    cfg = read_config(
+        {
+            **TINY_PRESSES,
+            "forces": [0.1, 0.2],
+            "placements": {"press_sphere": {"centres": 1, "radii": [0.008]}},
+        }
+    )
+    p = plan(cfg)
+    keep = tmp_path / "shard-00000.progress.pkl"
+
+    def stop(n):
+        raise _Stop
+
+    with pytest.raises(_Stop):
+        solve_shard(payload(p, 0, None, stop, keep))
+    assert keep.is_file()
+    ticks = []
+    resumed = solve_shard(payload(p, 0, None, ticks.append, keep))
+    whole = solve_shard(payload(p, 0, None))
+    assert ticks == [1, 1] and resumed["failures"] == whole["failures"] == []
+    a, b = resumed["records"], whole["records"]
+    np.testing.assert_array_equal(a["total"], b["total"])
+    np.testing.assert_allclose(
+        np.stack(a["displacement"]), np.stack(b["displacement"]), rtol=0, atol=1e-9
+    )
+    assert [json.loads(q)["depth"] for q in a["params"]] == pytest.approx(
+        [json.loads(q)["depth"] for q in b["params"]], abs=1e-9
+    )
+
+
+def test_kept_progress_of_another_config_is_named_and_not_taken_up(tmp_path, capsys):
+    from fem.worker import payload, solve_shard
+
+    p = plan(read_config(_cfg(forces=[0.05])))
+    keep = tmp_path / "shard-00000.progress.pkl"
+    keep.write_bytes(b"half a file")
+    torn = solve_shard(payload(p, 0, None, None, keep))
+    assert "not taken up" in capsys.readouterr().err
+    whole = solve_shard(payload(p, 0, None))
+    assert len(torn["records"]["task"]) == len(whole["records"]["task"]) > 0
+    other = plan(read_config(_cfg(forces=[0.05, 0.1])))
+    solve_shard(payload(other, 0, None, None, keep))
+    assert "another config" in capsys.readouterr().err
