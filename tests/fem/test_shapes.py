@@ -165,3 +165,33 @@ def test_the_skin_near_a_point_samples_its_faces():
     assert all(np.isclose(x, v).all(1).any() for v in near)
     radius = np.linalg.norm(x[:, :2], axis=1)  # chords of the tube lie inside its radius
     assert radius.min() < 0.04 * np.cos(np.pi / 24) + 1e-6 and radius.max() <= 0.04 + 1e-9
+
+
+def test_a_large_mesh_s_distance_is_exact_within_the_band_and_bounded_beyond():
+    """On a mesh of 20,480 faces (a hand has 50,864), most of the skin lies far outside: those
+    points are searched only as far as the band needs. Within the band the distance is the
+    exact one (:meth:`Surface.closest` unbounded); beyond, outside points get BAND or more
+    (BAND itself, or their distance to a triangle nearby: never less), inside ones -BAND or
+    their exact distance.
+    """
+    r = 0.01
+    mesh = trimesh.creation.icosphere(subdivisions=5, radius=r)
+    surface = Surface(mesh.vertices, mesh.faces, rounding=5e-4)
+    rng = np.random.default_rng(2)
+    x = rng.normal(size=(4000, 3))
+    x = x / np.linalg.norm(x, axis=1)[:, None] * rng.uniform(0.3 * r, 3 * r, (4000, 1))
+    phi, _, _ = surface.distance(x)
+    _, dist, c, _ = surface.closest(x)
+    outside = np.einsum("ij,ij->i", x - c, c) > 0  # the sphere's normal at c is c itself
+    true = np.where(outside, dist, -dist) - surface.rounding
+    band = np.abs(true) < BAND
+    assert band.sum() > 200 and (~band & outside).sum() > 1000 and (~band & ~outside).sum() > 100
+    np.testing.assert_array_equal(phi[band], true[band])
+    beyond = ~band & outside
+    assert np.all(phi[beyond] >= BAND)
+    bounded = phi[beyond] > BAND
+    assert bounded.any() and np.all(phi[beyond][bounded] >= true[beyond][bounded] - 1e-15)
+    deep = ~band & ~outside
+    known = phi[deep] != -BAND  # the exact distance, where the search found it
+    assert np.all(phi[deep] <= -BAND) and (~known).any()
+    np.testing.assert_array_equal(phi[deep][known], true[deep][known])
