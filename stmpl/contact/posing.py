@@ -35,9 +35,12 @@ def signed_distance(mesh, points: np.ndarray, upto: float = GAP_REACH) -> np.nda
     near = np.flatnonzero(box < upto)  # a point farther from the box is farther from the mesh
     if not len(near):
         return out
-    d = np.minimum(distance_to_surface(mesh, points[near], upto=upto), upto)
+    d = distance_to_surface(mesh, points[near], upto=upto)  # exact up to upto
     inside = winding_number(mesh, points[near]) > 0.5
-    d[inside] = -distance_to_surface(mesh, points[near][inside])
+    deep = np.flatnonzero(inside & (d > upto))  # inside deeper than upto: exactly too
+    if len(deep):
+        d[deep] = distance_to_surface(mesh, points[near][deep])
+    d = np.where(inside, -d, np.minimum(d, upto))
     out[near] = d
     return out
 
