@@ -1,13 +1,16 @@
 """Input features every learned model shares, defined once: the load as pressure (or, per
 newton, its pattern and the total force), or an object's pose as the gap field, the thickness
 normalised over the tissue range, and the scale of the linear prior's displacement as an input.
-Torch tensors, SI units in.
+Torch tensors, SI units in; and a pose model's answer read from its pressure outputs.
 """
 
 from __future__ import annotations
 
+import numpy as np
+
 from stmpl import tissue
 from stmpl.pose import GAP_REACH
+from stmpl.scene import Scene
 
 PRESSURE_SCALE = 1000.0
 """Pa: pressure inputs are divided by this (the tissue's Young's modulus in the paper)."""
@@ -94,3 +97,17 @@ def near_objects(gap):
     :mod:`stmpl.reach`.
     """
     return (CONTACT_BAND - gap).clamp_min(0.0)
+
+
+def posed_answer(scene: Scene, u: np.ndarray, pressure: np.ndarray, push: np.ndarray) -> dict:
+    """A pose model's answer to ``scene``: displacement ``u`` ``(N, 3)`` m, the contact force on
+    each vertex from ``pressure`` ``(N,)`` Pa (the network's, negative read as none: contact
+    pushes only) and the reaction from ``push`` ``(N,)`` Pa (the network's pressure along the
+    press direction, the reaction's density), both only within
+    :data:`CONTACT_BAND` of the objects.
+    """
+    area = scene.part.vertex_areas
+    near = scene.pose.gap <= CONTACT_BAND
+    force = np.where(near, np.maximum(pressure, 0.0), 0.0) * area
+    reaction = float(np.sum(np.where(near, push, 0.0) * area))
+    return {"displacement": u, "force": force, "reaction": reaction}

@@ -18,19 +18,19 @@ from models.features import (
     CONTACT_BAND,
     MIN_TOTAL_N,
     PRESSURE_OUT_SCALE,
+    posed_answer,
     pressure_out,
     total_force,
 )
 from models.losses import log_near_loss, near_loss, pooled_loss, relative_loss
 from stmpl import checkpoint, loads, tissue
 from stmpl import config as checked
-from stmpl.body.mirror import MIRROR, mirror_twin
+from stmpl.body.mirror import MIRROR, mirror_twin, mirrored_scene
 from stmpl.contact import objects
 from stmpl.contact.posing import posed
 from stmpl.data.dataset import same_mesh
 from stmpl.envelope import Envelope
 from stmpl.part import BodyPart, difference
-from stmpl.pose import Pose, Rigid
 from stmpl.predictor import BasePredictor, check_fidelity
 from stmpl.reach import REGION_TOLERANCE
 from stmpl.scene import Deformation, Scene
@@ -363,7 +363,7 @@ class LearnedPredictor(BasePredictor):
         twins = [mirror_twin(s.part, self.part) if isinstance(s, Scene) else None for s in batch]
         if not any(t is not None for t in twins):
             return super().predict(scenes, strict)
-        seen = [s if t is None else _mirrored(s, t) for s, t in zip(batch, twins)]
+        seen = [s if t is None else mirrored_scene(s, t) for s, t in zip(batch, twins)]
         out = super().predict(seen, strict)
         back = [
             d
@@ -461,7 +461,7 @@ class LearnedPredictor(BasePredictor):
         if not self.posed:
             return u
         pressures = out[..., 3:].double().cpu().numpy() * PRESSURE_OUT_SCALE
-        return [_posed_answer(s, x, p[:, 0], p[:, 1]) for s, x, p in zip(scenes, u, pressures)]
+        return [posed_answer(s, x, p[:, 0], p[:, 1]) for s, x, p in zip(scenes, u, pressures)]
 
     def network(self) -> torch.nn.Module:
         """The module :meth:`compile` compiles: the network without its prior (by default the
@@ -559,38 +559,3 @@ class LearnedPredictor(BasePredictor):
             except ValueError as e:
                 raise ValueError(f"checkpoint {path}: {e}") from e
         return p
-
-
-def _posed_answer(scene: Scene, u: np.ndarray, pressure: np.ndarray, push: np.ndarray) -> dict:
-    """A pose model's answer to ``scene``: displacement ``u`` ``(N, 3)`` m, the contact force on
-    each vertex from ``pressure`` ``(N,)`` Pa (the network's, negative read as none: contact
-    pushes only) and the reaction from ``push`` ``(N,)`` Pa (the network's pressure along the
-    press direction, the reaction's density), both only within
-    :data:`~models.features.CONTACT_BAND` of the objects.
-    """
-    area = scene.part.vertex_areas
-    near = scene.pose.gap <= CONTACT_BAND
-    force = np.where(near, np.maximum(pressure, 0.0), 0.0) * area
-    reaction = float(np.sum(np.where(near, push, 0.0) * area))
-    return {"displacement": u, "force": force, "reaction": reaction}
-
-
-def _mirrored(scene: Scene, twin) -> Scene:
-    """``scene`` on its mirror twin ``twin``: the thickness and the force (or the pose's gap)
-    vertex for vertex, a pose's objects and direction mirrored.
-    """
-    if scene.pose is None:
-        return Scene(twin, scene.thickness, scene.force, meta=scene.meta)
-    pose = scene.pose
-    objects = tuple(
-        Rigid(
-            o.name,
-            o.vertices * MIRROR,
-            o.faces[:, ::-1],
-            None if o.path is None else o.path * MIRROR,
-        )
-        for o in pose.objects
-    )
-    direction = None if pose.closing else pose.direction * MIRROR
-    mirrored = Pose(pose.gap, direction, objects)
-    return Scene.posed(twin, scene.thickness, mirrored, **scene.meta)

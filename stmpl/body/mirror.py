@@ -11,6 +11,8 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from stmpl.part import BodyPart
+from stmpl.pose import Pose, Rigid
+from stmpl.scene import Scene
 
 MIRROR = np.array([-1.0, 1.0, 1.0])
 """The body's mirror: x (the body's left-right axis, for anny and SMPL alike) negated."""
@@ -63,3 +65,24 @@ def self_mirror(part: BodyPart, tolerance: float = 1e-6) -> np.ndarray | None:
     if faces != {tuple(sorted(f)) for f in twin[part.faces].tolist()}:
         return None
     return twin
+
+
+def mirrored_scene(scene: Scene, twin) -> Scene:
+    """``scene`` on its mirror twin ``twin``: the thickness and the force (or the pose's gap)
+    vertex for vertex, a pose's objects and direction mirrored.
+    """
+    if scene.pose is None:
+        return Scene(twin, scene.thickness, scene.force, meta=scene.meta)
+    pose = scene.pose
+    objects = tuple(
+        Rigid(
+            o.name,
+            o.vertices * MIRROR,
+            o.faces[:, ::-1],
+            None if o.path is None else o.path * MIRROR,
+        )
+        for o in pose.objects
+    )
+    direction = None if pose.closing else pose.direction * MIRROR
+    mirrored = Pose(pose.gap, direction, objects)
+    return Scene.posed(twin, scene.thickness, mirrored, **scene.meta)
