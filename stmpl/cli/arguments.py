@@ -314,11 +314,12 @@ def simulate_options(sp) -> None:
     what.add_argument(
         "--given",
         choices=("force", "pose"),
-        default="force",
-        help="force (default): --force is shared over the skin the object touches (the "
-        "paper's load model); pose: the object stays where --at/--depth or --pose put it and "
-        "the force it meets is answered (by the FEM, --model fem, or a model trained on "
-        "pressed objects), or, with --force, it is pressed from there until it meets that force",
+        default=None,
+        help="force: --force is shared over the skin the object touches (the paper's load "
+        "model); pose: the object stays where --at/--depth or --pose put it and the force it "
+        "meets is answered (by the FEM, --model fem, or a model trained on pressed objects), "
+        "or, with --force, it is pressed from there until it meets that force. Default: what "
+        "the models take (pose for models trained on pressed objects), else force",
     )
     load_options(what)
     body_options(sp, smpl=False)

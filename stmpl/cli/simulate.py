@@ -121,11 +121,38 @@ def grasping(args, part) -> bool:
     return not chosen and not args.strap and part.axis is not None
 
 
+WAYS = {"force": "a force on the skin", "pose": "an object's pose"}
+"""How a scene can be given, as the command line says it."""
+
+
+def given_of(given: str | None, specs: list[str], preds: list) -> str:
+    """How the scene is given (``--given``): as asked, else as the models take it (an object's
+    pose for models trained on pressed objects; the FEM takes either), else by force. Models
+    that take it only the other way, or only in different ways, are refused by name.
+    """
+    only = {spec: p.takes[0] for spec, p in zip(specs, preds) if len(p.takes) == 1}
+    ways = set(only.values())
+    if len(ways) > 1:
+        by = "; ".join(f"{spec} {WAYS[way]}" for spec, way in only.items())
+        raise ValueError(f"the models take different scenes ({by}): compare each apart")
+    if given is not None:
+        wrong = [spec for spec, way in only.items() if way != given]
+        if wrong:
+            way = only[wrong[0]]
+            raise ValueError(
+                f"--given {given}, and {', '.join(wrong)} takes only {WAYS[way]}: use "
+                f"--given {way} (or leave it out)"
+            )
+        return given
+    return ways.pop() if ways else "force"
+
+
 def run(args) -> int:
     """``stmpl simulate``: build the scene, predict, compare, write and print."""
     t0 = time.perf_counter()
     specs = args.model or [default_model(args.part)]
     preds = answers.predictors(args, specs)
+    args.given = given_of(args.given, specs, preds)
     sub = answers.skin_of(preds, args.subdivide, 1)  # the FEM alone: the once-subdivided skin
     part = part_from_spec(
         {"model": "anny", "subdivisions": sub, "phenotype": phenotype_of(args)}, args.part

@@ -68,8 +68,14 @@ def test_letters_against_the_fem(tmp_path, capsys, arm):
         (["--object", ""], "--object needs a mesh file's path"),
         (["--sphere", "8", "--grip", "pinch"], "--grip chooses how the hand grasps a limb"),
         (["--part", "belly", "--grip", "pinch"], "the belly has no limb to grasp"),
-        (["--given", "pose", "--part", "belly"], "the open hand has no pose to press to"),
-        (["--sphere", "8", "--given", "pose"], "gnn answers a force given on the skin"),
+        (
+            ["--given", "pose", "--part", "belly", "--model", "fem"],
+            "the open hand has no pose to press to",
+        ),
+        (
+            ["--sphere", "8", "--given", "pose"],
+            "--given pose, and zoo:gnn_arm_bodies takes only a force on the skin: use --given force",
+        ),
         (
             ["--tissue", "forearm"],
             "learned the paper's 1 kPa gel, and --tissue asks for the forearm",
@@ -282,7 +288,8 @@ def test_a_grasp_given_by_its_pose_answers_the_squeeze(tmp_path, capsys, arm):
     out = capsys.readouterr().out
     assert "right hand (pinch) closed 2 mm from first touch" in out
     _reaction_said_and_kept(out, tmp_path)
-    assert main(["simulate", "--strap", "--given", "pose", "--out-dir", str(tmp_path)]) == 2
+    strap = ["simulate", "--strap", "--given", "pose", "--model", "fem"]
+    assert main([*strap, "--out-dir", str(tmp_path)]) == 2
     assert "a strap or the open hand has no pose" in capsys.readouterr().err
 
 
@@ -295,3 +302,35 @@ def test_a_finger_that_cannot_curl_as_deep_is_said(tmp_path, capsys, arm):
     assert main(argv) == 0
     out = capsys.readouterr().out
     assert "note: the tripod grip's middle finger cannot curl 6 mm into the limb" in out
+
+
+class _Takes:
+    def __init__(self, *takes):
+        self.takes = takes
+
+
+@pytest.mark.parametrize(
+    "given,takes,way",
+    [
+        (None, [("pose",)], "pose"),  # a model trained on pressed objects
+        (None, [("force",)], "force"),
+        (None, [("force", "pose")], "force"),  # the FEM alone: the paper's load model
+        (None, [("force", "pose"), ("pose",)], "pose"),
+        ("pose", [("force", "pose")], "pose"),
+        ("force", [("force", "pose"), ("force",)], "force"),
+    ],
+)
+def test_the_scene_is_given_as_the_models_take_it(given, takes, way):
+    from stmpl.cli.simulate import given_of
+
+    specs = [f"m{k}" for k in range(len(takes))]
+    assert given_of(given, specs, [_Takes(*t) for t in takes]) == way
+
+
+def test_models_that_take_different_scenes_are_named():
+    from stmpl.cli.simulate import given_of
+
+    with pytest.raises(ValueError, match="m0 an object's pose; m1 a force on the skin"):
+        given_of(None, ["m0", "m1"], [_Takes("pose"), _Takes("force")])
+    with pytest.raises(ValueError, match="m1 takes only an object's pose: use --given pose"):
+        given_of("force", ["m0", "m1"], [_Takes("force", "pose"), _Takes("pose")])
