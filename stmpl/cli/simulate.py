@@ -163,7 +163,7 @@ def run(args) -> int:
     force = args.force if args.given == "pose" and args.force_given else None
     if args.given == "pose" and grasping(args, part):
         kind = args.grip or "whole"
-        hand = Hand(phenotype={"height": args.hand_height}, side="R")
+        hand = {"height": args.hand_height}  # the body whose right hand grips: kept on disk
         scene = gripped(part, thick, args.depth * 1e-3, hand, args.along, args.around, kind)
         drawn = [_mesh(scene.pose.objects[0])]
         said = (

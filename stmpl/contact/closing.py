@@ -8,13 +8,23 @@ until the hand clears the skin. Its pose at a depth ``d`` is that hand closed ``
 
 from __future__ import annotations
 
+import hashlib
+import json
+from importlib.metadata import version
+
 import numpy as np
 from trimesh.remesh import subdivide_loop
 
+from stmpl.body.model import default_cache_dir
 from stmpl.contact.grips import GRIPS
 from stmpl.contact.hand import Hand, SkinDistance, grasp
+from stmpl.files import atomic_savez
 from stmpl.part import BodyPart
 from stmpl.pose import Rigid
+
+CLOSING_CACHE = 1
+"""The version of :func:`closing_grip`'s answers kept on disk (:func:`cached_closing_grip`); a
+change to what it returns raises it, and older files are then not read."""
 
 OPEN = 0.01
 """m: how far back along its path a grip may open to clear the skin."""
@@ -77,6 +87,41 @@ def closing_grip(
             mid = 0.5 * (lo + hi)
             lo, hi = (mid, hi) if clearance(mid).min() < 0 else (lo, mid)
     return Rigid(f"hand ({kind} grip)", closer - hi * path, faces, path)
+
+
+def cached_closing_grip(
+    part: BodyPart,
+    phenotype: dict | None = None,
+    side: str = "R",
+    along: float = 0.5,
+    around: float = 0.0,
+    kind: str = "whole",
+) -> Rigid:
+    """:func:`closing_grip` of the ``side`` hand of the anny body of ``phenotype``, kept on
+    disk (``$STMPL_CACHE_DIR/grips``) under the part's mesh, the hand and the placement: a grip
+    made before is read back without running anny (setting a grip and its path takes some two
+    hundred of its forward passes and as many distances to the skin: about 20 s).
+    """
+    if kind not in GRIPS:
+        raise ValueError(f"grip must be one of {sorted(GRIPS)}, got {kind!r}")
+    key = hashlib.sha256()
+    key.update(np.ascontiguousarray(part.vertices, dtype=np.float64).tobytes())
+    key.update(np.ascontiguousarray(part.faces, dtype=np.int64).tobytes())
+    placement = [phenotype or {}, side, float(along), float(around), kind]
+    key.update(json.dumps([CLOSING_CACHE, version("anny"), placement], sort_keys=True).encode())
+    f = default_cache_dir() / "grips" / f"{key.hexdigest()[:24]}.npz"
+    if f.is_file():
+        with np.load(f) as z:
+            return Rigid(str(z["name"]), z["vertices"], z["faces"], z["path"])
+    grip = closing_grip(part, Hand(phenotype=phenotype, side=side), along, around, kind)
+    arrays = {
+        "name": np.array(grip.name),
+        "vertices": np.asarray(grip.vertices, dtype=np.float64),
+        "faces": np.asarray(grip.faces, dtype=np.int64),
+        "path": np.asarray(grip.path, dtype=np.float64),
+    }
+    atomic_savez(f, arrays)
+    return grip
 
 
 def closed(grip: Rigid, depth: float) -> Rigid:

@@ -16,7 +16,7 @@ import trimesh
 
 from stmpl.contact import gap as along
 from stmpl.contact import objects
-from stmpl.contact.closing import closed, closing_grip
+from stmpl.contact.closing import cached_closing_grip, closed, closing_grip
 from stmpl.contact.hand import Hand
 from stmpl.contact.pressing import check_pose, distance_to_surface, winding_number
 from stmpl.part import BodyPart
@@ -120,21 +120,27 @@ def gripped(
     part: BodyPart,
     thickness,
     depth: float,
-    hand: Hand | None = None,
+    hand: Hand | dict | None = None,
     along: float = 0.5,
     around: float = 0.0,
     kind: str = "whole",
     **meta,
 ) -> Scene:
-    """The scene of anny's ``hand`` (default her right hand) in a ``kind`` of grip round the
+    """The scene of anny's ``hand`` (default her right hand, its grip kept on disk:
+    :func:`~stmpl.contact.closing.cached_closing_grip`) in a ``kind`` of grip round the
     limb ``part`` (``along``, ``around`` as for :func:`~stmpl.contact.hand.grasp`), closed
     ``depth`` (m) along its path from first touch (:func:`~stmpl.contact.closing.closing_grip`):
     a closing pose (its direction ``None``; its answer's reaction is the squeeze, the whole
-    contact force).
+    contact force). ``hand``: a :class:`~stmpl.contact.hand.Hand`, or the phenotype of the
+    body whose right hand it is (a dict; its grip kept on disk too).
     """
     if not (np.isfinite(depth) and depth >= 0):
         raise ValueError(f"a grip's depth must be >= 0 m, got {depth!r}")
-    grip = closed(closing_grip(part, hand or Hand(side="R"), along, around, kind), depth)
+    if isinstance(hand, Hand):
+        grip = closing_grip(part, hand, along, around, kind)
+    else:
+        grip = cached_closing_grip(part, hand, "R", along, around, kind)
+    grip = closed(grip, depth)
     gap = _gap(part, trimesh.Trimesh(grip.vertices, grip.faces, process=False), None)
     return Scene.posed(part, thickness, Pose(gap, None, (grip,)), **meta)
 

@@ -74,7 +74,7 @@ def test_letters_against_the_fem(tmp_path, capsys, arm):
         ),
         (
             ["--sphere", "8", "--given", "pose"],
-            "--given pose, and zoo:gnn_arm_bodies takes only a force on the skin: use --given force",
+            "zoo:gnn_arm_bodies takes only a force on the skin: use --given force",
         ),
         (
             ["--tissue", "forearm"],
