@@ -29,7 +29,7 @@ from fem.local import patch
 from fem.material import material
 from fem.material import material as make_material
 from fem.mesh import shell_mesh
-from fem.simulate import resolution
+from fem.simulate import resolution, tissue_mesh
 from fem.solver import Solver, SolverOptions
 from stmpl.body.model import default_cache_dir
 from stmpl.files import atomic_savez
@@ -46,6 +46,8 @@ def compliance(
     block: int = 64,
     progress=None,
     columns=None,
+    tissue: str = "paper",
+    phenotype: dict | None = None,
 ) -> np.ndarray:
     """``(N, N, 3)`` compliance ``G`` (m/N): ``G[i, j]`` is vertex ``i``'s displacement under a
     unit normal force on vertex ``j`` of a layer of ``thickness`` (m, a scalar or ``(N,)``).
@@ -54,13 +56,22 @@ def compliance(
     ``material``: a material object or its dict (its tangent at rest is used, so Neo-Hookean and
     linear give the same operator); ``options``: the ground truth's :class:`SolverOptions` (load
     mode, fixed rims, linear solver); ``progress``: a callable taking the number of columns done.
-    Raises ``ArithmeticError`` (from the factorisation) if the stiffness is not positive definite.
+    ``tissue``: ``"paper"`` (a layer of ``material``), or a layered preset of :mod:`fem.layers`
+    meshed as the FEM meshes it (:func:`fem.simulate.tissue_mesh`, ``phenotype`` shaping its
+    layers; ``thickness`` its skin and fat): its laws' tangent at rest, so the linear FEM of that
+    tissue. Raises ``ArithmeticError`` (from the factorisation) if the stiffness is not positive
+    definite.
     """
     n = part.n_vertices
     t = np.broadcast_to(np.asarray(thickness, dtype=float), (n,)).copy()
     r = resolution(res)
-    mat = make_material(**material) if isinstance(material, dict) else material
-    mesh = shell_mesh(part, t, layers=r.layers, subdivisions=r.subdivisions)
+    if tissue == "paper":
+        mat = make_material(**material) if isinstance(material, dict) else material
+        mesh = shell_mesh(part, t, layers=r.layers, subdivisions=r.subdivisions)
+    elif material is not None:
+        raise ValueError(f"the {tissue} preset brings its own laws: give no material with it")
+    else:
+        mesh, mat = tissue_mesh(part, t, r, tissue, phenotype)
     solver = Solver(mesh, mat, options=options, order=r.order)
     u0 = np.zeros((solver.n_all, 3))
     _, K = solver.assemble(u0, u0)
@@ -130,6 +141,8 @@ def local_compliance(
     tolerance: float = COLUMN_TOLERANCE,
     grow: float | None = None,
     progress=None,
+    tissue: str = "paper",
+    phenotype: dict | None = None,
 ) -> tuple[np.ndarray, dict]:
     """The columns ``(N, k, 3)`` (m/N) of :func:`compliance` for the vertices ``columns``
     ``(k,)`` of a uniform layer ``thickness`` (m), solved on the patch within ``margin`` of them
@@ -137,7 +150,8 @@ def local_compliance(
     ``grow`` (default :data:`stmpl.reach.GROW`) until every column moves the ring next to its cut
     by at most ``tolerance`` of its own largest displacement, up to the whole part. Rows outside
     the patch are zero. Returns the columns and a summary (margin, patch vertices, attempts,
-    seconds). ``progress``: a callable taking the number of columns solved, on each attempt.
+    seconds). ``progress``: a callable taking the number of columns solved, on each attempt;
+    ``tissue``, ``phenotype``: as for :func:`compliance`.
     """
     n = part.n_vertices
     cols = np.unique(np.asarray(columns, dtype=np.int64))
@@ -160,7 +174,15 @@ def local_compliance(
         where = np.full(n, -1)
         where[p.vertices] = np.arange(len(p.vertices))
         g = compliance(
-            p.part, t[p.vertices], res, material, options, columns=where[cols], progress=progress
+            p.part,
+            t[p.vertices],
+            res,
+            material,
+            options,
+            columns=where[cols],
+            progress=progress,
+            tissue=tissue,
+            phenotype=phenotype,
         )
         mag = np.linalg.norm(g, axis=-1)  # (n_p, k)
         moved = (
@@ -192,13 +214,34 @@ def local_compliance(
 STORE_VERSION = 1
 
 
+def fem_setup(config: dict) -> dict:
+    """What a linear FEM of a dataset's tissue is solved with, from its ``config`` (or such a
+    set-up itself): ``material``, ``resolution`` and ``solver``, and for a layered preset its
+    ``tissue`` and the body's ``phenotype`` (the paper's gel carries neither, so its set-ups
+    read as before).
+    """
+    out = {
+        "material": config.get("material") or {},
+        "resolution": config.get("resolution") or "reference",
+        "solver": config.get("solver") or {},
+    }
+    tissue = config.get("tissue") or "paper"
+    if tissue != "paper":
+        body = config.get("body") or {}
+        out["tissue"] = tissue
+        out["phenotype"] = config.get("phenotype", body.get("phenotype"))
+    return out
+
+
 class ColumnStore:
     """The compliance operator of one body part and FEM set-up at thickness ``levels`` (m), column
     by column as scenes ask for them (:func:`local_compliance`), kept in memory (one dense ``(N, N,
     3)`` float32 array per level used, each column contiguous) and, with ``cache``, on disk in
     stmpl's cache directory (``compliance/``), so a later process starts warm.
 
-    ``setup``: a dataset config's ``material``, ``resolution`` and ``solver`` entries.
+    ``setup``: a dataset config's ``material``, ``resolution`` and ``solver`` entries, and its
+    ``tissue`` and body's ``phenotype`` where the tissue is a layered preset
+    (:func:`fem_setup`).
     """
 
     def __init__(
@@ -206,13 +249,13 @@ class ColumnStore:
     ):
 
         self.part = part
-        self.setup = {
-            "material": setup.get("material") or {},
-            "resolution": setup.get("resolution") or "reference",
-            "solver": setup.get("solver") or {},
-        }
+        self.setup = fem_setup(setup)
         self.levels = [float(x) for x in levels]
-        self.material = material(**(self.setup["material"] or {}))
+        self.tissue = self.setup.get("tissue", "paper")
+        self.phenotype = self.setup.get("phenotype")
+        self.material = (
+            material(**(self.setup["material"] or {})) if self.tissue == "paper" else None
+        )
         self.options = SolverOptions(**(self.setup["solver"] or {}))
         self.res = self.setup["resolution"] or "reference"
         self.cache, self.progress = cache, progress
@@ -302,6 +345,8 @@ class ColumnStore:
             self.material,
             self.options,
             progress=progress,
+            tissue=self.tissue,
+            phenotype=self.phenotype,
         )
         if not np.all(np.isfinite(g)):
             raise ArithmeticError("the compliance operator has non-finite entries")

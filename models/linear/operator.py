@@ -18,7 +18,7 @@ import torch
 from torch import nn
 from tqdm import tqdm
 
-from fem.compliance import ColumnStore, compliance, sparsify
+from fem.compliance import ColumnStore, compliance, fem_setup, sparsify
 from fem.config import read_config
 from fem.material import material
 from fem.placements import make_load, plan
@@ -248,6 +248,8 @@ def operator_arrays(
     """
     levels = [float(x) for x in levels_m]
     setup = {k: fem_config.get(k) for k in ("material", "resolution", "solver")}
+    layered = {k: v for k, v in fem_setup(fem_config).items() if k in ("tissue", "phenotype")}
+    setup.update(layered)  # a layered preset's tissue and phenotype (the gel's: none)
     h = hashlib.sha256(json.dumps([CACHE_VERSION, setup, levels, tol], sort_keys=True).encode())
     for k in ("vertices", "faces"):
         h.update(np.ascontiguousarray(getattr(part, k)).tobytes())
@@ -258,7 +260,8 @@ def operator_arrays(
                 return {k: z[k] for k in z.files}
         except (OSError, ValueError, KeyError):
             pass  # a broken cache entry is recomputed
-    mat = material(**(setup["material"] or {}))
+    tissue, phenotype = layered.get("tissue", "paper"), layered.get("phenotype")
+    mat = material(**(setup["material"] or {})) if tissue == "paper" else None
     opts = SolverOptions(**(setup["solver"] or {}))
     res = setup["resolution"] or "reference"
     n = part.n_vertices
@@ -270,7 +273,16 @@ def operator_arrays(
     t0 = time.perf_counter()
     G = np.stack(
         [
-            compliance(part, t, res, mat, opts, progress=bar.update if bar is not None else None)
+            compliance(
+                part,
+                t,
+                res,
+                mat,
+                opts,
+                progress=bar.update if bar is not None else None,
+                tissue=tissue,
+                phenotype=phenotype,
+            )
             for t in levels
         ]
     )

@@ -114,3 +114,33 @@ def test_column_store_computes_once_and_reads_its_cache(part, G, tmp_path, monke
     assert ColumnStore(part, setup, [0.008]).missing(0, [50, 60, 70, 80]).size == 0
     back.path(0).write_bytes(b"not an npz")  # a broken file: recomputed
     assert ColumnStore(part, setup, [0.008]).missing(0, [50]).tolist() == [50]
+
+
+def test_a_layered_tissue_s_operator_is_its_fem_s_tangent_at_rest(part):
+    """The forearm preset's linear FEM (skin, fat and muscle meshed as the FEM meshes them): a
+    press on one vertex answered by its column differs from the layered FEM's answer by an
+    amount that vanishes with the load, in proportion to it (0.6 % of the deepest at 10 mN, three
+    times that at 30 mN on a tube); its on-demand patch gives the same column.
+    """
+    from fem.compliance import fem_setup, local_compliance
+    from fem.simulate import simulate
+
+    res = {"subdivisions": 1, "layers": 2, "order": 2, "refine_radius": None}
+    t = np.full(part.n_vertices, 0.0075)
+    j = int(np.argmin(np.linalg.norm(part.vertices - [0.04, 0, 0.1], axis=1)))
+    (g,) = compliance(part, t, res, columns=[j], tissue="forearm").transpose(1, 0, 2)
+    f = np.zeros(part.n_vertices)
+    f[j] = 1.0
+    mesh, sols = simulate(part, t, f, [0.01, 0.03], res, tissue="forearm")
+    off = [
+        np.abs(s.part_displacement(mesh) - g * total).max() / np.abs(g * total).max()
+        for s, total in zip(sols, [0.01, 0.03])
+    ]
+    assert off[0] < 0.01 and 2.5 < off[1] / off[0] < 3.5, off
+    local, _ = local_compliance(part, 0.0075, [j], res, tissue="forearm")
+    assert np.abs(local[:, 0] - g).max() < 2e-3 * np.abs(g).max()
+    with pytest.raises(ValueError, match="brings its own laws"):
+        compliance(part, t, res, NeoHookean(), columns=[j], tissue="forearm")
+    setup = fem_setup({"tissue": "forearm", "body": {"phenotype": {"weight": 0.7}}})
+    assert setup["tissue"] == "forearm" and setup["phenotype"] == {"weight": 0.7}
+    assert "tissue" not in fem_setup({"tissue": "paper"})  # the gel's set-ups read as before
