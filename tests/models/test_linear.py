@@ -179,3 +179,35 @@ def test_a_prepared_body_answers_a_press_anywhere_without_solving(ds, tmp_path, 
         np.testing.assert_allclose(a.displacement, fresh.predict(s).displacement, atol=1e-12)
     with pytest.raises(ValueError, match="thickness must be"):
         lazy.prepare(ds.part, t[:-1], progress=False)
+
+
+def test_a_layered_press_set_gets_the_linear_fem_of_its_own_tissue(
+    tiny_presses, tmp_path, monkeypatch
+):
+    """Fitted on a set of the layered forearm preset, the on-demand operator is solved on that
+    preset (its set-up names it) and answers each press's contact forces with the preset's
+    columns, not the paper gel's (1 kPa throughout: a dent three times deeper).
+    """
+    from fem.compliance import local_compliance
+    from stmpl.data.dataset import Dataset
+
+    monkeypatch.setenv("STMPL_CACHE_DIR", str(tmp_path))
+    ds = Dataset(tiny_presses)
+    lin = predictor.create("linear", ds.part, {"operator": "on_demand"})
+    lin.fit(ds, progress=False)
+    setup = lin.meta["operator"]["setup"]
+    assert setup["tissue"] == "forearm" and "phenotype" in setup
+    (scene,), _ = scenes_of(ds, "test", limit=1)
+    got = lin.predict(scene).displacement
+    loaded = np.flatnonzero(scene.force > 0)
+    t = float(scene.thickness[0])
+    G, _ = local_compliance(ds.part, t, loaded, setup["resolution"], tissue="forearm")
+    deepest = np.linalg.norm(got, axis=1).max()
+    # the fit solved every sample's columns on one patch, this the test press's alone: the
+    # same columns to the patches' cut (the stiff skin carries a dent far along a limb)
+    direct = np.einsum("nkc,k->nc", G, scene.force[loaded])
+    assert np.abs(got - direct).max() < 0.03 * deepest
+    gel, _ = local_compliance(ds.part, t, loaded, setup["resolution"])
+    assert np.linalg.norm(np.einsum("nkc,k->nc", gel, scene.force[loaded]), axis=1).max() > (
+        2 * deepest
+    )  # the gel: 4.8 mm where the forearm's layers give 1.4
