@@ -49,7 +49,8 @@ class _Shard:
     tell: object = None
     """Called with 1 as each planned sample ends, solved or failed (a progress bar's tick)."""
     keep: pathlib.Path | None = None
-    """Where the shard's progress is kept as its samples end (:func:`_keep`), or ``None``."""
+    """Where the shard's progress is kept as its samples end
+    (:func:`stmpl.data.format.progress_path`), or ``None``."""
     key: str = ""
     """What the kept progress must have been made for (:func:`_key`)."""
     done: list = field(default_factory=list)
