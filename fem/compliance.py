@@ -28,7 +28,6 @@ import numpy as np
 from fem.local import patch
 from fem.material import material
 from fem.material import material as make_material
-from fem.mesh import shell_mesh
 from fem.simulate import resolution, tissue_mesh
 from fem.solver import Solver, SolverOptions
 from stmpl.body.model import default_cache_dir
@@ -65,14 +64,11 @@ def compliance(
     n = part.n_vertices
     t = np.broadcast_to(np.asarray(thickness, dtype=float), (n,)).copy()
     r = resolution(res)
-    if tissue == "paper":
-        mat = make_material(**material) if isinstance(material, dict) else material
-        mesh = shell_mesh(part, t, layers=r.layers, subdivisions=r.subdivisions)
-    elif material is not None:
+    if tissue != "paper" and material is not None:
         raise ValueError(f"the {tissue} preset brings its own laws: give no material with it")
-    else:
-        mesh, mat = tissue_mesh(part, t, r, tissue, phenotype)
-    solver = Solver(mesh, mat, options=options, order=r.order)
+    mesh, layered = tissue_mesh(part, t, r, tissue, phenotype)  # refined nowhere: every column
+    mat = make_material(**material) if isinstance(material, dict) else material
+    solver = Solver(mesh, layered or mat, options=options, order=r.order)
     u0 = np.zeros((solver.n_all, 3))
     _, K = solver.assemble(u0, u0)
     solver.linear.factor(K)

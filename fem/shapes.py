@@ -346,7 +346,7 @@ class Surface:
         # a point the nearest triangles already put outside, farther than the band, needs no
         # exact distance: only the triangles that could bring it within the band are searched
         # (on a hand of 50,000 faces, most of the skin's points are such)
-        face, dist, c, bary = self.closest(xq, self._outside_beyond(xq, BAND + self.rounding))
+        face, dist, c, bary = self.closest(xq, BAND + self.rounding)
         at = np.einsum("kj,kji->ki", bary, vn[self.faces[face]])
         side = np.sign(np.einsum("ki,ki->k", xq - c, at))
         side[side == 0] = 1.0
@@ -366,30 +366,16 @@ class Surface:
         face, _, _, bary = self.closest(np.asarray(x, dtype=float).reshape(-1, 3))
         return np.einsum("kj,kji->ki", bary, self.path[self.faces[face]])
 
-    def _outside_beyond(self, x: np.ndarray, within: float):
-        """``within(k_answer)``: for :meth:`closest`, the distance (m) within which each of
-        ``x``'s nearest point must be sought: ``within`` where the triangles of its nearest
-        centroids put it outside the mesh farther than that, else everywhere (``inf``).
-        """
-        vn = self._index[1]
-
-        def bound(face, dist, c, bary):
-            at = np.einsum("kj,kji->ki", bary, vn[self.faces[face]])
-            out = (np.einsum("ki,ki->k", x - c, at) > 0) & (dist > within)
-            return np.where(out, within, np.inf)
-
-        return bound
-
-    def closest(self, x: np.ndarray, within=None):
+    def closest(self, x: np.ndarray, band: float | None = None):
         """``(face (K,), distance (K,) m, point (K, 3), barycentric (K, 3))``: the point of the
         mesh nearest to each of ``x`` ``(K, 3)``, exactly: among the triangles of the
         :data:`NEAREST` nearest centroids, and where those do not settle it, among every
-        triangle within reach. ``within``: given the first answer (face, distance, point,
-        barycentric), a ``(K,)`` distance (m) beyond which a point's exact answer is not
-        needed: only triangles that could be nearer are then searched, and where none is, the
-        first answer (no nearer than the truth) stays.
+        triangle within reach. ``band`` (m): a point those triangles put outside the mesh
+        farther than it needs no exact answer: only triangles that could bring it within
+        ``band`` are searched, and where none does, the first answer (no nearer than the
+        truth) stays.
         """
-        tri, _, tree, reach, _ = self._index
+        tri, vn, tree, reach, _ = self._index
         k = min(NEAREST, len(tri))
         dk, ik = tree.query(x, k=k)
         dk, ik = dk.reshape(len(x), k), ik.reshape(len(x), k)
@@ -399,7 +385,11 @@ class Surface:
         rows = np.arange(len(x))
         face, dist = ik[rows, j], dist[rows, j]
         c, bary = c.reshape(len(x), k, 3)[rows, j], bary.reshape(len(x), k, 3)[rows, j]
-        sought = dist if within is None else np.minimum(dist, within(face, dist, c, bary))
+        sought = dist
+        if band is not None:  # outside beyond the band: sought only within it
+            at = np.einsum("kj,kji->ki", bary, vn[self.faces[face]])
+            out = (np.einsum("ki,ki->k", x - c, at) > 0) & (dist > band)
+            sought = np.where(out, band, dist)
         # a point whose k nearest centroids do not settle it: every triangle in reach
         unsure = np.flatnonzero(dk[:, -1] < sought + reach) if k < len(tri) else []
         if len(unsure):

@@ -8,16 +8,11 @@ until the hand clears the skin. Its pose at a depth ``d`` is that hand closed ``
 
 from __future__ import annotations
 
-import hashlib
-import json
-from importlib.metadata import version
-
 import numpy as np
 from trimesh.remesh import subdivide_loop
 
-from stmpl.body.model import default_cache_dir
 from stmpl.contact.grips import GRIPS
-from stmpl.contact.hand import Hand, SkinDistance, grasp
+from stmpl.contact.hand import Hand, SkinDistance, grasp, kept_file
 from stmpl.files import atomic_savez
 from stmpl.part import BodyPart
 from stmpl.pose import Rigid
@@ -104,12 +99,8 @@ def cached_closing_grip(
     """
     if kind not in GRIPS:
         raise ValueError(f"grip must be one of {sorted(GRIPS)}, got {kind!r}")
-    key = hashlib.sha256()
-    key.update(np.ascontiguousarray(part.vertices, dtype=np.float64).tobytes())
-    key.update(np.ascontiguousarray(part.faces, dtype=np.int64).tobytes())
     placement = [phenotype or {}, side, float(along), float(around), kind]
-    key.update(json.dumps([CLOSING_CACHE, version("anny"), placement], sort_keys=True).encode())
-    f = default_cache_dir() / "grips" / f"{key.hexdigest()[:24]}.npz"
+    f = kept_file("grips", part, [CLOSING_CACHE, placement])
     if f.is_file():
         with np.load(f) as z:
             return Rigid(str(z["name"]), z["vertices"], z["faces"], z["path"])

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import pathlib
 from dataclasses import dataclass, field
 from importlib.metadata import version
 
@@ -177,6 +178,18 @@ GRASP_CACHE = 1
 ``grasp`` returns raises it, and older files are then not read."""
 
 
+def kept_file(folder: str, part: BodyPart, placement: list) -> pathlib.Path:
+    """Where a hand posed on ``part`` at ``placement`` (its version, the hand and where it is:
+    plain JSON) is kept: ``$STMPL_CACHE_DIR/<folder>/``, named by the part's mesh, the
+    placement and anny's version.
+    """
+    key = hashlib.sha256()
+    key.update(np.ascontiguousarray(part.vertices, dtype=np.float64).tobytes())
+    key.update(np.ascontiguousarray(part.faces, dtype=np.int64).tobytes())
+    key.update(json.dumps([version("anny"), placement], sort_keys=True).encode())
+    return default_cache_dir() / folder / f"{key.hexdigest()[:24]}.npz"
+
+
 def cached_grasp(
     part: BodyPart,
     phenotype: dict | None = None,
@@ -193,12 +206,8 @@ def cached_grasp(
     """
     if grip not in GRIPS:
         raise ValueError(f"grip must be one of {sorted(GRIPS)}, got {grip!r}")
-    key = hashlib.sha256()
-    key.update(np.ascontiguousarray(part.vertices, dtype=np.float64).tobytes())
-    key.update(np.ascontiguousarray(part.faces, dtype=np.int64).tobytes())
     placement = [phenotype or {}, side, float(along), float(around), grip, float(depth)]
-    key.update(json.dumps([GRASP_CACHE, version("anny"), placement], sort_keys=True).encode())
-    f = default_cache_dir() / "grasps" / f"{key.hexdigest()[:24]}.npz"
+    f = kept_file("grasps", part, [GRASP_CACHE, placement])
     if f.is_file():
         with np.load(f) as z:
             curls = dict(zip(FINGERS, z["curls"].tolist()))
