@@ -2,7 +2,7 @@
 stand-in (:class:`stmpl.responsive.Responsive`) and without.
 
     python benchmarks/first_touch.py [--seconds 20] [--rate 100] [--places 120]
-        [--model gnn_arm_bodies] [--stand-in naive_arm_fine] [--plain 4]
+        [--model gnn_arm_bodies] [--stand-in naive_arm_fine] [--plain 4] [--prepare]
 
 An empty column cache (a temporary ``STMPL_CACHE_DIR``); the model at fidelity ``auto`` on the
 once-subdivided left arm; a 1.5 cm disk of 0.3 N on 7.5 mm dragged along the arm's chart (u from
@@ -11,8 +11,10 @@ at ``--rate`` presses a second for ``--seconds``. With the stand-in every press 
 the model where its linear prior's columns are solved and by the stand-in (marked) while they
 are solved in the background. Printed: the latency per press (median, 95th percentile, largest),
 the share the stand-in answered, and how many places the model answered itself; then the model
-alone on its first ``--plain`` new places, each waiting for its columns. Run it alone: the times
-are wall-clock.
+alone on its first ``--plain`` new places, each waiting for its columns. ``--prepare``: then, in
+another empty cache, the model prepares the arm ahead (``Predictor.prepare``: every column it
+can need, timed) and the same drag is pressed on it alone. Run it alone: the times are
+wall-clock.
 """
 
 from __future__ import annotations
@@ -71,6 +73,7 @@ def main(argv=None) -> None:
     ap.add_argument("--model", default="gnn_arm_bodies")
     ap.add_argument("--stand-in", default="naive_arm_fine")
     ap.add_argument("--plain", type=int, default=4)
+    ap.add_argument("--prepare", action="store_true", help="then prepare the arm ahead, and drag")
     args = ap.parse_args(argv)
     os.environ["STMPL_CACHE_DIR"] = tempfile.mkdtemp(prefix="stmpl-first-touch-")
 
@@ -117,6 +120,19 @@ def main(argv=None) -> None:
         f"the model alone at {len(far)} new places: "
         + ", ".join(f"{t:.1f} s" for t in alone)
         + " before each answer"
+    )
+    if not args.prepare:
+        return
+    os.environ["STMPL_CACHE_DIR"] = tempfile.mkdtemp(prefix="stmpl-first-touch-")
+    prepared = zoo.read(args.model, fidelity="auto")
+    t0 = time.perf_counter()
+    solved = prepared.prepare(arm, scenes[0].thickness)
+    print(f"prepared ahead: {solved} columns in {time.perf_counter() - t0:.0f} s")
+    waits, _ = drag(prepared, scenes, args.seconds, args.rate)
+    ms = 1e3 * waits
+    print(
+        f"drag on the prepared model alone, {len(ms)} presses: median {np.median(ms):.2f} ms, "
+        f"p95 {np.percentile(ms, 95):.2f} ms, largest {ms.max():.1f} ms"
     )
 
 

@@ -42,7 +42,7 @@ def compliance(
     res="reference",
     material=None,
     options: SolverOptions | None = None,
-    block: int = 64,
+    block: int = 128,
     progress=None,
     columns=None,
     tissue: str = "paper",
@@ -77,12 +77,7 @@ def compliance(
     nodes = mesh.part_nodes
     for lo in range(0, len(want), block):
         at = np.arange(lo, min(lo + block, len(want)))
-        B = np.empty((len(solver.free), len(at)))
-        for k, j in enumerate(want[at]):
-            e = np.zeros(n)
-            e[j] = 1.0
-            B[:, k] = solver.external_forces(e).ravel()[solver.free]
-        X = solver.linear.solve(B)
+        X = solver.linear.solve(solver.external_force_columns(want[at]))
         u = np.zeros((solver.n_all * 3, len(at)))
         u[solver.free] = X
         G[:, at] = u.reshape(solver.n_all, 3, len(at))[nodes].transpose(0, 2, 1)

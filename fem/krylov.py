@@ -5,6 +5,7 @@ factorisation is only kept while it preconditions well).
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable
 from dataclasses import dataclass
 
@@ -25,13 +26,59 @@ class Krylov:
 
 def symmetric_matvec(K: sp.csr_matrix, upper: bool) -> Callable[[np.ndarray], np.ndarray]:
     """``x -> K x`` for a symmetric ``K`` stored whole or, ``upper``, as its upper triangle;
-    ``x`` ``(n,)`` or ``(n, k)``.
+    ``x`` ``(n,)`` or ``(n, k)``. A block of :data:`BLOCK` columns or more is multiplied by a
+    compiled kernel over the whole matrix's rows (both cores; SciPy's product runs on one).
     """
-    if not upper:
-        return K.__matmul__
-    diagonal = K.diagonal()
-    KT = K.T.tocsr()
-    return lambda x: K @ x + KT @ x - (diagonal * x.T).T
+    diagonal = K.diagonal() if upper else None
+    KT = K.T.tocsr() if upper else None
+    whole = []  # the whole matrix, made at the first block product
+
+    def matvec(x: np.ndarray) -> np.ndarray:
+        kernel = _block_kernel() if x.ndim == 2 and x.shape[1] >= BLOCK else None
+        if kernel is not None:
+            if not whole:
+                W = (K + KT - sp.diags(diagonal)).tocsr() if upper else K.tocsr()
+                W.sort_indices()
+                whole.append(W)
+            W = whole[0]
+            y = np.empty(x.shape)
+            kernel(W.indptr, W.indices, W.data, np.ascontiguousarray(x, dtype=float), y)
+            return y
+        if not upper:
+            return K @ x
+        return K @ x + KT @ x - (diagonal * x.T).T
+
+    return matvec
+
+
+BLOCK = 8
+"""Columns from which a block product goes to the compiled kernel."""
+
+
+@functools.cache
+def _block_kernel():
+    """``kernel(indptr, indices, data, X, Y)``: ``Y = K X`` for a CSR ``K`` and row-major
+    ``X`` ``(n, k)``, rows in parallel; ``None`` when Numba is absent.
+    """
+    try:
+        from numba import njit, prange  # deferred: compiled on first use
+    except ImportError:
+        return None
+
+    @njit(parallel=True, cache=True)
+    def kernel(indptr, indices, data, X, Y):  # pragma: no cover - compiled
+        k = X.shape[1]
+        for i in prange(len(indptr) - 1):
+            acc = np.zeros(k)
+            for p in range(indptr[i], indptr[i + 1]):
+                v = data[p]
+                j = indices[p]
+                for c in range(k):
+                    acc[c] += v * X[j, c]
+            for c in range(k):
+                Y[i, c] = acc[c]
+
+    return kernel
 
 
 def pcg(

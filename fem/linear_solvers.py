@@ -214,9 +214,13 @@ class _PardisoSingle(_Pardiso):
             return super().solve(b)
         rhs = b.reshape(len(b), -1)
         scale = np.linalg.norm(rhs, axis=0)
-        x, r, last = np.zeros_like(rhs), rhs, np.inf
+        x, r, last = None, rhs, np.inf
         for _ in range(REFINE_STEPS):
-            x = x + self._call(33, np.asfortranarray(r, dtype=np.float32)).astype(float)
+            step = self._call(33, np.asfortranarray(r, dtype=np.float32))
+            if x is None:
+                x = step.astype(float)
+            else:
+                x += step
             r = rhs - self._matvec(x)
             left = float(np.max(np.linalg.norm(r, axis=0) / np.maximum(scale, 1e-300)))
             if left <= REFINED:

@@ -145,17 +145,28 @@ class ShellMesh:
         forces ``(N,)`` (N): the linear pressure they make integrated against the 6-node skin
         triangles (nodes, then the midpoints of ``edges`` ``(E, 2)``, sorted pairs).
         """
+        forces = self.quadratic_force_operator(edges) @ np.asarray(force, float)
+        return forces.reshape(-1, 3)
+
+    def quadratic_force_operator(self, edges: np.ndarray) -> sp.csr_matrix:
+        """``(3 (M + E), N)`` sparse map from per-vertex normal forces (N) to the flattened
+        :meth:`quadratic_forces` (one column per vertex: a unit force on it).
+        """
         n_all = self.n_nodes + len(edges)
-        p = self.interp @ (np.asarray(force, float) / self.part.vertex_areas)
         tri = self.skin_faces
         key = edges[:, 0] * n_all + edges[:, 1]
         te = np.sort(tri[:, TRI_EDGES], axis=2)  # (K, 3, 2)
         mid = self.n_nodes + np.searchsorted(key, te[..., 0] * n_all + te[..., 1])
         nodes6 = np.concatenate([tri, mid], axis=1)  # (K, 6)
-        pq = TRI_POINTS @ p[tri].T  # (Qs, K)
-        N6 = tri_shape(2, TRI_POINTS)  # (Qs, 6)
-        load = self.skin_face_areas[:, None] * np.einsum("q,qk,qa->ka", TRI_WEIGHTS, pq, N6)
-        mag = np.bincount(nodes6.ravel(), weights=load.ravel(), minlength=n_all)
+        # int p N_b over a face, p linear from its corners' pressures p_a: area C[a, b] p_a
+        C = (TRI_WEIGHTS[:, None] * TRI_POINTS).T @ tri_shape(2, TRI_POINTS)  # (3, 6)
+        vals = self.skin_face_areas[:, None, None] * C[None]  # (K, 3, 6)
+        rows = np.broadcast_to(nodes6[:, None, :], vals.shape)
+        cols = np.broadcast_to(tri[:, :, None], vals.shape)
+        push = sp.csr_matrix(
+            (vals.ravel(), (rows.ravel(), cols.ravel())), shape=(n_all, self.n_skin)
+        )  # node magnitudes from skin-node pressures
+        pressure = self.interp @ sp.diags(1.0 / self.part.vertex_areas)  # (S, N)
         normals = np.zeros((n_all, 3))
         normals[: self.n_skin] = self.skin_normals
         skin_edge = (edges[:, 0] < self.n_skin) & (edges[:, 1] < self.n_skin)
@@ -163,7 +174,8 @@ class ShellMesh:
         normals[self.n_nodes + np.flatnonzero(skin_edge)] = nm / np.linalg.norm(
             nm, axis=1, keepdims=True
         )
-        return -mag[:, None] * normals
+        spread = sp.kron(sp.eye(n_all, format="csr"), np.ones((3, 1)), format="csr")
+        return (sp.diags(-normals.ravel()) @ spread @ (push @ pressure)).tocsr()
 
     def nodal_forces(self, force: np.ndarray, mode: str = "traction") -> np.ndarray:
         """``(M, 3)`` nodal force vectors (N) for per-vertex normal forces on the part.

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
-from fem.krylov import pcg, symmetric_matvec
+from fem.krylov import BLOCK, pcg, symmetric_matvec
 
 
 def _spd(n, seed=0):
@@ -20,6 +20,15 @@ def test_symmetric_matvec_from_the_upper_triangle_is_the_whole_product():
     x = np.random.default_rng(1).normal(size=60)
     np.testing.assert_allclose(symmetric_matvec(sp.triu(A).tocsr(), True)(x), A @ x, rtol=1e-12)
     np.testing.assert_allclose(symmetric_matvec(A, False)(x), A @ x, rtol=1e-12)
+
+
+def test_a_block_of_columns_is_the_whole_product_in_any_layout():
+    A = _spd(60)
+    X = np.random.default_rng(2).normal(size=(60, BLOCK + 3))
+    for K, upper in ((sp.triu(A).tocsr(), True), (A, False)):
+        product = symmetric_matvec(K, upper)
+        np.testing.assert_allclose(product(X), A @ X, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(product(np.asfortranarray(X)), A @ X, rtol=1e-12, atol=1e-12)
 
 
 def test_pcg_meets_its_tolerance_with_an_earlier_matrix_as_preconditioner():
