@@ -13,7 +13,8 @@ load, which every vertex is here). One factorisation, then ``N`` right-hand side
 On demand (:func:`local_compliance`, :class:`ColumnStore`), only the columns a scene loads are
 solved, on the patch of tissue they move (:mod:`fem.local`): a unit press on a vertex moves the
 tissue within a few thicknesses of it, so a patch's factorisation is a small fraction of the
-whole part's (on the once-subdivided arm: 394k free DOFs, 26 s to factorise, 0.3 s per column).
+whole part's (on the once-subdivided arm: 394k free DOFs, 11 s to factorise in single
+precision, then about 0.1 s per column in blocks of 128, each refined to double precision).
 """
 
 from __future__ import annotations
