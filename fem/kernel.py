@@ -1,5 +1,6 @@
 """The tangent's element matrices summed into its CSR data, two ways: a compiled kernel (Numba;
-every element matrix's upper entries added straight into the data) and its NumPy twin, used
+every element matrix's upper entries summed over its quadrature points, then added into the
+data) and its NumPy twin, used
 without Numba and to check the kernel.
 """
 
@@ -45,8 +46,9 @@ def element_data(g, GG, aW, bW, cW, local, pos, sel, nnz: int, full=None) -> np.
 
 def make_kernel():
     """A Numba kernel that adds the upper entries of every element matrix,
-    ``K_aibk = sum_q (aW d_ik G_a.G_b + bW g_ai g_bk + cW g_ak g_bi)``, straight into the CSR
-    data (4x faster than the NumPy path here); ``None`` when Numba is absent.
+    ``K_aibk = sum_q (aW d_ik G_a.G_b + bW g_ai g_bk + cW g_ak g_bi)``, to the CSR data: each
+    element's entries summed over its quadrature points first, then added once (4x faster than
+    the NumPy path here); ``None`` when Numba is absent.
     """
     try:
         from numba import njit  # deferred: compiles the FEM's kernels
@@ -56,24 +58,28 @@ def make_kernel():
     @njit(cache=True, nogil=True)
     def kernel(g, GG, aW, bW, cW, pos, data):  # pragma: no cover - compiled
         T, Q, n = g.shape[0], g.shape[1], g.shape[2]
+        m = 3 * n
+        ke = np.zeros(m * (m + 1) // 2)  # one element's upper entries, summed over its points
         for t in range(T):
+            ke[:] = 0.0
             for qp in range(Q):
+                a, b, c = aW[t, qp], bW[t, qp], cW[t, qp]
+                gt, Gt = g[t, qp], GG[t, qp]
                 e = 0
-                for p in range(3 * n):
+                for p in range(m):
                     A, i = p // 3, p % 3
-                    for q in range(p, 3 * n):
+                    gai = gt[A, i]
+                    for q in range(p, m):
                         B, k = q // 3, q % 3
-                        j = pos[t, e]
-                        e += 1
-                        if j < 0:
-                            continue
-                        v = (
-                            bW[t, qp] * g[t, qp, A, i] * g[t, qp, B, k]
-                            + cW[t, qp] * g[t, qp, A, k] * g[t, qp, B, i]
-                        )
+                        v = b * gai * gt[B, k] + c * gt[A, k] * gt[B, i]
                         if i == k:
-                            v += aW[t, qp] * GG[t, qp, A, B]
-                        data[j] += v
+                            v += a * Gt[A, B]
+                        ke[e] += v
+                        e += 1
+            for e in range(len(ke)):
+                j = pos[t, e]
+                if j >= 0:
+                    data[j] += ke[e]
 
     return kernel
 
@@ -91,28 +97,30 @@ def make_full_kernel():
     @njit(cache=True, nogil=True)
     def kernel(g, f, GG, aW, bW, cW, dW, eW, pos, data):  # pragma: no cover - compiled
         T, Q, n = g.shape[0], g.shape[1], g.shape[2]
+        m = 3 * n
+        ke = np.zeros(m * (m + 1) // 2)  # one element's upper entries, summed over its points
         for t in range(T):
+            ke[:] = 0.0
             for qp in range(Q):
+                a, b, c, d, h = aW[t, qp], bW[t, qp], cW[t, qp], dW[t, qp], eW[t, qp]
+                gt, ft, Gt = g[t, qp], f[t, qp], GG[t, qp]
                 e = 0
-                for p in range(3 * n):
+                for p in range(m):
                     A, i = p // 3, p % 3
-                    for q in range(p, 3 * n):
+                    gai, fai = gt[A, i], ft[A, i]
+                    for q in range(p, m):
                         B, k = q // 3, q % 3
-                        j = pos[t, e]
-                        e += 1
-                        if j < 0:
-                            continue
-                        gai, gbk = g[t, qp, A, i], g[t, qp, B, k]
-                        fai, fbk = f[t, qp, A, i], f[t, qp, B, k]
-                        v = (
-                            bW[t, qp] * gai * gbk
-                            + cW[t, qp] * g[t, qp, A, k] * g[t, qp, B, i]
-                            + dW[t, qp] * fai * fbk
-                            + eW[t, qp] * (fai * gbk + gai * fbk)
-                        )
+                        gbk, fbk = gt[B, k], ft[B, k]
+                        v = b * gai * gbk + c * gt[A, k] * gt[B, i] + d * fai * fbk
+                        v += h * (fai * gbk + gai * fbk)
                         if i == k:
-                            v += aW[t, qp] * GG[t, qp, A, B]
-                        data[j] += v
+                            v += a * Gt[A, B]
+                        ke[e] += v
+                        e += 1
+            for e in range(len(ke)):
+                j = pos[t, e]
+                if j >= 0:
+                    data[j] += ke[e]
 
     return kernel
 

@@ -58,14 +58,15 @@ BLOCK = 8
 @functools.cache
 def _block_kernel():
     """``kernel(indptr, indices, data, X, Y)``: ``Y = K X`` for a CSR ``K`` and row-major
-    ``X`` ``(n, k)``, rows in parallel; ``None`` when Numba is absent.
+    ``X`` ``(n, k)``, rows in parallel, the GIL released (a caller's other threads run on);
+    ``None`` when Numba is absent.
     """
     try:
         from numba import njit, prange  # deferred: compiled on first use
     except ImportError:
         return None
 
-    @njit(parallel=True, cache=True)
+    @njit(parallel=True, cache=True, nogil=True)
     def kernel(indptr, indices, data, X, Y):  # pragma: no cover - compiled
         k = X.shape[1]
         for i in prange(len(indptr) - 1):
