@@ -78,7 +78,7 @@ def compliance(
     nodes = mesh.part_nodes
     for lo in range(0, len(want), block):
         at = np.arange(lo, min(lo + block, len(want)))
-        X = solver.linear.solve(solver.external_force_columns(want[at]))
+        X = solver.linear.solve(unit_loads(solver, want[at]))
         u = np.zeros((solver.n_all * 3, len(at)))
         u[solver.free] = X
         G[:, at] = u.reshape(solver.n_all, 3, len(at))[nodes].transpose(0, 2, 1)
@@ -87,6 +87,22 @@ def compliance(
     if not np.all(np.isfinite(G)):
         raise ArithmeticError("the compliance operator has non-finite entries")
     return G
+
+
+def unit_loads(solver: Solver, columns: np.ndarray) -> np.ndarray:
+    """``(n_free, k)`` the free DOFs' share of ``solver``'s external forces under a unit normal
+    force on each part vertex of ``columns`` ``(k,)``, in Fortran order: the right-hand sides
+    of a block of compliance columns.
+    """
+    columns = np.asarray(columns, dtype=np.int64)
+    if solver.order == 1 or solver.options.force_mode == "nodal":
+        out = np.empty((len(solver.free), len(columns)), order="F")
+        for k, j in enumerate(columns):
+            e = np.zeros(solver.mesh.part.n_vertices)
+            e[j] = 1.0
+            out[:, k] = solver.external_forces(e).ravel()[solver.free]
+        return out
+    return solver.force_operator[solver.free][:, columns].toarray(order="F")
 
 
 def sparsify(G: np.ndarray, tol: float = 1e-3) -> tuple[np.ndarray, np.ndarray, float]:

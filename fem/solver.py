@@ -290,32 +290,12 @@ class Solver:
         force = np.asarray(force, dtype=float)
         if force.shape != (n,):
             raise ValueError(f"force must have shape ({n},), got {force.shape}")
-        return (self._force_operator @ force).reshape(-1, 3)
-
-    def external_force_columns(self, columns: np.ndarray) -> np.ndarray:
-        """``(n_free, k)`` the free DOFs' share of :meth:`external_forces` under a unit normal
-        force on each part vertex of ``columns`` ``(k,)``, in Fortran order (the right-hand
-        sides of a compliance block).
-        """
-        columns = np.asarray(columns, dtype=np.int64)
-        if self.order == 1 or self.options.force_mode == "nodal":
-            out = np.empty((len(self.free), len(columns)), order="F")
-            for k, j in enumerate(columns):
-                e = np.zeros(self.mesh.part.n_vertices)
-                e[j] = 1.0
-                out[:, k] = self.external_forces(e).ravel()[self.free]
-            return out
-        return self._free_force_operator[:, columns].toarray(order="F")
+        return (self.force_operator @ force).reshape(-1, 3)
 
     @cached_property
-    def _force_operator(self) -> sp.csr_matrix:
-        """``(3 n_all, N)``: the quadratic elements' consistent forces, linear in the load."""
+    def force_operator(self) -> sp.csr_matrix:
+        """``(3 n_all, N)``: quadratic elements' :meth:`external_forces` as a sparse map."""
         return self.mesh.quadratic_force_operator(self.edges)
-
-    @cached_property
-    def _free_force_operator(self) -> sp.csc_matrix:
-        """``(n_free, N)``: :attr:`_force_operator`'s free rows, by column."""
-        return self._force_operator[self.free].tocsc()
 
     # ------------------------------------------------------------------ solving
     def solve(self, force: np.ndarray, u0: np.ndarray | None = None) -> Solution:

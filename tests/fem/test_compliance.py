@@ -5,11 +5,11 @@ solve, and it is the tangent of the Neo-Hookean solve at rest.
 import numpy as np
 import pytest
 
-from fem.compliance import compliance, sparsify
+from fem.compliance import compliance, sparsify, unit_loads
 from fem.material import LinearElastic, NeoHookean
 from fem.mesh import shell_mesh
 from fem.solver import Solver
-from stmpl.body.primitives import tube
+from stmpl.body.primitives import sheet, tube
 
 RES = {"subdivisions": 1, "layers": 1, "order": 1, "refine_radius": None}
 
@@ -144,3 +144,19 @@ def test_a_layered_tissue_s_operator_is_its_fem_s_tangent_at_rest(part):
     setup = fem_setup({"tissue": "forearm", "body": {"phenotype": {"weight": 0.7}}})
     assert setup["tissue"] == "forearm" and setup["phenotype"] == {"weight": 0.7}
     assert "tissue" not in fem_setup({"tissue": "paper"})  # the gel's set-ups read as before
+
+
+@pytest.mark.parametrize("order", [1, 2])
+def test_force_columns_are_unit_loads_on_the_free_dofs(order):
+    part = sheet(0.1, 0.1, 7, 7)
+    mesh = shell_mesh(part, np.full(part.n_vertices, 0.005), layers=1)
+    S = Solver(mesh, order=order)
+    cols = np.array([24, 3, 31])
+    B = unit_loads(S, cols)
+    assert B.shape == (len(S.free), 3) and B.flags.f_contiguous
+    for k, j in enumerate(cols):
+        e = np.zeros(part.n_vertices)
+        e[j] = 1.0
+        f = S.external_forces(e)
+        np.testing.assert_allclose(f.sum(0), [0.0, 0.0, -1.0], atol=1e-12)
+        np.testing.assert_array_equal(B[:, k], f.ravel()[S.free])

@@ -230,22 +230,6 @@ def test_quadratic_pressure_loads_keep_the_total():
     assert np.abs(f[:, :2]).max() == 0
 
 
-@pytest.mark.parametrize("order", [1, 2])
-def test_force_columns_are_unit_loads_on_the_free_dofs(order):
-    part = sheet(0.1, 0.1, 7, 7)
-    mesh = shell_mesh(part, np.full(part.n_vertices, 0.005), layers=1)
-    S = Solver(mesh, order=order)
-    cols = np.array([24, 3, 31])
-    B = S.external_force_columns(cols)
-    assert B.shape == (len(S.free), 3) and B.flags.f_contiguous
-    for k, j in enumerate(cols):
-        e = np.zeros(part.n_vertices)
-        e[j] = 1.0
-        f = S.external_forces(e)
-        np.testing.assert_allclose(f.sum(0), [0.0, 0.0, -1.0], atol=1e-12)
-        np.testing.assert_array_equal(B[:, k], f.ravel()[S.free])
-
-
 def test_linear_solvers_agree():
     part, mesh = _small_shell()
     force = np.zeros(part.n_vertices)
