@@ -100,7 +100,8 @@ def main(argv=None) -> None:
     own = sum(1 for s in scenes if not model.missing(s))
     print(
         f"drag, {len(ms)} presses at {args.rate:g}/s: median {np.median(ms):.2f} ms, "
-        f"p95 {np.percentile(ms, 95):.2f} ms, largest {ms.max():.1f} ms; the stand-in answered "
+        f"p95 {np.percentile(ms, 95):.2f} ms, largest {ms.max():.1f} ms (press "
+        f"{int(ms.argmax()) + 1}); the stand-in answered "
         f"{100 * stood.mean():.0f} % of them; the model had solved {own} of {len(scenes)} places "
         f"by the end"
     )
