@@ -50,36 +50,12 @@ def make_kernel():
     element's entries summed over its quadrature points first, then added once (4x faster than
     the NumPy path here); ``None`` when Numba is absent.
     """
-    try:
-        from numba import njit  # deferred: compiles the FEM's kernels
-    except ImportError:
+    both = _element_kernel()
+    if both is None:
         return None
 
-    @njit(cache=True, nogil=True)
-    def kernel(g, GG, aW, bW, cW, pos, data):  # pragma: no cover - compiled
-        T, Q, n = g.shape[0], g.shape[1], g.shape[2]
-        m = 3 * n
-        ke = np.zeros(m * (m + 1) // 2)  # one element's upper entries, summed over its points
-        for t in range(T):
-            ke[:] = 0.0
-            for qp in range(Q):
-                a, b, c = aW[t, qp], bW[t, qp], cW[t, qp]
-                gt, Gt = g[t, qp], GG[t, qp]
-                e = 0
-                for p in range(m):
-                    A, i = p // 3, p % 3
-                    gai = gt[A, i]
-                    for q in range(p, m):
-                        B, k = q // 3, q % 3
-                        v = b * gai * gt[B, k] + c * gt[A, k] * gt[B, i]
-                        if i == k:
-                            v += a * Gt[A, B]
-                        ke[e] += v
-                        e += 1
-            for e in range(len(ke)):
-                j = pos[t, e]
-                if j >= 0:
-                    data[j] += ke[e]
+    def kernel(g, GG, aW, bW, cW, pos, data):
+        both(g, g, GG, aW, bW, cW, aW, aW, False, pos, data)  # f, dW, eW unread
 
     return kernel
 
@@ -89,13 +65,28 @@ def make_full_kernel():
     :func:`make_kernel`'s, plus ``dW f_ai f_bk + eW (f_ai g_bk + g_ai f_bk)`` with ``f`` the
     gradients mapped by ``F``; ``None`` when Numba is absent.
     """
+    both = _element_kernel()
+    if both is None:
+        return None
+
+    def kernel(g, f, GG, aW, bW, cW, dW, eW, pos, data):
+        both(g, f, GG, aW, bW, cW, dW, eW, True, pos, data)
+
+    return kernel
+
+
+@functools.cache
+def _element_kernel():
+    """The compiled kernel behind :func:`make_kernel` (``long`` False) and
+    :func:`make_full_kernel` (``long`` True); ``None`` when Numba is absent.
+    """
     try:
         from numba import njit  # deferred: compiles the FEM's kernels
     except ImportError:
         return None
 
     @njit(cache=True, nogil=True)
-    def kernel(g, f, GG, aW, bW, cW, dW, eW, pos, data):  # pragma: no cover - compiled
+    def kernel(g, f, GG, aW, bW, cW, dW, eW, long, pos, data):  # pragma: no cover - compiled
         T, Q, n = g.shape[0], g.shape[1], g.shape[2]
         m = 3 * n
         ke = np.zeros(m * (m + 1) // 2)  # one element's upper entries, summed over its points
@@ -107,12 +98,15 @@ def make_full_kernel():
                 e = 0
                 for p in range(m):
                     A, i = p // 3, p % 3
-                    gai, fai = gt[A, i], ft[A, i]
+                    gai = gt[A, i]
+                    fai = ft[A, i] if long else 0.0
                     for q in range(p, m):
                         B, k = q // 3, q % 3
-                        gbk, fbk = gt[B, k], ft[B, k]
-                        v = b * gai * gbk + c * gt[A, k] * gt[B, i] + d * fai * fbk
-                        v += h * (fai * gbk + gai * fbk)
+                        gbk = gt[B, k]
+                        v = b * gai * gbk + c * gt[A, k] * gt[B, i]
+                        if long:
+                            fbk = ft[B, k]
+                            v += d * fai * fbk + h * (fai * gbk + gai * fbk)
                         if i == k:
                             v += a * Gt[A, B]
                         ke[e] += v
