@@ -11,7 +11,9 @@ whole ``predict()`` (features, prior, network, envelope, the answer): the networ
 (its ``forward``, timed by hooks, the prior excluded), the share of ``predict()`` spent outside
 it, the network's floating-point work per scene (``torch.utils.flop_counter``: matrix products
 and convolutions) and the rate it achieves, against this CPU's fp32 matrix-product rate
-(a 1024 x 1024 product, the best of a few). The last column is batch 64's time per scene over
+(a 1024 x 1024 product, the best of a few). Each model first loads its compiled loops
+(``predictor.load_kernels()``: the GNN's subgraph kernel and fused processor steps), as an
+application answering many scenes does. The last column is batch 64's time per scene over
 batch 1's: below 1 a batch pays. With ``--compiled`` each learned model is measured again with
 its network compiled (``predictor.compile()``, :mod:`models.compiled`; the compile's seconds
 are printed). Targets: the default GNN at ``auto`` and batch 1 in at most
@@ -161,6 +163,7 @@ def main() -> None:
             except (TypeError, ValueError) as e:  # a model without fidelities
                 print(f"{name} at {fidelity}: {e}")
                 continue
+            p.load_kernels()  # many answers: as a loop or a viewer runs them
             work = flops(p, many[0])
             print(row(report(name, fidelity, p, many, args.repeat, work)))
             if args.compiled and p.name in ("gnn", "uv_unet"):  # a network to compile

@@ -266,6 +266,12 @@ class BasePredictor:
         """
         return 0
 
+    def load_kernels(self) -> None:
+        """Load whatever compiled code makes many answers faster (a loop, a viewer, an
+        evaluation), a cost of some tenths of a second once per process that a one-off answer
+        does not pay back; the answers stay the same. Nothing here by default.
+        """
+
     def missing(self, scene: Scene) -> int:
         """How many pieces (a linear FEM prior's columns) an answer to ``scene`` would compute
         before it answers: 0 when it answers at once, as by default.

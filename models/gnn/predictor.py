@@ -27,6 +27,7 @@ from models.features import (
     load_channels,
     near_objects,
 )
+from models.gnn import fused
 from models.gnn.network import MeshGraphNet, NormalisedGraphNet, Normaliser
 from models.gnn.subgraph import compiled, mesh, subgraph
 from models.learned import LearnedPredictor
@@ -65,11 +66,17 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         """The graph network itself (:class:`MeshGraphNet`): normalisers and prior stay eager."""
         return self.model.net
 
-    def compile(self, scene=None) -> float:
-        """As :meth:`LearnedPredictor.compile`; the subgraphs at fidelity ``auto`` come from
-        the compiled kernel from then on (:func:`models.gnn.subgraph.compiled`).
+    def load_kernels(self) -> None:
+        """The subgraphs at fidelity ``auto`` from the compiled kernel
+        (:func:`models.gnn.subgraph.compiled`) and the processor's steps fused
+        (:mod:`models.gnn.fused`), from then on.
         """
         compiled()
+        fused.kernels(load=True)
+
+    def compile(self, scene=None) -> float:
+        """As :meth:`LearnedPredictor.compile`, with :meth:`load_kernels` first."""
+        self.load_kernels()
         return super().compile(scene)
 
     def edge_features(self, part) -> np.ndarray:

@@ -107,6 +107,7 @@ def evaluate_dataset(
         raise ValueError(f"split {split!r} of {ds.folder} has no samples")
     part = ds.part
     seam = part.seam_vertices
+    predictor.load_kernels()  # many answers: the compiled loops pay
     rows, seconds, failed = [], [], []
     if not getattr(predictor, "batched", True):
         batch = 1  # the FEM: seconds a scene, and a solve may fail alone

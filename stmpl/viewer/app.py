@@ -150,6 +150,8 @@ class Viewer:
         self.thickness_mm = thickness_mm
         self._body = threading.Lock()  # the body, its thickness and tiles change together
         self._build_part()
+        for p in self.predictors.values():  # a viewer answers many presses: compiled loops
+            p.load_kernels()
         if prepare:  # columns ahead: no press waits for the linear FEM
             for p in self.predictors.values():
                 p.prepare(self.part, self.thickness, progress=progress)
