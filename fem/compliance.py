@@ -26,11 +26,13 @@ import time
 
 import numpy as np
 
+from fem.krylov import BLOCK
 from fem.local import patch
 from fem.material import material
 from fem.material import material as make_material
 from fem.simulate import resolution, tissue_mesh
 from fem.solver import Solver, SolverOptions
+from fem.verification import quarter_disk
 from stmpl.body.model import default_cache_dir
 from stmpl.files import atomic_savez
 from stmpl.part import BodyPart
@@ -221,6 +223,9 @@ def local_compliance(
 
 STORE_VERSION = 1
 
+_WARMED: set[str] = set()
+"""The FEM set-ups whose solves' compiled code :meth:`ColumnStore.warm` loaded in this process."""
+
 
 def fem_setup(config: dict) -> dict:
     """What a linear FEM of a dataset's tissue is solved with, from its ``config`` (or such a
@@ -334,6 +339,34 @@ class ColumnStore:
         _, done = self._level(level)
         cols = np.unique(np.asarray(columns, dtype=np.int64))
         return cols[~done[cols]]
+
+    def warm(self) -> float:
+        """Solve a few columns of a tiny flat patch with this store's FEM set-up, so that the
+        compiled code every solve runs (the assembly kernel of its laws, the block products of
+        the refinement) is loaded now, in the caller's thread. The first call of a compiled
+        kernel in a process holds Python's GIL for some tenths of a second while Numba loads it;
+        done by a solve in a background thread, that is a press answered that much later.
+        Returns the seconds it took (0 where a store of the same set-up was warmed in this
+        process).
+        """
+        setup = json.dumps(self.setup, sort_keys=True)
+        if setup in _WARMED:
+            return 0.0
+        t0 = time.perf_counter()
+        tiny = quarter_disk(np.linspace(0.0, 0.02, 5))  # 25 vertices, 2 cm
+        thickness = self.levels[0] if self.levels else 0.0075
+        compliance(
+            tiny,
+            thickness,
+            self.res,
+            self.material,
+            self.options,
+            columns=np.arange(BLOCK),
+            tissue=self.tissue,
+            phenotype=self.phenotype,
+        )
+        _WARMED.add(setup)
+        return time.perf_counter() - t0
 
     def ensure(self, level: int, columns, save: bool = True, progress=None) -> int:
         """Compute the missing ``columns`` at ``level`` (one patch around all of them); with

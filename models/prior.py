@@ -112,6 +112,14 @@ class LinearPrior:
             return self.normalised(base, force)
         return self.normalised(on_bodies(self, self.model.prior, thickness, force, body), force)
 
+    def load_kernels(self) -> None:
+        """The prior's solves' compiled code (:meth:`ComplianceOperator.load_kernels`), then the
+        rest of the predictor's.
+        """
+        if self.prior:
+            self.model.prior.load_kernels()
+        super().load_kernels()
+
     def prepare(self, part, thickness, progress: bool = True) -> int:
         """Solve the prior's columns at every vertex of ``part`` for tissue ``thickness``
         (:func:`prepare_operator`); 0 without the prior or with a stored operator.

@@ -46,6 +46,10 @@ class Responsive:
         self.errors: list[str] = []
         self._busy: threading.Thread | None = None
         self._lock = threading.Lock()
+        for p in (model, *self.stand_ins):  # many presses: compiled code loaded now, not by
+            load = getattr(p, "load_kernels", None)  # a background solve holding the GIL
+            if load is not None:  # (a predictor of the bare interface has none)
+                load()
 
     @property
     def preparing(self) -> bool:

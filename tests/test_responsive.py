@@ -111,3 +111,17 @@ def test_with_wait_the_model_answers_itself_where_no_stand_in_can():
     model = _Fake("model", ready=False)
     d = Responsive(model, _Fake("slow", ready=False), wait=True).predict(scene)
     assert d.info == {"predictor": "model"} and model.ready
+
+
+def test_the_model_and_its_stand_ins_load_their_compiled_code_before_the_first_press():
+    """A background solve that loads compiled code holds the GIL while a press waits (0.4-0.6 s
+    once per drag, measured by benchmarks/first_touch.py): a Responsive loads it first.
+    """
+    loaded = []
+
+    class Loading(_Fake):
+        def load_kernels(self):
+            loaded.append(self.name)
+
+    Responsive(Loading("model"), [Loading("quick"), _Fake("bare")])
+    assert loaded == ["model", "quick"]

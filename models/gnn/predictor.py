@@ -69,10 +69,12 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
     def load_kernels(self) -> None:
         """The subgraphs at fidelity ``auto`` from the compiled kernel
         (:func:`models.gnn.subgraph.compiled`) and the processor's steps fused
-        (:mod:`models.gnn.fused`), from then on.
+        (:mod:`models.gnn.fused`), from then on; and the linear prior's solves
+        (:meth:`models.prior.LinearPrior.load_kernels`).
         """
         compiled()
         fused.kernels(load=True)
+        super().load_kernels()
 
     def compile(self, scene=None) -> float:
         """As :meth:`LearnedPredictor.compile`, with :meth:`load_kernels` first."""

@@ -90,6 +90,14 @@ class ComplianceOperator(nn.Module):
     def on_demand(self) -> bool:
         return self.store is not None
 
+    def load_kernels(self) -> None:
+        """On demand: the compiled code of the store's solves loaded now
+        (:meth:`fem.compliance.ColumnStore.warm`), not by the first column solved in a
+        background thread while a press waits; a stored operator solves nothing.
+        """
+        if self.on_demand:
+            self.store.warm()
+
     @property
     def ready(self) -> bool:
         return len(self.levels) > 0 and (self.on_demand or self.index.shape[1] > 0)

@@ -78,6 +78,12 @@ class LinearPredictor(LearnedPredictor):
     def restored(self) -> None:
         reattach(self, self.model)
 
+    def load_kernels(self) -> None:
+        """The compiled code of the operator's solves on demand
+        (:meth:`ComplianceOperator.load_kernels`).
+        """
+        self.model.load_kernels()
+
     def missing(self, scene) -> int:
         """The operator's columns ``scene`` loads that are not yet solved (0 when stored)."""
         return missing_columns(self, self.model, scene)

@@ -116,6 +116,23 @@ def test_column_store_computes_once_and_reads_its_cache(part, G, tmp_path, monke
     assert ColumnStore(part, setup, [0.008]).missing(0, [50]).tolist() == [50]
 
 
+def test_a_warmed_store_solved_nothing_of_its_own_and_warms_once(part, tmp_path, monkeypatch):
+    """:meth:`ColumnStore.warm` runs the set-up's solve on a tiny patch (its compiled code
+    loaded in the caller's thread), once per set-up and process, and leaves the store and its
+    cache as they were.
+    """
+    from fem import compliance as mod
+
+    monkeypatch.setenv("STMPL_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(mod, "_WARMED", set())
+    setup = {"material": {"name": "neo_hookean", "E": 1000.0, "nu": 0.4}, "resolution": RES}
+    store = mod.ColumnStore(part, setup, [0.008])
+    assert store.warm() > 0 and store.computed == 0 and not store.path(0).exists()
+    assert mod.ColumnStore(part, setup, [0.008]).warm() == 0.0
+    other = {**setup, "material": {"name": "neo_hookean", "E": 2000.0, "nu": 0.4}}
+    assert mod.ColumnStore(part, other, [0.008]).warm() > 0
+
+
 def test_a_layered_tissue_s_operator_is_its_fem_s_tangent_at_rest(part):
     """The forearm preset's linear FEM (skin, fat and muscle meshed as the FEM meshes them): a
     press on one vertex answered by its column differs from the layered FEM's answer by an
