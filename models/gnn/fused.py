@@ -16,7 +16,7 @@ largest output).
 
 Used only for inference (no gradients, module in eval mode, CPU tensors) and only once Numba
 is loaded (:func:`kernels`): importing it costs a process about half a second, which a one-off
-answer does not pay back. :meth:`models.gnn.predictor.GNNPredictor.compile` loads it.
+answer does not pay back. :meth:`models.gnn.predictor.GNNPredictor.load_kernels` loads it.
 """
 
 from __future__ import annotations

@@ -156,9 +156,8 @@ class MeshGraphNet(nn.Module):
         at three steps.
         """
         h = _mlp(x, self.node_encoder)
-        if not self.training and fused.usable(
-            h
-        ):  # inference with the compiled loops: the same steps, fewer passes
+        # inference with the compiled loops (once loaded): the same steps, fewer passes
+        if not self.training and fused.usable(h):
             return _mlp(fused.processor(self.processor, h, e, edge_index, sizes), self.decoder)
         for s, block in enumerate(self.processor):
             if sizes is None:
