@@ -66,7 +66,10 @@ def _edge_out(y, e, gamma, beta, eps, i, agg):
 
 
 def _node_out(y, h, gamma, beta, eps):
-    """``y[k] <- h[k] + LN(y[k])`` in place; ``y`` ``(n, L)``, ``h`` ``(>= n, L)``."""
+    """``y[k] <- h[k] + LN(y[k])`` in place; ``y`` ``(n, L)``, ``h`` ``(>= n, L)``. (The
+    :func:`_edge_out` loop without its sum: one loop with a flag for the sum ran 2.7 times
+    slower, its inner loop no longer vectorised.)
+    """
     L = y.shape[1]
     for k in range(y.shape[0]):
         s = 0.0
