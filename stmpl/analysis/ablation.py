@@ -32,18 +32,15 @@ from tqdm import tqdm
 from stmpl import config as checked
 from stmpl.analysis import stability
 from stmpl.analysis.ablation_sets import Remade, datasets, ready
-from stmpl.analysis.tables import HONESTY, PAPER, TITLES, table
+from stmpl.analysis.report import POOLED, write
 from stmpl.files import atomic_write_text
-from stmpl.machine import describe
-from stmpl.metrics import honesty, pooled
+from stmpl.metrics import pooled
 from stmpl.pipeline.evaluate import evaluate_dataset, scenes_of
 from stmpl.pipeline.spec import key as spec_key
 from stmpl.pipeline.spec import predictor_from_spec
 from stmpl.pipeline.train import read_config as read_train
 from stmpl.pipeline.train import train
 from stmpl.predictor import ImpossibleAnswer, OutsideEnvelope
-from stmpl.table import markdown
-from stmpl.viz.chart import speed_accuracy
 
 DEFAULTS = {
     "name": None,
@@ -57,8 +54,6 @@ DEFAULTS = {
     "runs": None,  # training runs (default runs/ablation-<name>)
     "batch": 64,
 }
-POOLED = "pooled out of distribution"
-"""Table 2's row of a set-up over every out-of-distribution set together (as the paper's)."""
 SETUP_KEYS = {
     "name",
     "train",
@@ -190,6 +185,10 @@ def _training_config(setup: dict, cfg: dict, ds, seed: int | None = None) -> dic
     return read_train(t)
 
 
+CHART_EVERY = 60.0
+"""Seconds between redrawing the report's chart while a run goes on (drawing it takes some;
+the last set-up's report always has it)."""
+
 REMADE_TOLERANCE = {"rel_mee": 0.005, "peak_err": 0.05}
 """How far (percentage points) a cached set-up may measure differently on a dataset made again
 for its results to stand: under half the last digit the tables print (rel. MEE to 0.01, peak
@@ -296,7 +295,7 @@ def run(config, progress: bool = True, accept_remade: bool = False) -> dict:
     tables: dict = {"table1": {}, "table2": {}, "table3": {}}
     points = []
     cost = {"train": 0.0, "evaluate": 0.0, "wall": 0.0}  # seconds; what the report cost
-    t_run = time.perf_counter()
+    t_run = drawn = time.perf_counter()
 
     def save():
         atomic_write_text(cache_path, json.dumps(cache, indent=1, sort_keys=True))
@@ -336,7 +335,10 @@ def run(config, progress: bool = True, accept_remade: bool = False) -> dict:
         if bar is not None:
             bar.update(1)
         cost["wall"] = time.perf_counter() - t_run
-        _write(cfg, tables, out, points, remade, cost)  # the report so far
+        # the report so far; its chart (seconds to draw) at the end, or once a minute
+        chart = s is cfg["setups"][-1] or time.perf_counter() - drawn > CHART_EVERY
+        write(cfg, tables, out, points, remade, cost, chart)
+        drawn = time.perf_counter() if chart else drawn
     if bar is not None:
         bar.close()
     return {"tables": tables, "out": out, "points": points}
@@ -434,21 +436,6 @@ def _latency(p, ds, repeats: int = 5) -> dict:
     return {"1": one, str(len(scenes)): many}
 
 
-def _speed_row(p: dict) -> list[str]:
-    """A row of the report's speed table."""
-    ms = f"{1e3 * p['seconds']:.3g}"
-    if p.get("spread"):
-        ms += f" ({1e3 * p['spread'][0]:.3g}-{1e3 * p['spread'][1]:.3g})"
-    if p.get("truth"):
-        return [p["label"], str(p["batch"]), ms, "the truth", "the truth", "–"]
-
-    def err(e):
-        return "–" if e is None else f"{e['rel_mee']:.2f} ± {e['ci']:.2f}"
-
-    peak = "–" if p["out"] is None else f"{p['out']['peak_err']:+.1f}"
-    return [p["label"], str(p["batch"]), ms, err(p["in"]), err(p["out"]), peak]
-
-
 def _evaluated(model, model_key: str, ds, thick, cfg: dict, s: dict, cache: dict, save) -> dict:
     """``model``'s evaluation on ``ds``'s test split (thicknesses ``thick``), from the cache
     or measured and cached (``save`` writes the cache).
@@ -517,83 +504,3 @@ def _pooled(rows: list) -> dict | None:
 def _open(spec: str, fidelity: str = "full"):
 
     return predictor_from_spec(spec, fidelity=fidelity)
-
-
-def _write(
-    cfg,
-    tables,
-    out: pathlib.Path,
-    points: list,
-    remade: dict | None = None,
-    cost: dict | None = None,
-) -> None:
-
-    parts = [
-        f"# Ablation: {cfg['name']}\n",
-        "Datasets: "
-        + ", ".join(f"{n} ({d['folder']})" for n, d in cfg["datasets"].items())
-        + f". Machine: {describe()}. Errors in mm on the vertices that move more "
-        "than 0.001 mm, mean ± std over samples; rel. MEE against each sample's largest "
-        "displacement; peak err: predicted against true largest displacement, signed. "
-        "Rows in italics are the paper's as reported (its data, not ours).\n",
-    ]
-    if cost:
-        parts.append(
-            f"Compute behind this report: training {cost['train'] / 60:.0f} min, "
-            f"evaluation {cost['evaluate'] / 60:.0f} min (summed over the runs that "
-            f"made the cached results); this run took {cost['wall'] / 60:.1f} min, "
-            "the rest came from the cache.\n"
-        )
-    for n, v in (remade or {}).items():
-        parts.append(
-            f"Dataset {n} was made again (content hash {v['hash']}, not the recorded "
-            f"one): {v['checked_with']} measures {v['rel_mee'][1]:.4f} % / "
-            f"{v['peak_err'][1]:+.2f} % on it against {v['rel_mee'][0]:.4f} % / "
-            f"{v['peak_err'][0]:+.2f} % on the recorded set ({v['samples'][1]} test "
-            "samples), so the rows measured on the recorded set stand; rows measured "
-            "since are on the remade one.\n"
-        )
-    for k, rows in tables.items():
-        if not rows:
-            continue
-        paper = PAPER[k]
-        atomic_write_text(out / f"{k}.md", table(rows, paper))
-        atomic_write_text(out / f"{k}.csv", table(rows, paper, "csv"))
-        parts.append(f"## {TITLES[k]}\n\n" + table(rows, paper))
-    judged = {**tables.get("table1", {}), **tables.get("table2", {})}
-    judged = {k: v for k, v in judged.items() if not k.endswith(f" / {POOLED}")}
-    if judged:
-        parts.append(HONESTY + honesty(judged))
-    if points:
-        speed_accuracy(
-            [p for p in points if p.get("chart", True)],
-            out / "speed_accuracy",
-            f"Speed against accuracy ({cfg['name']}): lower left is better",
-        )
-        speeds = markdown(
-            [
-                "set-up",
-                "batch",
-                "ms/scene (quartiles)",
-                "rel. MEE % in distribution",
-                "OOD rel. MEE %",
-                "OOD peak err %",
-            ],
-            [_speed_row(p) for p in points],
-            "lrrrrr",
-        )
-        parts.insert(
-            2 + bool(cost),
-            "## Speed against accuracy\n\n![speed against accuracy]"
-            "(speed_accuracy.png)\n\nTime per scene on this machine at batch 1 and "
-            "64: the median over repeats, the bars its quartiles (the FEM: 3 scenes solved "
-            "one at a time, from rest). Error: the relative MEE in distribution and pooled "
-            "over the out-of-distribution test sets, the bars the 95 % interval of its mean "
-            "over the test scenes (rel. MEE ± that half-width below). Circles are batch 1, "
-            "squares batch 64, each with its own Pareto front. The FEM at the mesh the data "
-            "was made at is the truth (no error of its own) and sits on the panels' floor "
-            "with the paper's FEM time (its CPU, one thread, as reported); the star is the "
-            "paper's reported UV-UNet (its GPU, its data), a reference, not our "
-            "measurement.\n\n" + speeds,
-        )
-    atomic_write_text(out / "ablation.md", "\n".join(parts))

@@ -95,18 +95,26 @@ def test_tables_rows_and_the_cache(config, tmp_path, monkeypatch):
 
 
 def test_a_setup_off_the_chart_stays_in_the_tables(config, monkeypatch):
-    """``chart: false``: measured and tabled (its latency too), but not drawn on the chart."""
+    """``chart: false``: measured and tabled (its latency too), but not drawn on the chart; the
+    chart is drawn at the last set-up, and after others only once ``CHART_EVERY`` has passed.
+    """
     drawn = []
     monkeypatch.setattr(
-        "stmpl.analysis.ablation.speed_accuracy",
+        "stmpl.analysis.report.speed_accuracy",
         lambda pts, *a, **k: drawn.append({p["label"] for p in pts}),
     )
     config["setups"][1]["chart"] = False
     config["setups"] = config["setups"][:2]
+    monkeypatch.setattr(ablate, "CHART_EVERY", 1e9)  # the chart once, at the last set-up
     res = ablate.run(config, progress=False)
     assert "Naive: only 5 mm" in res["tables"]["table1"]
     assert {p["label"] for p in res["points"]} == {"Naive", "Naive: only 5 mm"}
-    assert drawn and drawn[-1] == {"Naive"}
+    assert drawn == [{"Naive"}]
+    monkeypatch.setattr(ablate, "CHART_EVERY", 0.0)  # a slow run: after every set-up
+    config["setups"][0]["epochs"] = 5  # (a new run, not the cache's)
+    drawn.clear()
+    ablate.run(config, progress=False)
+    assert drawn == [{"Naive"}, {"Naive"}]
 
 
 def test_the_truth_is_timed_and_drawn_but_not_measured(config, monkeypatch):
@@ -115,7 +123,7 @@ def test_the_truth_is_timed_and_drawn_but_not_measured(config, monkeypatch):
     """
     drawn = []
     monkeypatch.setattr(
-        "stmpl.analysis.ablation.speed_accuracy", lambda pts, *a, **k: drawn.append(pts)
+        "stmpl.analysis.report.speed_accuracy", lambda pts, *a, **k: drawn.append(pts)
     )
     config["setups"] = [config["setups"][0], {**config["setups"][2], "truth": True}]
     res = ablate.run(config, progress=False)
