@@ -16,7 +16,9 @@ and convolutions) and the rate it achieves, against this CPU's fp32 matrix-produ
 application answering many scenes does. The last column is batch 64's time per scene over
 batch 1's: below 1 a batch pays. With ``--compiled`` each learned model is measured again with
 its network compiled (``predictor.compile()``, :mod:`models.compiled`; the compile's seconds
-are printed). Targets: the default GNN at ``auto`` and batch 1 in at most
+are printed). A kind with a NumPy inference (the GNN; ``stmpl simulate`` answers with it) is
+measured that way too, in a row of its own (its products use NumPy's BLAS threads, set by
+``OMP_NUM_THREADS``, not ``--threads``). Targets: the default GNN at ``auto`` and batch 1 in at most
 1 ms, the UV-UNet in at most 2 ms; at batch 64 a quarter of batch 1's time per scene. Run it
 alone: the times are wall-clock.
 """
@@ -26,6 +28,7 @@ from __future__ import annotations
 import argparse
 import time
 import warnings
+from importlib.metadata import entry_points
 
 import numpy as np
 import torch
@@ -34,10 +37,13 @@ from torch.utils.flop_counter import FlopCounterMode
 from stmpl import AnnyBody, Scene, loads, tissue
 from stmpl.machine import describe
 from stmpl.pipeline import zoo
+from stmpl.predictor import NUMPY as NUMPY_GROUP
 from stmpl.predictor import ImpossibleAnswer, OutsideEnvelope
 from stmpl.table import header, row
 
 DEFAULT = ["gnn_arm_bodies", "uv_unet_arm_bodies", "linear_arm_fine", "naive_arm_fine"]
+NUMPY = {ep.name for ep in entry_points(group=NUMPY_GROUP)}
+"""The kinds with a NumPy inference (``engine="numpy"``), measured beside their torch rows."""
 
 
 def scenes(arm, n: int, seed: int = 0) -> list[Scene]:
@@ -166,6 +172,9 @@ def main() -> None:
             p.load_kernels()  # many answers: as a loop or a viewer runs them
             work = flops(p, many[0])
             print(row(report(name, fidelity, p, many, args.repeat, work)))
+            if p.name in NUMPY:  # the same model answered with NumPy alone (no torch)
+                q = zoo.read(name, fidelity=fidelity, engine="numpy")
+                print(row(report(name, f"{fidelity}, NumPy", q, many, args.repeat, work)))
             if args.compiled and p.name in ("gnn", "uv_unet"):  # a network to compile
                 seconds = p.compile(many[0])
                 label = f"{fidelity}, compiled ({seconds:.0f} s)"
@@ -182,12 +191,13 @@ def report(name: str, label: str, p, many: list[Scene], repeat: int, work: float
         one = measure(p, many[:1], repeat)
         lots = measure(p, many, max(3, repeat // 6))
     net = one["network"]
+    timed = hasattr(p, "model")  # a torch network, timed by hooks
     return [
         name,
         label,
         f"{1e3 * one['seconds']:.2f}",
-        f"{1e3 * net:.2f}",
-        f"{100 * (1 - net / one['seconds']):.0f} %",
+        f"{1e3 * net:.2f}" if timed else "-",
+        f"{100 * (1 - net / one['seconds']):.0f} %" if timed else "-",
         f"{work / 1e6:.1f}",
         f"{work / net / 1e9:.1f}" if net > 0 else "-",
         f"{1e3 * lots['seconds']:.2f}",

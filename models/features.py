@@ -23,6 +23,11 @@ PRIOR_SCALE = 0.1
 """The linear prior's displacement as an input, in the units of a model's ``raw`` output over
 this (with ``per_newton`` and 20 mm/N, 0.1 is 2 mm/N)."""
 
+CORRECTION_SCALE = 0.05
+"""On top of a prior the network's output is a correction in units of this share of ``raw``'s:
+corrections are a few per cent of the answer, and at full scale Adam's first steps would throw
+the prediction far from the prior before it learned anything (:mod:`models.prior`)."""
+
 MIN_TOTAL_N = 1e-9
 """N: below this total force a scene is unloaded; a per-newton model's inputs are then zero."""
 

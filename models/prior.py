@@ -8,6 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from fem.compliance import ColumnStore
+from models.features import CORRECTION_SCALE
 from models.linear.operator import (
     ComplianceOperator,
     check_operator,
@@ -24,10 +25,6 @@ PRIORS = ("none", "linear", "contact")
 """``linear``: the linear FEM's answer to the force (:class:`LinearPrior`); ``contact``: of a
 model given a pose, the skin inside the objects moved out to their surface
 (:meth:`~models.learned.LearnedPredictor.contact_base`)."""
-CORRECTION_SCALE = 0.05
-"""On top of the prior the network's output is a correction in units of this share of ``raw``'s:
-corrections are a few per cent of the answer, and at full scale Adam's first steps would throw
-the prediction far from the prior before it learned anything."""
 
 PRESSURE_START = 0.1
 """A pose model's contact pressure before it has learned (units of 10 kPa: 1 kPa, a light

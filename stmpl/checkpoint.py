@@ -101,6 +101,18 @@ def read(path) -> tuple[dict, dict]:
     """
     from safetensors.torch import load_file  # deferred: checkpoints only (torch)
 
+    return load_file(str(checked(path))), read_sidecar(path)
+
+
+def read_arrays(path) -> tuple[dict, dict]:
+    """:func:`read` with NumPy arrays for the tensors: no torch imported."""
+    from safetensors.numpy import load_file  # deferred: checkpoints only
+
+    return load_file(str(checked(path))), read_sidecar(path)
+
+
+def checked(path) -> pathlib.Path:
+    """``path`` once its sidecar's digest and the tensor file's size and SHA-256 are checked."""
     path = pathlib.Path(path)
     meta = read_sidecar(path)
     size = path.stat().st_size
@@ -111,4 +123,4 @@ def read(path) -> tuple[dict, dict]:
         )
     if sha256(path) != meta.get("sha256"):
         raise ValueError(f"checkpoint {path} does not match its SHA-256 (tampered or corrupt)")
-    return load_file(str(path)), meta
+    return path

@@ -94,13 +94,32 @@ def create(name: str, *args, **kwargs) -> "BasePredictor":
     return get(name)(*args, **kwargs)
 
 
-def read(path, device: str = "cpu", **options) -> "BasePredictor":
+NUMPY = "stmpl.numpy"
+"""Entry points of the predictors' NumPy inference, by kind: a trained model answered without
+its training library (torch), for one-off answers that should not pay its import."""
+
+ENGINES = ("default", "numpy", "auto")
+"""How :func:`read` answers a checkpoint: with its kind's own class, with the kind's NumPy
+inference (refused for a kind that has none), or the NumPy one where the kind has it and the
+device is the CPU."""
+
+
+def read(path, device: str = "cpu", engine: str = "default", **options) -> "BasePredictor":
     """A trained predictor from its checkpoint file (the checkpoint names its kind);
-    ``options`` (e.g. ``fidelity``) go to its constructor.
+    ``engine``: one of :data:`ENGINES`; ``options`` (e.g. ``fidelity``) go to its constructor.
     """
+    if engine not in ENGINES:
+        raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
     kind = read_sidecar(path)["kind"]
     if kind not in names():
         raise ValueError(f"checkpoint {path} is of unknown kind {kind!r}; known: {names()}")
+    light = {ep.name: ep for ep in entry_points(group=NUMPY)}
+    if engine == "numpy" and kind not in light:
+        raise ValueError(f"a {kind} model has no NumPy inference; those that do: {sorted(light)}")
+    if engine == "numpy" or (engine == "auto" and kind in light and device == "cpu"):
+        cls = light[kind].load()
+        cls.name = kind
+        return cls.from_checkpoint(path, device=device, **options)
     return get(kind).from_checkpoint(path, device=device, **options)
 
 

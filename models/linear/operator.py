@@ -23,6 +23,7 @@ from fem.config import read_config
 from fem.material import material
 from fem.placements import make_load, plan
 from fem.solver import SolverOptions
+from models.linear.columns import covers, grown_levels, interpolation, on_demand_answer
 from stmpl.body.model import default_cache_dir
 from stmpl.files import atomic_savez
 
@@ -120,34 +121,14 @@ class ComplianceOperator(nn.Module):
         return torch.from_numpy(interpolation(levels, t)).to(thickness.device)
 
     def grow(self, thickness: np.ndarray) -> np.ndarray:
-        """The levels ``(L,)`` m (float32) that interpolate ``thickness`` ``(B, N)`` m: on
-        demand, with :attr:`exact` a uniform layer's thickness added as a level and with
-        :attr:`extend` one beyond the levels; otherwise ``ValueError`` for a thickness outside
-        them.
+        """The levels ``(L,)`` m (float32) that interpolate ``thickness`` ``(B, N)`` m
+        (:func:`models.linear.columns.grown_levels` with :attr:`exact` and :attr:`extend`); a
+        level added is kept.
         """
-        if len(self.levels) == 0:
-            raise RuntimeError("the compliance operator is empty; fit the predictor first")
-        t = np.asarray(thickness, dtype=np.float32)
-        lv = self.levels.cpu().numpy()
-        new = []
-        if self.on_demand and self.exact and t.size:
-            lo_row, hi_row = t.min(-1), t.max(-1)
-            uniform = np.unique(lo_row[(hi_row - lo_row) <= 1e-9 * np.maximum(hi_row, 1e-3)])
-            new = [x for x in uniform if not (np.abs(lv - x) <= 1e-9).any()]
-        lo, hi = float(min([lv[0], *new])), float(max([lv[-1], *new]))
-        tmin, tmax = float(t.min()), float(t.max())
-        tol = 1e-6 * hi
-        beyond = [x for x in (tmin, tmax) if x < lo - tol or x > hi + tol]
-        if beyond and not (self.on_demand and self.extend):
-            raise ValueError(
-                f"thickness {tmin * 1e3:.3g}..{tmax * 1e3:.3g} mm lies outside the "
-                f"operator's levels {lo * 1e3:g}..{hi * 1e3:g} mm (the linear FEM "
-                "was computed there; a linear model with wider levels_mm covers "
-                "more)"
-            )
-        new = sorted(set(new) | set(beyond))
-        if new:
-            lv = np.sort(np.concatenate([lv, np.asarray(new, np.float32)]))
+        lv = grown_levels(
+            self.levels.cpu().numpy(), thickness, self.on_demand, self.exact, self.extend
+        )
+        if len(lv) != len(self.levels):
             self.levels = torch.as_tensor(lv, device=self.levels.device)
         return lv
 
@@ -193,53 +174,14 @@ class ComplianceOperator(nn.Module):
         return u.T.reshape(B, N, 3)
 
     def _on_demand(self, thickness: torch.Tensor, force: torch.Tensor) -> torch.Tensor:
-        """:meth:`forward` from the store's columns: only the loaded vertices' thickness is
-        interpolated, and each scene's answer is one weighted sum of its loaded columns per
-        level (the columns of the whole batch solved first, one patch per level).
+        """:meth:`forward` from the store's columns
+        (:func:`models.linear.columns.on_demand_answer`).
         """
-        B, N = force.shape
-        if N != self.store.part.n_vertices:
-            raise ValueError(
-                f"the operator covers {self.store.part.n_vertices} vertices, the input {N}"
-            )
         t = thickness.detach().cpu().numpy().astype(np.float32, copy=False)
-        levels = self.grow(t)
         f = force.detach().cpu().numpy().astype(np.float32, copy=False)
-        terms: dict[int, list] = {}  # level -> [(scene, columns, weighted forces)]
-        for b in range(B):
-            cols = np.flatnonzero(f[b])
-            if len(cols) == 0:
-                continue
-            w = interpolation(levels, t[b, cols])  # (K, L)
-            for lv in np.flatnonzero(w.any(0)):
-                fw = f[b, cols] * w[:, lv]
-                keep = fw != 0
-                if keep.any():
-                    terms.setdefault(int(lv), []).append((b, cols[keep], fw[keep]))
-        u = np.zeros((B, N, 3), np.float32)
-        for lv, rows in terms.items():
-            at = self.store.level(float(levels[lv]))
-            self.store.ensure(at, np.concatenate([c for _, c, _ in rows]))  # one patch
-            for b, cols, fw in rows:
-                u[b] += self.store.combination(at, cols, fw)
+        covers(self.store.part.n_vertices, f.shape[1])  # before a level is grown for it
+        u = on_demand_answer(self.store, self.grow(t), t, f)
         return torch.from_numpy(u).to(force.device)
-
-
-def interpolation(levels: np.ndarray, t: np.ndarray) -> np.ndarray:
-    """``(..., L)`` float32 weights of thicknesses ``t`` ``(...)`` m over ``levels`` ``(L,)``
-    (rising): linear between the two levels around each thickness (one level: weight 1).
-    """
-    L = len(levels)
-    w = np.zeros((*np.shape(t), L), np.float32)
-    if L == 1:
-        w[...] = 1.0
-        return w
-    t = np.clip(t, levels[0], levels[-1])  # only rounding (checked by grow)
-    k = np.clip(np.searchsorted(levels, t), 1, L - 1)
-    a = ((t - levels[k - 1]) / (levels[k] - levels[k - 1])).astype(np.float32)
-    np.put_along_axis(w, (k - 1)[..., None], (1 - a)[..., None], -1)
-    np.put_along_axis(w, k[..., None], a[..., None], -1)
-    return w
 
 
 def cache_dir() -> pathlib.Path:

@@ -2,8 +2,3 @@
 The network (:mod:`models.uv_unet.network`) knows no physics; the predictor
 (:mod:`models.uv_unet.predictor`) builds its images, its prior and its envelope.
 """
-
-from models.uv_unet.network import UNet
-from models.uv_unet.predictor import UVUNetPredictor
-
-__all__ = ["UNet", "UVUNetPredictor"]

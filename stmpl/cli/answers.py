@@ -40,6 +40,7 @@ def predictors(args, specs: list[str]) -> list:
             tissue=tissue,
             phenotype=phenotype_of(args),
             friction=args.friction,
+            engine=getattr(args, "engine", "default"),
         )
 
     fem = [spec == "fem" or spec.startswith("fem:") for spec in specs]

@@ -233,8 +233,8 @@ def fem_options(parser) -> None:
 
 
 def model_options(parser, default: str) -> None:
-    """``--model`` (repeatable), ``--subdivide``, ``--compare``, the fidelity, the device and
-    the FEM's options: what predicts a scene, and what checks it.
+    """``--model`` (repeatable), ``--subdivide``, ``--compare``, the fidelity, the device, the
+    engine and the FEM's options: what predicts a scene, and what checks it.
     """
     parser.add_argument(
         "--model",
@@ -259,6 +259,14 @@ def model_options(parser, default: str) -> None:
     )
     fidelity_option(parser)
     device_option(parser)
+    parser.add_argument(
+        "--engine",
+        default="auto",
+        choices=("auto", "default", "numpy"),
+        help="what runs a learned model: auto (default) answers with its NumPy inference on "
+        "the CPU where it has one (the GNN: the same answers without importing torch, a "
+        "second or more saved), default with torch, numpy with NumPy or not at all",
+    )
     fem_options(parser)
 
 

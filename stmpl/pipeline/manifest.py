@@ -6,6 +6,8 @@ extends it.
 
 from __future__ import annotations
 
+import copy
+import functools
 import json
 import os
 import pathlib
@@ -63,11 +65,23 @@ def names(path=None) -> list[str]:
 
 
 def entry(name: str, path=None) -> dict:
-    """The manifest entry of model ``name``."""
-    models = manifest(path)["models"]
+    """The manifest entry of model ``name`` (a copy: the manifest is read once per process
+    and version of the file, some megabytes of envelope evidence).
+    """
+    f = root(path) / MANIFEST
+    if not f.is_file():
+        manifest(path)  # says which folder has no manifest
+    stat = f.stat()
+    models = _read(str(f), stat.st_mtime_ns, stat.st_size)["models"]
     if name not in models:
         raise KeyError(f"no model {name!r} in the zoo at {root(path)}; it has {sorted(models)}")
-    return models[name]
+    return copy.deepcopy(models[name])
+
+
+@functools.lru_cache(maxsize=4)
+def _read(file: str, mtime_ns: int, size: int) -> dict:
+    """:func:`manifest` of the zoo folder of ``file``, kept for this version of the file."""
+    return manifest(pathlib.Path(file).parent)
 
 
 LABELS = {

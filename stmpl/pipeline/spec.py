@@ -20,6 +20,7 @@ def predictor_from_spec(
     tissue: str = "paper",
     phenotype: dict | None = None,
     friction: float = 0.0,
+    engine: str = "default",
     **options,
 ):
     """The predictor ``spec`` names (see the module docstring); ``res`` and ``levels`` are the
@@ -27,11 +28,12 @@ def predictor_from_spec(
     preset (its layers shaped by anny's ``phenotype``) and ``friction`` its Coulomb coefficient
     between a posed object and the skin; ``fidelity``
     (``full`` or ``auto``, :data:`stmpl.fidelity.FIDELITIES`) how much of the part it models;
-    ``options`` go to a learned model's constructor (e.g. ``region_tolerance``).
+    ``engine`` what runs a learned model (:data:`stmpl.predictor.ENGINES`); ``options`` go to
+    a learned model's constructor (e.g. ``region_tolerance``).
     """
     predictor.check_fidelity(fidelity)
     if spec.startswith("zoo:"):
-        return zoo.read(spec[4:], device=device, fidelity=fidelity, **options)
+        return zoo.read(spec[4:], device=device, fidelity=fidelity, engine=engine, **options)
     if spec == "fem" or spec.startswith("fem:"):
         res = spec.split(":", 1)[1] if ":" in spec else res
         return predictor.create(
@@ -44,7 +46,7 @@ def predictor_from_spec(
             friction=friction,
         )
     if pathlib.Path(spec).suffix == ".safetensors" or pathlib.Path(spec).exists():
-        return predictor.read(spec, device=device, fidelity=fidelity, **options)
+        return predictor.read(spec, device=device, fidelity=fidelity, engine=engine, **options)
     raise ValueError(
         f"unknown predictor {spec!r}: give fem, fem:<resolution>, zoo:<name> or a "
         ".safetensors checkpoint"

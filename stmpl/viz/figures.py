@@ -11,7 +11,6 @@ import pathlib
 import numpy as np
 
 from stmpl.part import BodyPart
-from stmpl.uv import uv_map
 
 
 def pyplot():
@@ -85,6 +84,8 @@ def draw_uv(
 ):
     """Show per-vertex ``values`` ``(N,)`` as the UV image a UV-UNet sees (chart only)."""
     import torch  # deferred: about a second to import; the core's types do not need it
+
+    from stmpl.uv import uv_map  # deferred: a torch module, for the UV chart's pictures only
 
     m = uv_map(part, size)
     img = m.rasterise(torch.tensor(np.array(values, float)[:, None])).numpy()[0]

@@ -110,15 +110,15 @@ def test_a_batch_answered_in_chunks_is_answered_as_one(name, fidelity, ds, make,
     """A batch bigger than a network call takes (:meth:`LearnedPredictor.chunk`) is answered
     chunk by chunk, in order, with the same answers as in one call.
     """
-    import models.learned
+    import models.trained
 
     p = make(name, ds).with_fidelity(fidelity)
     scenes = scenes_of(ds, "test", limit=5)[0]
-    monkeypatch.setattr(models.learned, "CHUNK_SCENES", 64)
-    monkeypatch.setattr(models.learned, "CHUNK_VERTICES", 64 * ds.part.n_vertices)
+    monkeypatch.setattr(models.trained, "CHUNK_SCENES", 64)
+    monkeypatch.setattr(models.trained, "CHUNK_VERTICES", 64 * ds.part.n_vertices)
     whole = [d.displacement for d in p.predict(scenes)]
-    monkeypatch.setattr(models.learned, "CHUNK_SCENES", 2)
-    monkeypatch.setattr(models.learned, "CHUNK_VERTICES", 2 * ds.part.n_vertices)
+    monkeypatch.setattr(models.trained, "CHUNK_SCENES", 2)
+    monkeypatch.setattr(models.trained, "CHUNK_VERTICES", 2 * ds.part.n_vertices)
     assert p.chunk() == 2
     for a, b in zip(p.predict(scenes), whole):
         np.testing.assert_allclose(a.displacement, b, rtol=1e-5, atol=1e-10)

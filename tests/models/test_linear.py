@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import torch
 
-from models.linear import ComplianceOperator
+from models.linear.operator import ComplianceOperator
 from stmpl import predictor
 from stmpl.metrics import sample_metrics
 from stmpl.pipeline.evaluate import scenes_of

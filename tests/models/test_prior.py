@@ -73,7 +73,7 @@ def test_a_batch_in_chunks_solves_its_columns_at_once(ds, tmp_path, monkeypatch)
     all its scenes first, one solve per level, not one per chunk; the answers are those of the
     batch in one call.
     """
-    import models.learned
+    import models.trained
 
     monkeypatch.setenv("STMPL_CACHE_DIR", str(tmp_path / "fit"))
     p = predictor.create(
@@ -87,7 +87,7 @@ def test_a_batch_in_chunks_solves_its_columns_at_once(ds, tmp_path, monkeypatch)
     whole = [d.displacement for d in p.predict(scenes)]
     monkeypatch.setenv("STMPL_CACHE_DIR", str(tmp_path / "empty"))  # nothing solved
     q = predictor.read(path)
-    monkeypatch.setattr(models.learned, "CHUNK_VERTICES", 2 * ds.part.n_vertices)
+    monkeypatch.setattr(models.trained, "CHUNK_VERTICES", 2 * ds.part.n_vertices)
     assert q.chunk() == 2 and all(q.missing(s) > 0 for s in scenes)
     answers = q.predict(scenes)
     op = q.model.prior
