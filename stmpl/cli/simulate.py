@@ -20,7 +20,6 @@ import pathlib
 import time
 
 import numpy as np
-import trimesh
 
 import stmpl.contact.pressing as contact
 from stmpl.body.spec import part_from_spec
@@ -32,8 +31,10 @@ from stmpl.contact.grips import GRIPS
 from stmpl.contact.hand import Hand, cached_grasp, palm_press
 from stmpl.contact.posing import gripped, posed
 from stmpl.files import atomic_write_text
+from stmpl.mesh import Mesh
 from stmpl.scene import Scene
-from stmpl.viz.figures import export_mesh, mesh_bytes, vertex_colors
+from stmpl.viz.figures import export_mesh, vertex_colors
+from stmpl.viz.meshfile import glb_bytes
 from stmpl.viz.render import contact_figure
 from stmpl.viz.verdict import facts
 
@@ -212,27 +213,33 @@ def run(args) -> int:
     return 0
 
 
-def _mesh(rigid) -> trimesh.Trimesh:
+def _mesh(rigid) -> Mesh:
     """A posed object (:class:`~stmpl.pose.Rigid`) as a mesh to draw."""
-    return trimesh.Trimesh(rigid.vertices, rigid.faces, process=False)
+    return Mesh(rigid.vertices, rigid.faces)
 
 
 def write_meshes(deformation, objects, base, about: dict | None = None) -> None:
-    """``base.glb``: the deformed part coloured by |u| with the objects in place; ``base.ply``:
-    the deformed part alone; both carry ``about`` (:func:`stmpl.viz.verdict.facts`).
+    """``base.glb``: the deformed part coloured by |u| with the objects (meshes in body
+    coordinates) in place, see-through; ``base.ply``: the deformed part alone; both carry
+    ``about`` (:func:`stmpl.viz.verdict.facts`).
     """
-    import trimesh  # deferred: object meshes and closest points only
-
     part, mag = deformation.scene.part, deformation.magnitude
     export_mesh(
         part, pathlib.Path(base).with_suffix(".ply"), mag, deformation.vertices, facts=about
     )
-    body = part.mesh(deformation.vertices)
-    body.visual.vertex_colors = vertex_colors(mag, "inferno")
-    world = trimesh.Scene()
-    world.add_geometry(body, node_name="body")
-    for k, m in enumerate(objects):
-        m = m.copy()
-        m.visual.face_colors = [150, 190, 255, 120]
-        world.add_geometry(m, node_name=f"object{k}")
-    pathlib.Path(base).with_suffix(".glb").write_bytes(mesh_bytes(world, "glb", about))
+    body = {
+        "name": "body",
+        "vertices": deformation.vertices,
+        "faces": part.faces,
+        "colors": vertex_colors(mag, "inferno"),
+    }
+    drawn = [
+        {"name": f"object{k}", "vertices": m.vertices, "faces": m.faces, "color": OBJECT_COLOR}
+        for k, m in enumerate(objects)
+    ]
+    about = {"stmpl": {str(k): v for k, v in (about or {}).items()}}
+    pathlib.Path(base).with_suffix(".glb").write_bytes(glb_bytes([body, *drawn], about))
+
+
+OBJECT_COLOR = (150, 190, 255, 120)
+"""RGBA of the pressing objects in the GLB: light blue, see-through."""

@@ -9,7 +9,6 @@ until the hand clears the skin. Its pose at a depth ``d`` is that hand closed ``
 from __future__ import annotations
 
 import numpy as np
-from trimesh.remesh import subdivide_loop
 
 from stmpl.contact.grips import GRIPS
 from stmpl.contact.hand import Hand, SkinDistance, grasp, kept_file
@@ -51,6 +50,8 @@ def closing_grip(
     near = grasp(part, hand, along, around, kind, depth=first)
     deep = _deepest(part, hand, along, around, kind, reach)
     reach = deep.depth
+    from trimesh.remesh import subdivide_loop  # deferred: object meshes and closest points only
+
     # Loop's subdivision is linear in the vertices: the smoothed path is the path smoothed
     closer, faces = subdivide_loop(near.vertices, near.faces, iterations=subdivisions)
     path, _ = subdivide_loop(

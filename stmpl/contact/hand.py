@@ -33,6 +33,7 @@ from stmpl.contact.grips import GRIPS
 from stmpl.contact.objects import surface_frame
 from stmpl.contact.pressing import Pressing, rotation_matrix
 from stmpl.files import atomic_savez
+from stmpl.mesh import Mesh
 from stmpl.part import BodyPart
 
 FINGERS = {"thumb": 1, "index": 2, "middle": 3, "ring": 4, "little": 5}
@@ -168,9 +169,9 @@ class Grasp:
 
     def pressing(self, total: float, name: str = "hand") -> Pressing:
         """The hand, already posed, as a :class:`~stmpl.contact.pressing.Pressing` of ``total``
-        N.
+        N (its mesh a :class:`stmpl.mesh.Mesh`: no trimesh to import).
         """
-        return Pressing(self.mesh(), np.eye(4), total, name)
+        return Pressing(Mesh(self.vertices, self.faces), np.eye(4), total, name)
 
 
 GRASP_CACHE = 1
@@ -240,15 +241,13 @@ def palm_press(
     point lies ``depth`` m inside the skin: a :class:`~stmpl.contact.pressing.Pressing` of ``total``
     N for a part that is not a limb (a belly), where :func:`grasp` has nothing to close around.
     """
-    import trimesh  # deferred: object meshes and closest points only
-
     if not (np.isfinite(depth) and 0 < depth < 0.01):
         raise ValueError(f"depth must lie in (0, 10) mm, got {depth * 1e3:g} mm")
     x = hand.vertices({f: OPEN_CURL for f in FINGERS})
     c, R = hand.frame()
     f, n = R[:, 0], R[:, 1]  # finger direction, out of the palm
     z = -n  # the palm faces the object's -z
-    mesh = trimesh.Trimesh((x - c) @ np.stack([f, np.cross(z, f), z], 1), hand.faces, process=False)
+    mesh = Mesh((x - c) @ np.stack([f, np.cross(z, f), z], 1), hand.faces)
     pose = surface_frame(part, uv=uv, spin=spin)
     normal = pose[:3, 2].copy()
     pose[:3, 3] -= float(mesh.vertices[:, 2].min()) * normal  # palm-most point on the skin

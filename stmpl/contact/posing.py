@@ -12,13 +12,13 @@ them along the way they press (:mod:`stmpl.contact.gap`; a closing grip: its sig
 from __future__ import annotations
 
 import numpy as np
-import trimesh
 
 from stmpl.contact import gap as along
 from stmpl.contact import objects
 from stmpl.contact.closing import cached_closing_grip, closed, closing_grip
 from stmpl.contact.hand import Hand
 from stmpl.contact.pressing import check_pose, distance_to_surface, winding_number
+from stmpl.mesh import Mesh
 from stmpl.part import BodyPart
 from stmpl.pose import GAP_REACH, Pose, Rigid
 from stmpl.scene import Scene
@@ -73,7 +73,10 @@ def posed(
     rigid, gap = [], np.full(part.n_vertices, GAP_REACH)
     for m, p, n in items:
         if not (hasattr(m, "vertices") and hasattr(m, "faces") and hasattr(m, "copy")):
-            raise TypeError(f"object {n!r}: the mesh must be a trimesh.Trimesh, got {type(m)}")
+            raise TypeError(
+                f"object {n!r}: the mesh must be a trimesh.Trimesh or stmpl.mesh.Mesh, got "
+                f"{type(m)}"
+            )
         P = np.eye(4) if p is None else check_pose(p)
         at = m.copy().apply_transform(P)
         if len(at.faces) == 0 or not np.isfinite(at.vertices).all():
@@ -109,7 +112,7 @@ def moved(scene: Scene, distance: float) -> Scene:
         step = distance * (o.path if pose.closing else pose.direction)
         r = Rigid(o.name, o.vertices + step, o.faces, o.path)
         rigid.append(r)
-        mesh = trimesh.Trimesh(r.vertices, r.faces, process=False)
+        mesh = Mesh(r.vertices, r.faces)
         gap = np.minimum(gap, _gap(scene.part, mesh, pose.direction))
     return Scene.posed(
         scene.part, scene.thickness, Pose(gap, pose.direction, tuple(rigid)), **scene.meta
@@ -141,7 +144,7 @@ def gripped(
     else:
         grip = cached_closing_grip(part, hand, "R", along, around, kind)
     grip = closed(grip, depth)
-    gap = _gap(part, trimesh.Trimesh(grip.vertices, grip.faces, process=False), None)
+    gap = _gap(part, Mesh(grip.vertices, grip.faces), None)
     return Scene.posed(part, thickness, Pose(gap, None, (grip,)), **meta)
 
 

@@ -27,6 +27,7 @@ from scipy.spatial import cKDTree
 
 from stmpl.geometry import closest_points
 from stmpl.loads import Load, _check_force, _check_total
+from stmpl.mesh import Mesh
 from stmpl.part import BodyPart
 
 SPLITS = ("equal", "area", "depth")
@@ -116,8 +117,9 @@ def read_mesh(path):
 
 @dataclass(frozen=True, eq=False)
 class Pressing:
-    """An object pressed on a part: ``mesh`` (a ``trimesh.Trimesh``, m, its own frame),
-    ``pose`` ``(4, 4)`` into body coordinates, ``total`` force (N) and a ``name``.
+    """An object pressed on a part: ``mesh`` (a ``trimesh.Trimesh`` or :class:`stmpl.mesh.Mesh`,
+    m, its own frame), ``pose`` ``(4, 4)`` into body coordinates, ``total`` force (N) and a
+    ``name``.
     """
 
     mesh: object
@@ -126,13 +128,14 @@ class Pressing:
     name: str = "object"
 
     def __post_init__(self) -> None:
-        import trimesh  # deferred: object meshes and closest points only
+        if not isinstance(self.mesh, Mesh):
+            import trimesh  # deferred: object meshes and closest points only
 
-        if not isinstance(self.mesh, trimesh.Trimesh):
-            raise TypeError(
-                f"object {self.name!r}: mesh must be a trimesh.Trimesh, got "
-                f"{type(self.mesh).__name__}"
-            )
+            if not isinstance(self.mesh, trimesh.Trimesh):
+                raise TypeError(
+                    f"object {self.name!r}: mesh must be a trimesh.Trimesh or stmpl.mesh.Mesh, "
+                    f"got {type(self.mesh).__name__}"
+                )
         m = self.mesh
         if len(m.faces) == 0 or not np.all(np.isfinite(m.vertices)):
             raise ValueError(f"object {self.name!r}: the mesh has no faces or non-finite vertices")

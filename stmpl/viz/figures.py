@@ -11,6 +11,7 @@ import pathlib
 import numpy as np
 
 from stmpl.part import BodyPart
+from stmpl.viz.meshfile import glb_bytes, ply_bytes
 
 
 def pyplot():
@@ -158,14 +159,13 @@ def mesh_bytes(mesh, fmt: str, facts: dict | None = None) -> bytes:
     data); in a PLY as ``comment stmpl KEY: VALUE`` header lines;
     in an OBJ as ``# stmpl`` lines.
     """
-    facts = {str(k): v for k, v in (facts or {}).items()}
     if fmt == "glb":
         import trimesh  # deferred: mesh files only
 
         scene = mesh if isinstance(mesh, trimesh.Scene) else trimesh.Scene(mesh)
-        scene.metadata["stmpl"] = facts
+        scene.metadata["stmpl"] = _facts(facts)
         return scene.export(file_type="glb")
-    lines = [f"stmpl {k}: {' '.join(str(v).split())}" for k, v in facts.items()]
+    lines = _comments(facts)
     data = mesh.export(file_type=fmt)
     data = data.encode() if isinstance(data, str) else data
     if fmt == "ply":  # comments go right after the format line
@@ -190,17 +190,38 @@ def export_mesh(
     (:func:`mesh_bytes`).
     """
     path = pathlib.Path(path)
-    if path.suffix.lower() not in (".ply", ".obj", ".glb"):
+    fmt = path.suffix.lower()[1:]
+    if fmt not in ("ply", "obj", "glb"):
         raise ValueError(f"mesh export supports .ply, .obj, .glb; got {path.suffix!r}")
-    mesh = part.mesh(vertices)
+    colors = None
     if values is not None:
         values = np.asarray(values, float)
         if values.shape != (part.n_vertices,):
             raise ValueError(f"values must have shape ({part.n_vertices},), got {values.shape}")
-        mesh.visual.vertex_colors = vertex_colors(values, cmap)
+        colors = vertex_colors(values, cmap)
+    v = part.vertices if vertices is None else np.asarray(vertices)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(mesh_bytes(mesh, path.suffix.lower()[1:], facts))
+    if fmt == "ply":
+        data = ply_bytes(v, part.faces, colors, _comments(facts))
+    elif fmt == "glb":
+        body = {"name": part.name, "vertices": v, "faces": part.faces, "colors": colors}
+        data = glb_bytes([body], {"stmpl": _facts(facts)})
+    else:
+        mesh = part.mesh(vertices)
+        if colors is not None:
+            mesh.visual.vertex_colors = colors
+        data = mesh_bytes(mesh, fmt, facts)
+    path.write_bytes(data)
     return path
+
+
+def _facts(facts: dict | None) -> dict:
+    return {str(k): v for k, v in (facts or {}).items()}
+
+
+def _comments(facts: dict | None) -> list[str]:
+    """``facts`` as a PLY's or OBJ's comment lines: ``stmpl KEY: VALUE``."""
+    return [f"stmpl {k}: {' '.join(str(v).split())}" for k, v in _facts(facts).items()]
 
 
 def prediction_figure(
