@@ -42,7 +42,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import brentq
 
 from stmpl.tissue import GEL_TRUSTED_COMPRESSION
 
@@ -566,6 +565,8 @@ def uniaxial(law, stretch: float) -> tuple[float, float]:
 
     def state(t):
         return law.stress(np.diag([stretch, t, t])[None].astype(float))[0]
+
+    from scipy.optimize import brentq  # deferred: root finding for a closed form only
 
     guess = stretch**-0.5  # incompressible
     lo, hi = guess / 1.2, guess * 1.2

@@ -42,6 +42,8 @@ HEAVY = {
     "imageio": "the viewer's screenshots",
     "meshio": "the .vtu export only",
     "skfem": "the reference assembly only",
+    "scipy.optimize": "root finding for a closed form only (a fifth of a second to import)",
+    "scipy.integrate": "quadrature for a closed form only (a tenth of a second to import)",
 }
 """Third-party libraries a function may import where it needs them, and why they wait."""
 
@@ -135,12 +137,17 @@ def _heavy(target: str) -> bool:
     """Whether importing ``target`` is heavy: a library of :data:`HEAVY`, or a module of ours
     that imports one at its top (``stmpl.uv``, a torch module).
     """
-    if target.split(".")[0] in HEAVY:
+    if _listed(target):
         return True
     ours = _internal(target)
     return ours is not None and any(
-        top and t.split(".")[0] in HEAVY for t, _, top in _imports(ours, MODULES[ours])
+        top and _listed(t) for t, _, top in _imports(ours, MODULES[ours])
     )
+
+
+def _listed(target: str) -> bool:
+    """Whether ``target`` is a library of :data:`HEAVY` or lies in one."""
+    return any(target == k or target.startswith(k + ".") for k in HEAVY)
 
 
 @pytest.mark.parametrize("module", sorted(MODULES))
