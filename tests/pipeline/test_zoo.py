@@ -61,6 +61,23 @@ def test_add_list_load_round_trip(zoo_dir):
         np.testing.assert_array_equal(a.displacement, b.displacement)
 
 
+def test_an_entry_is_a_copy_read_again_when_the_manifest_changes(zoo_dir):
+    """The manifest is parsed once per version of its file: an entry handed out is a copy (a
+    caller's change does not reach the next reader), and a rewritten manifest is read again.
+    """
+    folder, _, _ = zoo_dir
+    first = zoo.entry("unet_tiny", folder)
+    first["kind"] = "changed"
+    first["metrics"]["tiny"]["mee"][0] = -1.0
+    again = zoo.entry("unet_tiny", folder)
+    assert again["kind"] == "uv_unet" and again["metrics"]["tiny"]["mee"][0] > 0
+    path = folder / manifest.MANIFEST
+    m = json.loads(path.read_text())
+    m["models"]["unet_tiny"]["trained"]["machine"] = "another machine, a longer name"
+    path.write_text(json.dumps(m))
+    assert zoo.entry("unet_tiny", folder)["trained"]["machine"].startswith("another machine")
+
+
 def test_zoo_env_and_spec(zoo_dir, monkeypatch):
     folder, ds, _ = zoo_dir
     monkeypatch.setenv("STMPL_ZOO", str(folder))
