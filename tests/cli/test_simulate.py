@@ -131,6 +131,15 @@ def test_an_object_file_at_a_pose(tmp_path, capsys, arm):
     assert "--pose places an --object" in capsys.readouterr().err
 
 
+def test_the_engine_asked_for_a_model_that_has_none_is_refused_in_one_line(tmp_path, capsys):
+    """``--engine numpy`` answers with a model's NumPy inference or not at all."""
+    argv = ["simulate", "--engine", "numpy", "--model", "zoo:uv_unet_arm_bodies"]
+    assert main([*argv, "--out-dir", str(tmp_path)]) == 2
+    err = capsys.readouterr().err
+    assert "a uv_unet model has no NumPy inference; those that do: ['gnn']" in err
+    assert "Traceback" not in err and not (tmp_path / "simulate.png").exists()
+
+
 def test_a_press_past_the_envelope_is_said_and_a_failed_fem_is_one_line(tmp_path, capsys, arm):
     """5 N on a fingertip-sized patch: the GNN answers with a note that the scene lies outside
     its data and a warning that the answer is impossible; the FEM fails and says why in one
