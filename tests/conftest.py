@@ -101,6 +101,20 @@ def tiny_presses(tmp_path_factory):
     return out
 
 
+def pressed_ball(part, radius: float = 0.05, depth: float = 8e-3):
+    """A posed scene: a ball of ``radius`` (m; 5 cm spans several of the tube's 2 cm edges)
+    ``depth`` (m) into 7.5 mm of tissue at the vertex farthest from the part's rims.
+    """
+    from stmpl import tissue
+    from stmpl.contact import objects
+    from stmpl.contact.posing import posed
+
+    ball = objects.sphere(radius)
+    at = int(np.argmax(part.rim_distance))
+    pose = objects.press(part, ball, at, depth=depth)
+    return posed(part, tissue.constant(part, 0.0075), ball, pose)
+
+
 TINY_MODELS = {
     "naive": {},
     "linear": {},

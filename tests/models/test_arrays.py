@@ -13,10 +13,8 @@ import pytest
 import torch
 
 from stmpl import loads, predictor, tissue
-from stmpl.contact import objects
-from stmpl.contact.posing import posed
 from stmpl.scene import Scene
-from tests.conftest import TINY_MODELS
+from tests.conftest import TINY_MODELS, pressed_ball
 
 VARIANTS = {
     "force": {},
@@ -99,14 +97,7 @@ def test_a_pose_model_answers_its_pressures_and_reaction_as_torch_does(
     torch.manual_seed(0)
     options = {**TINY_MODELS["gnn"], "given": "pose", "prior": prior}
     path = _shaken(predictor.create("gnn", ds.part, options)).save(tmp_path / "m.safetensors")
-    ball = objects.sphere(0.05)
-    at = int(np.argmax(ds.part.rim_distance))
-    scene = posed(
-        ds.part,
-        tissue.constant(ds.part, 0.0075),
-        ball,
-        objects.press(ds.part, ball, at, depth=8e-3),
-    )
+    scene = pressed_ball(ds.part)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         want = predictor.read(path, fidelity=fidelity).predict(scene)

@@ -7,6 +7,7 @@ from models import features
 from stmpl import predictor
 from stmpl.pipeline.evaluate import scenes_of
 from stmpl.scene import Scene
+from tests.conftest import pressed_ball
 
 TINY_MODELS = {
     "naive": {},
@@ -180,20 +181,10 @@ def test_the_contact_prior_lays_the_skin_inside_an_object_on_its_surface(ds, kin
     import torch
 
     from models.prior import PRESSURE_START
-    from stmpl import tissue
-    from stmpl.contact import objects
-    from stmpl.contact.posing import posed
 
     torch.manual_seed(0)
     p = predictor.create(kind, ds.part, {**TINY_MODELS[kind], "given": "pose", "prior": "contact"})
-    ball = objects.sphere(0.05)  # over several of the tube's 2 cm edges
-    at = int(np.argmax(ds.part.rim_distance))
-    scene = posed(
-        ds.part,
-        tissue.constant(ds.part, 0.0075),
-        ball,
-        objects.press(ds.part, ball, at, depth=8e-3),
-    )
+    scene = pressed_ball(ds.part)
     gap = scene.pose.gap
     p.model.eval()
     assert (gap < 0).sum() >= 3  # the ball reaches into a few vertices
