@@ -206,6 +206,7 @@ def record(out: dict, fem, failures: dict) -> dict:
         }
         if d.reaction is not None:
             a["reaction_N"] = round(float(d.reaction), 6)
+            a["peak_pressure_kPa"] = round(float(d.pressure.max()) * 1e-3, 6)
         if fem is not None:
             m = sample_metrics(fem.displacement, d.displacement)
             a["against_fem"] = {k: round(float(m[k]), 6) for k in ("mee", "rel_mee", "peak_err")}
@@ -218,6 +219,7 @@ def record(out: dict, fem, failures: dict) -> dict:
         }
         if fem.reaction is not None:
             fem_record["reaction_N"] = round(float(fem.reaction), 6)
+            fem_record["peak_pressure_kPa"] = round(float(fem.pressure.max()) * 1e-3, 6)
     return {"answers": answers, "fem": fem_record, "failed": dict(failures)}
 
 

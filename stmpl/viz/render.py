@@ -188,8 +188,10 @@ def contact_figure(
     :class:`~stmpl.scene.Deformation`; ``truth``, e.g. the FEM's, first) showing the deformed
     skin in 3D coloured by |u| (mm, one scale for all panels) with the ``objects``
     (``trimesh`` meshes in body coordinates) drawn see-through, the method's time and, against
-    ``truth``, its relative mean error and its peak. ``failed``: name -> why, the solves that
-    gave no answer, each a panel of the skin at rest that says so in red.
+    ``truth``, its relative mean error and its peak. Where answers carry a contact pressure
+    (a scene given by an object's pose), a second row shows it on the skin, in kPa on one
+    scale. ``failed``: name -> why, the solves that gave no answer, each a panel of the skin at
+    rest that says so in red.
     """
     import matplotlib  # deferred: pictures only
     from matplotlib.figure import Figure  # deferred: pictures only (no pyplot: 0.2-0.3 s less)
@@ -217,6 +219,12 @@ def contact_figure(
     }
     window = fitted_window([*skins.values(), *shapes], basis, centre, reach)
     x0, x1, y0, y1 = window
+    pressed = {  # the contact pressure (kPa) of each answer that has one: a second row
+        name: d.pressure * 1e-3
+        for name, d in rows
+        if not isinstance(d, str) and d.force is not None
+    }
+    nrow = 2 if pressed else 1
     panel = 4.4  # inches across a panel
     width = panel * len(rows) + 1.6
     text = (title or _title(first.scene, first.info.get("force_control"))) + (
@@ -229,40 +237,64 @@ def contact_figure(
     titles = {name: _panel_title(name, d, truth) for name, d in rows}
     lines = text.count("\n") + 1 + max(t[0].count("\n") + 1 for t in titles.values())
     above, foot = 0.3 + LINE * lines, 0.15  # inches for the titles, and below
-    height = panel * (y1 - y0) / (x1 - x0) + above + foot
+    between = 0.35 if pressed else 0.0  # the pressure row's own line
+    aspect = (y1 - y0) / (x1 - x0)
+    right, wspace, ratios = (
+        1 - 0.8 / width,
+        0.05,
+        [1] * len(rows) + [0.05],
+    )  # 0.8 in: the bar's label
+    # a panel's width as laid out (less than ``panel``: the gaps and the colour bar), so that
+    # the figure is as tall as the window's shape needs at that width
+    cells = (right - 0.01) / (1 + wspace * (len(ratios) - 1) / len(ratios))
+    drawn = width * cells / sum(ratios)
+    height = drawn * aspect * nrow + above + between + foot
     fig = Figure(figsize=(width, height))
     grid = fig.add_gridspec(
-        1,
+        nrow,
         len(rows) + 1,
-        width_ratios=[1] * len(rows) + [0.05],
+        width_ratios=ratios,
         left=0.01,
-        right=1 - 0.8 / width,  # room for the colour bar's label
+        right=right,
         bottom=foot / height,
         top=1 - above / height,
-        wspace=0.05,
+        wspace=wspace,
+        hspace=between / (drawn * aspect),
     )
-    axes = [fig.add_subplot(grid[0, k]) for k in range(len(rows))]
-    # a panel's width as laid out (less than ``panel``: the gaps and the colour bar): the
-    # figure as tall as the window's shape needs at that width, the bar as tall as the panels
-    drawn = axes[0].get_position().width * width
-    height = drawn * (y1 - y0) / (x1 - x0) + above + foot
-    fig.set_size_inches(width, height)
-    grid.update(bottom=foot / height, top=1 - above / height)
+    axes = [[fig.add_subplot(grid[r, k]) for k in range(len(rows))] for r in range(nrow)]
     seen = [(m[in_window(m, basis, window)], (0.6, 0.8, 1.0, 0.3), True) for m in shapes]
-    for (name, d), ax in zip(rows, axes):
+    peak = max([float(p.max()) for p in pressed.values()] + [1e-6])
+    blues = matplotlib.colormaps["PuBu"]
+    for k, (name, d) in enumerate(rows):
         skin = skins[name]
         near = in_window(skin, basis, window)  # refined only where it is seen
+        ax = axes[0][k]
         if isinstance(d, str):  # a solve that failed: the skin at rest
             draw_meshes(ax, basis, [(skin[near], (0.85, 0.85, 0.85, 1.0), True), *seen])
         else:
             tri, val = refine(skin[near], d.magnitude[faces][near] * 1e3)
             draw_meshes(ax, basis, [(tri, cmap(val.mean(1) / top), True), *seen])  # far side hidden
-        ax.set_xlim(x0, x1)
-        ax.set_ylim(y0, y1)
         head, color = titles[name]
         ax.set_title(head, fontsize=10, color=color)
+        if pressed:  # the skin alone, coloured by its contact pressure (none: grey)
+            ax = axes[1][k]
+            if name in pressed:
+                tri, val = refine(skin[near], pressed[name][faces][near])
+                draw_meshes(ax, basis, [(tri, blues(val.mean(1) / peak), True)])
+                ax.set_title(f"contact pressure, peak {pressed[name].max():.3g} kPa", fontsize=9)
+            else:
+                draw_meshes(ax, basis, [(skin[near], (0.85, 0.85, 0.85, 1.0), True)])
+                ax.set_title(
+                    "no answer" if isinstance(d, str) else "no contact pressure", fontsize=9
+                )
+        for r in range(nrow):
+            axes[r][k].set_xlim(x0, x1)
+            axes[r][k].set_ylim(y0, y1)
     sm = matplotlib.cm.ScalarMappable(matplotlib.colors.Normalize(0, top), cmap)
     fig.colorbar(sm, cax=fig.add_subplot(grid[0, -1]), label="displacement |u| (mm)")
+    if pressed:
+        sm = matplotlib.cm.ScalarMappable(matplotlib.colors.Normalize(0, peak), blues)
+        fig.colorbar(sm, cax=fig.add_subplot(grid[1, -1]), label="contact pressure (kPa)")
     fig.suptitle(text, y=1 - 0.1 / height, va="top", fontsize=10)
     if path is not None:
         pathlib.Path(path).parent.mkdir(parents=True, exist_ok=True)

@@ -245,9 +245,11 @@ def _reaction_said_and_kept(out: str, folder) -> None:
     """The FEM's line gives a reaction above zero, and simulate.json keeps the same."""
     line = next(ln for ln in out.splitlines() if ln.startswith("fem"))
     reaction = float(line.split("reaction ")[1].split(" N")[0])
+    peak = float(line.split("peak pressure ")[1].split(" kPa")[0])
     record = json.loads((folder / "simulate.json").read_text())
-    assert reaction > 0
+    assert reaction > 0 and peak > 0
     assert record["answers"]["fem"]["reaction_N"] == pytest.approx(reaction, rel=1e-2)
+    assert record["answers"]["fem"]["peak_pressure_kPa"] == pytest.approx(peak, rel=1e-2)
 
 
 def test_a_fingertip_given_by_its_pose_answers_the_force_it_meets(tmp_path, capsys, arm):

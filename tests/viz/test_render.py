@@ -108,3 +108,38 @@ def test_a_title_says_an_object_was_pressed_on_until_it_met_a_force():
     assert _title(scene).endswith("the force is answered")
     forced = " ".join(_title(scene, {"moved_mm": 4.613, "force": 5.0}).split())
     assert forced.endswith("object pressed on 4.61 mm from where it was put, until it meets 5 N")
+
+
+def test_answers_with_a_contact_pressure_get_a_row_of_it():
+    """A posed scene's answers: below each dent its contact pressure on the skin (kPa, one
+    scale), a failed solve's panel saying it has no answer; a scene given by force: one row.
+    """
+    from stmpl.scene import Deformation
+    from tests.conftest import pressed_ball
+
+    scene = pressed_ball(tube())
+    inside = np.clip(-scene.pose.gap, 0, None)
+    area = scene.part.vertex_areas
+    u = -scene.part.normals * inside[:, None]
+    fem = Deformation(scene, u, {"seconds": 30.0}, 2e3 * inside / inside.max() * area, 0.9)
+    model = Deformation(scene, 0.9 * u, {"seconds": 0.004}, 0.5 * fem.force, 0.45)
+    fig = contact_figure({"gnn": model}, fem, [], failed={"FEM (fine)": "did not converge"})
+    titles = [ax.get_title() for ax in fig.axes]
+    assert titles[3:6] == [
+        "no answer",
+        "contact pressure, peak 2 kPa",
+        "contact pressure, peak 1 kPa",
+    ], titles
+    assert [ax.get_ylabel() for ax in fig.axes[6:]] == [
+        "displacement |u| (mm)",
+        "contact pressure (kPa)",
+    ]
+    pressed_row = fig.axes[3].get_position()
+    assert pressed_row.y1 < fig.axes[0].get_position().y0  # below the dents
+    from stmpl import loads
+    from stmpl.scene import Scene
+
+    part = scene.part
+    by_force = Scene(part, scene.thickness, loads.disk(part, 5, 0.02, 0.1).force)
+    flat = Deformation(by_force, u, {"seconds": 0.001})
+    assert len(contact_figure({"linear": flat}).axes) == 2  # one panel and its bar
