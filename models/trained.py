@@ -178,10 +178,12 @@ class TrainedPredictor(BasePredictor):
         mirrored back (``info["mirrored"]``).
         """
         single = isinstance(scenes, Scene)
-        batch = [scenes] if single else list(scenes)
+        if not single and not hasattr(scenes, "__iter__"):
+            return super().predict(scenes, strict)  # refused there, by name
+        batch = [scenes] if single else list(scenes)  # (a generator is read once, here)
         twins = [mirror_twin(s.part, self.part) if isinstance(s, Scene) else None for s in batch]
         if not any(t is not None for t in twins):
-            return super().predict(scenes, strict)
+            return super().predict(scenes if single else batch, strict)
         seen = [s if t is None else mirrored_scene(s, t) for s, t in zip(batch, twins)]
         out = super().predict(seen, strict)
         back = [

@@ -235,3 +235,18 @@ def test_a_pose_answered_with_no_force_or_a_pull_is_flagged_impossible():
         _Posing(-0.2).predict(scene)
     with pytest.raises(ValueError, match="posing answers an object's pose, and scene 0 gives a"):
         _Posing(0.0).predict(Scene(part, scene.thickness, np.zeros(part.n_vertices)))
+
+
+def test_what_is_not_a_scene_is_refused_by_name_and_a_generator_is_read_once(ds, make):
+    p = make("naive", ds)
+    for bad, message in [
+        (None, "predict takes a Scene or a list of Scenes, got NoneType"),
+        (3.0, "predict takes a Scene or a list of Scenes, got float"),
+        ([None], "scene 0 is a NoneType, not a Scene"),
+    ]:
+        with pytest.raises(TypeError, match=message):
+            p.predict(bad)
+    scenes, _ = scenes_of(ds, "test", limit=2)
+    answers = p.predict(s for s in scenes)  # a generator: every scene answered
+    assert len(answers) == 2
+    np.testing.assert_array_equal(answers[1].displacement, p.predict(scenes[1]).displacement)
