@@ -164,7 +164,6 @@ class GNNArrays(TrainedPredictor):
 
     name = "gnn"
     poses = True
-    engine = "numpy"
 
     @classmethod
     def options(cls, config: dict | None = None) -> dict:
@@ -232,7 +231,16 @@ class GNNArrays(TrainedPredictor):
         return self._priors[k]
 
     def ahead(self, scenes) -> None:
-        return None  # one call answers a batch of a one-off answer's size
+        """The linear prior's columns a batch needs on each of its bodies, solved at once
+        before the batch is answered chunk by chunk.
+        """
+        if self.prior_kind != "linear":
+            return
+        slots = np.asarray([self.slot(s.part) if self.general else 0 for s in scenes])
+        for k in np.unique(slots):
+            group = [s for s, j in zip(scenes, slots) if j == k]
+            t = np.stack([s.thickness for s in group]).astype(np.float32)
+            self._prior(int(k))(t, np.stack([s.force for s in group]).astype(np.float32))
 
     # -- inputs
     def body_tensors(self, part) -> dict:

@@ -138,3 +138,26 @@ def test_engines_that_cannot_be_are_refused_by_name(ds, tmp_path):
     with pytest.raises(ValueError, match="answers on the CPU, not on 'cuda'"):
         predictor.read(gnn, engine="numpy", device="cuda")
     assert type(predictor.read(gnn, engine="auto")).__name__ == "GNNArrays"
+
+
+def test_a_batch_in_chunks_answers_as_one_its_columns_solved_ahead(ds, tmp_path, monkeypatch):
+    import models.trained
+
+    torch.manual_seed(0)
+    options = {**TINY_MODELS["gnn"], **VARIANTS["on-demand prior of every body"]}
+    p = predictor.create("gnn", ds.part, options)
+    p.fit(ds, progress=False)
+    path = _shaken(p).save(tmp_path / "m.safetensors")
+    scenes = _scenes(ds.part)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        whole = predictor.read(path, engine="numpy").predict(scenes)
+        light = predictor.read(path, engine="numpy")
+        calls = []
+        real = light.ahead
+        light.ahead = lambda batch: calls.append(len(batch)) or real(batch)
+        monkeypatch.setattr(models.trained, "CHUNK_VERTICES", ds.part.n_vertices)  # 1 a call
+        chunked = light.predict(scenes)
+    assert calls == [len(scenes)]
+    for a, b in zip(whole, chunked):
+        _close(b.displacement, a.displacement, np.abs(a.displacement).max())  # float32 sums
