@@ -9,8 +9,11 @@ within float32 rounding (``tests/models/test_arrays.py``).
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import scipy.sparse as sp
+from threadpoolctl import ThreadpoolController
 
 from fem.compliance import ColumnStore
 from models.features import (
@@ -31,6 +34,17 @@ from models.linear.columns import (
 from models.trained import TrainedPredictor, checkpoint_part
 from stmpl import checkpoint, reach
 from stmpl.pose import GAP_REACH
+
+
+@functools.cache
+def blas() -> ThreadpoolController:
+    """The BLAS libraries loaded, whose threads an answer limits to one: products a few dozen
+    columns wide gain little from a second thread on an idle machine (the default GNN at
+    fidelity auto 6.3 against 6.7 ms a scene), and on a busy one the second thread waits on a
+    taken core (72 ms in place of 9 with two other jobs on a 2-core machine).
+    """
+    return ThreadpoolController()
+
 
 LAYER_NORM_EPS = 1e-5
 """torch's LayerNorm default, which the networks are trained with."""
@@ -256,6 +270,11 @@ class GNNArrays(TrainedPredictor):
         }
 
     def _answers(self, scenes) -> list:
+        with blas().limit(limits=1, user_api="blas"):
+            return self._answered(scenes)
+
+    def _answered(self, scenes) -> list:
+        """:meth:`_answers` on one BLAS thread."""
         B, N = len(scenes), self.part.n_vertices
         t = np.stack([s.thickness for s in scenes]).astype(np.float32)
         given = np.stack([s.pose.gap if self.posed else s.force for s in scenes])

@@ -161,3 +161,25 @@ def test_a_batch_in_chunks_answers_as_one_its_columns_solved_ahead(ds, tmp_path,
     assert calls == [len(scenes)]
     for a, b in zip(whole, chunked):
         _close(b.displacement, a.displacement, np.abs(a.displacement).max())  # float32 sums
+
+
+def test_an_answer_runs_on_one_blas_thread_and_gives_the_rest_back(ds, tmp_path, monkeypatch):
+    from models.gnn import arrays
+
+    torch.manual_seed(0)
+    path = predictor.create("gnn", ds.part, TINY_MODELS["gnn"]).save(tmp_path / "m.safetensors")
+    light = predictor.read(path, engine="numpy")
+
+    def threads():
+        return [i["num_threads"] for i in arrays.blas().info() if i["user_api"] == "blas"]
+
+    before, seen = threads(), []
+    real = arrays.GraphNetArrays.__call__
+    monkeypatch.setattr(
+        arrays.GraphNetArrays, "__call__", lambda *a, **k: seen.append(threads()) or real(*a, **k)
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        light.predict(_scenes(ds.part))
+    assert seen and all(t == [1] * len(before) for t in seen)
+    assert threads() == before
