@@ -192,7 +192,8 @@ class GNNArrays(TrainedPredictor):
         e = part.edges
         self._ei = np.concatenate([e, e[:, ::-1]]).T  # (2, 2E): both directions, as trained
         self._mesh = mesh(part, self._ei)
-        self._order = np.argsort(self._ei[1], kind="stable")  # the edges target by target
+        order = np.argsort(self._ei[1], kind="stable")  # the edges target by target
+        self._order, self._sorted = order, np.ascontiguousarray(self._ei[:, order])
         self.steps = int(self.config["steps"])
         self.net = GraphNetArrays(state, self.steps)
         self.prior_kind = self.config.get("prior", "none")
@@ -259,14 +260,17 @@ class GNNArrays(TrainedPredictor):
     # -- inputs
     def body_tensors(self, part) -> dict:
         """Per body: vertex areas' inverse ``inv_area`` ``(N,)`` (1/m^2), ``normals``
-        ``(N, 3)`` and the encoded edges ``(2E, latent)`` in :attr:`_ei`'s order.
+        ``(N, 3)`` and the encoded edges ``(2E, latent)`` in :attr:`_ei`'s order, and target
+        by target (``sorted_edges``, as the whole part's graph reads them).
         """
         rel = part.vertices[self._ei[0]] - part.vertices[self._ei[1]]  # x_j - x_i, m
         attr = np.concatenate([rel, np.linalg.norm(rel, axis=1, keepdims=True)], 1)
+        edges = self.net.encode_edges(attr.astype(np.float32))
         return {
             "inv_area": (1.0 / part.vertex_areas).astype(np.float32),
             "normals": np.asarray(part.normals, np.float32),
-            "edges": self.net.encode_edges(attr.astype(np.float32)),
+            "edges": edges,
+            "sorted_edges": np.ascontiguousarray(edges[self._order]),
         }
 
     def _answers(self, scenes) -> list:
@@ -321,10 +325,13 @@ class GNNArrays(TrainedPredictor):
         B, N = f.shape
         E = self._ei.shape[1]
         if self.fidelity != "auto":
-            order = self._order
-            edges = np.concatenate([self._body_data[k]["edges"][order] for k in slots])
-            offs = np.repeat(np.arange(B) * N, E)
-            ei = np.tile(self._ei[:, order], B) + offs
+            edges = [self._body_data[k]["sorted_edges"] for k in slots]
+            edges = edges[0] if B == 1 else np.concatenate(edges)
+            ei = (
+                self._sorted
+                if B == 1
+                else np.tile(self._sorted, B) + np.repeat(np.arange(B) * N, E)
+            )
             y = self.net(x, edges, ei)
             return y if base is None else base.reshape(B * N, 3) + CORRECTION_SCALE * y
         near = np.maximum(CONTACT_BAND - f, 0.0) if self.posed else f

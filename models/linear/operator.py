@@ -11,7 +11,6 @@ import hashlib
 import json
 import pathlib
 import time
-import warnings
 
 import numpy as np
 import torch
@@ -23,7 +22,14 @@ from fem.config import read_config
 from fem.material import material
 from fem.placements import make_load, plan
 from fem.solver import SolverOptions
-from models.linear.columns import covers, grown_levels, interpolation, on_demand_answer
+from models.linear.columns import (
+    covers,
+    grown_levels,
+    interpolation,
+    on_demand_answer,
+    stored_answer,
+    stored_matrices,
+)
 from stmpl.body.model import default_cache_dir
 from stmpl.files import atomic_savez
 
@@ -114,12 +120,6 @@ class ComplianceOperator(nn.Module):
     levels. The priors of other bodies than a model's own set it (:meth:`LinearPrior.body_prior`),
     as their training data's ``linear`` answers were solved at each body's thickness."""
 
-    def weights(self, thickness: torch.Tensor) -> torch.Tensor:
-        """``(B, N, L)`` interpolation weights of each vertex's thickness over the levels."""
-        t = thickness.detach().cpu().numpy().astype(np.float32, copy=False)
-        levels = self.grow(t)
-        return torch.from_numpy(interpolation(levels, t)).to(thickness.device)
-
     def grow(self, thickness: np.ndarray) -> np.ndarray:
         """The levels ``(L,)`` m (float32) that interpolate ``thickness`` ``(B, N)`` m
         (:func:`models.linear.columns.grown_levels` with :attr:`exact` and :attr:`extend`); a
@@ -133,45 +133,23 @@ class ComplianceOperator(nn.Module):
         return lv
 
     def _matrices(self, n: int) -> list:
-        """Per level, the operator as a sparse CSR matrix ``(3 n, n)`` (rows ``3 i + c``), built
-        once per installed operator (:meth:`set` and loading reset them), device and vertex
-        count.
+        """Per level, the stored operator as a sparse matrix
+        (:func:`models.linear.columns.stored_matrices`), built once per installed operator
+        (:meth:`set` and loading reset them) and vertex count.
         """
-        key = (self.values.device, n)
-        if getattr(self, "_csr_key", None) != key:
-            i, j = self.index
-            if self.index.numel() and int(self.index.max()) >= n:
-                raise ValueError(
-                    f"the operator covers {int(self.index.max()) + 1} vertices, the input {n}"
-                )
-            rows = (3 * i[:, None] + torch.arange(3, device=i.device)).reshape(-1)
-            cols = j[:, None].expand(-1, 3).reshape(-1)
-            order = torch.argsort(rows * max(n, 1) + cols)
-            rows, cols = rows[order], cols[order]
-            crow = torch.zeros(3 * n + 1, dtype=torch.long, device=i.device)
-            crow[1:] = torch.cumsum(torch.bincount(rows, minlength=3 * n), 0)
-            with warnings.catch_warnings():  # "sparse CSR support is in beta"
-                warnings.simplefilter("ignore", UserWarning)
-                self._csr = [
-                    torch.sparse_csr_tensor(
-                        crow, cols, v.reshape(-1)[order], (3 * n, n), check_invariants=False
-                    )
-                    for v in self.values
-                ]
-            self._csr_key = key
+        if getattr(self, "_csr_key", None) != n:
+            index, values = self.index.cpu().numpy(), self.values.cpu().numpy()
+            self._csr = stored_matrices(index, values, n)
+            self._csr_key = n
         return self._csr
 
     def forward(self, thickness: torch.Tensor, force: torch.Tensor) -> torch.Tensor:
-        B, N = force.shape
         if self.on_demand:
             return self._on_demand(thickness, force)
-        fw = force[..., None] * self.weights(thickness)  # (B, N, L)
-        used = torch.nonzero(fw.abs().sum((0, 1))).flatten().tolist()  # levels that carry load
-        u = torch.zeros(3 * N, B, device=force.device, dtype=self.values.dtype)
-        mats = self._matrices(N)
-        for lv in used:
-            u = u + mats[lv] @ fw[..., lv].T.to(self.values.dtype)  # (3N, N) @ (N, B)
-        return u.T.reshape(B, N, 3)
+        t = thickness.detach().cpu().numpy().astype(np.float32, copy=False)
+        f = force.detach().cpu().numpy().astype(np.float32, copy=False)
+        u = stored_answer(self._matrices(f.shape[1]), self.grow(t), t, f)
+        return torch.from_numpy(u).to(force.device)
 
     def _on_demand(self, thickness: torch.Tensor, force: torch.Tensor) -> torch.Tensor:
         """:meth:`forward` from the store's columns
@@ -280,7 +258,8 @@ def needed_columns(
     """Per level, the vertices whose column the samples ``thickness``, ``force`` ``(S, N)``
     need (loaded, with a non-zero interpolation weight on that level).
     """
-    w = op.weights(torch.as_tensor(thickness, dtype=torch.float32)).numpy()  # (S, N, L)
+    t = np.asarray(thickness, dtype=np.float32)
+    w = interpolation(op.grow(t), t)  # (S, N, L)
     need = (np.asarray(force)[..., None] > 0) & (w > 0)
     return [np.flatnonzero(need[..., lv].any(0)) for lv in range(w.shape[-1])]
 

@@ -33,7 +33,7 @@ from stmpl.contact.posing import gripped, posed
 from stmpl.files import atomic_write_text
 from stmpl.mesh import Mesh
 from stmpl.scene import Scene
-from stmpl.viz.figures import export_mesh, vertex_colors
+from stmpl.viz.figures import export_mesh, glb_extras, vertex_colors
 from stmpl.viz.meshfile import glb_bytes
 from stmpl.viz.render import contact_figure
 from stmpl.viz.verdict import facts
@@ -237,8 +237,7 @@ def write_meshes(deformation, objects, base, about: dict | None = None) -> None:
         {"name": f"object{k}", "vertices": m.vertices, "faces": m.faces, "color": OBJECT_COLOR}
         for k, m in enumerate(objects)
     ]
-    about = {"stmpl": {str(k): v for k, v in (about or {}).items()}}
-    pathlib.Path(base).with_suffix(".glb").write_bytes(glb_bytes([body, *drawn], about))
+    pathlib.Path(base).with_suffix(".glb").write_bytes(glb_bytes([body, *drawn], glb_extras(about)))
 
 
 OBJECT_COLOR = (150, 190, 255, 120)

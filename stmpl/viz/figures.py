@@ -153,28 +153,37 @@ def vertex_colors(values: np.ndarray, cmap="inferno", vmin=None, vmax=None) -> n
 
 
 def mesh_bytes(mesh, fmt: str, facts: dict | None = None) -> bytes:
-    """``mesh`` (a trimesh mesh or scene) as a ``ply``, ``obj`` or ``glb`` file, carrying
-    ``facts`` (what the answer is and whether it can be trusted: ``{key: text or number}``):
-    in a GLB as the ``stmpl`` entry of the scene's extras (glTF's own place for application
-    data); in a PLY as ``comment stmpl KEY: VALUE`` header lines;
-    in an OBJ as ``# stmpl`` lines.
+    """``mesh`` (a trimesh mesh, its vertex colours kept where it has them) as a file:
+    :func:`mesh_file`.
     """
-    if fmt == "glb":
-        import trimesh  # deferred: mesh files only
+    visual = getattr(mesh, "visual", None)
+    colors = visual.vertex_colors if getattr(visual, "kind", None) == "vertex" else None
+    return mesh_file(mesh.vertices, mesh.faces, colors, fmt, facts)
 
-        scene = mesh if isinstance(mesh, trimesh.Scene) else trimesh.Scene(mesh)
-        scene.metadata["stmpl"] = _facts(facts)
-        return scene.export(file_type="glb")
-    lines = _comments(facts)
-    data = mesh.export(file_type=fmt)
-    data = data.encode() if isinstance(data, str) else data
-    if fmt == "ply":  # comments go right after the format line
-        magic, form, rest = data.split(b"\n", 2)
-        notes = b"".join(f"comment {c}\n".encode() for c in lines)
-        return magic + b"\n" + form + b"\n" + notes + rest
-    if fmt == "obj":
-        return "".join(f"# {c}\n" for c in lines).encode() + data
-    raise ValueError(f"mesh export supports ply, obj, glb; got {fmt!r}")
+
+def mesh_file(vertices, faces, colors, fmt: str, facts: dict | None = None) -> bytes:
+    """A mesh (``vertices`` ``(V, 3)`` m, ``faces`` ``(F, 3)``, optional RGBA uint8 ``colors``
+    ``(V, 4)``) as a ``ply``, ``obj`` or ``glb`` file, carrying ``facts`` (what the answer is
+    and whether it can be trusted: ``{key: text or number}``): in a GLB as the ``stmpl`` entry
+    of the scene's extras (glTF's own place for application data, :func:`glb_extras`); in a
+    PLY as ``comment stmpl KEY: VALUE`` header lines; in an OBJ as ``# stmpl`` lines.
+    """
+    if fmt == "ply":
+        return ply_bytes(vertices, faces, colors, _comments(facts))
+    if fmt == "glb":
+        body = {"name": "body", "vertices": vertices, "faces": faces, "colors": colors}
+        return glb_bytes([body], glb_extras(facts))
+    if fmt != "obj":
+        raise ValueError(f"mesh export supports ply, obj, glb; got {fmt!r}")
+    import trimesh  # deferred: mesh files only
+
+    mesh = trimesh.Trimesh(vertices, faces, process=False)
+    if colors is not None:
+        mesh.visual.vertex_colors = colors
+    return (
+        "".join(f"# {c}\n" for c in _comments(facts)).encode()
+        + mesh.export(file_type="obj").encode()
+    )
 
 
 def export_mesh(
@@ -187,7 +196,7 @@ def export_mesh(
 ) -> pathlib.Path:
     """Write the part (optionally moved to ``vertices`` ``(N, 3)``) with per-vertex colours of
     ``values`` ``(N,)`` to ``.ply``, ``.obj`` or ``.glb``, carrying ``facts``
-    (:func:`mesh_bytes`).
+    (:func:`mesh_file`).
     """
     path = pathlib.Path(path)
     fmt = path.suffix.lower()[1:]
@@ -201,27 +210,18 @@ def export_mesh(
         colors = vertex_colors(values, cmap)
     v = part.vertices if vertices is None else np.asarray(vertices)
     path.parent.mkdir(parents=True, exist_ok=True)
-    if fmt == "ply":
-        data = ply_bytes(v, part.faces, colors, _comments(facts))
-    elif fmt == "glb":
-        body = {"name": part.name, "vertices": v, "faces": part.faces, "colors": colors}
-        data = glb_bytes([body], {"stmpl": _facts(facts)})
-    else:
-        mesh = part.mesh(vertices)
-        if colors is not None:
-            mesh.visual.vertex_colors = colors
-        data = mesh_bytes(mesh, fmt, facts)
-    path.write_bytes(data)
+    path.write_bytes(mesh_file(v, part.faces, colors, fmt, facts))
     return path
 
 
-def _facts(facts: dict | None) -> dict:
-    return {str(k): v for k, v in (facts or {}).items()}
+def glb_extras(facts: dict | None) -> dict:
+    """``facts`` as a GLB scene's extras: ``{"stmpl": {key: value}}``."""
+    return {"stmpl": {str(k): v for k, v in (facts or {}).items()}}
 
 
 def _comments(facts: dict | None) -> list[str]:
     """``facts`` as a PLY's or OBJ's comment lines: ``stmpl KEY: VALUE``."""
-    return [f"stmpl {k}: {' '.join(str(v).split())}" for k, v in _facts(facts).items()]
+    return [f"stmpl {k}: {' '.join(str(v).split())}" for k, v in (facts or {}).items()]
 
 
 def prediction_figure(
