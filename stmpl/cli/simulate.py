@@ -231,7 +231,7 @@ def write_meshes(deformation, objects, base, about: dict | None = None) -> None:
         "name": "body",
         "vertices": deformation.vertices,
         "faces": part.faces,
-        "colors": vertex_colors(mag, "inferno"),
+        "colors": vertex_colors(mag),
     }
     drawn = [
         {"name": f"object{k}", "vertices": m.vertices, "faces": m.faces, "color": OBJECT_COLOR}

@@ -11,6 +11,7 @@ import pathlib
 import numpy as np
 
 from stmpl.part import BodyPart
+from stmpl.viz.colours import RAMPS, ramp
 from stmpl.viz.meshfile import glb_bytes, ply_bytes
 
 
@@ -140,16 +141,23 @@ def save_figure(fig, path, dpi: int):
     return fig
 
 
-def vertex_colors(values: np.ndarray, cmap="inferno", vmin=None, vmax=None) -> np.ndarray:
-    """``(N, 4)`` uint8 RGBA colours of per-vertex values."""
-    import matplotlib  # deferred: pictures only
-    import matplotlib.colors as mcolors  # deferred: pictures only
-
+def vertex_colors(values: np.ndarray, cmap="YlOrRd", vmin=None, vmax=None) -> np.ndarray:
+    """``(N, 4)`` uint8 RGBA colours of per-vertex ``values`` ``(N,)`` from ``vmin`` (default:
+    their least) to ``vmax`` (their most): our own ramps (:mod:`stmpl.viz.colours`, the
+    pictures' colours, no plotting library) or any of matplotlib's colour maps by name.
+    """
     values = np.asarray(values, float)
-    norm = mcolors.Normalize(
-        vmin=values.min() if vmin is None else vmin, vmax=values.max() if vmax is None else vmax
-    )
-    return (matplotlib.colormaps[cmap](norm(values)) * 255).round().astype(np.uint8)
+    lo = values.min() if vmin is None else vmin
+    hi = values.max() if vmax is None else vmax
+    t = (values - lo) / (hi - lo) if hi > lo else np.zeros_like(values)
+    if cmap in RAMPS:
+        rgb = ramp(cmap, t)
+    else:
+        import matplotlib  # deferred: only for a colour map of its own
+
+        rgb = matplotlib.colormaps[cmap](np.clip(t, 0.0, 1.0))[:, :3]
+    rgba = np.concatenate([rgb, np.ones((len(values), 1))], 1)
+    return (rgba * 255).round().astype(np.uint8)
 
 
 def mesh_bytes(mesh, fmt: str, facts: dict | None = None) -> bytes:
@@ -191,7 +199,7 @@ def export_mesh(
     path,
     values: np.ndarray | None = None,
     vertices: np.ndarray | None = None,
-    cmap="inferno",
+    cmap="YlOrRd",
     facts: dict | None = None,
 ) -> pathlib.Path:
     """Write the part (optionally moved to ``vertices`` ``(N, 3)``) with per-vertex colours of

@@ -1,50 +1,28 @@
 """Shaded 3D pictures of a pressed body: the deformed part coloured by its displacement, the
 objects that press it drawn see-through, one panel per method.
 
-Triangles of every mesh are projected through one camera, lit by a light from the viewer and
-drawn back to front in one collection (a painter's algorithm: no OpenGL, so it works on a
-headless machine). The camera looks at the contact along the skin's mean outward normal there.
+Every mesh is projected through one camera and drawn by a software rasteriser
+(:mod:`stmpl.viz.raster`: a depth buffer, colours and light interpolated across each triangle)
+on a page of text and colour bars drawn with Pillow (:mod:`stmpl.viz.page`): no OpenGL and no
+plotting library, so it works on a headless machine and costs the main job no import of one.
+The camera looks at the contact along the skin's mean outward normal there.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import pathlib
 import textwrap
 
 import numpy as np
+from PIL import Image, ImageDraw
 
 from stmpl.metrics import sample_metrics
+from stmpl.viz import page
+from stmpl.viz.colours import ramp
 from stmpl.viz.figures import view_basis
+from stmpl.viz.raster import Raster
 from stmpl.viz.verdict import impossible
-
-
-def refine(triangles: np.ndarray, values: np.ndarray, levels: int = 2):
-    """Split every triangle ``(T, 3, 3)`` with corner ``values`` ``(T, 3)`` into four at its
-    edge midpoints, ``levels`` times (a triangle soup, for smooth colours): ``(T 4^L, 3, 3)``,
-    ``(T 4^L, 3)``.
-    """
-    t, v = np.asarray(triangles, float), np.asarray(values, float)
-    for _ in range(levels):
-        m = 0.5 * (t + t[:, [1, 2, 0]])  # midpoints ab, bc, ca
-        mv = 0.5 * (v + v[:, [1, 2, 0]])
-        t = np.concatenate(
-            [
-                np.stack([t[:, 0], m[:, 0], m[:, 2]], 1),
-                np.stack([m[:, 0], t[:, 1], m[:, 1]], 1),
-                np.stack([m[:, 2], m[:, 1], t[:, 2]], 1),
-                m,
-            ]
-        )
-        v = np.concatenate(
-            [
-                np.stack([v[:, 0], mv[:, 0], mv[:, 2]], 1),
-                np.stack([mv[:, 0], v[:, 1], mv[:, 1]], 1),
-                np.stack([mv[:, 2], mv[:, 1], v[:, 2]], 1),
-                mv,
-            ]
-        )
-    return t, v
-
 
 LIGHT = np.array([-0.35, 0.55, 0.76]) / np.linalg.norm([-0.35, 0.55, 0.76])
 """Light direction in camera coordinates (right, up, towards the viewer): from the upper left,
@@ -68,39 +46,80 @@ def turned(basis: np.ndarray, yaw: float = TILT[0], pitch: float = TILT[1]) -> n
     return r @ basis
 
 
-def draw_meshes(ax, basis: np.ndarray, meshes: list) -> None:
-    """Draw ``meshes`` seen through ``basis`` (camera rows: right, up, towards the viewer):
-    each a tuple ``(triangles (T, 3, 3), rgba (T, 4) or (4,), cull)``; triangles turned away are
-    dropped where ``cull`` is true (closed, opaque meshes).
-    """
-    from matplotlib.collections import PolyCollection  # deferred: pictures only
+SUPERSAMPLE = 2
+"""Each pixel of a picture is the mean of ``SUPERSAMPLE`` squared drawn ones: smooth outlines."""
+GLASS = ((0.6, 0.8, 1.0), 0.3)
+"""The colour and opacity of the objects that press, drawn over the skin."""
+GREY = (0.85, 0.85, 0.85)
+"""The skin where a panel has no values to colour it by."""
 
-    polys, colours, depth = [], [], []
-    for triangles, rgba, cull in meshes:
-        tri = np.asarray(triangles) @ basis.T
-        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-        keep = n[:, 2] > 0 if cull else np.ones(len(tri), bool)
-        c = np.broadcast_to(np.asarray(rgba, float), (len(tri), 4)).copy()
-        n = n * np.where(n[:, 2] < 0, -1.0, 1.0)[:, None]  # the side the viewer sees
-        c[:, :3] *= (0.3 + 0.7 * np.clip(n @ LIGHT, 0.0, 1.0))[:, None]
-        polys.append(tri[keep, :, :2])
-        colours.append(c[keep])
-        depth.append(tri[keep, :, 2].mean(1))
-    order = np.argsort(np.concatenate(depth))
-    colours = np.concatenate(colours)[order]
-    ax.add_collection(
-        PolyCollection(
-            np.concatenate(polys)[order],
-            facecolors=colours,
-            edgecolors="none",
-            # smoothed edges of abutting opaque triangles leave hairline seams; see-through
-            # ones unsmoothed would draw their shared edges twice
-            antialiaseds=colours[:, 3] < 1,
+
+def shade(normals: np.ndarray) -> np.ndarray:
+    """``(N,)`` the light on surfaces of unit ``normals`` ``(N, 3)`` (camera coordinates): 0.3
+    from all around and up to 0.7 from :data:`LIGHT`.
+    """
+    return 0.3 + 0.7 * np.clip(normals @ LIGHT, 0.0, 1.0)
+
+
+@dataclasses.dataclass
+class View:
+    """A camera: ``basis`` (rows: right, up, towards the viewer) looking at ``window``
+    ``(x0, x1, y0, y1)`` (m, camera coordinates), drawn ``width`` x ``height`` pixels.
+    """
+
+    basis: np.ndarray
+    window: tuple
+    width: int
+    height: int
+
+    def project(self, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``(xy (..., 2) supersampled pixels, depth (...) m)`` of ``points`` ``(..., 3)``."""
+        cam = np.asarray(points, float) @ self.basis.T
+        x0, x1, y0, y1 = self.window
+        xy = np.stack(
+            [
+                (cam[..., 0] - x0) / (x1 - x0) * self.width * SUPERSAMPLE,
+                (y1 - cam[..., 1]) / (y1 - y0) * self.height * SUPERSAMPLE,
+            ],
+            -1,
         )
-    )
-    ax.set_aspect("equal")
-    ax.axis("off")
+        return xy, cam[..., 2]
+
+    def raster(self) -> Raster:
+        """An empty (white) raster of this view, supersampled."""
+        return Raster(self.width * SUPERSAMPLE, self.height * SUPERSAMPLE)
+
+
+def draw_skin(raster: Raster, view: View, vertices: np.ndarray, faces: np.ndarray, rgb) -> None:
+    """Draw the skin ``vertices`` ``(N, 3)`` (m), its ``faces`` ``(F, 3)`` that face the viewer,
+    each vertex of colour ``rgb`` ``(N, 3)`` (or one ``(3,)``) lit along its normal (the mean
+    of its faces' normals, weighted by area): smooth light over the skin's shape.
+    """
+    cam = np.asarray(vertices, float) @ view.basis.T
+    tri = cam[faces]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    normals = np.zeros_like(cam)
+    for k in range(3):
+        np.add.at(normals, faces[:, k], n)
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+    lit = np.broadcast_to(np.asarray(rgb, float), cam.shape) * shade(normals)[:, None]
+    front = faces[n[:, 2] > 0]  # faces turned away are hidden by the skin in front of them
+    xy, z = view.project(vertices)
+    raster.opaque(xy[front], z[front], lit[front])
+
+
+def draw_glass(raster: Raster, view: View, triangles: np.ndarray) -> None:
+    """Draw an object's ``triangles`` ``(T, 3, 3)`` (m) that face the viewer see-through over
+    the skin (:data:`GLASS`), each lit along its own normal.
+    """
+    triangles = np.asarray(triangles, float).reshape(-1, 3, 3)
+    tri = triangles @ view.basis.T
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    front = n[:, 2] > 0
+    n = n[front] / np.maximum(np.linalg.norm(n[front], axis=1, keepdims=True), 1e-300)
+    colour, alpha = GLASS
+    xy, z = view.project(triangles[front])
+    raster.glass(xy, z, np.asarray(colour) * shade(n)[:, None], alpha)
 
 
 def contact_camera(deformation) -> tuple[np.ndarray, np.ndarray, float]:
@@ -175,6 +194,39 @@ def _warning(d) -> str | None:
     return None
 
 
+@dataclasses.dataclass
+class Panel:
+    """A panel of a picture: its ``title`` in ``colour``, its ``row`` (0: the dents, 1: the
+    contact pressure) and ``box`` ``(x0, y0, x1, y1)``, pixels on the page.
+    """
+
+    title: str
+    colour: str
+    row: int
+    box: tuple
+
+
+@dataclasses.dataclass
+class Picture:
+    """A drawn picture: the ``image``, its ``title``, its ``panels`` and its colour ``bars``
+    (``(label, box)``, pixels on the page).
+    """
+
+    image: Image.Image
+    title: str
+    panels: list
+    bars: list
+
+    def save(self, path) -> None:
+        """Write the picture as a PNG at ``path`` (its folder made if missing)."""
+        pathlib.Path(path).parent.mkdir(parents=True, exist_ok=True)
+        self.image.save(path, format="PNG")
+
+
+RED = "#a00000"
+"""The colour of a panel's title that says its answer is not to be trusted."""
+
+
 def contact_figure(
     deformations: dict,
     truth=None,
@@ -183,19 +235,16 @@ def contact_figure(
     dpi: int = 110,
     title: str | None = None,
     failed: dict | None = None,
-):
-    """A PNG of one pressed scene: a panel per method (``deformations``: name ->
+) -> Picture:
+    """A picture of one pressed scene: a panel per method (``deformations``: name ->
     :class:`~stmpl.scene.Deformation`; ``truth``, e.g. the FEM's, first) showing the deformed
-    skin in 3D coloured by |u| (mm, one scale for all panels) with the ``objects``
-    (``trimesh`` meshes in body coordinates) drawn see-through, the method's time and, against
-    ``truth``, its relative mean error and its peak. Where answers carry a contact pressure
-    (a scene given by an object's pose), a second row shows it on the skin, in kPa on one
-    scale. ``failed``: name -> why, the solves that gave no answer, each a panel of the skin at
-    rest that says so in red.
+    skin in 3D coloured by |u| (mm, one scale for all panels) with the ``objects`` (meshes in
+    body coordinates) drawn see-through, the method's time and, against ``truth``, its relative
+    mean error and its peak. Where answers carry a contact pressure (a scene given by an
+    object's pose), a second row shows it on the skin, in kPa on one scale. ``failed``: name ->
+    why, the solves that gave no answer, each a panel of the skin at rest that says so in red.
+    Written as a PNG at ``path`` if given.
     """
-    import matplotlib  # deferred: pictures only
-    from matplotlib.figure import Figure  # deferred: pictures only (no pyplot: 0.2-0.3 s less)
-
     rows = ([("FEM", truth)] if truth is not None else []) + list(deformations.items())
     if not rows:
         raise ValueError("no deformations to draw")
@@ -208,102 +257,88 @@ def contact_figure(
     top = max(max(d.magnitude.max() for d in answered) * 1e3, 1e-6)
     depth = 1e3 * float(np.median(first.scene.thickness))
     scale = EXAGGERATION if EXAGGERATION * top <= depth else 1.0
-    cmap = matplotlib.colormaps["YlOrRd"]  # light where still: the shading shows shape
     shapes = [np.asarray(m.vertices)[np.asarray(m.faces)] for m in objects]
     faces = skin_faces(part)
     skins = {
-        name: part.vertices[faces]
-        if isinstance(d, str)
-        else (part.vertices + scale * d.displacement)[faces]
+        name: part.vertices if isinstance(d, str) else part.vertices + scale * d.displacement
         for name, d in rows
     }
-    window = fitted_window([*skins.values(), *shapes], basis, centre, reach)
-    x0, x1, y0, y1 = window
+    window = fitted_window([v[faces] for v in skins.values()] + shapes, basis, centre, reach)
     pressed = {  # the contact pressure (kPa) of each answer that has one: a second row
         name: d.pressure * 1e-3
         for name, d in rows
         if not isinstance(d, str) and d.force is not None
     }
-    nrow = 2 if pressed else 1
-    panel = 4.4  # inches across a panel
-    width = panel * len(rows) + 1.6
+    peak = max([float(p.max()) for p in pressed.values()] + [1e-6])
+    x0, x1, y0, y1 = window
+    wide = round(4.2 * dpi)  # a panel's pixels across
+    view = View(basis, window, wide, max(1, round(wide * (y1 - y0) / (x1 - x0))))
+    seen = [m[in_window(m, basis, window)] for m in shapes]
+
+    # the page: the title, a row of panels with their titles, the pressure row, the bars
+    big, small = page.points(10, dpi), page.points(9, dpi)
+    line = page.line_height(big)
+    margin, gap, bar = round(0.1 * dpi), round(0.05 * wide), round(0.05 * wide)
+    labels = ["displacement |u| (mm)"] + (["contact pressure (kPa)"] if pressed else [])
+    beside = max(page.bar_space(t, lab, big) for t, lab in zip((top, peak), labels))
+    width = margin + len(rows) * wide + len(rows) * gap + bar + beside + margin
     text = (title or _title(first.scene, first.info.get("force_control"))) + (
         f"\n(displacements drawn {scale:g}x their size; colours true)"
         if scale > 1
         else "\n(displacements drawn true to scale)"
     )
-    chars = int(13 * width)  # what a line of 10 pt text holds across the figure
-    text = "\n".join(textwrap.fill(line, chars) for line in text.splitlines())
+    text = page.wrap(text, big, width - 2 * margin)
     titles = {name: _panel_title(name, d, truth) for name, d in rows}
-    lines = text.count("\n") + 1 + max(t[0].count("\n") + 1 for t in titles.values())
-    above, foot = 0.3 + LINE * lines, 0.15  # inches for the titles, and below
-    between = 0.35 if pressed else 0.0  # the pressure row's own line
-    aspect = (y1 - y0) / (x1 - x0)
-    right, wspace, ratios = (
-        1 - 0.8 / width,
-        0.05,
-        [1] * len(rows) + [0.05],
-    )  # 0.8 in: the bar's label
-    # a panel's width as laid out (less than ``panel``: the gaps and the colour bar), so that
-    # the figure is as tall as the window's shape needs at that width
-    cells = (right - 0.01) / (1 + wspace * (len(ratios) - 1) / len(ratios))
-    drawn = width * cells / sum(ratios)
-    height = drawn * aspect * nrow + above + between + foot
-    fig = Figure(figsize=(width, height))
-    grid = fig.add_gridspec(
-        nrow,
-        len(rows) + 1,
-        width_ratios=ratios,
-        left=0.01,
-        right=right,
-        bottom=foot / height,
-        top=1 - above / height,
-        wspace=wspace,
-        hspace=between / (drawn * aspect),
-    )
-    axes = [[fig.add_subplot(grid[r, k]) for k in range(len(rows))] for r in range(nrow)]
-    seen = [(m[in_window(m, basis, window)], (0.6, 0.8, 1.0, 0.3), True) for m in shapes]
-    peak = max([float(p.max()) for p in pressed.values()] + [1e-6])
-    blues = matplotlib.colormaps["PuBu"]
-    for k, (name, d) in enumerate(rows):
-        skin = skins[name]
-        near = in_window(skin, basis, window)  # refined only where it is seen
-        ax = axes[0][k]
-        if isinstance(d, str):  # a solve that failed: the skin at rest
-            draw_meshes(ax, basis, [(skin[near], (0.85, 0.85, 0.85, 1.0), True), *seen])
-        else:
-            tri, val = refine(skin[near], d.magnitude[faces][near] * 1e3)
-            draw_meshes(ax, basis, [(tri, cmap(val.mean(1) / top), True), *seen])  # far side hidden
-        head, color = titles[name]
-        ax.set_title(head, fontsize=10, color=color)
-        if pressed:  # the skin alone, coloured by its contact pressure (none: grey)
-            ax = axes[1][k]
-            if name in pressed:
-                tri, val = refine(skin[near], pressed[name][faces][near])
-                draw_meshes(ax, basis, [(tri, blues(val.mean(1) / peak), True)])
-                ax.set_title(f"contact pressure, peak {pressed[name].max():.3g} kPa", fontsize=9)
-            else:
-                draw_meshes(ax, basis, [(skin[near], (0.85, 0.85, 0.85, 1.0), True)])
-                ax.set_title(
-                    "no answer" if isinstance(d, str) else "no contact pressure", fontsize=9
-                )
-        for r in range(nrow):
-            axes[r][k].set_xlim(x0, x1)
-            axes[r][k].set_ylim(y0, y1)
-    sm = matplotlib.cm.ScalarMappable(matplotlib.colors.Normalize(0, top), cmap)
-    fig.colorbar(sm, cax=fig.add_subplot(grid[0, -1]), label="displacement |u| (mm)")
+    heads = max(t[0].count("\n") + 1 for t in titles.values())
+    tops = [margin + (text.count("\n") + 1) * line + line // 2 + heads * line + 4]
     if pressed:
-        sm = matplotlib.cm.ScalarMappable(matplotlib.colors.Normalize(0, peak), blues)
-        fig.colorbar(sm, cax=fig.add_subplot(grid[1, -1]), label="contact pressure (kPa)")
-    fig.suptitle(text, y=1 - 0.1 / height, va="top", fontsize=10)
+        tops.append(tops[0] + view.height + page.line_height(small) + 8)
+    height = tops[-1] + view.height + margin
+    image = Image.new("RGB", (width, height), "white")
+    draw = ImageDraw.Draw(image)
+    page.write(draw, width / 2, margin, text, big)
+    panels = []
+    for k, (name, d) in enumerate(rows):
+        left = margin + k * (wide + gap)
+        skin = skins[name]
+        raster = view.raster()
+        near = faces[in_window(skin[faces], basis, window)]  # drawn only where it is seen
+        if isinstance(d, str):  # a solve that failed: the skin at rest
+            draw_skin(raster, view, skin, near, GREY)
+        else:
+            draw_skin(raster, view, skin, near, ramp("YlOrRd", d.magnitude * 1e3 / top))
+        for m in seen:
+            draw_glass(raster, view, m)
+        image.paste(Image.fromarray(raster.image(SUPERSAMPLE)), (left, tops[0]))
+        head, colour = titles[name]
+        page.write(
+            draw, left + wide / 2, tops[0] - 4 - (head.count("\n") + 1) * line, head, big, colour
+        )
+        panels.append(Panel(head, colour, 0, (left, tops[0], left + wide, tops[0] + view.height)))
+        if pressed:  # the skin alone, coloured by its contact pressure (none: grey)
+            raster = view.raster()
+            if name in pressed:
+                draw_skin(raster, view, skin, near, ramp("PuBu", pressed[name] / peak))
+                head = f"contact pressure, peak {pressed[name].max():.3g} kPa"
+            else:
+                draw_skin(raster, view, skin, near, GREY)
+                head = "no answer" if isinstance(d, str) else "no contact pressure"
+            image.paste(Image.fromarray(raster.image(SUPERSAMPLE)), (left, tops[1]))
+            page.write(draw, left + wide / 2, tops[1] - 4 - page.line_height(small), head, small)
+            panels.append(
+                Panel(head, "black", 1, (left, tops[1], left + wide, tops[1] + view.height))
+            )
+    left = margin + len(rows) * (wide + gap)
+    bars = []
+    for r, (t, name, label) in enumerate(zip((top, peak), ("YlOrRd", "PuBu"), labels)):
+        box = (left, tops[r], left + bar, tops[r] + view.height)
+        page.colour_bar(image, box, name, t, label, big)
+        bars.append((label, box))
+    panels.sort(key=lambda p: (p.row, p.box[0]))  # the dents, then their pressures
+    picture = Picture(image, text, panels, bars)
     if path is not None:
-        pathlib.Path(path).parent.mkdir(parents=True, exist_ok=True)
-        fig.savefig(path, dpi=dpi)
-    return fig
-
-
-LINE = 0.17
-"""Inches a line of 10 pt text takes."""
+        picture.save(path)
+    return picture
 
 
 def _panel_title(name: str, d, truth) -> tuple[str, str]:
@@ -311,10 +346,9 @@ def _panel_title(name: str, d, truth) -> tuple[str, str]:
     error against ``truth``, and in red why it is not to be trusted; or, for a solve that
     failed (``d`` its reason), that it gave no answer and why.
     """
-    red = "#a00000"
     if isinstance(d, str):
         why = textwrap.fill(d, 44, max_lines=3, placeholder=" ...")
-        return f"{name}: failed, no answer\n{why}", red
+        return f"{name}: failed, no answer\n{why}", RED
     ms, fc = d.info.get("seconds"), d.info.get("force_control")
     head = (
         f"{name}"
@@ -332,7 +366,7 @@ def _panel_title(name: str, d, truth) -> tuple[str, str]:
     warn = _warning(d)
     if warn:
         lines.append(warn)
-    return "\n".join(lines), red if warn else "black"
+    return "\n".join(lines), RED if warn else "black"
 
 
 def duration(seconds: float) -> str:

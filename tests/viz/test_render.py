@@ -4,17 +4,8 @@ import numpy as np
 import pytest
 
 from stmpl.body.primitives import sheet, tube
-from stmpl.viz.render import contact_figure, refine, skin_faces
-
-
-def test_refine_keeps_area_and_interpolates_linearly():
-    tri = np.array([[[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]])
-    vals = tri[..., 0] + 2 * tri[..., 1]  # a linear field
-    t, v = refine(tri, vals, levels=2)
-    assert t.shape == (16, 3, 3) and v.shape == (16, 3)
-    area = 0.5 * np.linalg.norm(np.cross(t[:, 1] - t[:, 0], t[:, 2] - t[:, 0]), axis=1)
-    assert area.sum() == pytest.approx(0.5)
-    np.testing.assert_allclose(v, t[..., 0] + 2 * t[..., 1])
+from stmpl.viz.colours import ramp
+from stmpl.viz.render import contact_figure, skin_faces
 
 
 def test_pictures_leave_out_the_faces_that_span_a_cut():
@@ -44,36 +35,47 @@ def test_contact_figure(tmp_path, arm):
     d = zoo.read("linear_arm").predict(scene)
     fig = contact_figure({"linear": d}, None, [touch.objects[0].posed()], tmp_path / "c.png")
     assert (tmp_path / "c.png").stat().st_size > 30_000
-    assert "bar 0.3 N" in fig._suptitle.get_text()
-    title = fig.axes[0].get_title()
-    assert "outside its envelope" not in title
+    assert "bar 0.3 N" in fig.title
+    title = fig.panels[0].title
+    assert "outside its envelope" not in title and fig.panels[0].colour == "black"
+    # the panel shows the skin, lit, and its dent in the ramp's reds; the bar runs its ramp
+    x0, y0, x1, y1 = fig.panels[0].box
+    px = np.asarray(fig.image)[y0:y1, x0:x1].astype(int)
+    drawn = (px < 250).any(2)
+    assert 0.2 < drawn.mean() < 0.95
+    assert ((px[..., 0] - px[..., 2] > 120) & (px[..., 1] < 120)).sum() > 20  # the deepest
+    ((label, (bx0, by0, bx1, by1)),) = fig.bars
+    assert label == "displacement |u| (mm)"
+    bar = np.asarray(fig.image)[by0 + 2 : by1 - 1, (bx0 + bx1) // 2] / 255
+    np.testing.assert_allclose(bar[0], ramp("YlOrRd", 1.0), atol=0.02)
+    np.testing.assert_allclose(bar[-1], ramp("YlOrRd", 0.0), atol=0.02)
     # an answer outside the model's envelope says so in its panel, in red
     d.info["envelope"] = {
         "inside": False,
         "outside": ["mean pressure of a contact 0.48 kPa > 0.4 kPa (where it was measured)"],
     }
     fig = contact_figure({"linear": d}, None, [touch.objects[0].posed()], tmp_path / "c.png")
-    ax = fig.axes[0]
-    assert " ".join(ax.get_title().split()).endswith(
+    panel = fig.panels[0]
+    assert " ".join(panel.title.split()).endswith(
         "outside its envelope: mean pressure of a contact 0.48 kPa > 0.4 kPa"
     )
-    assert ax.title.get_color() == "#a00000"
+    assert panel.colour == "#a00000"
     # a long reason is cut to its claim and wrapped to the panel's width
     d.info["envelope"]["outside"] = [
         "no scene in the data combines its thickness, force, area and pressures: the nearest "
         "lies 1.54 x the data's spacing away"
     ]
     fig = contact_figure({"linear": d}, None, [], tmp_path / "c.png")
-    title = fig.axes[0].get_title()
+    title = fig.panels[0].title
     assert " ".join(title.split()).endswith("combines its thickness, force, area and pressures")
     assert max(len(line) for line in title.splitlines()) <= 46
     d.info["physical"] = False  # an answer saved before the reasons were kept
     fig = contact_figure({"linear": d}, None, [], tmp_path / "c.png")
-    title = " ".join(fig.axes[0].get_title().split())
+    title = " ".join(fig.panels[0].title.split())
     assert title.endswith("thickness, past 0.4, where the gel buckles: do not use"), title
     d.info["impossible"] = ["the object pulls on the skin (-0.2 N)"]
     fig = contact_figure({"linear": d}, None, [], tmp_path / "c.png")
-    title = " ".join(fig.axes[0].get_title().split())
+    title = " ".join(fig.panels[0].title.split())
     assert title.endswith("the object pulls on the skin (-0.2 N): do not use"), title
     with pytest.raises(ValueError, match="no deformations"):
         contact_figure({})
@@ -124,22 +126,24 @@ def test_answers_with_a_contact_pressure_get_a_row_of_it():
     fem = Deformation(scene, u, {"seconds": 30.0}, 2e3 * inside / inside.max() * area, 0.9)
     model = Deformation(scene, 0.9 * u, {"seconds": 0.004}, 0.5 * fem.force, 0.45)
     fig = contact_figure({"gnn": model}, fem, [], failed={"FEM (fine)": "did not converge"})
-    titles = [ax.get_title() for ax in fig.axes]
+    titles = [p.title for p in fig.panels]
+    assert titles[0].startswith("FEM (fine): failed, no answer")
     assert titles[3:6] == [
         "no answer",
         "contact pressure, peak 2 kPa",
         "contact pressure, peak 1 kPa",
     ], titles
-    assert [ax.get_ylabel() for ax in fig.axes[6:]] == [
+    assert [label for label, _ in fig.bars] == [
         "displacement |u| (mm)",
         "contact pressure (kPa)",
     ]
-    pressed_row = fig.axes[3].get_position()
-    assert pressed_row.y1 < fig.axes[0].get_position().y0  # below the dents
+    assert fig.panels[3].box[1] > fig.panels[0].box[3]  # the pressure row below the dents
+    assert fig.bars[1][1][1] == fig.panels[3].box[1]  # each bar beside its row
     from stmpl import loads
     from stmpl.scene import Scene
 
     part = scene.part
     by_force = Scene(part, scene.thickness, loads.disk(part, 5, 0.02, 0.1).force)
     flat = Deformation(by_force, u, {"seconds": 0.001})
-    assert len(contact_figure({"linear": flat}).axes) == 2  # one panel and its bar
+    one = contact_figure({"linear": flat})
+    assert len(one.panels) == 1 and len(one.bars) == 1  # one panel and its bar
