@@ -45,3 +45,19 @@ def test_a_colour_bar_runs_its_ramp_upward_within_its_reach():
     np.testing.assert_allclose(px[208, 20], ramp("PuBu", 0.0), atol=0.02)
     assert (px[:, right:] == 1).all()  # nothing beyond its reach
     assert (px[:, 31:right] < 1).any()  # its ticks and label
+
+
+def test_text_needs_no_matplotlib_to_have_a_font(monkeypatch):
+    """Where matplotlib's fonts are not installed, Pillow's own scalable font takes their place
+    at the size asked for.
+    """
+    import importlib.util
+
+    page.font.cache_clear()
+    monkeypatch.setattr(importlib.util, "find_spec", lambda name: None)
+    try:
+        own = page.font(30)
+        assert "DejaVu" not in (own.getname()[0] or "")
+        assert own.size == 30 and page.text_width("displacement", 30) > 100
+    finally:
+        page.font.cache_clear()
