@@ -21,7 +21,6 @@ import json
 import pathlib
 import re
 import time
-import warnings
 
 import numpy as np
 from tqdm import tqdm
@@ -30,14 +29,10 @@ from stmpl import config as checked
 from stmpl import predictor
 from stmpl.contact import gap as along
 from stmpl.data.dataset import open_data
-from stmpl.data.format import at_levels
-from stmpl.envelope import Envelope
-from stmpl.failures import ImpossibleAnswer, OutsideEnvelope
 from stmpl.files import atomic_path
-from stmpl.metrics import sample_metrics
 from stmpl.pipeline import mirrored
-from stmpl.pipeline.evaluate import evaluate_dataset, scenes_of
-from stmpl.scene import Scene
+from stmpl.pipeline.evaluate import evaluate_dataset
+from stmpl.pipeline.selection import envelope, evidence, selection
 
 DEFAULTS = {
     "name": None,
@@ -127,7 +122,7 @@ def _split_tensors(ds, split, cfg, device, p=None):
     """
     import torch  # deferred: about a second to import; the core's types do not need it
 
-    a, keep = _selection(ds, split, cfg)
+    a, keep = selection(ds, split, cfg)
     if getattr(p, "posed", False):  # the pose a model reads: along the press where it has one
         _require_poses(a, cfg)
         a = {**a, "gap": _pose_gaps(ds, a)}
@@ -205,103 +200,6 @@ def _prior_answers(p, a, keep, body, device):
                 sel = torch.nonzero(b == k).flatten()
                 out[at[sel]] = p.body_prior(k)(th[sel], f[sel])
     return out
-
-
-def _selection(ds, split, cfg):
-    """A split's arrays and the indices of the samples the config trains on."""
-    a = ds.arrays(split)
-    keep = np.arange(len(a["total"]))
-    if cfg["thickness_mm"] is not None:
-        keep = keep[at_levels(a, cfg["thickness_mm"])]
-    if split == "train" and cfg["train_fraction"] < 1.0:  # a seeded share of the placements
-        places = np.unique(a["placement"][keep])
-        rng = np.random.default_rng(cfg["seed"])
-        n = max(1, int(round(cfg["train_fraction"] * len(places))))
-        chosen = rng.permutation(places)[:n]
-        keep = keep[np.isin(a["placement"][keep], chosen)]
-    if split == "train" and cfg["max_train"]:
-        keep = keep[: int(cfg["max_train"])]
-    if split == "train" and cfg.get("mirror", False):  # no place whose twin is validated or tested
-        keep = mirrored.held_out(ds, a, keep, mirrored.twin_of(ds))
-    return a, keep
-
-
-def envelope(ds, cfg):
-    """The :class:`~stmpl.envelope.Envelope` of the training scenes the config selects."""
-    a, keep = _selection(ds, "train", cfg)
-    if len(keep) == 0:
-        raise ValueError(
-            f"dataset {cfg['data']} has no training samples (after the thickness filter)"
-        )
-    return Envelope.of(
-        ds.parts,
-        a["thickness"][keep],
-        a["force"][keep],
-        name="training",
-        source=f"{ds.card['name']} ({ds.card['hash']}), train split",
-        body=a["body"][keep],
-    )
-
-
-def evidence(p, ds, cfg) -> dict:
-    """Measure predictor ``p`` on the validation scenes the config selects (never trained on)
-    and add each to its envelope's support as evidence (:meth:`Envelope.measure`), the planned
-    validation scenes the FEM could not solve too (no answer is backed there). Returns
-    ``{"scenes": measured, "kept": of them the promise kept, "unsolved": added unsolved}``.
-    """
-    if p.envelope is None:
-        return {}
-    a, keep = _selection(ds, "val", cfg)
-    source = f"{ds.card['name']} ({ds.card['hash']}), validation split"
-    rel, peak = [], []
-    posed = None
-    if getattr(p, "posed", False):
-        posed = scenes_of(ds, "val", cfg["thickness_mm"], given="pose")[0]
-    for i in range(0, len(keep), 64):
-        at = keep[i : i + 64]
-        if posed is not None:  # the same samples, given by their poses
-            scenes = posed[i : i + 64]
-        else:
-            scenes = [
-                Scene(
-                    ds.parts[a["body"][k]],
-                    a["thickness"][k].astype(float),
-                    a["force"][k].astype(float),
-                )
-                for k in at
-            ]
-        with warnings.catch_warnings():  # measured, not warned
-            warnings.simplefilter("ignore", OutsideEnvelope)
-            warnings.simplefilter("ignore", ImpossibleAnswer)
-            out = p.predict(scenes)
-        for d, u in zip(out, a["displacement"][at]):
-            m = sample_metrics(u.astype(float), d.displacement)
-            rel.append(m["rel_mee"])
-            peak.append(m["peak_err"])
-    got = {"scenes": int(len(keep)), "kept": 0, "unsolved": 0}
-    if len(keep):
-        kept = p.envelope.measure(
-            ds.parts, a["thickness"][keep], a["force"][keep], rel, peak, source, a["body"][keep]
-        )
-        got["kept"] = int(kept.sum())
-    failed = ds.failed("val")
-    if failed is not None:
-        sel = np.arange(len(failed["total"]))
-        if cfg["thickness_mm"] is not None:
-            sel = sel[at_levels(failed, cfg["thickness_mm"])]
-        if len(sel):
-            nan = np.full(len(sel), np.nan)
-            p.envelope.measure(
-                ds.parts,
-                failed["thickness"][sel],
-                failed["force"][sel],
-                nan,
-                nan,
-                source + ", not solved by the FEM",
-                failed["body"][sel],
-            )
-            got["unsolved"] = int(len(sel))
-    return got
 
 
 def train(config, resume: bool = True, progress: bool = True):
@@ -403,7 +301,7 @@ def _model(cfg: dict, ds):
             raise RuntimeError(f"body {k} of the dataset took another slot")
     p.envelope = envelope(ds, cfg)
     if getattr(p, "posed", False):  # how deep the training poses reach: beyond, outside
-        a, keep = _selection(ds, "train", cfg)
+        a, keep = selection(ds, "train", cfg)
         _require_poses(a, cfg)
         p.meta["pose_deepest_mm"] = float(-1e3 * _pose_gaps(ds, a)[keep].min())
     return p

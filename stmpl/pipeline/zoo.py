@@ -47,7 +47,7 @@ from stmpl.pipeline.manifest import (  # the manifest alone: read without torch
     names,
     root,
 )
-from stmpl.pipeline.train import envelope, evidence
+from stmpl.pipeline.selection import envelope, evidence
 from stmpl.predictor import OutsideEnvelope
 from stmpl.support import Support, coordinates
 
