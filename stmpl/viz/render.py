@@ -17,6 +17,7 @@ import textwrap
 import numpy as np
 from PIL import Image, ImageDraw
 
+from stmpl.geometry import vertex_normals
 from stmpl.metrics import sample_metrics
 from stmpl.viz import page
 from stmpl.viz.colours import ramp
@@ -95,15 +96,12 @@ def draw_skin(raster: Raster, view: View, vertices: np.ndarray, faces: np.ndarra
     each vertex of colour ``rgb`` ``(N, 3)`` (or one ``(3,)``) lit along its normal (the mean
     of its faces' normals, weighted by area): smooth light over the skin's shape.
     """
-    cam = np.asarray(vertices, float) @ view.basis.T
-    tri = cam[faces]
-    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    normals = np.zeros_like(cam)
-    for k in range(3):
-        np.add.at(normals, faces[:, k], n)
-    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
-    lit = np.broadcast_to(np.asarray(rgb, float), cam.shape) * shade(normals)[:, None]
-    front = faces[n[:, 2] > 0]  # faces turned away are hidden by the skin in front of them
+    vertices = np.asarray(vertices, float)
+    tri = vertices[faces]
+    toward = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]) @ view.basis[2]
+    normals = vertex_normals(vertices, faces) @ view.basis.T  # in camera coordinates
+    lit = np.broadcast_to(np.asarray(rgb, float), vertices.shape) * shade(normals)[:, None]
+    front = faces[toward > 0]  # faces turned away are hidden by the skin in front of them
     xy, z = view.project(vertices)
     raster.opaque(xy[front], z[front], lit[front])
 
