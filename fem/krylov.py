@@ -29,14 +29,21 @@ def symmetric_matvec(K: sp.csr_matrix, upper: bool) -> Callable[[np.ndarray], np
     ``x`` ``(n,)`` or ``(n, k)``. A block of :data:`BLOCK` columns or more is multiplied by a
     compiled kernel over the whole matrix's rows (both cores; SciPy's product runs on one).
     """
-    diagonal = K.diagonal() if upper else None
-    KT = K.T.tocsr() if upper else None
-    whole = []  # the whole matrix, made at the first block product
+    made = {}  # the stored triangle's transpose and the diagonal, made at the first product
+
+    def lower() -> tuple[sp.csr_matrix, np.ndarray]:
+        if "KT" not in made:
+            made["KT"], made["diagonal"] = K.T.tocsr(), K.diagonal()
+        return made["KT"], made["diagonal"]
+
+    whole = []
 
     def matvec(x: np.ndarray) -> np.ndarray:
         kernel = _block_kernel() if x.ndim == 2 and x.shape[1] >= BLOCK else None
         if kernel is not None:
             if not whole:
+                if upper:
+                    KT, diagonal = lower()
                 W = (K + KT - sp.diags(diagonal)).tocsr() if upper else K.tocsr()
                 W.sort_indices()
                 whole.append(W)
@@ -46,6 +53,7 @@ def symmetric_matvec(K: sp.csr_matrix, upper: bool) -> Callable[[np.ndarray], np
             return y
         if not upper:
             return K @ x
+        KT, diagonal = lower()
         return K @ x + KT @ x - (diagonal * x.T).T
 
     return matvec

@@ -118,6 +118,9 @@ class Tangent:
             if K is None:
                 _, K = self.assemble(u, f, False)
             x, spent = self.krylov(K, rhs)
+            # where CG failed, the tangent moves fast (a contact's set changed): the next step
+            # factorises afresh too; measured on a whole-hand grip, letting it try CG on this
+            # step's factorisation first saved no factorisation and failed CG twice more
             refresh, slow = x is None, spent >= KRYLOV_ITERATIONS[0]
         if refresh:
             failed = self.refactorise(u, f, K)

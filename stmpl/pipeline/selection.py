@@ -40,13 +40,18 @@ def selection(ds, split: str, cfg: dict) -> tuple[dict, np.ndarray]:
     return a, keep
 
 
+def no_samples(cfg: dict, split: str) -> ValueError:
+    """The error for a ``split`` that the config ``cfg`` leaves without samples."""
+    which = {"train": "training", "val": "validation"}.get(split, split)
+    kept = "" if cfg["thickness_mm"] is None else f" at thickness_mm {cfg['thickness_mm']}"
+    return ValueError(f"dataset {cfg['data']} has no {which} samples{kept}")
+
+
 def envelope(ds, cfg):
     """The :class:`~stmpl.envelope.Envelope` of the training scenes the config selects."""
     a, keep = selection(ds, "train", cfg)
     if len(keep) == 0:
-        raise ValueError(
-            f"dataset {cfg['data']} has no training samples (after the thickness filter)"
-        )
+        raise no_samples(cfg, "train")
     return Envelope.of(
         ds.parts,
         a["thickness"][keep],

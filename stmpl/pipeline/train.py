@@ -32,7 +32,7 @@ from stmpl.data.dataset import open_data
 from stmpl.files import atomic_path
 from stmpl.pipeline import mirrored
 from stmpl.pipeline.evaluate import evaluate_dataset
-from stmpl.pipeline.selection import envelope, evidence, selection
+from stmpl.pipeline.selection import envelope, evidence, no_samples, selection
 
 DEFAULTS = {
     "name": None,
@@ -123,6 +123,8 @@ def _split_tensors(ds, split, cfg, device, p=None):
     import torch  # deferred: about a second to import; the core's types do not need it
 
     a, keep = selection(ds, split, cfg)
+    if len(keep) == 0:
+        raise no_samples(cfg, split)
     if getattr(p, "posed", False):  # the pose a model reads: along the press where it has one
         _require_poses(a, cfg)
         a = {**a, "gap": _pose_gaps(ds, a)}
@@ -225,11 +227,6 @@ def train(config, resume: bool = True, progress: bool = True):
     opt = torch.optim.Adam(p.model.parameters(), lr=cfg["lr"])
     tr = _split_tensors(ds, "train", cfg, device, p)
     va = _split_tensors(ds, "val", cfg, device, p)
-    if len(tr[0]) == 0 or len(va[0]) == 0:
-        raise ValueError(
-            f"dataset {cfg['data']} has no training or no validation samples "
-            "(after the thickness filter)"
-        )
     state_path = out / "state.pt"
     run = {"epoch": 0, "best": np.inf, "best_state": None, "bad": 0, "history": []}
     if resume and state_path.exists():

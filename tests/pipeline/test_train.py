@@ -191,6 +191,8 @@ def test_a_thickness_subset_trains_and_evaluates_on_those_levels_only(tiny_datas
     assert p.envelope.boxes["training"]["thickness"] == pytest.approx([0.005, 0.005])
     scenes, _ = scenes_of(ds, "test", thickness_mm=[10.0])
     assert scenes and all(np.allclose(s.thickness, 0.010) for s in scenes)
+    with pytest.raises(ValueError, match=r"has no training samples at thickness_mm \[6.0\]$"):
+        train(_cfg(tiny_dataset, tmp_path / "none", epochs=2, thickness_mm=[6.0]), progress=False)
 
 
 def test_a_model_trains_on_two_datasets_at_once(tiny_dataset, tmp_path, tiny_config):
