@@ -16,6 +16,7 @@ from dataclasses import replace
 import numpy as np
 
 from fem.contact import FLOOR, FORCE_TOLERANCE, HELD, Pressed, Pressing, relax
+from fem.newton import backtrack
 from fem.shapes import positive
 
 AIM_STEPS = 4
@@ -295,14 +296,8 @@ def _newton_on_depth(go, u, depth: float, force: float, rtol: float, floor: floa
         step = np.zeros(u.size)
         step[free] = du
         step = step.reshape(-1, 3)
-        alpha, trial = 1.0, None
-        for _ in range(12):
-            Et = energy(u + alpha * step, depth + alpha * dd)
-            if np.isfinite(Et) and (Et <= E + 1e-4 * alpha * slope or Et - E <= 1e-12 * abs(E)):
-                trial = u + alpha * step
-                break
-            alpha *= 0.5
-        if trial is None:
+        alpha, Et = backtrack(lambda a: energy(u + a * step, depth + a * dd), E, slope)
+        if Et is None:
             contact.shape = shape.pushed(depth, e)
             if not fresh:
                 refresh = True
@@ -311,7 +306,7 @@ def _newton_on_depth(go, u, depth: float, force: float, rtol: float, floor: floa
                 return {**out, "ok": True, "u": u, "factorisations": factorisations}
             reason = "line search failed to lower the energy"
             return {**out, "ok": False, "reason": reason, "iterations": it + 1}
-        u, depth, E = trial, depth + alpha * dd, Et
+        u, depth, E = u + alpha * step, depth + alpha * dd, Et
         refresh = refresh or (fresh and alpha < 1.0)
     out = {"iterations": opt.max_iter, "residual": rel, "depth": depth}
     reason = f"no convergence in {opt.max_iter} iterations (residual {rel:.2e})"

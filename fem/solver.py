@@ -1,4 +1,5 @@
-"""Static equilibrium of the tissue shell: Newton's method with a line search on the energy.
+"""Static equilibrium of the tissue shell: its energy, residual and tangent, solved by Newton's
+method (:mod:`fem.newton`).
 
 The displacement ``u`` of the free nodes minimises ``Pi(u) = sum_t V_t W(F_t) - f . u`` with P1
 tetrahedra (``F = I + sum_a u_a (x) grad phi_a``, constant per element). Each Newton step solves
@@ -47,6 +48,7 @@ from fem.kernel import compiled, element_data, outer_data
 from fem.linear_solvers import make_linear_solver
 from fem.material import NeoHookean, det3, inv3, volume_split, volumetric
 from fem.mesh import ShellMesh
+from fem.newton import newton
 from fem.options import SolverOptions
 from fem.pattern import Pattern
 from fem.solution import Solution
@@ -318,7 +320,7 @@ class Solver:
         while s < 1.0:
             step = min(step, 1.0 - s)
             f = f_start + (s + step) * (f_target - f_start)
-            res = self._newton(u, f)
+            res = newton(self, u, f)
             iters += res["iterations"]
             last = res
             if res["ok"]:
@@ -383,147 +385,6 @@ class Solver:
         out[self.free] = r[self.free]
         return out.reshape(-1, 3)
 
-    def _converged(self, u, f, it: int, rel: float, factorisations: int, definite: bool) -> dict:
-        """Newton's answer at ``u``; when steps were taken without the pressure stiffness, the
-        full tangent must be positive definite there (a stable state), else the layer buckles.
-        """
-        if definite and self.tangent.factorise(u, f) is not None:
-            return {
-                "ok": False,
-                "reason": "indefinite tangent at the answer: the layer buckles",
-                "iterations": it + 1,
-                "residual": rel,
-            }
-        return {
-            "ok": True,
-            "u": u,
-            "iterations": it,
-            "residual": rel,
-            "factorisations": factorisations,
-        }
-
-    def _line_search(self, u: np.ndarray, f: np.ndarray, step: np.ndarray, E: float, slope: float):
-        """Backtracking (Armijo, halving up to 12 times) along ``step`` from ``u`` of energy
-        ``E`` and directional derivative ``slope``: ``(alpha, u + alpha step, its energy)``, or
-        ``(alpha, None, None)`` when no step lowers the energy.
-        """
-        alpha = 1.0
-        for _ in range(12):
-            trial = u + alpha * step
-            Et = self.energy(trial, f)
-            if np.isfinite(Et) and (Et <= E + 1e-4 * alpha * slope or (Et - E) <= 1e-12 * abs(E)):
-                return alpha, trial, Et
-            alpha *= 0.5
-        # Near equilibrium the energy's change falls below its round-off (W sums terms of order
-        # mu, or K, to get mu eps^2; a contact's too): a full step that lowers the residual is
-        # taken instead.
-        trial = u + step
-        Et = self.energy(trial, f)
-        if np.isfinite(Et) and abs(Et - E) <= 1e-6 * abs(E):
-            r0 = np.linalg.norm(self.residual(u, f).reshape(-1)[self.free])
-            r1 = np.linalg.norm(self.residual(trial, f).reshape(-1)[self.free])
-            if r1 < r0:
-                return 1.0, trial, Et
-        return alpha, None, None
-
-    def _newton(
-        self, u: np.ndarray, f: np.ndarray, rtol: float | None = None, floor: float = 0.0
-    ) -> dict:
-        """Newton iterations from ``u`` under nodal forces ``f``. With a direct linear solver
-        (and ``options.reuse`` above 0) and a factorised full tangent, each step solves the
-        current tangent by conjugate gradients preconditioned with the kept factorisation
-        (:class:`~fem.tangent.Tangent`; kept from solve to solve), renewed where CG slows.
-        Otherwise the factorised tangent is kept while the residual still contracts by
-        ``options.reuse`` per step; when a kept factorisation gives no usable step, the tangent
-        is assembled and factorised afresh.
-        """
-        opt = self.options
-        free = self.free
-        krylov = self.linear.direct and opt.reuse > 0
-        fnorm = max(np.linalg.norm(f.reshape(-1)[free]), 1e-30)
-        scale = self.potentials  # pressed by an object: the contact forces set the scale
-        if scale:  # (an object that retracts touches nothing at first: the largest so far)
-            fnorm = max(fnorm, *(np.linalg.norm(p.gradient(u)) for p in scale))
-        E = self.energy(u, f)
-        history: list[float] = []
-        rel, factorisations = float("nan"), 0
-        tangent = self.tangent
-        refresh = not (krylov and tangent.factored == "full")
-        definite = False  # steps taken with the tangent less its pressure stiffness
-        r = self.residual(u, f)
-        for it in range(opt.max_iter + 1):
-            rf = r.reshape(-1)[free]
-            if scale and it:
-                fnorm = max(fnorm, *(np.linalg.norm(p.gradient(u)) for p in scale))
-            rel = float(np.linalg.norm(rf) / fnorm)
-            history.append(rel)
-            if rel <= (rtol or opt.rtol):
-                return self._converged(u, f, it, rel, factorisations, definite)
-            if it == opt.max_iter:
-                break
-            if len(history) > opt.stagnation and history[-1] > 0.5 * history[-1 - opt.stagnation]:
-                return {
-                    "ok": False,
-                    "reason": f"stagnated: residual {rel:.2e} did not halve in "
-                    f"{opt.stagnation} iterations",
-                    "iterations": it,
-                    "residual": rel,
-                }
-            conjugate = krylov and tangent.factored == "full"
-            if not conjugate and len(history) > 1 and rel > opt.reuse * history[-2]:
-                refresh = True
-            du, failed, refresh, slow = tangent.direction(u, f, rf, refresh, conjugate)
-            if failed is not None:
-                return {**failed, "iterations": it + failed["iterations"], "residual": rel}
-            factorisations += refresh
-            definite |= tangent.factored == "definite"
-            fresh, refresh = refresh, False
-            slope = float(rf @ du)
-            if not np.all(np.isfinite(du)) or slope >= 0:
-                if not fresh:  # kept factors gave no descent: refactorise next iteration
-                    refresh = True
-                    continue
-                return {
-                    "ok": False,
-                    "reason": "indefinite tangent: no descent direction",
-                    "iterations": it + 1,
-                    "residual": rel,
-                }
-            step = np.zeros(u.size)
-            step[free] = du
-            step = step.reshape(-1, 3)
-            alpha, trial, Et = self._line_search(u, f, step, E, slope)
-            if trial is None:
-                if not fresh:
-                    refresh = True
-                    continue
-                if rel <= floor:
-                    return {
-                        "ok": True,
-                        "u": u,
-                        "iterations": it + 1,
-                        "residual": rel,
-                        "factorisations": factorisations,
-                    }
-                inv = not np.isfinite(self.energy(u + 2.0**-11 * step, f))
-                reason = (
-                    "element inversion: every step along the Newton direction makes det F <= 0"
-                    if inv
-                    else "line search failed to lower the energy"
-                )
-                return {"ok": False, "reason": reason, "iterations": it + 1, "residual": rel}
-            u, E = trial, Et
-            r = self.residual(u, f)
-            # CG that slowed renews its preconditioner; without CG, a damped step means the
-            # kept tangent has moved on
-            refresh = slow if conjugate else alpha < 1.0
-        return {
-            "ok": False,
-            "reason": f"no convergence in {opt.max_iter} iterations (residual {rel:.2e})",
-            "iterations": opt.max_iter,
-            "residual": rel,
-        }
-
     def equilibrium(
         self, u: np.ndarray, f: np.ndarray, rtol: float | None = None, floor: float = 0.0
     ) -> dict:
@@ -533,7 +394,7 @@ class Solver:
         ``floor``: a residual at which a step the line search cannot improve ends the solve
         as converged (the round-off floor of a contact whose nodes come and go; 0: never).
         """
-        return self._newton(np.array(u, dtype=float), f, rtol, floor)
+        return newton(self, np.array(u, dtype=float), f, rtol, floor)
 
     def _fail(self, res, iters, t0, force, substeps) -> Solution:
         return Solution.failed(
