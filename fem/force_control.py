@@ -59,7 +59,7 @@ def press_to_force(
     the last two answers and at most :data:`AIM_STEPS` steps of ``step`` (m) ahead, until the
     reaction passes the force; then the depth is found between the last two answers (each try
     marched from the nearer one). A try that fails, past the tissue's trust bounds
-    (:class:`~fem.material.Limits`) or in a march that cannot go on, is halved toward the last
+    (:class:`~fem.limits.Limits`) or in a march that cannot go on, is halved toward the last
     answer, and no later try aims at or past the shallowest failure: the search fails, saying
     why and after what force, once its last answer lies within :data:`GAP` of that depth (a
     march that stalled there is first tried once more with one step past it), or

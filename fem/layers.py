@@ -25,7 +25,8 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from fem.material import Demiray, Exponential, Layered, Limits, NeoHookean, Yeoh
+from fem.limits import Limits
+from fem.material import Demiray, Exponential, Layered, NeoHookean, Yeoh
 from stmpl.tissue import GEL, Bound
 
 MIN_FAT = 0.0005

@@ -43,7 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from stmpl.tissue import GEL_TRUSTED_COMPRESSION
+from fem.limits import GEL, Limits
 
 _I = np.eye(3)
 
@@ -80,57 +80,6 @@ def lame(E: float, nu: float) -> tuple[float, float]:
     if not (np.isfinite(nu) and -1.0 < nu < 0.5):
         raise ValueError(f"Poisson's ratio nu must lie in (-1, 0.5), got {nu!r}")
     return E / (2 * (1 + nu)), E * nu / ((1 + nu) * (1 - 2 * nu))
-
-
-@dataclass(frozen=True)
-class Limits:
-    """Where a tissue's answers are trusted: the smallest volume ratio ``min_det_F`` anywhere in
-    it and the largest ``max_compression`` (how far the skin moves inward as a share of the
-    tissue's depth under it). ``compression_source`` and ``volume_source`` say where each
-    bound comes from.
-    """
-
-    min_det_F: float
-    max_compression: float
-    compression_source: str = ""
-    volume_source: str = ""
-
-    def __post_init__(self) -> None:
-        if not (0.0 <= self.min_det_F < 1.0 and 0.0 < self.max_compression <= 1.0):
-            raise ValueError(
-                f"limits need min_det_F in [0, 1) and max_compression in (0, 1], got "
-                f"{self.min_det_F!r} and {self.max_compression!r}"
-            )
-
-    def reason(self, detF: float, compression: float) -> str:
-        """Why a state of smallest volume ratio ``detF`` and skin ``compression`` (a share of
-        the tissue's depth) lies past these bounds, or ``""``.
-        """
-        if detF < self.min_det_F:
-            return (
-                f"not trusted: the tissue keeps {detF:.2f} of its volume at worst "
-                f"(trusted down to {self.min_det_F:g}{_why(self.volume_source)})"
-            )
-        if compression > self.max_compression:
-            return (
-                f"not trusted: the skin moves inward {compression:.2f} x the tissue's depth "
-                f"(trusted up to {self.max_compression:g}{_why(self.compression_source)})"
-            )
-        return ""
-
-
-def _why(source: str) -> str:
-    return f"; {source}" if source else ""
-
-
-GEL = Limits(
-    0.0,
-    GEL_TRUSTED_COMPRESSION,
-    compression_source="the paper's gel buckles from about a third of its depth: past 0.4, "
-    "all but one measured answer were the last before it did",
-)
-"""The compressible neo-Hookean gel's trust bounds (:data:`stmpl.tissue.GEL_TRUSTED_COMPRESSION`,
-measured by ``benchmarks/gel_failure.py``)."""
 
 
 class Law:
@@ -494,67 +443,6 @@ class Layered(Law):
         (:meth:`IsochoricLaw.shape_parts`).
         """
         return self._parts(F, "shape_parts")
-
-
-def volumetric(K: np.ndarray, J: np.ndarray):
-    """``(U, U', U'')`` of the volume part ``U(J) = K/4 (J^2 - 1 - 2 ln J)`` at volume ratios
-    ``J`` ``(T,)`` with bulk moduli ``K`` ``(T,)`` (Pa): J/m^3, Pa, Pa; ``U = inf`` where
-    ``J <= 0``.
-    """
-    with np.errstate(invalid="ignore", divide="ignore"):
-        U = np.where(J > 0, 0.25 * K * (J**2 - 1 - 2 * np.log(J)), np.inf)
-        return U, 0.5 * K * (J - 1 / J), 0.5 * K * (1 + 1 / J**2)
-
-
-def shear_moduli(material, n_elements: int) -> np.ndarray:
-    """``(T,)`` each element's initial shear modulus, Pa (a :class:`Layered` material's by
-    layer).
-    """
-    laws = getattr(material, "laws", None)
-    if laws is None:
-        return np.full(n_elements, float(material.mu))
-    return np.array([law.mu for law in laws], dtype=float)[np.asarray(material.layer)]
-
-
-def bulk_moduli(material, n_elements: int) -> np.ndarray | None:
-    """``(T,)`` each element's bulk modulus (Pa) when ``material`` splits into a shape part and
-    a volume part ``U(J)`` (the tissue laws), else ``None`` (the compressible neo-Hookean and
-    linear laws, whose volume terms are not separable).
-    """
-    split = getattr(material, "bulk_moduli", None)
-    return None if split is None else split(n_elements)
-
-
-NEARLY_INCOMPRESSIBLE = 100.0
-"""Under ``volume="auto"`` (:class:`~fem.options.SolverOptions`) a layer takes mean dilatation
-where its bulk modulus exceeds this many times its shear modulus (Poisson's ratio above 0.495:
-the fat and the muscle); a more compressible one (the skin, K / mu 13) keeps its volume term at
-every point, which one element through its depth needs to bend as it should (mean dilatation
-there made a fingertip on the forearm 13 % softer with one skin element than with two)."""
-
-
-def volume_split(material, n_elements: int, volume: str = "auto"):
-    """``(bulk, point_bulk)``, each ``(T,)`` (Pa): the bulk modulus each element takes on its
-    mean volume ratio (mean dilatation) and the one it takes at every quadrature point, 0
-    where the other applies. ``volume``: ``"mean"`` for every element, ``"auto"`` where the
-    law is nearly incompressible (:data:`NEARLY_INCOMPRESSIBLE`). ``None`` under ``"auto"`` for
-    a material without a bulk modulus or with no nearly incompressible layer (the law is then
-    evaluated as it stands); ``"mean"`` then raises or applies everywhere.
-    """
-    K = bulk_moduli(material, n_elements)
-    if K is None:
-        if volume == "mean":
-            raise ValueError(
-                f"mean dilatation needs laws with a bulk modulus (the tissue laws); "
-                f"{type(material).__name__} has none"
-            )
-        return None
-    mean = np.ones(len(K), bool)
-    if volume == "auto":
-        mean = K > NEARLY_INCOMPRESSIBLE * shear_moduli(material, len(K))
-        if not mean.any():  # every element's volume at its points: the law as it stands
-            return None
-    return np.where(mean, K, 0.0), np.where(mean, 0.0, K)
 
 
 def uniaxial(law, stretch: float) -> tuple[float, float]:

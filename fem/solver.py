@@ -46,13 +46,14 @@ from fem.elements import ELEMENTS, quadratic
 from fem.finer import FinerPart
 from fem.kernel import compiled, element_data, outer_data
 from fem.linear_solvers import make_linear_solver
-from fem.material import NeoHookean, det3, inv3, volume_split, volumetric
+from fem.material import NeoHookean, det3, inv3
 from fem.mesh import ShellMesh
 from fem.newton import newton
 from fem.options import SolverOptions
 from fem.pattern import Pattern
 from fem.solution import Solution
 from fem.tangent import Tangent
+from fem.volume import volume_split, volumetric
 from stmpl.part import BodyPart
 
 
@@ -428,7 +429,7 @@ class Solver:
     def distrust(self, detF: float, compression: float) -> str:
         """Why a state of smallest volume ratio ``detF`` and skin ``compression`` (share of
         the depth) cannot be trusted, or ``""``: an inverted element, the skin pushed past
-        ``options.max_compression``, or past the material's :class:`~fem.material.Limits`.
+        ``options.max_compression``, or past the material's :class:`~fem.limits.Limits`.
         """
         if detF <= 0:
             return f"inverted element (min det F {detF:.3g})"

@@ -8,7 +8,8 @@ import pytest
 import fem.force_control
 from fem.contact import Pressed, Pressing, press
 from fem.force_control import _aim, press_to_force
-from fem.material import Layered, Limits
+from fem.limits import Limits
+from fem.material import Layered
 from fem.shapes import Punch, Sphere
 from fem.solver import Solver
 from fem.verification import punch_slab

@@ -7,11 +7,11 @@ import pytest
 
 import fem.solver as fs
 from fem.kernel import NUMPY
+from fem.limits import Limits
 from fem.linear_solvers import available_linear_solvers
 from fem.material import (
     Demiray,
     Layered,
-    Limits,
     LinearElastic,
     NeoHookean,
     Yeoh,
