@@ -84,7 +84,7 @@ def lame(E: float, nu: float) -> tuple[float, float]:
 
 class Law:
     """What every material gives from its ``tangent_parts``: the stress and the full tangent.
-    ``limits`` (a :class:`Limits`, or ``None``) bound where its answers are trusted.
+    ``limits`` (a :class:`~fem.limits.Limits`, or ``None``) bound where its answers are trusted.
     """
 
     limits = None
@@ -124,8 +124,8 @@ class Material(Law):
 @dataclass(frozen=True)
 class NeoHookean(Material):
     """Compressible Neo-Hookean solid. ``E`` in Pa, ``nu`` dimensionless; needs ``det F > 0``.
-    Trusted up to :data:`GEL` (where the paper's gel was measured to buckle); as a layer of a
-    tissue file, the tissue's bounds apply instead.
+    Trusted up to :data:`fem.limits.GEL` (where the paper's gel was measured to buckle); as a
+    layer of a tissue file, the tissue's bounds apply instead.
     """
 
     name = "neo_hookean"
@@ -357,7 +357,7 @@ class Exponential(IsochoricLaw):
 class Layered(Law):
     """Each element its own layer's law: ``laws`` (one per layer) and ``layer`` ``(T,)`` (the
     layer of each element, in the mesh's element order), and the tissue's trust bounds
-    ``limits`` (:class:`Limits`, or ``None``). Evaluated on ``F`` ``(T Q, 3, 3)``, ``Q``
+    ``limits`` (:class:`~fem.limits.Limits`, or ``None``). Evaluated on ``F`` ``(T Q, 3, 3)``, ``Q``
     quadrature points per element in a row.
     """
 

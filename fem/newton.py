@@ -27,8 +27,8 @@ def backtrack(
     """The first step length ``alpha`` of ``1, 1/2, 1/4, ...`` (:data:`HALVINGS` of them) at
     which ``energy_at(alpha)`` is finite and falls below ``E + ARMIJO alpha slope`` (or rises by
     no more than the energy's round-off), from energy ``E`` with directional derivative
-    ``slope`` (< 0): ``(alpha, energy there)``, or ``(the last alpha, None)`` where none does.
-    ``energy_at`` is last called at the step returned.
+    ``slope`` (< 0): ``(alpha, energy there)``, or ``(0.5 ** HALVINGS, None)`` where none
+    does. ``energy_at`` is last called at the step returned.
     """
     alpha = 1.0
     for _ in range(HALVINGS):
