@@ -29,25 +29,25 @@ def symmetric_matvec(K: sp.csr_matrix, upper: bool) -> Callable[[np.ndarray], np
     ``x`` ``(n,)`` or ``(n, k)``. A block of :data:`BLOCK` columns or more is multiplied by a
     compiled kernel over the whole matrix's rows (both cores; SciPy's product runs on one).
     """
-    made = {}  # the stored triangle's transpose and the diagonal, made at the first product
+    made = {}  # the stored triangle's transpose and diagonal, the whole matrix: at first use
 
     def lower() -> tuple[sp.csr_matrix, np.ndarray]:
         if "KT" not in made:
             made["KT"], made["diagonal"] = K.T.tocsr(), K.diagonal()
         return made["KT"], made["diagonal"]
 
-    whole = []
-
     def matvec(x: np.ndarray) -> np.ndarray:
         kernel = _block_kernel() if x.ndim == 2 and x.shape[1] >= BLOCK else None
         if kernel is not None:
-            if not whole:
+            if "whole" not in made:
                 if upper:
                     KT, diagonal = lower()
-                W = (K + KT - sp.diags(diagonal)).tocsr() if upper else K.tocsr()
+                    W = (K + KT - sp.diags(diagonal)).tocsr()
+                else:
+                    W = K.tocsr()
                 W.sort_indices()
-                whole.append(W)
-            W = whole[0]
+                made["whole"] = W
+            W = made["whole"]
             y = np.empty(x.shape)
             kernel(W.indptr, W.indices, W.data, np.ascontiguousarray(x, dtype=float), y)
             return y
