@@ -241,6 +241,7 @@ def generate(
                     "of another config: solving it again"
                 )
     on_disk = len(p.tasks) - sum(len(p.shard_tasks(k)) for k in todo)  # tasks already solved
+    todo = schedule(p, todo, {k for k in todo if progress_path(out, k).is_file()})
     if max_shards is not None:
         todo = todo[:max_shards]
     runs_path = out / "runs.json"
@@ -251,6 +252,24 @@ def generate(
     ):
         return {}
     return write_card(out, p, chash, runs)
+
+
+def schedule(p: Plan, todo: list[int], begun: set[int]) -> list[int]:
+    """The shards of ``todo`` in the order they are solved: those ``begun`` first (a stopped
+    run's kept progress resumes), then the training, validation and test shards interleaved at
+    their shares among the shards left, each split's in its own order. A long set stopped part
+    way therefore holds every split in proportion, and can be trained on and validated as it
+    grows.
+    """
+    split = {k: int(p.split[p.tasks[p.shard_tasks(k)[0]][0]]) for k in todo}
+    rest = [k for k in sorted(todo) if k not in begun]
+    size = Counter(split[k] for k in rest)
+    rank: Counter = Counter()
+    key = {k: (0.0, k) for k in begun & set(todo)}
+    for k in rest:  # the n-th of a split of m shards at (n + 1/2) / m of the way
+        key[k] = (1 + (rank[split[k]] + 0.5) / size[split[k]], k)
+        rank[split[k]] += 1
+    return sorted(todo, key=key.__getitem__)
 
 
 def _parallel(cfg: dict, workers, backend, scheduler) -> dict:

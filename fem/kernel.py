@@ -1,14 +1,13 @@
-"""The tangent's element matrices summed into its CSR data, two ways: a compiled kernel (Numba;
-every element matrix's upper entries summed over its quadrature points, then added into the
-data) and its NumPy twin, used
-without Numba and to check the kernel.
+"""The tangent's element matrices summed into its CSR data, two ways: a compiled kernel (Numba:
+each element's matrix summed over its quadrature points in 3 x 3 blocks, then added into the
+data with the mean-dilatation volume term in one pass) and its NumPy twin, used without Numba
+and to check the kernel.
 """
 
 from __future__ import annotations
 
 import functools
 from collections.abc import Callable
-from typing import NamedTuple
 
 import numpy as np
 
@@ -45,40 +44,36 @@ def element_data(g, GG, aW, bW, cW, local, pos, sel, nnz: int, full=None) -> np.
 
 
 def make_kernel():
-    """A Numba kernel that adds the upper entries of every element matrix,
-    ``K_aibk = sum_q (aW d_ik G_a.G_b + bW g_ai g_bk + cW g_ak g_bi)``, to the CSR data: each
-    element's entries summed over its quadrature points first, then added once (4x faster than
-    the NumPy path here); ``None`` when Numba is absent.
+    """A Numba kernel adding every element matrix's upper entries to the CSR data:
+    ``kernel(g, GG, aW, bW, cW, pos, data, full=None, volume=None)`` with the arguments of
+    :func:`element_data` and, for mean dilatation, ``volume = (beta, coef)`` of
+    :func:`outer_data`; ``None`` when Numba is absent.
     """
     both = _element_kernel()
     if both is None:
         return None
 
-    def kernel(g, GG, aW, bW, cW, pos, data):
-        both(g, g, GG, aW, bW, cW, aW, aW, False, pos, data)  # f, dW, eW unread
-
-    return kernel
-
-
-def make_full_kernel():
-    """The compiled kernel of the long form (laws of ``I1`` and ``J``): as
-    :func:`make_kernel`'s, plus ``dW f_ai f_bk + eW (f_ai g_bk + g_ai f_bk)`` with ``f`` the
-    gradients mapped by ``F``; ``None`` when Numba is absent.
-    """
-    both = _element_kernel()
-    if both is None:
-        return None
-
-    def kernel(g, f, GG, aW, bW, cW, dW, eW, pos, data):
-        both(g, f, GG, aW, bW, cW, dW, eW, True, pos, data)
+    def kernel(g, GG, aW, bW, cW, pos, data, full=None, volume=None):
+        f, dW, eW = (g, aW, aW) if full is None else full  # f, dW, eW unread when short
+        if volume is None:  # beta, coef unread
+            beta, coef = np.zeros((len(g), 1)), np.zeros(len(g))
+        else:
+            beta, coef = np.ascontiguousarray(volume[0]), np.ascontiguousarray(volume[1])
+        long, outer = full is not None, volume is not None
+        both(g, f, GG, aW, bW, cW, dW, eW, long, beta, coef, outer, pos, data)
 
     return kernel
 
 
 @functools.cache
 def _element_kernel():
-    """The compiled kernel behind :func:`make_kernel` (``long`` False) and
-    :func:`make_full_kernel` (``long`` True); ``None`` when Numba is absent.
+    """The compiled kernel behind :func:`make_kernel`; ``None`` when Numba is absent.
+
+    Each element's matrix is summed over its quadrature points as 3 x 3 blocks ``(a, b)``,
+    ``b >= a``: with ``u_b = bW g_b + eW f_b`` and ``v_b = eW g_b + dW f_b`` (made once a
+    point), the block is ``g_a u_b^T + f_a v_b^T + cW g_b g_a^T + aW G_ab I``, a third of the
+    multiplications of the entries written out, and no division in the loops. The volume
+    term ``coef beta beta^T`` is added as the entries go into the data, in the same pass.
     """
     try:
         from numba import njit  # deferred: compiles the FEM's kernels
@@ -86,35 +81,40 @@ def _element_kernel():
         return None
 
     @njit(cache=True, nogil=True)
-    def kernel(g, f, GG, aW, bW, cW, dW, eW, long, pos, data):  # pragma: no cover - compiled
+    def kernel(
+        g, f, GG, aW, bW, cW, dW, eW, long, beta, coef, outer, pos, data
+    ):  # pragma: no cover - compiled
         T, Q, n = g.shape[0], g.shape[1], g.shape[2]
         m = 3 * n
-        ke = np.zeros(m * (m + 1) // 2)  # one element's upper entries, summed over its points
+        ke = np.zeros((m, m))  # one element's matrix (upper blocks), summed over its points
+        u, v = np.zeros((n, 3)), np.zeros((n, 3))
         for t in range(T):
             ke[:] = 0.0
             for qp in range(Q):
                 a, b, c, d, h = aW[t, qp], bW[t, qp], cW[t, qp], dW[t, qp], eW[t, qp]
                 gt, ft, Gt = g[t, qp], f[t, qp], GG[t, qp]
-                e = 0
-                for p in range(m):
-                    A, i = p // 3, p % 3
-                    gai = gt[A, i]
-                    fai = ft[A, i] if long else 0.0
-                    for q in range(p, m):
-                        B, k = q // 3, q % 3
-                        gbk = gt[B, k]
-                        v = b * gai * gbk + c * gt[A, k] * gt[B, i]
-                        if long:
-                            fbk = ft[B, k]
-                            v += d * fai * fbk + h * (fai * gbk + gai * fbk)
-                        if i == k:
-                            v += a * Gt[A, B]
-                        ke[e] += v
-                        e += 1
-            for e in range(len(ke)):
-                j = pos[t, e]
-                if j >= 0:
-                    data[j] += ke[e]
+                for B in range(n):
+                    for k in range(3):
+                        u[B, k] = b * gt[B, k] + (h * ft[B, k] if long else 0.0)
+                        v[B, k] = h * gt[B, k] + d * ft[B, k] if long else 0.0
+                for A in range(n):
+                    for B in range(A, n):
+                        for i in range(3):
+                            gai, cgbi = gt[A, i], c * gt[B, i]
+                            fai = ft[A, i] if long else 0.0
+                            for k in range(3):
+                                ke[3 * A + i, 3 * B + k] += (
+                                    gai * u[B, k] + fai * v[B, k] + cgbi * gt[A, k]
+                                )
+                            ke[3 * A + i, 3 * B + i] += a * Gt[A, B]
+            e = 0
+            for p in range(m):
+                bp = coef[t] * beta[t, p] if outer else 0.0
+                for q in range(p, m):
+                    j = pos[t, e]
+                    e += 1
+                    if j >= 0:
+                        data[j] += ke[p, q] + (bp * beta[t, q] if outer else 0.0)
 
     return kernel
 
@@ -132,47 +132,11 @@ def outer_data(beta, coef, pos, sel, local, nnz: int) -> np.ndarray:
     return data
 
 
-def make_outer_kernel():
-    """A Numba kernel adding every element's ``coef_t beta_t beta_t^T`` (upper entries) to the
-    CSR data; ``None`` when Numba is absent.
-    """
-    try:
-        from numba import njit  # deferred: compiles the FEM's kernels
-    except ImportError:
-        return None
-
-    @njit(cache=True, nogil=True)
-    def kernel(beta, coef, pos, data):  # pragma: no cover - compiled
-        T, m = beta.shape
-        for t in range(T):
-            e = 0
-            for p in range(m):
-                bp = coef[t] * beta[t, p]
-                for q in range(p, m):
-                    j = pos[t, e]
-                    e += 1
-                    if j >= 0:
-                        data[j] += bp * beta[t, q]
-
-    return kernel
-
-
-class Kernels(NamedTuple):
-    """The compiled kernels (each ``None`` without Numba: the NumPy path instead)."""
-
-    element: Callable | None
-    full: Callable | None
-    outer: Callable | None
-
-
 @functools.cache
-def compiled() -> Kernels:
-    """The compiled kernels, made at a process's first assembly: importing Numba and loading
-    the kernels from its cache take a quarter of a second that a process which never
-    assembles a tangent (a learned model answering from cached columns) does not pay.
+def compiled() -> Callable | None:
+    """The compiled kernel (:func:`make_kernel`), made at a process's first assembly:
+    importing Numba and loading the kernel from its cache take a quarter of a second that a
+    process which never assembles a tangent (a learned model answering from cached columns)
+    does not pay. ``None`` without Numba: the NumPy path instead.
     """
-    return Kernels(make_kernel(), make_full_kernel(), make_outer_kernel())
-
-
-NUMPY = Kernels(None, None, None)
-"""No compiled kernel: the NumPy path everywhere (what the kernels are checked against)."""
+    return make_kernel()

@@ -249,26 +249,20 @@ class Solver:
             Fq = np.asarray(parts[6]).reshape(T, Q, 3, 3)
             fg = np.ascontiguousarray(np.matmul(self.G, Fq.transpose(0, 1, 3, 2)))  # F grad N
             full = (fg, *(np.asarray(x).reshape(T, Q) * self.W for x in parts[4:6]))
-        kernels = compiled()
-        if kernels.element is not None and (full is None or kernels.full is not None):
+        volume = None
+        if self.bulk is not None:  # each element's rank-one volume term V U'' beta beta^T
+            beta = np.einsum("q,tq,tqai->tai", self.element.weights, J, g).reshape(T, -1)
+            volume = (beta, self.V * d2U)
+        kernel = compiled()
+        if kernel is not None:
             data = np.zeros(self.pattern.nnz)
             for pos in self.pattern.places:
-                if full is None:
-                    kernels.element(g, GG, aW, bW, cW, pos, data)
-                else:
-                    kernels.full(g, full[0], GG, aW, bW, cW, full[1], full[2], pos, data)
+                kernel(g, GG, aW, bW, cW, pos, data, full, volume)
         else:
             pat = self.pattern
             data = element_data(g, GG, aW, bW, cW, pat.local, *pat.gather, pat.nnz, full=full)
-        if self.bulk is not None:  # each element's rank-one volume term V U'' beta beta^T
-            beta = np.einsum("q,tq,tqai->tai", self.element.weights, J, g).reshape(T, -1)
-            coef = self.V * d2U
-            if kernels.outer is not None:
-                for pos in self.pattern.places:
-                    kernels.outer(np.ascontiguousarray(beta), coef, pos, data)
-            else:
-                pat = self.pattern
-                data += outer_data(beta, coef, *pat.gather, pat.local, pat.nnz)
+            if volume is not None:
+                data += outer_data(*volume, *pat.gather, pat.local, pat.nnz)
         for p in self.potentials:
             r += p.gradient(u)
             data += self.pattern.entries(*p.hessian(u))

@@ -13,8 +13,8 @@ import pytest
 import yaml
 
 from fem.config import read_config
-from fem.generate import generate
-from fem.placements import plan, split_of
+from fem.generate import generate, schedule
+from fem.placements import Plan, plan, split_of
 from fem.simulate import simulate
 from stmpl.data.dataset import Dataset
 
@@ -76,6 +76,20 @@ def test_splits_go_by_placement():
     assert np.bincount(s, minlength=3).tolist() == [16, 2, 2]
     assert np.bincount(split_of(5, [0.8, 0.1, 0.1], 0), minlength=3).tolist() == [3, 1, 1]
     assert not np.array_equal(split_of(20, [0.8, 0.1, 0.1], 1), s)
+
+
+def test_shards_begun_go_first_then_every_split_at_its_share():
+    split = split_of(12, [0.5, 0.25, 0.25], seed=0)  # 6 training, 3 validation, 3 test places
+    p = Plan({"shard_tasks": 1}, None, [{}] * 12, split, [(i, 0) for i in range(12)])
+    order = schedule(p, list(range(12)), begun={7, 2})
+    assert sorted(order) == list(range(12)) and order[:2] == [2, 7]
+    rest = split[order[2:]]
+    share = np.bincount(rest, minlength=3) / len(rest)
+    for n in range(1, 11):  # every prefix of the rest holds each split at its share, +- 1
+        assert np.all(np.abs(np.bincount(rest[:n], minlength=3) - n * share) <= 1), n
+    for s_ in range(3):  # each split's shards in their own order
+        mine = [k for k in order[2:] if split[k] == s_]
+        assert mine == sorted(mine)
 
 
 def test_serial_run_card_and_samples(tmp_path):
