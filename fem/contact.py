@@ -66,9 +66,27 @@ class Contact:
         self.held = solver.fixed[self.nodes].all(axis=1)  # skin nodes held in place (a rim)
         self.held_inside = 0.0
         self.rest = solver.positions[self.nodes]
+        self._last = None  # (shape, positions, distance) of the last distance computed
+
+    def _distance(self, u: np.ndarray):
+        """The object's ``(phi, grad, curvature)`` at the skin nodes displaced by ``u``: a
+        Newton step asks for it at one state several times (the residual, the tangent, the
+        coupling, the line search's energy), so the last one is kept, read-only, and given
+        again for the same object and the same positions.
+        """
+        x = self.rest + u[self.nodes]
+        last = self._last
+        if last is not None and last[0] is self.shape and np.array_equal(last[1], x):
+            return last[2]
+        found = self.shape.distance(x)
+        for a in found:
+            if a is not None:
+                a.flags.writeable = False
+        self._last = (self.shape, x, found)
+        return found
 
     def _state(self, u: np.ndarray):
-        phi, grad, curv = self.shape.distance(self.rest + u[self.nodes])
+        phi, grad, curv = self._distance(u)
         p = np.maximum(self.multipliers - self.stiffness * phi, 0.0)
         return phi, grad, curv, p
 

@@ -357,13 +357,16 @@ class Surface:
         grad[near] = g
         return phi, grad, None
 
-    def path_at(self, x: np.ndarray) -> np.ndarray:
+    def path_at(self, x: np.ndarray, band: float | None = None) -> np.ndarray:
         """``(K, 3)``: the :attr:`path` (m per m of depth) at the point of the mesh nearest to
-        each of ``x`` ``(K, 3)`` (m), interpolated over its triangle.
+        each of ``x`` ``(K, 3)`` (m), interpolated over its triangle. ``band`` (m): a point
+        outside the mesh farther than it takes the path at a point of the mesh near it (among
+        its nearest triangles), not searched for the nearest (:meth:`closest`).
         """
         if self.path is None:
             raise ValueError(f"{self.name}: the mesh has no path")
-        face, _, _, bary = self.closest(np.asarray(x, dtype=float).reshape(-1, 3))
+        x = np.asarray(x, dtype=float).reshape(-1, 3)
+        face, _, _, bary = self.closest(x, band)
         return np.einsum("kj,kji->ki", bary, self.path[self.faces[face]])
 
     def closest(self, x: np.ndarray, band: float | None = None):

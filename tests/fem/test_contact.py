@@ -42,6 +42,43 @@ def test_the_contact_potential_is_consistent():
     np.testing.assert_allclose(Hd, fd, atol=1e-6 * np.abs(fd).max())
 
 
+def test_the_object_s_distance_is_measured_once_a_state():
+    """The residual, the tangent and the energy at one state share one distance; a new state
+    or a moved object measures again, with the same answers as measured afresh.
+    """
+    solver, a, h = punch_slab(2.0, spacing=0.25, order=1)
+    punch = Punch([0, 0, 1e-4], [0, 0, -1], a)
+    calls = []
+
+    class Counted:
+        def __init__(self, shape):
+            self.shape = shape
+
+        def distance(self, x):
+            calls.append(x.copy())
+            return self.shape.distance(x)
+
+    c = Contact(solver, Counted(punch), 1e6)
+    c.multipliers[:] = 5.0
+    u = np.random.default_rng(0).normal(0, 2e-4, (solver.n_all, 3))
+    g, H, E = c.gradient(u), c.hessian(u), c.energy(u)
+    assert len(calls) == 1
+    v = u.copy()
+    v[c.nodes[0], 2] += 1e-6
+    c.gradient(v)
+    assert len(calls) == 2
+    c.shape = Counted(punch)  # the object moved (a new shape): measured again
+    np.testing.assert_array_equal(c.gradient(u), g)
+    assert len(calls) == 3 and c.energy(u) == E
+    fresh = Contact(solver, punch, 1e6)
+    fresh.multipliers[:] = 5.0
+    np.testing.assert_array_equal(fresh.gradient(u), g)
+    for got, want in zip(c.hessian(u), H):
+        np.testing.assert_array_equal(got, want)
+    with pytest.raises(ValueError, match="read-only"):
+        c._distance(u)[1][0] = 0.0  # a kept answer cannot be changed by a caller
+
+
 def test_the_contact_potential_s_terms_in_the_object_s_depth_are_its_derivatives():
     """Force control in one Newton system differentiates the potential in the object's depth
     too: the reaction is the energy's derivative, ``c`` the reaction's and ``b`` the

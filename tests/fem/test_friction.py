@@ -4,9 +4,10 @@ dragged across a slab that sticks and then slides at Coulomb's bound, and bad co
 
 import numpy as np
 import pytest
+import trimesh
 
 from fem.contact import Contact, slide
-from fem.friction import SKIN_FRICTION, Friction, coefficient, motion
+from fem.friction import REACHED, SKIN_FRICTION, Friction, coefficient, motion
 from fem.shapes import Punch, Surface
 from fem.verification import punch_slab
 
@@ -82,6 +83,26 @@ def test_a_closing_mesh_moves_each_point_by_its_path():
     x = np.array([[0.25, 0.25, 0.001], [0.0, 0.0, 0.0]])
     np.testing.assert_allclose(motion(tri, None, x, 2.0), [[1.0, 0.5, 0.5], [2.0, 0, 0]])
     np.testing.assert_allclose(motion(tri, [0, 0, 1.0], x, 2.0), [[0, 0, 2.0]] * 2)
+
+
+def test_a_closing_mesh_s_motion_is_exact_wherever_a_step_can_press():
+    """Within :data:`REACHED` of the mesh a point moves by the path at its nearest point, as
+    found by searching every triangle; farther out by the path at a point of the mesh.
+    """
+    ball = trimesh.creation.icosphere(3, radius=0.02)
+    path = ball.vertices * [30.0, 60.0, 90.0]  # m per m of depth, smooth over the mesh
+    mesh = Surface(np.asarray(ball.vertices), np.asarray(ball.faces), path=path)
+    rng = np.random.default_rng(0)
+    out = rng.normal(size=(400, 3))
+    out /= np.linalg.norm(out, axis=1)[:, None]
+    x = out * rng.uniform(0.0195, 0.06, 400)[:, None]
+    near = np.abs(np.linalg.norm(x, axis=1) - 0.02) < REACHED - 1e-4
+    got, exact = motion(mesh, None, x, 1e-4), 1e-4 * mesh.path_at(x)
+    np.testing.assert_array_equal(got[near], exact[near])
+    reach = 1e-4 * np.linalg.norm(path, axis=1).max()
+    assert np.all(np.linalg.norm(got, axis=1) <= reach * (1 + 1e-12))
+    # a long step widens the band: every point within it is exact
+    np.testing.assert_array_equal(motion(mesh, None, x, 0.05), 0.05 * mesh.path_at(x))
 
 
 @pytest.mark.parametrize("bad", [-0.1, float("nan"), float("inf"), "0.5", True, None])
