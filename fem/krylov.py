@@ -53,10 +53,43 @@ def symmetric_matvec(K: sp.csr_matrix, upper: bool) -> Callable[[np.ndarray], np
             return y
         if not upper:
             return K @ x
+        single = _upper_kernel() if x.ndim == 1 else None
+        if single is not None:  # one pass over the triangle: no transpose made
+            y = np.empty(len(x))
+            single(K.indptr, K.indices, K.data, np.ascontiguousarray(x, dtype=float), y)
+            return y
         KT, diagonal = lower()
         return K @ x + KT @ x - (diagonal * x.T).T
 
     return matvec
+
+
+@functools.cache
+def _upper_kernel():
+    """``kernel(indptr, indices, data, x, y)``: ``y = K x`` for a symmetric ``K`` stored as its
+    upper triangle (CSR), in one pass: each stored ``K_ij`` adds ``K_ij x_j`` to ``y_i`` and,
+    off the diagonal, ``K_ij x_i`` to ``y_j``. On a grip's tangent (9M stored entries) this
+    spares making the triangle's transpose (0.17 s a tangent) for Newton's CG solves; ``None``
+    when Numba is absent.
+    """
+    try:
+        from numba import njit  # deferred: compiled on first use
+    except ImportError:
+        return None
+
+    @njit(cache=True, nogil=True)
+    def kernel(indptr, indices, data, x, y):  # pragma: no cover - compiled
+        y[:] = 0.0
+        for i in range(len(indptr) - 1):
+            xi, acc = x[i], 0.0
+            for p in range(indptr[i], indptr[i + 1]):
+                j, v = indices[p], data[p]
+                acc += v * x[j]
+                if j != i:
+                    y[j] += v * xi
+            y[i] += acc
+
+    return kernel
 
 
 BLOCK = 8

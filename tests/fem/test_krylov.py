@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 
+from fem import krylov
 from fem.krylov import BLOCK, pcg, symmetric_matvec
 
 
@@ -15,11 +16,16 @@ def _spd(n, seed=0):
     return (B @ B.T + sp.identity(n) * 0.5).tocsr()
 
 
-def test_symmetric_matvec_from_the_upper_triangle_is_the_whole_product():
+def test_symmetric_matvec_from_the_upper_triangle_is_the_whole_product(monkeypatch):
     A = _spd(60)
     x = np.random.default_rng(1).normal(size=60)
+    assert krylov._upper_kernel() is not None, "numba is missing: the kernel cannot be checked"
     np.testing.assert_allclose(symmetric_matvec(sp.triu(A).tocsr(), True)(x), A @ x, rtol=1e-12)
     np.testing.assert_allclose(symmetric_matvec(A, False)(x), A @ x, rtol=1e-12)
+    X = np.random.default_rng(3).normal(size=(60, 2))  # a narrow block: SciPy's products
+    np.testing.assert_allclose(symmetric_matvec(sp.triu(A).tocsr(), True)(X), A @ X, rtol=1e-12)
+    monkeypatch.setattr(krylov, "_upper_kernel", lambda: None)  # without Numba
+    np.testing.assert_allclose(symmetric_matvec(sp.triu(A).tocsr(), True)(x), A @ x, rtol=1e-12)
 
 
 def test_a_block_of_columns_is_the_whole_product_in_any_layout():
