@@ -71,8 +71,8 @@ def motion(shape, direction, x: np.ndarray, step: float) -> np.ndarray:
     """
     if direction is not None:
         return np.broadcast_to(step * np.asarray(direction, dtype=float), x.shape)
-    band = max(REACHED, 4 * abs(step) * float(np.linalg.norm(shape.path, axis=1).max()))
-    return step * shape.path_at(x, band)
+    fastest = 0.0 if shape.path is None else float(np.linalg.norm(shape.path, axis=1).max())
+    return step * shape.path_at(x, max(REACHED, 4 * abs(step) * fastest))
 
 
 class Friction:

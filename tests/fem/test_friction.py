@@ -2,6 +2,8 @@
 dragged across a slab that sticks and then slides at Coulomb's bound, and bad coefficients.
 """
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 import trimesh
@@ -83,6 +85,8 @@ def test_a_closing_mesh_moves_each_point_by_its_path():
     x = np.array([[0.25, 0.25, 0.001], [0.0, 0.0, 0.0]])
     np.testing.assert_allclose(motion(tri, None, x, 2.0), [[1.0, 0.5, 0.5], [2.0, 0, 0]])
     np.testing.assert_allclose(motion(tri, [0, 0, 1.0], x, 2.0), [[0, 0, 2.0]] * 2)
+    with pytest.raises(ValueError, match="has no path"):  # a mesh that does not close
+        motion(replace(tri, path=None), None, x, 2.0)
 
 
 def test_a_closing_mesh_s_motion_is_exact_wherever_a_step_can_press():
