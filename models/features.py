@@ -69,9 +69,26 @@ square centimetre)."""
 
 CONTACT_BAND = 0.008
 """m: a pose model's contact force is answered on the vertices within this of an object at rest,
-zero farther away: the skin moves in under a press, not out towards the object, but a vertex one
-edge from the touching ones carries its share of the contact force (on anny's belly, edges of
-about 10 mm, 6 % of the force lies on vertices 5-7.5 mm from the object at rest, none farther)."""
+and tapered to none over :data:`CONTACT_TAPER` beyond it: the skin moves in under a press, not
+out towards the object, but a vertex one edge from the touching ones carries its share of the
+contact force (on anny's belly, edges of about 10 mm, 6 % of the force lies on vertices 5-7.5 mm
+from the object at rest, none farther)."""
+
+CONTACT_TAPER = 0.002
+"""m: beyond :data:`CONTACT_BAND` a vertex's share of the answered contact force falls linearly
+to none over this, so that an object's reaction moves continuously with its depth and force
+control finds every force between two depths. With a hard edge it jumped as vertices crossed
+it (an untrained model's reaction on a grip rose in steps of up to 0.1 N, each where a vertex
+entered the band, and no depth gave 1 N)."""
+
+
+def contact_weight(gap):
+    """Each vertex's share of its answered contact force from the gap field ``gap`` (m; NumPy
+    or torch, any shape): 1 within :data:`CONTACT_BAND` of an object, none beyond
+    :data:`CONTACT_TAPER` more, linear between.
+    """
+    return ((CONTACT_BAND + CONTACT_TAPER - gap) / CONTACT_TAPER).clip(0.0, 1.0)
+
 
 PRESSURE_LOG_MAX = 8.0
 """The largest log-pressure a pose model answers (e^8 x 10 kPa, 30 MPa: far past any contact the
@@ -97,22 +114,21 @@ def gap_channels(gap) -> list:
 
 
 def near_objects(gap):
-    """``(B, N)`` a field that is positive on the vertices within :data:`CONTACT_BAND` of an
-    object (m): where a pose loads the skin, as a force field marks it for the regions of
-    :mod:`stmpl.reach`.
+    """``(B, N)`` a field (NumPy or torch) that is positive on the vertices an answer's contact
+    force reaches (:func:`contact_weight`), from the gap field ``gap`` (m): where a pose loads
+    the skin, as a force field marks it for the regions of :mod:`stmpl.reach`.
     """
-    return (CONTACT_BAND - gap).clamp_min(0.0)
+    return (CONTACT_BAND + CONTACT_TAPER - gap).clip(min=0.0)
 
 
 def posed_answer(scene: Scene, u: np.ndarray, pressure: np.ndarray, push: np.ndarray) -> dict:
     """A pose model's answer to ``scene``: displacement ``u`` ``(N, 3)`` m, the contact force on
     each vertex from ``pressure`` ``(N,)`` Pa (the network's, negative read as none: contact
     pushes only) and the reaction from ``push`` ``(N,)`` Pa (the network's pressure along the
-    press direction, the reaction's density), both only within
-    :data:`CONTACT_BAND` of the objects.
+    press direction, the reaction's density), both weighed by :func:`contact_weight`: whole
+    within :data:`CONTACT_BAND` of the objects, tapered to none beyond.
     """
-    area = scene.part.vertex_areas
-    near = scene.pose.gap <= CONTACT_BAND
-    force = np.where(near, np.maximum(pressure, 0.0), 0.0) * area
-    reaction = float(np.sum(np.where(near, push, 0.0) * area))
+    share = contact_weight(scene.pose.gap) * scene.part.vertex_areas
+    force = np.maximum(pressure, 0.0) * share
+    reaction = float(np.sum(push * share))
     return {"displacement": u, "force": force, "reaction": reaction}

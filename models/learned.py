@@ -18,6 +18,7 @@ from models.features import (
     CONTACT_BAND,
     MIN_TOTAL_N,
     PRESSURE_OUT_SCALE,
+    contact_weight,
     posed_answer,
     pressure_out,
     total_force,
@@ -185,8 +186,8 @@ class LearnedPredictor(TrainedPredictor):
         """A pose model's reaction error beside a ``relative`` or ``pooled`` loss: from ``(B, N,
         2)`` contact pressure and push per vertex (units of :meth:`raw`) and the gap field ``gap``
         ``(B, N)`` (m), the mean over the samples of ``|log(R / R*)|``, the reaction ``R`` the
-        push summed over the vertex areas within :data:`~models.features.CONTACT_BAND` of the
-        object, as an answer sums it, and ``R*`` the true one: the relative error where it is
+        push summed over the vertex areas weighed by :func:`~models.features.contact_weight`,
+        as an answer sums it, and ``R*`` the true one: the relative error where it is
         small, and an answer ten times too large pulled back by a bounded step (each vertex by
         its share of ``R``), not by ten times the step. Beside it the pressures' error where the
         object presses keeps their map in shape.
@@ -197,7 +198,7 @@ class LearnedPredictor(TrainedPredictor):
             else self.body_tensor("inv_area", body)
         )
         true = (tgt[..., 1] / inv_area).sum(-1)
-        got = torch.where(gap <= CONTACT_BAND, pred[..., 1], 0.0) / inv_area
+        got = contact_weight(gap) * pred[..., 1] / inv_area
         return (
             (torch.log(got.sum(-1).clamp_min(1e-12)) - torch.log(true.clamp_min(1e-12)))
             .abs()

@@ -17,11 +17,11 @@ from threadpoolctl import ThreadpoolController
 
 from fem.compliance import ColumnStore
 from models.features import (
-    CONTACT_BAND,
     CORRECTION_SCALE,
     MIN_TOTAL_N,
     PRESSURE_LOG_MAX,
     PRESSURE_OUT_SCALE,
+    near_objects,
     posed_answer,
 )
 from models.gnn.subgraph import loaded, mesh, subgraph
@@ -334,7 +334,7 @@ class GNNArrays(TrainedPredictor):
             )
             y = self.net(x, edges, ei)
             return y if base is None else base.reshape(B * N, 3) + CORRECTION_SCALE * y
-        near = np.maximum(CONTACT_BAND - f, 0.0) if self.posed else f
+        near = near_objects(f) if self.posed else f
         if base is not None:  # the region: where the linear FEM moves the tissue, a ring wider
             seeds, grow = reach.moving(near, base, self.region_tolerance), 1
         else:

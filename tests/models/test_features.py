@@ -32,3 +32,15 @@ def test_pressures_are_read_from_their_logarithm_and_cannot_overflow():
     out = features.pressure_out(raw).numpy()
     np.testing.assert_allclose(out[:3], [25.0, 0.02, 1.0], rtol=1e-5)
     assert out[3] == pytest.approx(np.exp(features.PRESSURE_LOG_MAX), rel=1e-5)
+
+
+def test_a_vertex_s_share_of_the_contact_force_tapers_to_none_past_the_band():
+    band, taper = features.CONTACT_BAND, features.CONTACT_TAPER
+    gap = np.array([-0.01, 0.0, band, band + taper / 4, band + taper / 2, band + taper, 0.05])
+    want = [1.0, 1.0, 1.0, 0.75, 0.5, 0.0, 0.0]
+    np.testing.assert_allclose(features.contact_weight(gap), want, atol=1e-12)
+    np.testing.assert_allclose(features.contact_weight(torch.tensor(gap)).numpy(), want, atol=1e-12)
+    # the regions reach every vertex with a share, and no other
+    near = features.near_objects(gap)
+    assert np.array_equal(near > 0, features.contact_weight(gap) > 0)
+    assert np.array_equal(features.near_objects(torch.tensor(gap)).numpy(), near)

@@ -136,7 +136,7 @@ def test_a_model_given_a_pose_answers_the_force_near_the_object_and_its_reaction
     """
     import torch
 
-    from models.features import CONTACT_BAND, PRESSURE_OUT_SCALE
+    from models.features import CONTACT_BAND, CONTACT_TAPER, PRESSURE_OUT_SCALE
     from stmpl import tissue
     from stmpl.contact import objects
     from stmpl.contact.posing import posed
@@ -148,14 +148,17 @@ def test_a_model_given_a_pose_answers_the_force_near_the_object_and_its_reaction
     pose = objects.press(ds.part, ball, at, depth=3e-3)
     scene = posed(ds.part, tissue.constant(ds.part, 0.0075), ball, pose)
     d = p.predict(scene)
-    near = scene.pose.gap <= CONTACT_BAND
-    assert not d.force[~near].any() and d.force.min() >= 0
-    t, g = (torch.tensor(x[None], dtype=torch.float32) for x in (scene.thickness, scene.pose.gap))
+    gap = scene.pose.gap
+    reached = gap < CONTACT_BAND + CONTACT_TAPER  # the band and its taper
+    assert not d.force[~reached].any() and d.force.min() >= 0
+    t, g = (torch.tensor(x[None], dtype=torch.float32) for x in (scene.thickness, gap))
     with torch.no_grad():
         out = p.forward(t, g)[0].double().numpy() * PRESSURE_OUT_SCALE  # pressure, push: Pa
+    share = np.clip((CONTACT_BAND + CONTACT_TAPER - gap) / CONTACT_TAPER, 0, 1)
+    assert np.all(share[gap <= CONTACT_BAND] == 1) and np.any((share > 0) & (share < 1))
     area = ds.part.vertex_areas
-    np.testing.assert_allclose(d.force, np.where(near, np.maximum(out[:, 3], 0), 0) * area)
-    assert d.reaction == pytest.approx(float(np.sum(out[near, 4] * area[near])), rel=1e-6)
+    np.testing.assert_allclose(d.force, np.maximum(out[:, 3], 0) * share * area)
+    assert d.reaction == pytest.approx(float(np.sum(out[:, 4] * share * area)), rel=1e-6)
     q = predictor.read(p.save(tmp_path / "m.safetensors"))
     assert q.takes == ("pose",)
     np.testing.assert_allclose(q.predict(scene).displacement, d.displacement, atol=1e-9)
