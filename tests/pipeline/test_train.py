@@ -4,6 +4,7 @@ import numpy as np
 import pytest
 
 from fem.layers import bound
+from models import features
 from stmpl import checkpoint, predictor
 from stmpl.contact import gap as along
 from stmpl.data.dataset import Dataset
@@ -257,7 +258,8 @@ def test_a_model_given_the_pose_learns_the_dent_and_the_force_of_pressed_objects
     for s, d in zip(scenes, p.predict(scenes)):
         assert d.force.shape == (ds.part.n_vertices,) and d.force.min() >= 0
         assert d.reaction >= 0 and np.isfinite(d.displacement).all()
-        assert not d.force[s.pose.gap > 0.005].any()  # none far from the object
+        reach = features.CONTACT_BAND + features.CONTACT_TAPER
+        assert not d.force[s.pose.gap >= reach].any()  # none past the band and its taper
     got = evaluate_dataset(p, ds, "test")
     assert got["samples"] == len(scenes) and np.isfinite(got["reaction_err"][0])
     a = ds.arrays()
