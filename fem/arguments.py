@@ -18,7 +18,12 @@ def add_generate(sub) -> None:
     ge.add_argument("--workers", type=int, help="parallel workers (default from the config)")
     ge.add_argument("--backend", choices=["serial", "processes", "dask"])
     ge.add_argument("--scheduler", help="Dask scheduler address (implies --backend dask)")
-    ge.add_argument("--max-shards", type=int, help="stop after this many new shards")
+    ge.add_argument(
+        "--max-shards",
+        type=int,
+        help="stop after this many new shards (0: solve none), with a card of the shards on "
+        "disk that says the set is not complete",
+    )
     ge.add_argument(
         "--max-bodies", type=int, help="a config of several bodies: stop after the first this many"
     )

@@ -26,7 +26,7 @@ def generate_command(args) -> int:
         tissue=args.tissue,
     )
     if not card:
-        print("stopped early (--max-shards or --max-bodies); run again to finish")
+        print("stopped early (--max-bodies); run again to finish")
         return 0
     if "members" in card:  # one dataset per body
         for m in card["members"]:
@@ -56,6 +56,12 @@ def generate_command(args) -> int:
             f"{card['placements_skipped']['by_reason']}"
         )
     print(f"content hash {card['hash']}")
+    if not card["complete"]:
+        print(
+            f"stopped early: {card['shards_written']} shards ({card['tasks']} of "
+            f"{card['tasks_planned']} tasks); the card says the set is not complete; run again "
+            "to finish it"
+        )
     return 0
 
 

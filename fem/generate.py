@@ -73,16 +73,16 @@ def _count(items, key) -> dict:
 
 
 def write_card(out: pathlib.Path, p: Plan, chash: str, runs: list) -> dict:
-    """Scan every shard and write ``card.json``; returns the card."""
-    metas = []
-    for k in range(p.n_shards):
-        m = read_shard_meta(shard_path(out, k), chash)
-        if m is None:
-            raise RuntimeError(f"shard {k} is missing or unreadable; run generate again")
-        metas.append(m)
+    """Scan the shards on disk and write ``card.json``; returns the card. A set stopped part way
+    gets a card of the shards it has, ``complete: false``, with how many of the planned shards,
+    tasks and samples they are: it can be trained on and measured as it grows, and says so.
+    """
+    metas = [m for k in range(p.n_shards) if (m := read_shard_meta(shard_path(out, k), chash))]
+    if not metas:
+        raise ValueError(f"{out} holds no finished shard yet: there is nothing to write a card of")
     tasks = [t for m in metas for t in m["tasks"]]
-    if sorted(tasks) != list(range(len(p.tasks))):
-        raise RuntimeError("shards do not cover every task exactly once")
+    if len(set(tasks)) != len(tasks) or not set(tasks) <= set(range(len(p.tasks))):
+        raise RuntimeError("the shards do not hold distinct planned tasks; generate the set again")
     split = np.concatenate([m["split"] for m in metas])
     level = np.concatenate([m["thickness_level"] for m in metas])
     kinds = [k for m in metas for k in m["kind"]]
@@ -114,7 +114,10 @@ def write_card(out: pathlib.Path, p: Plan, chash: str, runs: list) -> dict:
             "by_reason": _count(p.skipped, lambda x: x["reason"]),
         },
         "placements_per_split": {s: int((p.split == i).sum()) for i, s in enumerate(SPLITS)},
-        "tasks": len(p.tasks),
+        "complete": len(metas) == p.n_shards,
+        "shards_written": f"{len(metas)} of {p.n_shards}",
+        "tasks": len(tasks),
+        "tasks_planned": len(p.tasks),
         "samples": int(len(split)),
         "samples_per_split": {s: int((split == i).sum()) for i, s in enumerate(SPLITS)},
         "samples_per_kind": {k: kinds.count(k) for k in sorted(set(kinds))},
@@ -122,7 +125,8 @@ def write_card(out: pathlib.Path, p: Plan, chash: str, runs: list) -> dict:
         "tissue": getattr(preset(p.cfg["tissue"]), "name", "paper"),
         "force_range_N": [float(min(p.cfg["forces"])), float(max(p.cfg["forces"]))],
         "samples_per_force_N": {f"{f:g}": int(np.isclose(total, f).sum()) for f in p.cfg["forces"]},
-        "attempted": int(len(p.tasks) * len(p.cfg["forces"])),
+        "attempted": int(len(tasks) * len(p.cfg["forces"])),
+        "planned": int(len(p.tasks) * len(p.cfg["forces"])),
         "failures": len(failures),
         "failures_by_reason": _count(failures, lambda f: f["reason"].split(":")[0]),
         "failures_per_split": {
@@ -200,8 +204,9 @@ def generate(
     """Generate (or finish) the dataset of ``config`` (a YAML path or a dict) in folder ``out``
     (default ``data/<name>``; ``data/<name>-<tissue>`` when ``tissue`` names a layered preset
     in place of the config's). Returns the card. ``max_shards`` stops after that many new shards
-    (for tests and trial runs; the card is then not written and ``{}`` is returned);
-    ``max_bodies``, for a config of several bodies, stops after that many bodies.
+    (0: solves none), and the card then says the set is not complete (``complete: false``: a
+    long set is trained on as it grows); ``max_bodies``, for a config of several bodies, stops
+    after that many bodies (``{}`` is then returned: a bodies card covers every body).
     """
     cfg = read_config(config)
     if progress:
@@ -225,8 +230,8 @@ def generate(
             max_bodies=max_bodies,
         )
     par = _parallel(cfg, workers, backend, scheduler)
-    if max_shards is not None and max_shards < 1:
-        raise ValueError(f"max_shards must be >= 1, got {max_shards}")
+    if max_shards is not None and (isinstance(max_shards, bool) or max_shards < 0):
+        raise ValueError(f"max_shards must be an integer >= 0, got {max_shards}")
     out = pathlib.Path(out if out is not None else pathlib.Path("data") / cfg["name"])
     chash = config_hash(cfg)
     p = plan(cfg, part)
@@ -246,11 +251,12 @@ def generate(
         todo = todo[:max_shards]
     runs_path = out / "runs.json"
     runs = json.loads(runs_path.read_text()) if runs_path.exists() else []
-    _solve(out, cfg, p, chash, todo, par, runs, progress, on_disk)
-    if max_shards is not None and any(
-        read_shard_meta(shard_path(out, k), chash) is None for k in range(p.n_shards)
-    ):
-        return {}
+    try:
+        _solve(out, cfg, p, chash, todo, par, runs, progress, on_disk)
+    except KeyboardInterrupt:  # the card of what is on disk, then stop as asked
+        if on_disk or any(read_shard_meta(shard_path(out, k), chash) for k in todo):
+            write_card(out, p, chash, runs)
+        raise
     return write_card(out, p, chash, runs)
 
 
@@ -411,7 +417,7 @@ def generate_bodies(cfg: dict, out, max_bodies: int | None = None, **kwargs) -> 
             )
             print(f"body {k + 1}/{len(ms)}: {ph}; {m['thickness_mm'][0]:g} mm", flush=True)
         card = generate(m, member_folder(out, k), **kwargs)
-        if not card:
+        if not card["complete"]:
             return {}
         cards.append(card)
     card = {

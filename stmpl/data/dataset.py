@@ -39,8 +39,8 @@ class Dataset:
             raise FileNotFoundError(f"dataset folder not found: {self.folder}")
         card = self.folder / "card.json"
         if not card.is_file():
-            raise FileNotFoundError(f"{self.folder} is not a finished dataset (no card.json); "
-                                    "run `stmpl generate` to make or finish it")
+            raise FileNotFoundError(f"{self.folder} has no card.json; run `stmpl generate` to "
+                                    "make or finish it (`--max-shards 0` cards a set part way)")
         try:
             self.card = json.loads(card.read_text())
         except (json.JSONDecodeError, UnicodeDecodeError) as e:
@@ -63,6 +63,10 @@ class Dataset:
         except (OSError, ValueError, KeyError) as e:
             raise ValueError(f"{self.folder / 'part.npz'} is missing or corrupt: {e}") from e
         self._cache: dict = {}
+        self.complete = bool(self.card.get("complete", True))
+        """False for a set stopped part way: its card covers the shards it has (``shards_written``
+        of the planned, ``tasks`` of ``tasks_planned``), and what is trained or measured on it
+        says so."""
 
     def __len__(self) -> int:
         return int(self.card["samples"])
@@ -73,8 +77,9 @@ class Dataset:
         return [self.part]
 
     def __repr__(self) -> str:
+        part_way = "" if self.complete else f", part way: {self.card['shards_written']} shards"
         return (f"Dataset({str(self.folder)!r}, {len(self)} samples, "
-                f"{self.card['samples_per_split']})")
+                f"{self.card['samples_per_split']}{part_way})")
 
     def verify(self) -> None:
         """Check every shard (and the part) against the card; ``ValueError`` naming the first
@@ -245,12 +250,15 @@ class Datasets:
                                   for s in SPLITS},
             "config": {**cards[0]["config"], "thickness_mm": levels},
             "tissue": cards[0].get("tissue", "paper"),
+            "complete": all(ds.complete for ds in self.members),
             "datasets": [{"folder": str(ds.folder), "name": ds.card["name"],
-                          "hash": ds.card["hash"]} for ds in self.members]}
+                          "hash": ds.card["hash"], "complete": ds.complete}
+                         for ds in self.members]}
         if len(self.parts) > 1:
             self.card["bodies"] = [(p.source or {}).get("options", {}).get("phenotype")
                                    for p in self.parts]
         self._all: dict | None = None
+        self.complete = self.card["complete"]
 
     def __len__(self) -> int:
         return int(self.card["samples"])

@@ -305,6 +305,8 @@ def evaluate(
             s = evaluate_dataset(p, ds, split, limit=limit)
         results[name] = {k: tuple(v) if isinstance(v, list) else v for k, v in s.items()}
     md = table(results) + "\nWhat the answers say about themselves:\n\n" + honesty(results)
+    if not ds.complete:
+        md += f"\nThe dataset is a set part way: {len(ds)} samples so far.\n"
     for name, s in results.items():
         if s.get("failed"):
             md += (

@@ -216,6 +216,11 @@ def train(config, resume: bool = True, progress: bool = True):
         if progress:
             print(f"removed {stale}, left by a run that was killed while writing it")
     ds = open_data(cfg["data"])
+    if progress and not ds.complete:
+        print(
+            f"{ds.folder} is a set part way ({ds.card['samples']} samples so far): the "
+            "checkpoint's card says so"
+        )
     p = _model(cfg, ds)
     device = torch.device(cfg["device"])
     t_fit = time.perf_counter()
@@ -404,6 +409,7 @@ def _write_checkpoint(p, cfg, ds, out, history, best, extra) -> pathlib.Path:
             "name": ds.card["name"],
             "samples": ds.card["samples_per_split"],
             "tissue": ds.card.get("tissue", "paper"),
+            "complete": ds.complete,
             **({"datasets": ds.card["datasets"]} if "datasets" in ds.card else {}),
         },
         "training": {

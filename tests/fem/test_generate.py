@@ -231,17 +231,29 @@ def test_cli_generate_stops_early_and_finishes(tmp_path, capsys):
     path = tmp_path / "cfg.yaml"
     path.write_text(yaml.safe_dump(_cfg(thickness_mm=[7.5], forces=[0.05, 0.1])))
     out = tmp_path / "cli"
+    assert main(["generate", str(path), "--out", str(out), "--max-shards", "0"]) == 2
+    assert "no finished shard yet" in capsys.readouterr().err
     assert main(["generate", str(path), "--out", str(out), "--max-shards", "1"]) == 0
     said = capsys.readouterr()
-    assert "stopped early" in said.out
+    assert "stopped early: 1 of " in said.out
     # the bar runs from nothing to this run's shard, not to the whole set
     bar = re.findall(r"(\d+)/(\d+) \[", said.err)
     assert bar[0][0] == "0" and bar[-1][0] == bar[-1][1]
-    assert len(list(out.glob("shard-*.h5"))) == 1 and not (out / "card.json").exists()
+    assert len(list(out.glob("shard-*.h5"))) == 1
+    # a set part way has a card of what it holds, and is read (and trained on) as such
+    part_way = json.loads((out / "card.json").read_text())
+    assert not part_way["complete"] and part_way["tasks"] < part_way["tasks_planned"]
+    ds = Dataset(out)
+    assert not ds.complete and "part way" in repr(ds)
+    assert len(ds.arrays()["task"]) == part_way["samples"] == part_way["attempted"] - part_way[
+        "failures"
+    ]
     assert main(["generate", str(path), "--out", str(out), "--quiet"]) == 0
     printed = capsys.readouterr().out
     card = json.loads((out / "card.json").read_text())
-    assert f"{card['samples']} samples" in printed
+    assert f"{card['samples']} samples" in printed and "stopped early" not in printed
+    assert card["complete"] and Dataset(out).complete
+    assert card["tasks"] == card["tasks_planned"] and card["attempted"] == card["planned"]
     assert len(card["timing"]["runs"]) == 2
     assert card["attempted"] > int(bar[-1][1])
     assert main(["generate", str(tmp_path / "missing.yaml")]) == 2
