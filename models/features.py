@@ -78,7 +78,7 @@ CONTACT_TAPER = 0.002
 """m: beyond :data:`CONTACT_BAND` a vertex's share of the answered contact force falls linearly
 to none over this, so that an object's reaction moves continuously with its depth and force
 control finds every force between two depths. With a hard edge it jumped as vertices crossed
-it (an untrained model's reaction on a grip rose in steps of up to 0.1 N, each where a vertex
+it (an untrained model's reaction on a grip rose in steps of 0.04-0.13 N, each where a vertex
 entered the band, and no depth gave 1 N)."""
 
 
