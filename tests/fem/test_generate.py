@@ -245,9 +245,11 @@ def test_cli_generate_stops_early_and_finishes(tmp_path, capsys):
     assert not part_way["complete"] and part_way["tasks"] < part_way["tasks_planned"]
     ds = Dataset(out)
     assert not ds.complete and "part way" in repr(ds)
-    assert len(ds.arrays()["task"]) == part_way["samples"] == part_way["attempted"] - part_way[
-        "failures"
-    ]
+    assert (
+        len(ds.arrays()["task"])
+        == part_way["samples"]
+        == part_way["attempted"] - part_way["failures"]
+    )
     assert main(["generate", str(path), "--out", str(out), "--quiet"]) == 0
     printed = capsys.readouterr().out
     card = json.loads((out / "card.json").read_text())
