@@ -22,8 +22,8 @@ from dataclasses import replace
 import numpy as np
 
 from fem.contact import press
+from fem.kinematics import det3
 from fem.layers import preset
-from fem.material import det3
 from fem.shapes import Sphere
 from fem.simulate import tissue_mesh
 from fem.solver import Solver

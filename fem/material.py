@@ -43,34 +43,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fem.kinematics import det3, inv3
 from fem.limits import GEL, Limits
 
 _I = np.eye(3)
-
-
-def det3(F: np.ndarray) -> np.ndarray:
-    """``(T,)`` determinants of ``(T, 3, 3)`` matrices (closed form, faster than LAPACK here)."""
-    return (
-        F[:, 0, 0] * (F[:, 1, 1] * F[:, 2, 2] - F[:, 1, 2] * F[:, 2, 1])
-        - F[:, 0, 1] * (F[:, 1, 0] * F[:, 2, 2] - F[:, 1, 2] * F[:, 2, 0])
-        + F[:, 0, 2] * (F[:, 1, 0] * F[:, 2, 1] - F[:, 1, 1] * F[:, 2, 0])
-    )
-
-
-def inv3(F: np.ndarray):
-    """``(F^-1 (T, 3, 3), det F (T,))`` by cofactors."""
-    C = np.empty_like(F)
-    C[:, 0, 0] = F[:, 1, 1] * F[:, 2, 2] - F[:, 1, 2] * F[:, 2, 1]
-    C[:, 0, 1] = F[:, 0, 2] * F[:, 2, 1] - F[:, 0, 1] * F[:, 2, 2]
-    C[:, 0, 2] = F[:, 0, 1] * F[:, 1, 2] - F[:, 0, 2] * F[:, 1, 1]
-    C[:, 1, 0] = F[:, 1, 2] * F[:, 2, 0] - F[:, 1, 0] * F[:, 2, 2]
-    C[:, 1, 1] = F[:, 0, 0] * F[:, 2, 2] - F[:, 0, 2] * F[:, 2, 0]
-    C[:, 1, 2] = F[:, 0, 2] * F[:, 1, 0] - F[:, 0, 0] * F[:, 1, 2]
-    C[:, 2, 0] = F[:, 1, 0] * F[:, 2, 1] - F[:, 1, 1] * F[:, 2, 0]
-    C[:, 2, 1] = F[:, 0, 1] * F[:, 2, 0] - F[:, 0, 0] * F[:, 2, 1]
-    C[:, 2, 2] = F[:, 0, 0] * F[:, 1, 1] - F[:, 0, 1] * F[:, 1, 0]
-    J = F[:, 0, 0] * C[:, 0, 0] + F[:, 0, 1] * C[:, 1, 0] + F[:, 0, 2] * C[:, 2, 0]
-    return C / J[:, None, None], J
 
 
 def lame(E: float, nu: float) -> tuple[float, float]:

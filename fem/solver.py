@@ -45,8 +45,9 @@ import scipy.sparse as sp
 from fem.elements import ELEMENTS, quadratic
 from fem.finer import FinerPart
 from fem.kernel import compiled, element_data, outer_data
+from fem.kinematics import deformation_gradient, det3, inv3
 from fem.linear_solvers import make_linear_solver
-from fem.material import NeoHookean, det3, inv3
+from fem.material import NeoHookean
 from fem.mesh import ShellMesh
 from fem.newton import newton
 from fem.options import SolverOptions
@@ -148,8 +149,7 @@ class Solver:
         """``(T, Q, 3, 3)`` ``F = I + sum_a u_a (x) grad N_a`` at the quadrature points, for
         nodal displacement ``u`` ``(n_all, 3)``.
         """
-        ue = u[self.conn].transpose(0, 2, 1)[:, None]  # (T, 1, 3, n)
-        return np.eye(3) + np.matmul(ue, self.G)
+        return deformation_gradient(u, self.conn, self.G)
 
     def _F(self, u: np.ndarray) -> np.ndarray:
         return self.deformation_gradient(u).reshape(-1, 3, 3)
