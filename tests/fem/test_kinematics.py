@@ -1,5 +1,6 @@
 """The deformation gradient and the inverse of F: compiled and NumPy alike, exact on a
-homogeneous deformation."""
+homogeneous deformation.
+"""
 
 import numpy as np
 import pytest
