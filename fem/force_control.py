@@ -382,7 +382,9 @@ def _bracket(go, force: float, rtol: float, step: float, start: Pressed | None):
 def _between(go, force: float, rtol: float, lo: Pressed, hi: Pressed) -> Pressed:
     """Force control's second phase: the depth between answers ``lo`` and ``hi`` that carries
     ``force``, aimed by the power law through them; a try that fails is replaced by the
-    bracket's middle and quarters.
+    bracket's middle and quarters. Each try marches from the nearer answer, or with friction
+    from ``lo``: a frictional answer depends on the way it was reached, and the object closes
+    on the skin, never backs off it (from ``hi`` the skin would slip back under the fingers).
     """
     failed, answer = [], hi  # shares of the bracket whose tries failed
     for _ in range(30):
@@ -393,9 +395,10 @@ def _between(go, force: float, rtol: float, lo: Pressed, hi: Pressed) -> Pressed
             if w is None:
                 return replace(answer, reason=f"cannot carry {force:g} N: {answer.reason}")
         depth = lo.depth + w * (hi.depth - lo.depth)
-        # from the nearer answer: the tissue's answer does not depend on the path (elastic,
-        # frictionless), and the shorter march is the cheaper
-        near = lo if (depth - lo.depth <= hi.depth - depth and lo.depth > 0) else hi
+        if go.friction:  # the loading path's answer, from below (rest while lo is at rest)
+            near = lo if lo.depth > 0 else None
+        else:  # the elastic answer does not depend on the path: the shorter march
+            near = lo if (depth - lo.depth <= hi.depth - depth and lo.depth > 0) else hi
         answer = go.to(depth, near)
         if not answer.ok:
             failed.append(w)

@@ -261,3 +261,35 @@ def test_an_object_over_the_held_rim_fails_at_once_saying_so():
     assert not failed.ok and failed.displacement is None
     assert failed.reason.startswith("cannot carry 0.1 N: the object presses the part's held rim")
     assert failed.iterations < 40  # one try, not a search
+
+
+@pytest.mark.parametrize("friction", [None, 0.5])
+def test_the_bracket_s_tries_march_from_below_where_friction_makes_the_answer_path_dependent(
+    friction,
+):
+    """Between an answer below the force and one above, a try without friction marches from
+    the nearer one; with friction always from the one below (or from rest): the object closes
+    on the skin and never backs off it, so the answer is the loading path's.
+    """
+
+    class Go:  # a press that stiffens past Hertz's law, each try's start recorded
+        def __init__(self):
+            self.friction, self.starts = friction, []
+
+        def to(self, depth, start):
+            self.starts.append((depth, None if start is None else start.depth))
+            return Pressed(True, "", depth, reaction=2e4 * depth**1.5 + 4e9 * depth**4)
+
+    for lo_depth in (0.0, 0.001):
+        go = Go()
+        lo, hi = (go.to(d, None) for d in (lo_depth, 0.004))
+        go.starts.clear()
+        found = fem.force_control._between(go, 1.5, 1e-6, lo, hi)
+        assert found.ok and found.reaction == pytest.approx(1.5, rel=1e-6)
+        assert len(go.starts) >= 3
+        came_from_above = [d for d, s in go.starts if s is not None and s > d]
+        if friction:
+            assert not came_from_above
+            assert all(s is None or s < d for d, s in go.starts)
+        else:
+            assert came_from_above  # the shorter march, down from the answer above
