@@ -60,7 +60,7 @@ def main() -> None:
     ap.add_argument("--force", type=float, default=1.0)
     args = ap.parse_args()
 
-    from fem import shapes, solver, tangent
+    from fem import contact, shapes, solver, tangent
     from fem.config import read_config
     from fem.placements import plan
     from fem.worker import payload, solve_shard
@@ -85,11 +85,26 @@ def main() -> None:
         (shapes.Surface, "distance", lambda a, kw, r: "the hand's distance"),
     )
     inside: list = []
+    tries = []  # each depth the search tried: from where, what it carried, what it cost
+    march = contact.Pressing.to
+
+    def tried(self, depth, start):
+        t = time.perf_counter()
+        a = march(self, depth, start)
+        since = 0.0 if start is None else start.depth
+        tries.append((depth, since, a.reaction if a.ok else None, a.iterations, a.updates))
+        tries[-1] += (time.perf_counter() - t,)
+        return a
+
     t0 = time.perf_counter()
     with contextlib.ExitStack() as stack:
         for owner, name, label in hooks:
             stack.enter_context(timed(spent, inside, owner, name, label))
-        out = solve_shard(payload(p, shard, 1))
+        contact.Pressing.to = tried
+        try:
+            out = solve_shard(payload(p, shard, 1))
+        finally:
+            contact.Pressing.to = march
     wall = time.perf_counter() - t0
     rec = out["records"]
     print(f"{args.config}: task {args.task} to {args.force:g} N from rest")
@@ -107,6 +122,22 @@ def main() -> None:
         print(row([key, str(n), f"{s:.1f}"]))
     rest = wall - sum(s for _, s in spent.values())
     print(row(["the rest (residuals, energies, set-up)", "", f"{rest:.1f}"]))
+    print(f"\nthe search's {len(tries)} tries:")
+    print(header(["depth mm", "from mm", "N", "iterations", "multiplier updates", "s"], "rrrrrr"))
+    for depth, since, reaction, iterations, updates, took in tries:
+        carried = "failed" if reaction is None else f"{reaction:.4f}"
+        print(
+            row(
+                [
+                    f"{1e3 * depth:.4f}",
+                    f"{1e3 * since:.4f}",
+                    carried,
+                    str(iterations),
+                    str(updates),
+                    f"{took:.1f}",
+                ]
+            )
+        )
 
 
 if __name__ == "__main__":
