@@ -63,7 +63,7 @@ def deformation_gradient(
 def _kernels():
     """``(deformation gradient, inverse)`` compiled by Numba (cached on disk), or ``None``."""
     try:
-        import numba
+        import numba  # deferred: a quarter of a second, paid by the first solve only
     except ImportError:
         return None
 
