@@ -46,7 +46,8 @@ def generate_command(args) -> int:
     print(
         f"{card['samples']} samples (train {sp['train']}, val {sp['val']}, test "
         f"{sp['test']}) from {card['placements']} placements; {card['failures']} of "
-        f"{card['attempted']} solves failed {card['failures_by_reason'] or ''}"
+        f"{card['attempted']} solves failed"
+        + (f" {card['failures_by_reason']}" if card["failures_by_reason"] else "")
         + (f"; median {median:.2f} s per sample" if median is not None else "")
     )
     skipped = card.get("placements_skipped", {}).get("count", 0)
