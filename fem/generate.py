@@ -44,7 +44,7 @@ from stmpl.data.format import (
     shard_path,
     write_shard,
 )
-from stmpl.files import atomic_savez, atomic_write_text
+from stmpl.files import atomic_savez, atomic_write_text, folder_lock
 from stmpl.part import BodyPart
 
 
@@ -236,6 +236,13 @@ def generate(
     chash = config_hash(cfg)
     p = plan(cfg, part)
     _check_solvable(p)
+    out.mkdir(parents=True, exist_ok=True)
+    with folder_lock(out, f"stmpl generate {cfg['name']}"):  # one run writes a folder
+        return _generate_in(out, cfg, p, chash, par, progress, max_shards)
+
+
+def _generate_in(out, cfg, p: Plan, chash: str, par: dict, progress, max_shards) -> dict:
+    """:func:`generate`'s work in its folder ``out``, held: the shards left solved, the card."""
     _prepare(out, cfg, p, chash)
     todo = [k for k in range(p.n_shards) if read_shard_meta(shard_path(out, k), chash) is None]
     if progress:

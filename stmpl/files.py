@@ -1,9 +1,11 @@
 """Atomic file writes: a temporary file beside the target, then a rename, so a reader never sees
-half a file and a killed writer leaves the old one in place.
+half a file and a killed writer leaves the old one in place; and a folder held by one process at
+a time (:func:`folder_lock`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import os
 import pathlib
 import tempfile
@@ -65,3 +67,36 @@ def atomic_write_text(path, text: str) -> pathlib.Path:
     with atomic_path(path) as tmp:
         tmp.write_text(text)
     return pathlib.Path(path)
+
+
+@contextlib.contextmanager
+def folder_lock(folder, what: str):
+    """Hold ``folder`` for this process while the block runs (``folder/.lock`` names its pid):
+    a second process that asks for it while the first lives gets a ``RuntimeError`` naming
+    ``what`` holds it and that process; a lock left by a process that is gone is taken over.
+    """
+    path = pathlib.Path(folder) / ".lock"
+    try:
+        pid = int(path.read_text().split()[0])
+    except (OSError, ValueError, IndexError):
+        pid = None
+    if pid is not None and pid != os.getpid() and _alive(pid):
+        raise RuntimeError(
+            f"{folder} is held by {what} (process {pid}); wait for it to end or stop it"
+        )
+    atomic_write_text(path, f"{os.getpid()} {what}\n")
+    try:
+        yield
+    finally:
+        path.unlink(missing_ok=True)
+
+
+def _alive(pid: int) -> bool:
+    """Whether a process ``pid`` runs on this machine."""
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:  # another user's: alive
+        return True
+    return True

@@ -1,9 +1,10 @@
 import os
+import subprocess
 
 import numpy as np
 import pytest
 
-from stmpl.files import atomic_path, atomic_savez, atomic_write_text
+from stmpl.files import atomic_path, atomic_savez, atomic_write_text, folder_lock
 
 
 def test_atomic_writes_replace_whole_files_with_ordinary_permissions(tmp_path):
@@ -22,3 +23,21 @@ def test_atomic_writes_replace_whole_files_with_ordinary_permissions(tmp_path):
             raise RuntimeError("killed")
     assert (tmp_path / "a.json").read_text() == "{}"  # the old file stays
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.json", "a.npz"]  # no debris
+
+
+def test_a_folder_is_held_by_one_living_process_at_a_time(tmp_path):
+    lock = tmp_path / ".lock"
+    with folder_lock(tmp_path, "a run"):
+        assert lock.read_text().split()[0] == str(os.getpid())
+    assert not lock.exists()  # let go at the end
+    lock.write_text(f"{os.getppid()} another run\n")  # a living process holds it
+    with pytest.raises(RuntimeError, match=rf"held by a run \(process {os.getppid()}\)"):
+        with folder_lock(tmp_path, "a run"):
+            pass
+    assert lock.read_text().startswith(str(os.getppid()))  # not taken from it
+    gone = subprocess.Popen(["true"])
+    gone.wait()
+    lock.write_text(f"{gone.pid} a run that was killed\n")
+    with folder_lock(tmp_path, "a run"):  # a dead process's lock is taken over
+        assert lock.read_text().split()[0] == str(os.getpid())
+    assert not lock.exists()

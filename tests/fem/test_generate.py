@@ -211,9 +211,12 @@ def test_a_killed_run_resumes_without_loss_or_duplicates(tmp_path):
     _same(a, b)
     if all(np.array_equal(a[k], b[k]) for k in a):  # bit-identical samples: one hash
         assert resumed["hash"] == whole["hash"]
-    # the same folder refuses a different config
+    # the same folder refuses a different config, and a second run while one writes it
     with pytest.raises(ValueError, match="different config"):
         generate(_cfg(forces=[0.05]), out, progress=False)
+    (out / ".lock").write_text(f"{os.getppid()} stmpl generate\n")
+    with pytest.raises(RuntimeError, match="held by stmpl generate"):
+        generate(path, out, progress=False)
 
 
 def test_dask_local_cluster_with_two_workers_matches_serial(tmp_path):
