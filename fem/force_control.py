@@ -196,8 +196,8 @@ def _coupled(go, force: float, start: Pressed) -> tuple[Pressed | None, float | 
     contact.multipliers = start.multipliers.copy()
     at = {"depth": start.depth}
 
-    def solve(v, rtol, floor):
-        res = _newton_on_depth(go, v, at["depth"], force, rtol, floor)
+    def solve(v, rtol, floor, check, definite):
+        res = _newton_on_depth(go, v, at["depth"], force, rtol, floor, check, definite)
         at["depth"] = res.get("depth", at["depth"])
         return res
 
@@ -233,7 +233,27 @@ def _searched(go, force: float, rtol: float, step: float, start: Pressed, reache
     return _between(go, force, rtol, *got) if isinstance(got, tuple) else got
 
 
-def _newton_on_depth(go, u, depth: float, force: float, rtol: float, floor: float = FLOOR):
+def _converged(tangent, u, zero, K, out: dict, factorisations: int, definite, check) -> dict:
+    """The one system's answer at ``u`` (tangent ``K``), checked as
+    :func:`fem.newton._converged` checks a press's.
+    """
+    if check and definite and tangent.factorise(u, zero, K=K) is not None:
+        reason = "indefinite tangent at the answer: the layer buckles"
+        return {**out, "ok": False, "reason": reason, "iterations": out["iterations"] + 1}
+    found = {**out, "ok": True, "u": u, "factorisations": factorisations}
+    return {**found, "definite": definite and not check}
+
+
+def _newton_on_depth(
+    go,
+    u,
+    depth: float,
+    force: float,
+    rtol: float,
+    floor: float = FLOOR,
+    check: bool = True,
+    definite: bool = False,
+):
     """Newton's method on the displacement ``u`` and the object's depth ``depth`` (m) together,
     at fixed contact multipliers: the energy ``Pi(u, d) = W(u) + C(u, d) - force d`` minimised,
     so that at its answer the tissue is in equilibrium and the reaction ``dC/dd`` is ``force``.
@@ -242,8 +262,10 @@ def _newton_on_depth(go, u, depth: float, force: float, rtol: float, floor: floa
     contact's mixed derivative; :meth:`fem.contact.Contact.coupling`), and a backtracking line
     search on ``Pi`` keeps each a descent. Converged where the residual is within ``rtol`` of
     the contact forces and the reaction within ``rtol`` of ``force``; ``floor`` as for
-    :meth:`fem.solver.Solver.equilibrium`. Returns the solver's dict with ``depth`` beside
-    ``u`` (failed: the depth it had reached); the contact is left at the answer's pose.
+    :meth:`fem.solver.Solver.equilibrium`, and ``check`` and ``definite`` (whether the answer's
+    stability is checked; solves on the way to it that stepped without the pressure stiffness).
+    Returns the solver's dict with ``depth`` beside ``u`` (failed: the depth it had reached);
+    the contact is left at the answer's pose.
     """
     solver, contact, shape, e = go.solver, go.contact, go.shape, go.direction
     free, opt, tangent = solver.free, solver.options, solver.tangent
@@ -253,7 +275,7 @@ def _newton_on_depth(go, u, depth: float, force: float, rtol: float, floor: floa
         contact.shape = shape.pushed(d, e)
         return solver.energy(v, zero) - force * d
 
-    E, scale, history, definite, factorisations = energy(u, depth), 0.0, [], False, 0
+    E, scale, history, factorisations = energy(u, depth), 0.0, [], 0
     krylov = solver.linear.direct and opt.reuse > 0
     refresh = not (krylov and tangent.factored == "full")
     for it in range(opt.max_iter + 1):
@@ -266,10 +288,7 @@ def _newton_on_depth(go, u, depth: float, force: float, rtol: float, floor: floa
         history.append(rel)
         out = {"iterations": it, "residual": rel, "depth": depth}
         if rel <= rtol:
-            if definite and tangent.factorise(u, zero, K=K) is not None:
-                reason = "indefinite tangent at the answer: the layer buckles"
-                return {**out, "ok": False, "reason": reason, "iterations": it + 1}
-            return {**out, "ok": True, "u": u, "factorisations": factorisations}
+            return _converged(tangent, u, zero, K, out, factorisations, definite, check)
         if it == opt.max_iter:
             break
         patience = COUPLED_STAGNATION
@@ -302,8 +321,8 @@ def _newton_on_depth(go, u, depth: float, force: float, rtol: float, floor: floa
             if not fresh:
                 refresh = True
                 continue
-            if rel <= floor:
-                return {**out, "ok": True, "u": u, "factorisations": factorisations}
+            if rel <= floor:  # converged as far as round-off lets it
+                return _converged(tangent, u, zero, K, out, factorisations, definite, check)
             reason = "line search failed to lower the energy"
             return {**out, "ok": False, "reason": reason, "iterations": it + 1}
         u, depth, E = u + alpha * step, depth + alpha * dd, Et

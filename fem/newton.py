@@ -39,11 +39,15 @@ def backtrack(
     return alpha, None
 
 
-def _converged(solver, u, f, it: int, rel: float, factorisations: int, definite: bool) -> dict:
-    """Newton's answer at ``u``; when steps were taken without the pressure stiffness, the
-    full tangent must be positive definite there (a stable state), else the layer buckles.
+def _converged(
+    solver, u, f, it: int, rel: float, factorisations: int, definite: bool, check: bool
+) -> dict:
+    """Newton's answer at ``u``; when steps were taken without the pressure stiffness (and
+    ``check``: the answer is one, not a start on the way to one), the full tangent must be
+    positive definite there (a stable state), else the layer buckles. ``definite`` comes back
+    in the answer, for a caller that checks a later solve's.
     """
-    if definite and solver.tangent.factorise(u, f) is not None:
+    if check and definite and solver.tangent.factorise(u, f) is not None:
         return {
             "ok": False,
             "reason": "indefinite tangent at the answer: the layer buckles",
@@ -56,6 +60,7 @@ def _converged(solver, u, f, it: int, rel: float, factorisations: int, definite:
         "iterations": it,
         "residual": rel,
         "factorisations": factorisations,
+        "definite": definite and not check,
     }
 
 
@@ -81,7 +86,13 @@ def _line_search(solver, u: np.ndarray, f: np.ndarray, step: np.ndarray, E: floa
 
 
 def newton(
-    solver, u: np.ndarray, f: np.ndarray, rtol: float | None = None, floor: float = 0.0
+    solver,
+    u: np.ndarray,
+    f: np.ndarray,
+    rtol: float | None = None,
+    floor: float = 0.0,
+    check: bool = True,
+    definite: bool = False,
 ) -> dict:
     """Newton iterations from ``u`` under nodal forces ``f``. With a direct linear solver
     (and ``options.reuse`` above 0) and a factorised full tangent, each step solves the
@@ -90,6 +101,11 @@ def newton(
     Otherwise the factorised tangent is kept while the residual still contracts by
     ``options.reuse`` per step; when a kept factorisation gives no usable step, the tangent
     is assembled and factorised afresh.
+
+    ``check``: whether the answer is checked for stability when steps were taken without the
+    pressure stiffness (``False`` for a start on the way to an answer: the answer's
+    ``"definite"`` then says whether such steps were taken); ``definite``: such steps were
+    taken before this solve, by solves on the way to it that were not checked.
     """
     opt = solver.options
     free = solver.free
@@ -103,7 +119,7 @@ def newton(
     rel, factorisations = float("nan"), 0
     tangent = solver.tangent
     refresh = not (krylov and tangent.factored == "full")
-    definite = False  # steps taken with the tangent less its pressure stiffness
+    # steps taken with the tangent less its pressure stiffness (here or on the way here)
     r = solver.residual(u, f)
     for it in range(opt.max_iter + 1):
         rf = r.reshape(-1)[free]
@@ -112,7 +128,7 @@ def newton(
         rel = float(np.linalg.norm(rf) / fnorm)
         history.append(rel)
         if rel <= (rtol or opt.rtol):
-            return _converged(solver, u, f, it, rel, factorisations, definite)
+            return _converged(solver, u, f, it, rel, factorisations, definite, check)
         if it == opt.max_iter:
             break
         if len(history) > opt.stagnation and history[-1] > 0.5 * history[-1 - opt.stagnation]:
@@ -151,14 +167,8 @@ def newton(
             if not fresh:
                 refresh = True
                 continue
-            if rel <= floor:
-                return {
-                    "ok": True,
-                    "u": u,
-                    "iterations": it + 1,
-                    "residual": rel,
-                    "factorisations": factorisations,
-                }
+            if rel <= floor:  # converged as far as round-off lets it
+                return _converged(solver, u, f, it + 1, rel, factorisations, definite, check)
             inv = not np.isfinite(solver.energy(u + 2.0**-11 * step, f))
             reason = (
                 "element inversion: every step along the Newton direction makes det F <= 0"

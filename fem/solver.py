@@ -381,15 +381,23 @@ class Solver:
         return out.reshape(-1, 3)
 
     def equilibrium(
-        self, u: np.ndarray, f: np.ndarray, rtol: float | None = None, floor: float = 0.0
+        self,
+        u: np.ndarray,
+        f: np.ndarray,
+        rtol: float | None = None,
+        floor: float = 0.0,
+        check: bool = True,
+        definite: bool = False,
     ) -> dict:
         """Newton's method from ``u`` ``(n_all, 3)`` under nodal forces ``f`` ``(n_all, 3)``
         and the :attr:`potentials`, to a relative residual ``rtol`` (default the options'):
         ``{"ok", "u", "iterations", "residual"}`` or, failed, ``{"ok": False, "reason", ...}``.
         ``floor``: a residual at which a step the line search cannot improve ends the solve
         as converged (the round-off floor of a contact whose nodes come and go; 0: never).
+        ``check`` and ``definite``: whether the answer's stability is checked, and whether
+        solves on the way to it stepped without the pressure stiffness (:func:`fem.newton.newton`).
         """
-        return newton(self, np.array(u, dtype=float), f, rtol, floor)
+        return newton(self, np.array(u, dtype=float), f, rtol, floor, check, definite)
 
     def _fail(self, res, iters, t0, force, substeps) -> Solution:
         return Solution.failed(

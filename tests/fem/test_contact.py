@@ -3,12 +3,14 @@ answers against the closed forms of :mod:`fem.verification`.
 """
 
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 import trimesh
 
-from fem.contact import Contact, Pressing, press
+import fem.contact
+from fem.contact import RTOL, UZAWA_RTOL, Contact, Pressing, press, relax
 from fem.material import NeoHookean
 from fem.shapes import Punch, Sphere, Surface
 from fem.solver import Solver, SolverOptions
@@ -287,3 +289,57 @@ def test_a_mesh_presses_as_the_shape_it_approximates():
     with pytest.raises(ValueError, match="a direction is needed"):
         press(solver, surface, None, [depth])
     assert solver.options.stagnation == SolverOptions().stagnation  # patience only while pressing
+
+
+def test_uzawa_solves_loosely_until_the_multipliers_settle_then_checks_the_answer():
+    """While the multipliers still move, each equilibrium is solved to the loose residual and
+    not checked for stability; once an update meets the tolerances, one more solve to the
+    answer's residual is checked, told that a loose solve stepped without the pressure
+    stiffness, and judged again. A step on the way is one loose, unchecked solve.
+    """
+    lefts = iter([0.5, 0.01, 1e-4, 1e-5])
+
+    class Stub:
+        held_inside = 0.0
+
+        def update(self, u):
+            return 0.0, next(lefts)
+
+    calls = []
+
+    def solve(u, rtol, floor, check, definite):
+        calls.append((rtol, check, definite))
+        return {"ok": True, "u": u, "iterations": 2, "definite": len(calls) == 1 and not check}
+
+    solver = SimpleNamespace(options=SimpleNamespace(rtol=1e-8))
+    out = relax(solver, Stub(), np.zeros((3, 3)), 1e-6, 20, solve=solve)
+    assert out["ok"] and out["updates"] == 4 and out["iterations"] == 8
+    assert calls == [(UZAWA_RTOL, False, False)] + [(UZAWA_RTOL, False, True)] * 2 + [
+        (RTOL, True, True)
+    ]
+    lefts, calls[:] = iter([0.5]), []
+    out = relax(solver, Stub(), np.zeros((3, 3)), 1e-6, 20, on_the_way=True, solve=solve)
+    assert out["ok"] and calls == [(UZAWA_RTOL, False, False)]
+    lefts, calls[:] = iter([0.5, 1e-4]), []
+    strict = SimpleNamespace(options=SimpleNamespace(rtol=UZAWA_RTOL))  # nothing looser
+    assert relax(strict, Stub(), np.zeros((3, 3)), 1e-6, 20, solve=solve)["ok"]
+    assert calls == [(UZAWA_RTOL, True, False), (UZAWA_RTOL, True, False)]
+
+
+def test_a_press_solved_loosely_on_the_way_is_the_press_solved_tightly_throughout():
+    """A ball pressed 15 % of a slab's depth with Uzawa's iteration solved inexactly (the
+    default) and exactly (every solve to the answer's residual): the same reaction and
+    displacement within the solver's tolerances, in fewer Newton iterations (7 against 10).
+    """
+    solver, a, h = punch_slab(2.0, spacing=0.25)
+    ball = Sphere([0.0, 0.0, 0.5 * a], 0.5 * a)
+    e = [0.0, 0.0, -1.0]
+    (loose,) = press(solver, ball, e, [0.15 * h])
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(fem.contact, "UZAWA_RTOL", RTOL)
+        (tight,) = press(solver, ball, e, [0.15 * h])
+    assert loose.ok and tight.ok, (loose.reason, tight.reason)
+    assert loose.reaction == pytest.approx(tight.reaction, rel=1e-4)
+    gap = np.abs(loose.displacement - tight.displacement).max()
+    assert gap <= 1e-4 * np.abs(tight.displacement).max()
+    assert loose.iterations < tight.iterations, (loose.iterations, tight.iterations)

@@ -90,7 +90,7 @@ def test_where_the_one_system_stalls_the_search_starts_at_the_depth_it_reached(m
     (known,) = press(solver, ball, e, [0.012 * h])
     reached = 0.997 * known.depth
 
-    def stalled(go, u, depth, force, rtol, floor=0.0):
+    def stalled(go, u, depth, force, rtol, floor=0.0, check=True, definite=False):
         return {"ok": False, "reason": "stagnated (test)", "iterations": 10, "depth": reached}
 
     tries, to = [], Pressing.to
