@@ -334,6 +334,8 @@ def _solve(
     a progress bar of the running totals (from the ``on_disk`` tasks already solved to those and
     this run's); the run is added to ``runs.json`` even if it stops.
     """
+    if not todo:  # nothing left to solve (or ``--max-shards 0``): no bar to draw
+        return
     threads = max(1, (os.cpu_count() or 1) // par["workers"])
     t0 = time.perf_counter()
     started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")

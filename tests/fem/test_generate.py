@@ -253,6 +253,11 @@ def test_cli_generate_stops_early_and_finishes(tmp_path, capsys):
         == part_way["samples"]
         == part_way["attempted"] - part_way["failures"]
     )
+    # a run that solves nothing cards the set once more, and draws no bar
+    assert main(["generate", str(path), "--out", str(out), "--max-shards", "0"]) == 0
+    said = capsys.readouterr()
+    assert "stopped early: 1 of " in said.out and not re.findall(r"\d+/\d+ \[", said.err)
+    assert json.loads((out / "card.json").read_text())["tasks"] == part_way["tasks"]
     assert main(["generate", str(path), "--out", str(out), "--quiet"]) == 0
     printed = capsys.readouterr().out
     card = json.loads((out / "card.json").read_text())
