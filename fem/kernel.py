@@ -11,6 +11,8 @@ from collections.abc import Callable
 
 import numpy as np
 
+from stmpl.jit import njit
+
 
 def element_data(g, GG, aW, bW, cW, local, pos, sel, nnz: int, full=None) -> np.ndarray:
     """The tangent's CSR data (``(nnz,)``) with NumPy, from ``g`` ``(T, Q, n, 3)``
@@ -75,12 +77,11 @@ def _element_kernel():
     multiplications of the entries written out, and no division in the loops. The volume
     term ``coef beta beta^T`` is added as the entries go into the data, in the same pass.
     """
-    try:
-        from numba import njit  # deferred: compiles the FEM's kernels
-    except ImportError:
+    jit = njit()
+    if jit is None:
         return None
 
-    @njit(cache=True, nogil=True)
+    @jit
     def kernel(
         g, f, GG, aW, bW, cW, dW, eW, long, beta, coef, outer, pos, data
     ):  # pragma: no cover - compiled

@@ -15,6 +15,8 @@ import functools
 
 import numpy as np
 
+from stmpl.jit import njit
+
 
 def det3(F: np.ndarray) -> np.ndarray:
     """``(T,)`` determinants of ``(T, 3, 3)`` matrices (closed form, faster than LAPACK here)."""
@@ -63,12 +65,11 @@ def deformation_gradient(
 @functools.lru_cache(maxsize=1)
 def _kernels():
     """``(deformation gradient, inverse)`` compiled by Numba (cached on disk), or ``None``."""
-    try:
-        import numba  # deferred: a quarter of a second, paid by the first solve only
-    except ImportError:
+    jit = njit(error_model="numpy")
+    if jit is None:
         return None
 
-    @numba.njit(cache=True, nogil=True, error_model="numpy")
+    @jit
     def gradient(u, conn, G):  # pragma: no cover - compiled
         T, Q, n, _ = G.shape
         F = np.zeros((T, Q, 3, 3))
@@ -84,7 +85,7 @@ def _kernels():
                             F[t, q, i, j] += ui * G[t, q, a, j]
         return F
 
-    @numba.njit(cache=True, nogil=True, error_model="numpy")
+    @jit
     def inverse(F):  # pragma: no cover - compiled
         m = F.shape[0]
         out, J = np.empty_like(F), np.empty(m)

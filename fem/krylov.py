@@ -12,6 +12,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from stmpl.jit import njit
+
 
 @dataclass(frozen=True)
 class Krylov:
@@ -72,12 +74,11 @@ def _upper_kernel():
     spares making the triangle's transpose (0.17 s a tangent) for Newton's CG solves; ``None``
     when Numba is absent.
     """
-    try:
-        from numba import njit  # deferred: compiled on first use
-    except ImportError:
+    jit = njit()
+    if jit is None:
         return None
 
-    @njit(cache=True, nogil=True)
+    @jit
     def kernel(indptr, indices, data, x, y):  # pragma: no cover - compiled
         y[:] = 0.0
         for i in range(len(indptr) - 1):
@@ -102,12 +103,12 @@ def _block_kernel():
     ``X`` ``(n, k)``, rows in parallel, the GIL released (a caller's other threads run on);
     ``None`` when Numba is absent.
     """
-    try:
-        from numba import njit, prange  # deferred: compiled on first use
-    except ImportError:
+    jit = njit(parallel=True)
+    if jit is None:
         return None
+    from numba import prange  # deferred: Numba is there (jit is), and imported by now
 
-    @njit(parallel=True, cache=True, nogil=True)
+    @jit
     def kernel(indptr, indices, data, X, Y):  # pragma: no cover - compiled
         k = X.shape[1]
         for i in prange(len(indptr) - 1):

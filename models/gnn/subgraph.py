@@ -16,12 +16,13 @@ Vertex ids over a batch are ``b N + i``; edges of the mesh are the predictor's d
 from __future__ import annotations
 
 import functools
-import sys
 from typing import NamedTuple
 
 import numpy as np
 
 from stmpl import reach
+from stmpl.jit import loaded as numba_loaded
+from stmpl.jit import njit
 
 
 class Subgraph(NamedTuple):
@@ -183,12 +184,10 @@ def make_kernel():
     """The compiled :func:`subgraph`: ``kernel(ptr, nbr, in_ptr, in_order, src, seeds, steps,
     grow)`` returns the :class:`Subgraph`'s arrays; ``False`` when Numba is absent.
     """
-    try:
-        from numba import njit  # deferred: a quarter of a second to import
-    except ImportError:
+    jit = njit()
+    if jit is None:
         return False
-    levels = njit(cache=True, nogil=True)(_levels)
-    ordered = njit(cache=True, nogil=True)(_ordered)
+    levels, ordered = jit(_levels), jit(_ordered)
 
     def kernel(ptr, nbr, in_ptr, in_order, src, seeds, steps, grow):
         level = levels(ptr, nbr, seeds, steps, grow)
@@ -210,4 +209,4 @@ def loaded():
     :meth:`~models.gnn.predictor.GNNPredictor.compile`), else ``False``: a one-off answer does
     not pay half a second to save a third of a millisecond.
     """
-    return compiled() if "numba" in sys.modules else False
+    return compiled() if numba_loaded() else False
