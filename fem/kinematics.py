@@ -4,9 +4,8 @@ of a displacement, and the determinant and inverse of ``F``.
 The deformation gradient and the inverse are compiled with Numba where it is installed (one
 pass over the elements, no temporaries: on arrays of a grip's 57k quadratic elements about 5
 and 9 times as fast as NumPy's batched products, `benchmarks/fem_kinematics.py`), NumPy
-otherwise; the two agree to rounding, and a test
-holds them to it. The laws invert ``F`` once per layer at every residual and tangent, so these
-run hundreds of times a force.
+otherwise; the two agree to rounding, and a test holds them to it. The laws invert ``F`` once
+per layer at every residual and tangent, so these run hundreds of times a force.
 """
 
 from __future__ import annotations
