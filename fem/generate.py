@@ -49,7 +49,9 @@ from stmpl.part import BodyPart
 
 
 def code_version() -> dict:
-
+    """The build that runs: ``{"stmpl": version, "git": short commit}`` (no ``git`` outside a
+    repository).
+    """
     out = {"stmpl": stmpl.__version__}
     try:
         here = pathlib.Path(__file__).resolve().parent
@@ -332,7 +334,8 @@ def _solve(
 ) -> None:
     """Solve the shards ``todo`` on the backend ``par`` names, writing each as it arrives, with
     a progress bar of the running totals (from the ``on_disk`` tasks already solved to those and
-    this run's); the run is added to ``runs.json`` even if it stops.
+    this run's); the run is added to ``runs.json`` even if it stops, with the shards it wrote and
+    the build that solved them.
     """
     if not todo:  # nothing left to solve (or ``--max-shards 0``): no bar to draw
         return
@@ -353,7 +356,7 @@ def _solve(
             dynamic_ncols=True,
         )
     tell = bar.update if bar is not None and par["backend"] != "dask" else None
-    done = 0
+    done, written = 0, []
     try:
         for result in run(p, todo, par, threads, tell, lambda k: progress_path(out, k)):
             write_shard(
@@ -370,6 +373,7 @@ def _solve(
             )
             progress_path(out, result["shard"]).unlink(missing_ok=True)
             done += 1
+            written.append(int(result["shard"]))
             totals["samples"] += len(result["records"]["task"])
             totals["failed"] += len(result["failures"])
             why.update(f["reason"].split(":")[0] for f in result["failures"])
@@ -387,6 +391,8 @@ def _solve(
                     "started": started,
                     "wall_seconds": round(time.perf_counter() - t0, 2),
                     "shards": done,
+                    "written": sorted(written),  # which build solved which shard
+                    "code": code_version(),
                     "backend": par["backend"],
                     "workers": par["workers"],
                 }

@@ -264,7 +264,11 @@ def test_cli_generate_stops_early_and_finishes(tmp_path, capsys):
     assert f"{card['samples']} samples" in printed and "stopped early" not in printed
     assert card["complete"] and Dataset(out).complete
     assert card["tasks"] == card["tasks_planned"] and card["attempted"] == card["planned"]
-    assert len(card["timing"]["runs"]) == 2
+    runs = card["timing"]["runs"]
+    assert len(runs) == 2 and runs[0]["shards"] == len(runs[0]["written"]) == 1
+    shards = len(list(out.glob("shard-*.h5")))
+    assert sorted(runs[0]["written"] + runs[1]["written"]) == list(range(shards))
+    assert all(r["code"]["stmpl"] for r in runs)  # which build solved which shards
     assert card["attempted"] > int(bar[-1][1])
     assert main(["generate", str(tmp_path / "missing.yaml")]) == 2
     assert "config file not found" in capsys.readouterr().err
