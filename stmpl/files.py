@@ -71,18 +71,21 @@ def atomic_write_text(path, text: str) -> pathlib.Path:
 
 @contextlib.contextmanager
 def folder_lock(folder, what: str):
-    """Hold ``folder`` for this process while the block runs (``folder/.lock`` names its pid):
-    a second process that asks for it while the first lives gets a ``RuntimeError`` naming
-    ``what`` holds it and that process; a lock left by a process that is gone is taken over.
+    """Hold ``folder`` for this process while the block runs (``folder/.lock`` names its pid
+    and ``what`` holds it): a second process that asks for it while the first lives gets a
+    ``RuntimeError`` naming what holds it and that process; a lock left by a process that is
+    gone is taken over.
     """
     path = pathlib.Path(folder) / ".lock"
     try:
-        pid = int(path.read_text().split()[0])
-    except (OSError, ValueError, IndexError):
-        pid = None
+        pid, _, holder = path.read_text().strip().partition(" ")
+        pid = int(pid)
+    except (OSError, ValueError):
+        pid, holder = None, ""
     if pid is not None and pid != os.getpid() and _alive(pid):
         raise RuntimeError(
-            f"{folder} is held by {what} (process {pid}); wait for it to end or stop it"
+            f"{folder} is held by {holder or 'another run'} (process {pid}); wait for it to "
+            "end or stop it"
         )
     atomic_write_text(path, f"{os.getpid()} {what}\n")
     try:

@@ -31,7 +31,7 @@ def test_a_folder_is_held_by_one_living_process_at_a_time(tmp_path):
         assert lock.read_text().split()[0] == str(os.getpid())
     assert not lock.exists()  # let go at the end
     lock.write_text(f"{os.getppid()} another run\n")  # a living process holds it
-    with pytest.raises(RuntimeError, match=rf"held by a run \(process {os.getppid()}\)"):
+    with pytest.raises(RuntimeError, match=rf"held by another run \(process {os.getppid()}\)"):
         with folder_lock(tmp_path, "a run"):
             pass
     assert lock.read_text().startswith(str(os.getppid()))  # not taken from it
