@@ -113,6 +113,21 @@ def gap_channels(gap) -> list:
     return [(-gap).clamp_min(0.0), gap.clamp(0.0, GAP_REACH)]
 
 
+def gap_of(given):
+    """``(B, N)`` the gap field (m) of a pose model's input ``given`` (NumPy or torch): the
+    input itself, or with the option ``motion`` the first of its ``(B, N, 4)`` channels.
+    """
+    return given[..., 0] if given.ndim == 3 else given
+
+
+def way_channels(given) -> list:
+    """The way the objects move (:attr:`stmpl.pose.Pose.way`, m per m) as three ``(B, N)``
+    input channels of a pose model's input ``given`` ``(B, N, 4)`` (option ``motion``); none of
+    a gap field alone ``(B, N)``.
+    """
+    return [given[..., k] for k in (1, 2, 3)] if given.ndim == 3 else []
+
+
 def near_objects(gap):
     """``(B, N)`` a field (NumPy or torch) that is positive on the vertices an answer's contact
     force reaches (:func:`contact_weight`), from the gap field ``gap`` (m): where a pose loads

@@ -19,6 +19,7 @@ from models.features import (
     MIN_TOTAL_N,
     PRESSURE_OUT_SCALE,
     contact_weight,
+    gap_of,
     posed_answer,
     pressure_out,
     total_force,
@@ -115,7 +116,7 @@ class LearnedPredictor(TrainedPredictor):
         out = self.with_pressures(self.raw(thickness, force, body, base))
         if self.config.get("prior") != "contact":
             return out
-        return out + F.pad(self.contact_base(force, body), (0, out.shape[-1] - 3))
+        return out + F.pad(self.contact_base(gap_of(force), body), (0, out.shape[-1] - 3))
 
     def with_pressures(self, out):
         """A network's output ``(..., C)`` with a pose model's two pressure channels read from
@@ -176,8 +177,9 @@ class LearnedPredictor(TrainedPredictor):
         if self.config.get("loss", "mse") == "mse":
             return ((pred - tgt) ** 2).mean()
         if self.posed:  # where the object presses: the dent, the pressures; the reaction
-            p, t, near = pred[..., 3:], tgt[..., 3:], force <= CONTACT_BAND
-            pressure = log_near_loss(p, t, near) + self.reaction_loss(p, t, force, body)
+            gap = gap_of(force)
+            p, t, near = pred[..., 3:], tgt[..., 3:], gap <= CONTACT_BAND
+            pressure = log_near_loss(p, t, near) + self.reaction_loss(p, t, gap, body)
             dent = near_loss(pred[..., :3], tgt[..., :3], near)
             return self.euclidean_loss(pred[..., :3], tgt[..., :3], force) + dent + pressure
         return self.euclidean_loss(pred, tgt, force)
@@ -223,8 +225,7 @@ class LearnedPredictor(TrainedPredictor):
         t = torch.tensor(
             np.stack([s.thickness for s in scenes]), dtype=torch.float32, device=self.device
         )
-        given = [s.pose.gap if self.posed else s.force for s in scenes]
-        f = torch.tensor(np.stack(given), dtype=torch.float32, device=self.device)
+        f = torch.tensor(self.given(scenes), dtype=torch.float32, device=self.device)
         body = None
         if self.general and any(s.part is not self.part for s in scenes):
             body = self.bodies_of([s.part for s in scenes])

@@ -81,6 +81,8 @@ class TrainedPredictor(BasePredictor):
         displacement scale) without building anything; raises ``ValueError``.
         """
         allowed = {**cls.defaults, "disp_scale_mm": DISP_SCALE_MM, "given": "force"}
+        if cls.poses:
+            allowed["motion"] = False
         unknown = set(config or {}) - set(allowed)
         if unknown:
             raise ValueError(
@@ -96,6 +98,12 @@ class TrainedPredictor(BasePredictor):
             raise ValueError(f"the {cls.name} model takes a force only (given: force)")
         if out["given"] == "pose" and out.get("per_newton"):
             raise ValueError("a model given a pose knows no force to answer per newton of")
+        if out.get("motion", False) not in (True, False):
+            raise ValueError(f"motion must be true or false, got {out['motion']!r}")
+        if out.get("motion") and out["given"] != "pose":
+            raise ValueError(
+                "motion: true reads the way a posed object moves; a model given a force has none"
+            )
         for key in cls.counts:
             checked.integer(out[key], key, 1)
         return out
@@ -107,6 +115,31 @@ class TrainedPredictor(BasePredictor):
         the press (the reaction's density).
         """
         return self.config["given"] == "pose"
+
+    @property
+    def motion(self) -> bool:
+        """Whether a pose model also reads the way the objects move (option ``motion``: the
+        pose's :attr:`~stmpl.pose.Pose.way` field beside its gap): a grip's fingers sweep along
+        the skin as they close, and friction drags the skin their way.
+        """
+        return bool(self.config.get("motion", False))
+
+    def given(self, scenes) -> np.ndarray:
+        """``(B, N)`` what the network reads of each scene: its force (N per vertex), or a
+        pose's gap field (m); with the option ``motion`` ``(B, N, 4)``, the gap and the pose's
+        way field (:func:`models.features.gap_of`, :func:`~models.features.way_channels`).
+        """
+        if not self.posed:
+            return np.stack([s.force for s in scenes])
+        if not self.motion:
+            return np.stack([s.pose.gap for s in scenes])
+        missing = [k for k, s in enumerate(scenes) if s.pose.way is None]
+        if missing:
+            raise ValueError(
+                f"this model reads the way the objects move (option motion), and scene "
+                f"{missing[0]}'s pose gives only its gap field"
+            )
+        return np.stack([np.concatenate([s.pose.gap[:, None], s.pose.way], 1) for s in scenes])
 
     @property
     def out_channels(self) -> int:

@@ -7,9 +7,12 @@ A :class:`Pose` holds the rigid objects at their pose in the part's body coordin
 learned models read: each rest skin vertex's signed distance to the objects (m), inside them
 measured along the way they press (negative: how far the skin there must move along the press
 to clear them, however deep; for objects that close each their own way, a grip, the signed
-distance inside too), cut at :data:`GAP_REACH` away from them. The contact wing computes it
-(:mod:`stmpl.contact.gap`, :func:`stmpl.contact.posing.posed`); this module only holds and
-checks it.
+distance inside too), cut at :data:`GAP_REACH` away from them; and, where known, the ``way``
+field: how the objects' surface nearest each rest skin vertex moves as they press. A grip's
+fingers curl, so their surface sweeps along the skin as the hand closes, and friction drags the
+skin with it: on the layered forearm the skin under the fingers moves mostly along itself, the
+way the fingers sweep. The contact wing computes both (:mod:`stmpl.contact.gap`,
+:func:`stmpl.contact.posing.posed`); this module only holds and checks them.
 """
 
 from __future__ import annotations
@@ -85,11 +88,17 @@ class Pose:
             reaction is the whole contact force: the squeeze).
         objects: the :class:`Rigid` objects at their pose; none where only the gap field is
             known (a dataset's sample: a learned model needs no more, the FEM refuses it).
+        way: ``(N, 3)`` how the objects' surface nearest each rest skin vertex moves per metre
+            the objects press or close (m per m: the direction itself for objects pressing
+            along one; a grip's :attr:`Rigid.path` at its nearest point), zero where no object
+            lies within :data:`GAP_REACH`; ``None`` where it is not known. A learned model with
+            the option ``motion`` reads it beside the gap.
     """
 
     gap: np.ndarray
     direction: np.ndarray
     objects: tuple = ()
+    way: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         g = np.asarray(self.gap, dtype=float)
@@ -119,7 +128,17 @@ class Pose:
                 f"Pose.direction is None (objects closing along their paths), and object "
                 f"{lacking!r} has no path"
             )
+        w = None
+        if self.way is not None:
+            w = np.array(self.way, dtype=float)
+            if w.shape != (len(g), 3):
+                raise ValueError(f"Pose.way must be (N, 3) = {(len(g), 3)}, got {w.shape}")
+            if not np.isfinite(w).all():
+                i = int(np.argmax(~np.isfinite(w).all(axis=1)))
+                raise ValueError(f"Pose.way is not finite at vertex {i}")
+            w.setflags(write=False)
         g.setflags(write=False)
+        object.__setattr__(self, "way", w)
         object.__setattr__(self, "gap", g)
         object.__setattr__(self, "direction", d)
         object.__setattr__(self, "objects", objects)
@@ -161,6 +180,8 @@ class Pose:
         """
         d = np.zeros(0) if self.direction is None else self.direction
         out = {"gap": self.gap, "direction": d}
+        if self.way is not None:
+            out["way"] = self.way
         for k, o in enumerate(self.objects):
             out[f"object{k}/vertices"] = o.vertices
             out[f"object{k}/faces"] = o.faces
@@ -183,4 +204,5 @@ class Pose:
             for k, n in enumerate(names)
         )
         d = np.asarray(arrays["direction"])
-        return cls(arrays["gap"], None if d.size == 0 else d, objects)
+        way = arrays.get("way")
+        return cls(arrays["gap"], None if d.size == 0 else d, objects, way)

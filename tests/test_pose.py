@@ -85,3 +85,22 @@ def test_the_answer_to_a_pose_carries_its_force_and_reaction_through_a_file(part
     loaded = Scene(part, s.thickness, f)
     with pytest.raises(ValueError, match="no answered force or reaction"):
         Deformation(loaded, u, {}, f, 0.2)
+
+
+def test_a_pose_s_way_field_is_checked_and_travels_through_its_arrays(part):
+    """The way field (how the objects' surface moves near each vertex) is one finite 3-vector
+    per vertex, kept read-only and written with the pose's arrays; without it a pose has none.
+    """
+    p = _pose(part)
+    assert p.way is None and "way" not in p.arrays()
+    way = np.zeros((part.n_vertices, 3))
+    way[3] = [0.0, 0.6, -0.8]
+    q = Pose(p.gap, p.direction, p.objects, way)
+    assert not q.way.flags.writeable
+    back = Pose.from_arrays(q.arrays(), q.names())
+    np.testing.assert_array_equal(back.way, way)
+    with pytest.raises(ValueError, match=r"Pose.way must be \(N, 3\)"):
+        Pose(p.gap, p.direction, p.objects, way[:-1])
+    way[5, 1] = np.nan
+    with pytest.raises(ValueError, match="Pose.way is not finite at vertex 5"):
+        Pose(p.gap, p.direction, p.objects, way)

@@ -24,8 +24,10 @@ from models.features import (
     THICKNESS_SCALE,
     THICKNESS_SHIFT,
     gap_channels,
+    gap_of,
     load_channels,
     near_objects,
+    way_channels,
 )
 from models.gnn import fused
 from models.gnn.network import MeshGraphNet, NormalisedGraphNet, Normaliser
@@ -110,8 +112,10 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         self.inv_area = torch.tensor(1.0 / part.vertex_areas, dtype=torch.float32, device=dev)
         # node features: pressure (Pa, or Pa per N), [total force N], thickness m, normal
         load = ([0.0, 0.0], [PRESSURE_SCALE, 1.0]) if self.per_newton else ([0.0], [PRESSURE_SCALE])
-        if self.posed:  # how deep inside an object, how far outside (m)
+        if self.posed:  # how deep inside an object, how far outside (m); the way they move
             load = ([0.0, 0.0], [GAP_SCALE, GAP_REACH])
+            if self.motion:
+                load = (load[0] + [0.0] * 3, load[1] + [1.0] * 3)
         node = Normaliser(
             load[0] + [THICKNESS_SHIFT, 0, 0, 0], load[1] + [THICKNESS_SCALE, 1, 1, 1]
         )
@@ -141,7 +145,7 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
                 self.body_tensor("normals", body),
             )
         if self.posed:
-            load = torch.stack(gap_channels(force), -1)
+            load = torch.stack(gap_channels(gap_of(force)) + way_channels(force), -1)
         else:
             load = torch.stack(load_channels(force, inv_area, self.per_newton), -1)
         base = self.base(thickness, force, body, base)
@@ -228,7 +232,7 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         """
         B, N = thickness.shape
         steps = int(self.config["steps"])
-        f = (near_objects(force) if self.posed else force).cpu().numpy()
+        f = (near_objects(gap_of(force)) if self.posed else force).cpu().numpy()
         if base is not None:  # the region: where the linear FEM moves the tissue, a ring wider
             seeds, grow = reach.moving(f, base.detach().cpu().numpy(), self.region_tolerance), 1
         else:

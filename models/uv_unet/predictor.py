@@ -25,8 +25,10 @@ from models.features import (
     PRESSURE_SCALE,
     PRIOR_SCALE,
     gap_channels,
+    gap_of,
     load_channels,
     normalised_thickness,
+    way_channels,
 )
 from models.learned import LearnedPredictor
 from models.linear.operator import ComplianceOperator
@@ -92,6 +94,7 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
             1.0 / part.vertex_areas / PRESSURE_SCALE, dtype=torch.float32, device=self.device
         )
         c_in = 2 + (1 if c["per_newton"] or self.posed else 0) + (6 if c["geometry"] else 0)
+        c_in += 3 if self.motion else 0  # the way the objects move
         if not self.prior:
             net = UNet(
                 c_in,
@@ -130,9 +133,9 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
         inv_area = (
             self._inv_area if body is None else self.body_tensor("inv_area", body) / PRESSURE_SCALE
         )
-        if self.posed:  # ``force`` is the gap field (m)
-            inside, outside = gap_channels(force)
-            load = [inside / GAP_SCALE, outside / GAP_REACH]
+        if self.posed:  # ``force`` is the gap field (m), and the way the objects move
+            inside, outside = gap_channels(gap_of(force))
+            load = [inside / GAP_SCALE, outside / GAP_REACH, *way_channels(force)]
         else:
             load = load_channels(force, inv_area, self.per_newton)
         chans = [*load, normalised_thickness(thickness)]
@@ -201,7 +204,7 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
         tgt = self.normalised(target, force)
         contact = None
         if self.config["prior"] == "contact":
-            contact = F.pad(self.contact_base(force, body), (0, tgt.shape[-1] - 3))
+            contact = F.pad(self.contact_base(gap_of(force), body), (0, tgt.shape[-1] - 3))
         if self.config["loss"] != "mse":
             pred = self.corrected(
                 None if base is None else base[:, self._corner_vertex],
@@ -213,10 +216,11 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
             loss = self.euclidean_loss(pred[..., :3], tgt[..., :3], force) + self._tv(out)
             if self.posed:  # the dent and the pressures at the corners, the reaction's sum
                 vertex = self.with_pressures(self.uvmap.sample(out))[..., 3:]
-                near = force[:, self._corner_vertex] <= CONTACT_BAND
+                gap = gap_of(force)
+                near = gap[:, self._corner_vertex] <= CONTACT_BAND
                 loss = loss + near_loss(pred[..., :3], tgt[..., :3], near)
                 loss = loss + log_near_loss(pred[..., 3:], tgt[..., 3:], near)
-                loss = loss + self.reaction_loss(vertex, whole[..., 3:], force, body)
+                loss = loss + self.reaction_loss(vertex, whole[..., 3:], gap, body)
             return loss
         if contact is not None:  # the image of what the prior leaves
             tgt = tgt - contact
@@ -238,7 +242,7 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
 
     def corner_displacement(self, thickness, force, body=None) -> np.ndarray:
         """``(B, T, 3)`` displacement (m) at every UV corner, seam copies apart (``force``: a
-        pose model's gap field).
+        pose model's input, :meth:`given`).
         """
         self.model.eval()
         with torch.no_grad():
@@ -248,7 +252,7 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
             if self.config["prior"] == "contact":
                 c = (
                     c
-                    + F.pad(self.contact_base(force, body), (0, c.shape[-1] - 3))[
+                    + F.pad(self.contact_base(gap_of(force), body), (0, c.shape[-1] - 3))[
                         :, self._corner_vertex
                     ]
                 )

@@ -69,7 +69,7 @@ def self_mirror(part: BodyPart, tolerance: float = 1e-6) -> np.ndarray | None:
 
 def mirrored_scene(scene: Scene, twin) -> Scene:
     """``scene`` on its mirror twin ``twin``: the thickness and the force (or the pose's gap)
-    vertex for vertex, a pose's objects and direction mirrored.
+    vertex for vertex, a pose's objects, direction and way mirrored.
     """
     if scene.pose is None:
         return Scene(twin, scene.thickness, scene.force, meta=scene.meta)
@@ -84,5 +84,6 @@ def mirrored_scene(scene: Scene, twin) -> Scene:
         for o in pose.objects
     )
     direction = None if pose.closing else pose.direction * MIRROR
-    mirrored = Pose(pose.gap, direction, objects)
+    way = None if pose.way is None else pose.way * MIRROR
+    mirrored = Pose(pose.gap, direction, objects, way)
     return Scene.posed(twin, scene.thickness, mirrored, **scene.meta)

@@ -17,6 +17,7 @@ passes a vertex off its track (a ball between two vertices of a coarse mesh).
 from __future__ import annotations
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from stmpl.pose import GAP_REACH
 
@@ -130,3 +131,29 @@ def of_sample(points, kind: str, params: dict, stored) -> np.ndarray:
     if kind in PRESSED:
         return np.minimum(of_press(points, kind, params), signed)
     return signed
+
+
+def way(points, gap, direction=None, objects=()) -> np.ndarray:
+    """``(P, 3)`` the way field of a pose (:attr:`stmpl.pose.Pose.way`, m per m) on the rest
+    skin ``points`` ``(P, 3)`` with gap field ``gap`` ``(P,)`` (m): the press ``direction``
+    ``(3,)`` where an object lies within :data:`~stmpl.pose.GAP_REACH`; objects that close
+    along their own paths (``direction`` None; :class:`~stmpl.pose.Rigid` with a ``path``):
+    the path of the object vertex nearest each point there. Zero elsewhere.
+    """
+    x = np.asarray(points, dtype=float).reshape(-1, 3)
+    g = np.asarray(gap, dtype=float).reshape(-1)
+    if len(g) != len(x):
+        raise ValueError(f"gap must hold one distance per point ({len(x)}), got {len(g)}")
+    out = np.zeros((len(x), 3))
+    near = np.flatnonzero(g < GAP_REACH)
+    if direction is not None:
+        out[near] = _unit(direction)
+        return out
+    if any(o.path is None for o in objects) or not objects:
+        raise ValueError("a closing pose's way needs its objects, each with its path")
+    v = np.concatenate([o.vertices for o in objects])
+    path = np.concatenate([o.path for o in objects])
+    if len(near):
+        _, nearest = cKDTree(v).query(x[near])
+        out[near] = path[nearest]
+    return out

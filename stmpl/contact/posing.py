@@ -83,7 +83,8 @@ def posed(
             raise ValueError(f"object {n!r}: the mesh has no faces or non-finite vertices")
         rigid.append(Rigid(n, np.asarray(at.vertices), np.asarray(at.faces)))
         gap = np.minimum(gap, _gap(part, at, d))
-    return Scene.posed(part, thickness, Pose(gap, d, tuple(rigid)), **meta)
+    pose = Pose(gap, d, tuple(rigid), along.way(part.vertices, gap, d))
+    return Scene.posed(part, thickness, pose, **meta)
 
 
 def _gap(part: BodyPart, mesh, direction) -> np.ndarray:
@@ -114,8 +115,9 @@ def moved(scene: Scene, distance: float) -> Scene:
         rigid.append(r)
         mesh = Mesh(r.vertices, r.faces)
         gap = np.minimum(gap, _gap(scene.part, mesh, pose.direction))
+    way = along.way(scene.part.vertices, gap, pose.direction, tuple(rigid))
     return Scene.posed(
-        scene.part, scene.thickness, Pose(gap, pose.direction, tuple(rigid)), **scene.meta
+        scene.part, scene.thickness, Pose(gap, pose.direction, tuple(rigid), way), **scene.meta
     )
 
 
@@ -145,7 +147,8 @@ def gripped(
         grip = cached_closing_grip(part, hand, "R", along, around, kind)
     grip = closed(grip, depth)
     gap = _gap(part, Mesh(grip.vertices, grip.faces), None)
-    return Scene.posed(part, thickness, Pose(gap, None, (grip,)), **meta)
+    way = along.way(part.vertices, gap, None, (grip,))
+    return Scene.posed(part, thickness, Pose(gap, None, (grip,), way), **meta)
 
 
 def first_touch(part: BodyPart, thickness, kind: str, params: dict, hand: Hand | None = None):
@@ -186,3 +189,24 @@ def first_touch(part: BodyPart, thickness, kind: str, params: dict, hand: Hand |
     front = centre + (radius * d if kind == "press_sphere" else 0.0)
     pose[:3, 3] = front - depth * d
     return posed(part, thickness, mesh, pose, name=kind.removeprefix("press_"))
+
+
+def sample_way(part: BodyPart, kind: str, params: dict, gap) -> np.ndarray:
+    """``(N, 3)`` the way field (:attr:`stmpl.pose.Pose.way`) of a dataset sample on ``part``
+    with gap field ``gap`` ``(N,)`` (m, as a pose model reads it): a pressed disk's or ball's
+    recorded ``direction``; a grip's, anny's right hand (its grip kept on disk:
+    :func:`~stmpl.contact.closing.cached_closing_grip`) closed the recorded ``depth``.
+    """
+    if kind != "press_grip":
+        try:
+            return along.way(part.vertices, gap, params["direction"])
+        except (KeyError, TypeError) as e:
+            raise ValueError(f"a {kind} sample does not record its press direction ({e})") from e
+    try:
+        grip = cached_closing_grip(
+            part, None, "R", float(params["along"]), float(params["around"]), params["grip"]
+        )
+        depth = float(params["depth"])
+    except (KeyError, TypeError) as e:
+        raise ValueError(f"a grip sample does not record its placement and depth ({e})") from e
+    return along.way(part.vertices, gap, None, (closed(grip, depth),))

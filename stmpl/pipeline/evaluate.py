@@ -19,7 +19,7 @@ import numpy as np
 
 from stmpl.contact import gap as along
 from stmpl.contact.force_control import ForceNotMet, to_force
-from stmpl.contact.posing import first_touch
+from stmpl.contact.posing import first_touch, sample_way
 from stmpl.data.dataset import Dataset, Datasets, open_data
 from stmpl.data.format import at_levels
 from stmpl.envelope import breaks_promise
@@ -30,10 +30,19 @@ from stmpl.predictor import OutsideEnvelope, PredictionFailed, given_to
 from stmpl.scene import Scene
 
 
-def scenes_of(ds, split: str, thickness_mm=None, limit: int | None = None, given: str = "force"):
+def scenes_of(
+    ds,
+    split: str,
+    thickness_mm=None,
+    limit: int | None = None,
+    given: str = "force",
+    way: bool = False,
+):
     """``(scenes, true displacements (S, N, 3) m)`` of a dataset split. ``given="pose"``: each
     scene given by its object's pose (its gap field, :func:`stmpl.contact.gap.of_sample`, and
-    direction; a dataset of pressed objects), the sample's reaction (N) in ``meta["reaction"]``.
+    direction; a dataset of pressed objects), the sample's reaction (N) in ``meta["reaction"]``;
+    with ``way`` its way field too (:func:`stmpl.contact.posing.sample_way`: a grip's hand is
+    set again, or read from disk).
     """
     if limit is not None and (isinstance(limit, bool) or not isinstance(limit, int) or limit < 1):
         raise ValueError(f"limit must be a number of samples >= 1, got {limit!r}")
@@ -46,7 +55,8 @@ def scenes_of(ds, split: str, thickness_mm=None, limit: int | None = None, given
     parts = getattr(ds, "parts", [ds.part])
     body = a.get("body", np.zeros(len(a["total"]), int))
     if given == "pose":
-        return _posed_scenes(ds, a, keep, parts, body), a["displacement"][keep].astype(float)
+        scenes = _posed_scenes(ds, a, keep, parts, body, way)
+        return scenes, a["displacement"][keep].astype(float)
     scenes = [
         Scene(
             parts[body[i]],
@@ -59,8 +69,10 @@ def scenes_of(ds, split: str, thickness_mm=None, limit: int | None = None, given
     return scenes, a["displacement"][keep].astype(float)
 
 
-def _posed_scenes(ds, a: dict, keep, parts, body) -> list[Scene]:
-    """The samples ``keep`` of arrays ``a`` as scenes given by their object's pose."""
+def _posed_scenes(ds, a: dict, keep, parts, body, way: bool = False) -> list[Scene]:
+    """The samples ``keep`` of arrays ``a`` as scenes given by their object's pose (with
+    ``way``, its way field too).
+    """
     if "gap" not in a:
         raise ValueError(
             f"{ds.folder} holds no poses (gap field): it is not a dataset of pressed objects"
@@ -69,7 +81,8 @@ def _posed_scenes(ds, a: dict, keep, parts, body) -> list[Scene]:
     for i in keep:
         params, part = a["params"][i], parts[body[i]]
         gap = along.of_sample(part.vertices, a["kind"][i], params, a["gap"][i])
-        pose = Pose(gap, params["direction"])
+        w = sample_way(part, a["kind"][i], params, gap) if way else None
+        pose = Pose(gap, params["direction"], (), w)
         meta = {
             "placement": int(a["placement"][i]),
             "total": float(a["total"][i]),
@@ -102,7 +115,8 @@ def evaluate_dataset(
     """
     import torch  # deferred: about a second to import; the core's types do not need it
 
-    scenes, truth = scenes_of(ds, split, thickness_mm, limit, given_to(predictor))
+    motion = getattr(predictor, "motion", False)
+    scenes, truth = scenes_of(ds, split, thickness_mm, limit, given_to(predictor), motion)
     if not scenes:
         raise ValueError(f"split {split!r} of {ds.folder} has no samples")
     part = ds.part
@@ -124,11 +138,8 @@ def evaluate_dataset(
                 continue
         if hasattr(predictor, "corner_displacement"):
             t, f = (
-                torch.tensor(np.stack(x), dtype=torch.float32, device=predictor.device)
-                for x in (
-                    [s.thickness for s in chunk],
-                    [s.force if s.pose is None else s.pose.gap for s in chunk],
-                )
+                torch.tensor(np.asarray(x), dtype=torch.float32, device=predictor.device)
+                for x in (np.stack([s.thickness for s in chunk]), predictor.given(chunk))
             )
             body = (
                 predictor.bodies_of([s.part for s in chunk])

@@ -13,7 +13,7 @@ from stmpl.body.mirror import MIRROR, self_mirror
 
 SCALARS = ("thickness", "force", "gap", "pressure", "push")
 """Per-vertex fields a mirror carries vertex for vertex."""
-VECTORS = ("displacement", "linear")
+VECTORS = ("displacement", "linear", "way")
 """Per-vertex ``(N, 3)`` fields a mirror also turns (x negated)."""
 RESULTS = ("depth", "reaction", "direction", "centre")
 """A press's ``params`` that are its answer, not its place."""

@@ -75,7 +75,8 @@ def evidence(p, ds, cfg) -> dict:
     rel, peak = [], []
     posed = None
     if getattr(p, "posed", False):
-        posed = scenes_of(ds, "val", cfg["thickness_mm"], given="pose")[0]
+        motion = getattr(p, "motion", False)
+        posed = scenes_of(ds, "val", cfg["thickness_mm"], given="pose", way=motion)[0]
     for i in range(0, len(keep), 64):
         at = keep[i : i + 64]
         if posed is not None:  # the same samples, given by their poses

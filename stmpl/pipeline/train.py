@@ -28,6 +28,7 @@ from tqdm import tqdm
 from stmpl import config as checked
 from stmpl import predictor
 from stmpl.contact import gap as along
+from stmpl.contact.posing import sample_way
 from stmpl.data.dataset import open_data
 from stmpl.files import atomic_path
 from stmpl.pipeline import mirrored
@@ -128,6 +129,8 @@ def _split_tensors(ds, split, cfg, device, p=None):
     if getattr(p, "posed", False):  # the pose a model reads: along the press where it has one
         _require_poses(a, cfg)
         a = {**a, "gap": _pose_gaps(ds, a)}
+        if p.motion:  # and the way the objects move there
+            a["way"] = _pose_ways(ds, a, keep)
     if split == "train" and cfg.get("mirror", False):
         # every training press twice: as solved and mirrored
         a, keep = mirrored.with_mirrored(a, keep, mirrored.twin_of(ds))
@@ -147,7 +150,8 @@ def _split_tensors(ds, split, cfg, device, p=None):
         target = np.concatenate(
             [a["displacement"], a["pressure"][..., None], a["push"][..., None]], -1
         )
-        return t(a["thickness"]), t(a["gap"]), t(target), body, base
+        given = a["gap"] if "way" not in a else np.concatenate([a["gap"][..., None], a["way"]], -1)
+        return t(a["thickness"]), t(given), t(target), body, base
     return t(a["thickness"]), t(a["force"]), t(a["displacement"]), body, base
 
 
@@ -163,6 +167,18 @@ def _pose_gaps(ds, a: dict) -> np.ndarray:
             for b, k, params, g in zip(body, a["kind"], a["params"], a["gap"])
         ]
     ).astype(np.float32)
+
+
+def _pose_ways(ds, a: dict, keep) -> np.ndarray:
+    """``(S, N, 3)`` m per m: each sample's way field (:func:`stmpl.contact.posing.sample_way`;
+    zero for the samples not in ``keep``, which are not read), from the gap field ``a["gap"]``.
+    """
+    parts = getattr(ds, "parts", [ds.part])
+    body = a["body"] if "body" in a else np.zeros(len(a["total"]), int)
+    out = np.zeros((*np.shape(a["gap"]), 3), dtype=np.float32)
+    for i in keep:
+        out[i] = sample_way(parts[body[i]], a["kind"][i], a["params"][i], a["gap"][i])
+    return out
 
 
 def _require_poses(a: dict, cfg: dict) -> None:

@@ -63,3 +63,35 @@ def test_a_sample_s_gap_is_measured_along_its_press_and_a_grip_s_is_kept():
         gap.of_press(x, "press_sphere", {"radius": 0.008})
     with pytest.raises(ValueError, match="finite nonzero 3-vector"):
         gap.ball(x, [0, 0, 0], 0.008, [0, 0, 0])
+
+
+def test_the_way_field_is_the_press_direction_or_the_nearest_object_vertex_s_path():
+    """Within reach of an object the way is the press direction; a closing pose's is the path
+    of the object vertex nearest each point (two fingers sweeping opposite ways drag the skin
+    under each its own way); beyond reach it is zero; a closing pose without paths is refused.
+    """
+    from stmpl.pose import Rigid
+
+    x = np.array([[-0.01, 0.0, 0.0], [0.01, 0.0, 0.0], [0.5, 0.0, 0.0]])
+    g = np.array([-0.001, 0.002, GAP_REACH])
+    w = gap.way(x, g, [0.0, 0.0, -2.0])
+    np.testing.assert_allclose(w, [[0, 0, -1], [0, 0, -1], [0, 0, 0]])
+    tri = np.array([[0, 1, 2]])
+    left = Rigid(
+        "left",
+        [[-0.01, 0, 0.001], [-0.012, 0, 0.001], [-0.01, 0.002, 0.001]],
+        tri,
+        path=np.tile([0.0, 0.8, -0.6], (3, 1)),
+    )
+    right = Rigid(
+        "right",
+        [[0.01, 0, 0.001], [0.012, 0, 0.001], [0.01, 0.002, 0.001]],
+        tri,
+        path=np.tile([0.0, -0.8, -0.6], (3, 1)),
+    )
+    w = gap.way(x, g, None, (left, right))
+    np.testing.assert_allclose(w, [[0, 0.8, -0.6], [0, -0.8, -0.6], [0, 0, 0]])
+    with pytest.raises(ValueError, match="needs its objects, each with its path"):
+        gap.way(x, g, None, (Rigid("box", left.vertices, tri),))
+    with pytest.raises(ValueError, match="one distance per point"):
+        gap.way(x, g[:2], D)

@@ -120,3 +120,31 @@ def test_a_dataset_s_object_at_first_touch_moved_by_its_depth_is_its_sample_s_po
     assert kinds == {"press_disk", "press_sphere"}
     with pytest.raises(ValueError, match="does not record its object's pose"):
         first_touch(s.part, s.thickness, "press_sphere", {"radius": 0.008})
+
+
+def test_posed_moved_and_a_dataset_s_grip_carry_the_way_the_objects_move(part, monkeypatch):
+    """A posed fingertip's way is its press direction near it; a closing object moved along
+    its path carries that path; a grip sample's way is its hand closed the recorded depth
+    (the grip read from :func:`cached_closing_grip`), the path of the hand vertex nearest each
+    skin vertex.
+    """
+    from stmpl.contact import posing
+
+    tip = objects.sphere(0.008)
+    t = tissue.constant(part, 0.0075)
+    at = posed(part, t, tip, objects.press(part, tip, uv=(0.5, 0.5), depth=0.001))
+    near = at.pose.gap < GAP_REACH
+    np.testing.assert_allclose(at.pose.way[near], np.tile(at.pose.direction, (near.sum(), 1)))
+    assert not at.pose.way[~near].any() and (~near).any()
+    o = at.pose.objects[0]
+    path = np.tile([0.0, 0.6, 0.0], (len(o.vertices), 1)) + 0.8 * at.pose.direction
+    hand = Rigid("hand", o.vertices, o.faces, path)
+    closing = moved(Scene.posed(part, t, Pose(at.pose.gap, None, (hand,))), 0.0005)
+    near = closing.pose.gap < GAP_REACH
+    np.testing.assert_allclose(closing.pose.way[near], np.tile(path[0], (near.sum(), 1)))
+    monkeypatch.setattr(posing, "cached_closing_grip", lambda *a, **k: hand)
+    params = {"along": 0.5, "around": 0.0, "grip": "pinch", "depth": 0.0005}
+    w = posing.sample_way(part, "press_grip", params, closing.pose.gap)
+    np.testing.assert_allclose(w, closing.pose.way)
+    with pytest.raises(ValueError, match="does not record its placement and depth"):
+        posing.sample_way(part, "press_grip", {"grip": "pinch"}, closing.pose.gap)

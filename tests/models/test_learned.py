@@ -310,3 +310,51 @@ def test_the_pressures_error_is_read_in_their_logarithm():
     per_vertex = (np.log((20 + e) / (10 + e)) + np.log((5 + e) / (2.5 + e))) / 2  # both near log 2
     expected = per_vertex / 2 / 2  # over the two near vertices, over the two samples
     assert float(log_near_loss(pred, target, near)) == pytest.approx(expected, rel=1e-3)
+
+
+@pytest.mark.filterwarnings("ignore::stmpl.failures.ImpossibleAnswer")  # a random network's
+@pytest.mark.parametrize("kind", ["gnn", "uv_unet"])
+def test_a_pose_model_with_motion_reads_the_way_the_objects_move(ds, tmp_path, kind):
+    """Option ``motion``: the model reads the pose's way field beside its gap (a network's
+    answer changes with it, a plain pose model's does not), the option travels in the
+    checkpoint, a pose without its way is refused by name, and motion needs a pose.
+    """
+    import dataclasses
+
+    import torch
+
+    from stmpl import tissue
+    from stmpl.contact import objects
+    from stmpl.contact.posing import posed
+
+    ball = objects.sphere(0.008)
+    at = int(np.argmax(ds.part.rim_distance))
+    t = tissue.constant(ds.part, 0.0075)
+    scene = posed(ds.part, t, ball, objects.press(ds.part, ball, at, depth=3e-3))
+    way = scene.pose.way.copy()
+    way[scene.pose.gap < 0.01] = [0.0, 0.8, -0.6]  # a finger sweeping along the skin
+    swept = Scene.posed(ds.part, t, dataclasses.replace(scene.pose, way=way))
+    answers = {}
+    for motion in (False, True):
+        torch.manual_seed(0)
+        p = predictor.create(
+            kind, ds.part, {**TINY_MODELS[kind], "given": "pose", "motion": motion}
+        )
+        with torch.no_grad():  # past the silent start: an answer that reads its inputs
+            for q in p.model.parameters():
+                q.add_(0.1 * torch.randn_like(q))
+        answers[motion] = [p.predict(s).displacement for s in (scene, swept)]
+    np.testing.assert_array_equal(*answers[False])
+    assert np.abs(answers[True][0] - answers[True][1]).max() > 1e-7
+    q = predictor.read(p.save(tmp_path / "m.safetensors"))
+    assert q.motion
+    np.testing.assert_allclose(q.predict(swept).displacement, answers[True][1], atol=1e-9)
+    bare = Scene.posed(ds.part, t, dataclasses.replace(scene.pose, way=None))
+    with pytest.raises(ValueError, match="reads the way the objects move \\(option motion\\)"):
+        q.predict(bare)
+    for options, message in [
+        ({"motion": True}, "a model given a force has none"),
+        ({"given": "pose", "motion": "yes"}, "motion must be true or false"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            predictor.create(kind, ds.part, {**TINY_MODELS[kind], **options})

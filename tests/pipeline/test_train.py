@@ -287,3 +287,41 @@ def test_a_model_given_the_pose_learns_the_dent_and_the_force_of_pressed_objects
         p.predict(scenes_of(ds, "test")[0][:1])
     with pytest.raises(ValueError, match="no gap, pressure and push arrays"):
         train({**cfg, "data": str(tiny_dataset), "out": str(tmp_path / "r2")}, progress=False)
+
+
+@pytest.mark.filterwarnings("ignore::stmpl.failures.OutsideEnvelope")  # five epochs' answers
+def test_a_pose_model_with_motion_trains_and_is_measured_on_the_way_its_samples_move(
+    tiny_presses, tmp_path
+):
+    """``motion: true``: training reads each sample's way field beside its gap (a press's:
+    its direction near the object), the validation scenes that back its envelope and the
+    test scenes it is measured on carry theirs, and the scores equal those of the same
+    scenes answered one by one.
+    """
+    from stmpl.metrics import sample_metrics
+    from stmpl.pipeline.evaluate import evaluate_dataset
+
+    cfg = _cfg(
+        tiny_presses,
+        tmp_path / "run",
+        name="gnn_motion",
+        model="gnn",
+        options={"latent": 16, "steps": 2, "given": "pose", "motion": True},
+        epochs=5,
+        batch=4,
+        lr=0.01,
+    )
+    p = predictor.read(train(cfg, progress=False))
+    assert p.motion and p.takes == ("pose",)
+    ds = Dataset(tiny_presses)
+    scenes, truth = scenes_of(ds, "test", given="pose", way=True)
+    a = ds.arrays("test")
+    for s, params in zip(scenes, a["params"]):
+        near = s.pose.gap < 0.01
+        np.testing.assert_allclose(s.pose.way[near], np.tile(params["direction"], (near.sum(), 1)))
+    got = evaluate_dataset(p, ds, "test")
+    rel = [sample_metrics(u, d.displacement)["rel_mee"] for d, u in zip(p.predict(scenes), truth)]
+    assert got["samples"] == len(scenes)
+    assert got["rel_mee"][0] == pytest.approx(np.mean(rel), rel=1e-4)
+    with pytest.raises(ValueError, match="option motion"):
+        p.predict(scenes_of(ds, "test", given="pose")[0][:1])
