@@ -1,0 +1,108 @@
+"""The skin held where an object holds it, and the rest answered by the linear FEM.
+
+A grip's fingers drag the skin under them along with their sweep, and on the layered forearm
+the stiff skin over soft fat carries that drag along the whole limb: most of a grip's
+displacement lies centimetres from any contact, where the strains are small. There the tissue
+is linear: held at the FEM's own displacement within 2 cm of the contact, the rest of the
+skin as the linear FEM answers it lies within 0.24-0.77 % of the peak displacement on average
+(``benchmarks/grip_far_field.py``). So what happens near the object (large strains, contact,
+friction) and what the tissue carries away from it (linear) can be answered apart.
+
+:class:`Holding` is the linear FEM of a tissue on a part: its stiffness at rest
+(:func:`fem.simulate.tissue_mesh`, the tangent of its laws at no strain), factorised once. The
+skin's vertices ``H`` held at displacements ``u_H`` and every other node free of load, the
+skin's displacement is
+
+    u = G[:, H] G[H, H]^-1 u_H
+
+with ``G`` the 3D nodal compliance: ``G[i, j]`` the displacement of vertex ``i`` under a unit
+force on vertex ``j`` (3 x 3 per pair). Its columns at the held vertices are solved with the one
+factorisation (a block of right-hand sides), so holding other vertices needs no new one.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fem.finer import FinerPart, meshed
+from fem.simulate import resolution, tissue_mesh
+from fem.solver import Solver
+from stmpl.part import BodyPart
+
+
+class Holding:
+    """The linear FEM of ``tissue`` (a preset of :mod:`fem.layers`, or ``"paper"``) on
+    ``part`` with skin and fat ``thickness`` (m, scalar or ``(N,)``), at resolution ``res``
+    (quadratic elements: a part subdivided once is meshed on the part it came from, whose
+    nodes carry its vertices, :mod:`fem.finer`), factorised at rest. ``phenotype`` shapes a
+    layered preset's layers.
+    """
+
+    def __init__(
+        self,
+        part: BodyPart,
+        thickness,
+        res="medium",
+        tissue: str = "forearm",
+        phenotype: dict | None = None,
+    ):
+        n = part.n_vertices
+        t = np.broadcast_to(np.asarray(thickness, dtype=float), (n,)).copy()
+        if not (np.isfinite(t).all() and (t > 0).all()):
+            raise ValueError("thickness must be finite and positive (m) at every vertex")
+        r = resolution(res)
+        if r.order != 2:
+            raise ValueError(
+                f"the held skin is answered in quadratic elements, got order {r.order}"
+            )
+        meshed_part, meshed_t = meshed(part, t, r.order)
+        mesh, material = tissue_mesh(meshed_part, meshed_t, r, tissue, phenotype)
+        self.solver = Solver(mesh, material, order=r.order)
+        u0 = np.zeros((self.solver.n_all, 3))
+        _, K = self.solver.assemble(u0, u0)
+        self.solver.linear.factor(K)
+        self.part = part
+        self.nodes = FinerPart(self.solver, part).nodes  # (N,) the node at each vertex
+        self._row = np.full(self.solver.n_all * 3, -1)
+        self._row[self.solver.free] = np.arange(len(self.solver.free))
+
+    @property
+    def unknowns(self) -> int:
+        """The linear FEM's free degrees of freedom."""
+        return len(self.solver.free)
+
+    def columns(self, vertices) -> np.ndarray:
+        """``(3 N, 3 k)`` m/N: the skin's displacement (vertex by vertex, x y z) under a unit
+        force along x, y and z on each of ``vertices`` ``(k,)`` in turn.
+        """
+        v = np.asarray(vertices, dtype=np.int64)
+        rows = self._row[(self.nodes[v][:, None] * 3 + np.arange(3)).ravel()]
+        if (rows < 0).any():
+            k = int(v[np.argmax((rows < 0).reshape(-1, 3).any(1))])
+            raise ValueError(f"vertex {k} is held by the mesh itself (a fixed rim): it moves not")
+        B = np.zeros((len(self.solver.free), len(rows)), order="F")
+        B[rows, np.arange(len(rows))] = 1.0
+        X = np.zeros((self.solver.n_all * 3, len(rows)))
+        X[self.solver.free] = self.solver.linear.solve(B)
+        return X.reshape(self.solver.n_all, 3, -1)[self.nodes].reshape(3 * len(self.nodes), -1)
+
+    def answer(self, held, displacement) -> np.ndarray:
+        """``(N, 3)`` m: the skin's displacement with the vertices ``held`` ``(k,)`` at
+        ``displacement[held]`` (``displacement`` ``(N, 3)`` m; its other rows are not read)
+        and no load elsewhere.
+        """
+        n = self.part.n_vertices
+        h = np.unique(np.asarray(held, dtype=np.int64))
+        if len(h) == 0:
+            raise ValueError("no vertex is held: the linear FEM's answer would be the rest")
+        if h.min() < 0 or h.max() >= n:
+            raise ValueError(f"held vertices must be indices in 0..{n - 1}")
+        u = np.asarray(displacement, dtype=float)
+        if u.shape != (n, 3):
+            raise ValueError(f"displacement must be (N, 3) = {(n, 3)}, got {u.shape}")
+        if not np.isfinite(u[h]).all():
+            raise ValueError("the held displacement is not finite")
+        G = self.columns(h)
+        at = (h[:, None] * 3 + np.arange(3)).ravel()
+        forces = np.linalg.solve(G[at], u[h].ravel())
+        return (G @ forces).reshape(n, 3)

@@ -1,0 +1,100 @@
+"""The skin held where an object holds it and the rest answered by the linear FEM
+(fem/holding.py): against the same linear FEM solved with those nodes fixed, on a part and on
+its subdivision.
+"""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+from scipy.sparse.linalg import spsolve
+
+from fem.holding import Holding
+from stmpl.body import tube
+
+RES = {"subdivisions": 0, "layers": 1, "order": 2}
+
+
+@pytest.fixture(scope="module")
+def part():
+    return tube(radius=0.03, length=0.08, n_around=12, n_along=6)
+
+
+def _held_and_target(part):
+    """A patch of the tube's skin pushed in and dragged round it, 1-2 mm."""
+    x = part.vertices
+    held = np.flatnonzero((np.abs(x[:, 2] - 0.04) < 0.02) & (x[:, 0] > 0.015))
+    u = np.zeros((part.n_vertices, 3))
+    u[held] = -0.001 * part.normals[held] + [0.0, 0.002, 0.0]
+    return held, u
+
+
+def _fixed_solve(h: Holding, held, u) -> np.ndarray:
+    """The same linear FEM with the held vertices' nodes fixed at ``u``: ``K_FF x = -K_FH u_H``."""
+    s = h.solver
+    z = np.zeros((s.n_all, 3))
+    _, K = s.assemble(z, z)
+    if sp.tril(K, -1).nnz == 0:  # the solver keeps the upper triangle (symmetric PARDISO)
+        K = K + sp.triu(K, 1).T
+    K = K.tocsr()
+    dof = np.full(s.n_all * 3, -1)
+    dof[s.free] = np.arange(len(s.free))
+    H = dof[(h.nodes[held][:, None] * 3 + np.arange(3)).ravel()]
+    F = np.setdiff1d(np.arange(len(s.free)), H)
+    x = np.zeros(len(s.free))
+    x[H] = u[held].ravel()
+    x[F] = spsolve(K[F][:, F].tocsc(), -K[F][:, H] @ x[H])
+    full = np.zeros(s.n_all * 3)
+    full[s.free] = x
+    return full.reshape(s.n_all, 3)[h.nodes]
+
+
+def test_the_held_skin_stays_and_the_rest_is_the_fixed_linear_fem_s(part):
+    """Held vertices come back where they were held; every other vertex where the linear FEM
+    with those nodes fixed puts it (a Dirichlet solve, not the compliance's Schur complement),
+    within round-off; and the answer moves far from the held patch.
+    """
+    h = Holding(part, 0.0075, RES, "forearm")
+    held, u = _held_and_target(part)
+    got = h.answer(held, u)
+    np.testing.assert_allclose(got[held], u[held], atol=1e-12)
+    want = _fixed_solve(h, held, u)
+    assert np.abs(got - want).max() < 1e-6 * np.abs(u).max()
+    free = np.setdiff1d(np.arange(part.n_vertices), held)
+    assert np.linalg.norm(got[free], axis=1).max() > 0.1 * np.abs(u).max()
+
+
+def test_a_subdivided_part_is_held_and_answered_on_its_own_vertices(part):
+    """On the tube subdivided once, meshed on the tube it came from (its vertices are the
+    quadratic elements' nodes), a held edge midpoint stays and the answer is the fixed solve's.
+    """
+    fine = part.subdivided(1)
+    h = Holding(fine, 0.0075, RES, "forearm")
+    assert h.unknowns == Holding(part, 0.0075, RES, "forearm").unknowns
+    held, u = _held_and_target(fine)
+    assert (held >= part.n_vertices).any()  # midpoints among them
+    got = h.answer(held, u)
+    np.testing.assert_allclose(got[held], u[held], atol=1e-12)
+    assert np.abs(got - _fixed_solve(h, held, u)).max() < 1e-6 * np.abs(u).max()
+
+
+def test_bad_holds_are_named(part):
+    h = Holding(part, 0.0075, RES, "forearm")
+    held, u = _held_and_target(part)
+    rim = part.rims[0][0]
+    for args, message in [
+        (([], u), "no vertex is held"),
+        (([part.n_vertices], u), "held vertices must be indices"),
+        ((held, u[:-1]), r"displacement must be \(N, 3\)"),
+        ((held, np.where(np.isin(np.arange(len(u)), held)[:, None], u, np.nan)), None),
+        ((held, np.full_like(u, np.nan)), "not finite"),
+        (([rim], u), "held by the mesh itself"),
+    ]:
+        if message is None:  # the rows not held are not read
+            assert np.isfinite(h.answer(*args)).all()
+            continue
+        with pytest.raises(ValueError, match=message):
+            h.answer(*args)
+    with pytest.raises(ValueError, match="finite and positive"):
+        Holding(part, -0.001, RES, "forearm")
+    with pytest.raises(ValueError, match="quadratic elements"):
+        Holding(part, 0.0075, {"subdivisions": 0, "layers": 1, "order": 1}, "paper")
