@@ -3,16 +3,15 @@ layered forearm, friction drags the skin under the fingers along with them, and 
 (stiff, over soft fat) carries that drag along the whole limb, beyond any message-passing
 network's reach. Here the FEM's own displacement of the skin within a radius of the contact
 is held, and the rest of the skin answered by the linear FEM of the same tissue (its tangent at
-rest); the answer is compared with the FEM's on the plain arm's vertices, near and far.
+rest); the answer is compared with the FEM's on every vertex of the skin, near and far.
 
     python benchmarks/grip_far_field.py [--data data/forearm_grips] [--shards 2 12]
                                         [--hold 0.005 0.01 0.02]
 
-The linear FEM is the plain arm's (the data's first vertices; medium resolution: the layered
-preset's element layers in quadratic elements, about 60k unknowns), factorised once for each
-thickness. Held vertices get unit nodal forces in x, y and z; the forces that put them at the
-FEM's displacement follow from those columns, and the whole skin's answer from the same
-columns. A few seconds a sample on one thread.
+The linear FEM (:class:`fem.holding.Holding`) is meshed on the plain arm the data's arm was
+subdivided from (the layered preset's element layers in quadratic elements, about 60k
+unknowns; every vertex of the data's arm is one of its nodes), factorised once for each
+thickness, and answers on the data's 2109 vertices. A few seconds a sample on one thread.
 """
 
 from __future__ import annotations
@@ -25,42 +24,8 @@ import numpy as np
 
 FAR = 0.05
 """m: a vertex farther than this from every contact vertex is "far"."""
-
-
-def linear_solver(part, thickness: np.ndarray):
-    """The linear FEM of the forearm preset on ``part`` (thickness ``(N,)`` m of skin and
-    fat), factorised; and each free DOF's row.
-    """
-    from fem.simulate import tissue_mesh
-    from fem.solver import Solver
-
-    mesh, material = tissue_mesh(
-        part, thickness, {"subdivisions": 0, "layers": 1, "order": 2}, "forearm"
-    )
-    solver = Solver(mesh, material, order=2)
-    u0 = np.zeros((solver.n_all, 3))
-    _, K = solver.assemble(u0, u0)
-    solver.linear.factor(K)
-    row = np.full(solver.n_all * 3, -1)
-    row[solver.free] = np.arange(len(solver.free))
-    return solver, row
-
-
-def held_answer(solver, row, held: np.ndarray, target: np.ndarray) -> np.ndarray:
-    """``(N, 3)`` the linear FEM's skin displacement (m) with the part vertices ``held`` at
-    ``target[held]`` ``(N, 3)``.
-    """
-    nodes = solver.mesh.part_nodes
-    n = len(nodes)
-    rows = row[(nodes[held][:, None] * 3 + np.arange(3)).ravel()]
-    B = np.zeros((len(solver.free), len(rows)), order="F")
-    B[rows, np.arange(len(rows))] = 1.0
-    X = np.zeros((solver.n_all * 3, len(rows)))
-    X[solver.free] = solver.linear.solve(B)
-    G = X.reshape(solver.n_all, 3, -1)[nodes].reshape(3 * n, -1)  # skin DOFs x held DOFs
-    sel = (np.asarray(held)[:, None] * 3 + np.arange(3)).ravel()
-    forces = np.linalg.solve(G[sel], target[held].ravel())
-    return (G @ forces).reshape(n, 3)
+RES = {"subdivisions": 0, "layers": 1, "order": 2}
+"""The linear FEM's mesh of the plain arm: the preset's element layers, quadratic elements."""
 
 
 def main() -> None:
@@ -73,18 +38,13 @@ def main() -> None:
     import h5py
     from scipy.spatial import cKDTree
 
+    from fem.holding import Holding
     from stmpl.machine import describe
     from stmpl.part import BodyPart
 
     with np.load(f"{args.data}/part.npz") as z:
         arrays = dict(z)
-    fine = BodyPart.from_arrays(str(arrays["name"]), arrays, json.loads(str(arrays["source"])))
-    part = fine.coarser
-    if part is None:
-        raise SystemExit(
-            f"{args.data}: its part is not a subdivided one; no plain part to solve on"
-        )
-    n = part.n_vertices
+    part = BodyPart.from_arrays(str(arrays["name"]), arrays, json.loads(str(arrays["source"])))
     print(describe())
     solvers = {}
     print(
@@ -100,18 +60,21 @@ def main() -> None:
         key = round(float(T[0][0]), 6)
         if key not in solvers:
             t0 = time.perf_counter()
-            solvers[key] = linear_solver(part, T[0][:n].astype(float))
-            print(f"(thickness {1e3 * key:g} mm: factorised in {time.perf_counter() - t0:.1f} s)")
-        solver, row = solvers[key]
+            solvers[key] = Holding(part, T[0].astype(float), RES, "forearm")
+            print(
+                f"(thickness {1e3 * key:g} mm: {solvers[key].unknowns} unknowns, factorised in "
+                f"{time.perf_counter() - t0:.1f} s)"
+            )
+        holding = solvers[key]
         for i in range(len(U)):
-            truth = U[i][:n].astype(float)
-            peak = np.linalg.norm(U[i], axis=1).max()
-            near = cKDTree(fine.vertices[P[i] > 0]).query(part.vertices)[0]
+            truth = U[i].astype(float)
+            peak = np.linalg.norm(truth, axis=1).max()
+            near = cKDTree(part.vertices[P[i] > 0]).query(part.vertices)[0]
             far = near > FAR
             rest = np.linalg.norm(truth, axis=1)
             for r in args.hold:
                 held = np.flatnonzero(near < r)
-                u = held_answer(solver, row, held, truth)
+                u = holding.answer(held, truth)
                 e = np.linalg.norm(u - truth, axis=1)
                 print(
                     f"| {s} | {params[i]['grip']} at {params[i]['along']:g} | {total[i]:.0f} | "

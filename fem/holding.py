@@ -4,7 +4,7 @@ A grip's fingers drag the skin under them along with their sweep, and on the lay
 the stiff skin over soft fat carries that drag along the whole limb: most of a grip's
 displacement lies centimetres from any contact, where the strains are small. There the tissue
 is linear: held at the FEM's own displacement within 2 cm of the contact, the rest of the
-skin as the linear FEM answers it lies within 0.24-0.77 % of the peak displacement on average
+skin as the linear FEM answers it lies within 0.14-0.55 % of the peak displacement on average
 (``benchmarks/grip_far_field.py``). So what happens near the object (large strains, contact,
 friction) and what the tissue carries away from it (linear) can be answered apart.
 
