@@ -16,6 +16,7 @@ import numpy as np
 from stmpl.contact import gap as along
 from stmpl.contact import objects
 from stmpl.contact.closing import cached_closing_grip, closed, closing_grip
+from stmpl.contact.gap import way as way_field
 from stmpl.contact.hand import Hand
 from stmpl.contact.pressing import check_pose, distance_to_surface, winding_number
 from stmpl.mesh import Mesh
@@ -83,7 +84,7 @@ def posed(
             raise ValueError(f"object {n!r}: the mesh has no faces or non-finite vertices")
         rigid.append(Rigid(n, np.asarray(at.vertices), np.asarray(at.faces)))
         gap = np.minimum(gap, _gap(part, at, d))
-    pose = Pose(gap, d, tuple(rigid), along.way(part.vertices, gap, d))
+    pose = Pose(gap, d, tuple(rigid), way_field(part.vertices, gap, d))
     return Scene.posed(part, thickness, pose, **meta)
 
 
@@ -115,7 +116,7 @@ def moved(scene: Scene, distance: float) -> Scene:
         rigid.append(r)
         mesh = Mesh(r.vertices, r.faces)
         gap = np.minimum(gap, _gap(scene.part, mesh, pose.direction))
-    way = along.way(scene.part.vertices, gap, pose.direction, tuple(rigid))
+    way = way_field(scene.part.vertices, gap, pose.direction, tuple(rigid))
     return Scene.posed(
         scene.part, scene.thickness, Pose(gap, pose.direction, tuple(rigid), way), **scene.meta
     )
@@ -147,7 +148,7 @@ def gripped(
         grip = cached_closing_grip(part, hand, "R", along, around, kind)
     grip = closed(grip, depth)
     gap = _gap(part, Mesh(grip.vertices, grip.faces), None)
-    way = along.way(part.vertices, gap, None, (grip,))
+    way = way_field(part.vertices, gap, None, (grip,))
     return Scene.posed(part, thickness, Pose(gap, None, (grip,), way), **meta)
 
 
@@ -199,7 +200,7 @@ def sample_way(part: BodyPart, kind: str, params: dict, gap) -> np.ndarray:
     """
     if kind != "press_grip":
         try:
-            return along.way(part.vertices, gap, params["direction"])
+            return way_field(part.vertices, gap, params["direction"])
         except (KeyError, TypeError) as e:
             raise ValueError(f"a {kind} sample does not record its press direction ({e})") from e
     try:
@@ -209,4 +210,4 @@ def sample_way(part: BodyPart, kind: str, params: dict, gap) -> np.ndarray:
         depth = float(params["depth"])
     except (KeyError, TypeError) as e:
         raise ValueError(f"a grip sample does not record its placement and depth ({e})") from e
-    return along.way(part.vertices, gap, None, (closed(grip, depth),))
+    return way_field(part.vertices, gap, None, (closed(grip, depth),))

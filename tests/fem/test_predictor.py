@@ -10,6 +10,7 @@ from fem.simulate import simulate
 from stmpl import loads, predictor, tissue
 from stmpl.body.primitives import tube
 from stmpl.pipeline.evaluate import scenes_of
+from stmpl.pose import GAP_REACH
 from stmpl.scene import Scene
 
 
@@ -204,6 +205,9 @@ def test_the_fem_closes_a_grip_given_by_its_pose(tmp_path):
     res = {"subdivisions": 0, "layers": 2, "refine_radius": 0.02, "order": 1}
     scene = gripped(part, th, 0.002, Hand(side="R"), along=0.5, kind="pinch")
     assert scene.pose.closing and scene.pose.objects[0].path is not None
+    reach = scene.pose.gap < GAP_REACH  # the way the closing fingers move there, none beyond
+    assert np.linalg.norm(scene.pose.way[reach], axis=1).max() > 0.5
+    assert not scene.pose.way[~reach].any()
     shape, depth = at_pose(part, scene.pose)
     assert depth == pytest.approx(0.002, abs=3e-4)
     d = predictor.create("fem", res=res).predict(scene)
