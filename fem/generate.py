@@ -342,6 +342,7 @@ def _solve(
     threads = max(1, (os.cpu_count() or 1) // par["workers"])
     t0 = time.perf_counter()
     started = _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+    code = code_version()  # the build that solves this run's shards, whatever the checkout becomes
     bar = None
     totals = {"samples": 0, "failed": 0}
     why: Counter = Counter()  # the failures' reasons, as the progress bar sums them up
@@ -392,7 +393,7 @@ def _solve(
                     "wall_seconds": round(time.perf_counter() - t0, 2),
                     "shards": done,
                     "written": sorted(written),  # which build solved which shard
-                    "code": code_version(),
+                    "code": code,
                     "backend": par["backend"],
                     "workers": par["workers"],
                 }

@@ -228,7 +228,7 @@ def test_dask_local_cluster_with_two_workers_matches_serial(tmp_path):
     _same(a, b)
 
 
-def test_cli_generate_stops_early_and_finishes(tmp_path, capsys):
+def test_cli_generate_stops_early_and_finishes(tmp_path, capsys, monkeypatch):
     from stmpl.cli.main import main
 
     path = tmp_path / "cfg.yaml"
@@ -258,6 +258,17 @@ def test_cli_generate_stops_early_and_finishes(tmp_path, capsys):
     said = capsys.readouterr()
     assert "stopped early: 1 of " in said.out and not re.findall(r"\d+/\d+ \[", said.err)
     assert json.loads((out / "card.json").read_text())["tasks"] == part_way["tasks"]
+    from fem import generate as gen
+
+    build = {"git": "the build the run started on"}
+    monkeypatch.setattr(gen, "code_version", lambda: {"stmpl": "0.1.0", **build})
+    write = gen.write_shard
+
+    def moved_on(*args, **kwargs):  # the checkout moves on while the run goes
+        build["git"] = "a later build"
+        return write(*args, **kwargs)
+
+    monkeypatch.setattr(gen, "write_shard", moved_on)
     assert main(["generate", str(path), "--out", str(out), "--quiet"]) == 0
     printed = capsys.readouterr().out
     card = json.loads((out / "card.json").read_text())
@@ -269,6 +280,7 @@ def test_cli_generate_stops_early_and_finishes(tmp_path, capsys):
     shards = len(list(out.glob("shard-*.h5")))
     assert sorted(runs[0]["written"] + runs[1]["written"]) == list(range(shards))
     assert all(r["code"]["stmpl"] for r in runs)  # which build solved which shards
+    assert runs[1]["code"]["git"] == "the build the run started on"
     assert card["attempted"] > int(bar[-1][1])
     assert main(["generate", str(tmp_path / "missing.yaml")]) == 2
     assert "config file not found" in capsys.readouterr().err
