@@ -75,7 +75,6 @@ def cut(gap: np.ndarray) -> np.ndarray:
     return np.minimum(gap, GAP_REACH)
 
 
-@dataclass(frozen=True, eq=False)
 class Pose:
     """Where the pressing objects are (see the module docstring).
 
@@ -92,16 +91,18 @@ class Pose:
             the objects press or close (m per m: the direction itself for objects pressing
             along one; a grip's :attr:`Rigid.path` at its nearest point), zero where no object
             lies within :data:`GAP_REACH`; ``None`` where it is not known. A learned model with
-            the option ``motion`` reads it beside the gap.
+            the option ``motion`` reads it beside the gap. It may be given as a function of no
+            arguments that returns it: then it is computed (and checked) when first read, so a
+            scene whose answer never reads it does not pay for it (a grip's costs a search of
+            the hand's surface).
+
+    A pose is read-only: its arrays cannot be written, nor its attributes set.
     """
 
-    gap: np.ndarray
-    direction: np.ndarray
-    objects: tuple = ()
-    way: np.ndarray | None = None
+    __slots__ = ("gap", "direction", "objects", "_way", "_way_of")
 
-    def __post_init__(self) -> None:
-        g = np.asarray(self.gap, dtype=float)
+    def __init__(self, gap, direction, objects=(), way=None) -> None:
+        g = np.asarray(gap, dtype=float)
         if g.ndim != 1:
             raise ValueError(f"Pose.gap must be one distance per vertex (N,), got {g.shape}")
         if not np.isfinite(g).all():
@@ -112,12 +113,12 @@ class Pose:
                 f"Pose.gap must be cut at {1e3 * GAP_REACH:g} mm (GAP_REACH), got up to "
                 f"{1e3 * g.max():.3g} mm"
             )
-        objects = tuple(self.objects)
+        objects = tuple(objects)
         if not all(isinstance(o, Rigid) for o in objects):
             raise ValueError("Pose.objects must be Rigid objects")
         d = None
-        if self.direction is not None:
-            d = np.array(self.direction, dtype=float)
+        if direction is not None:
+            d = np.array(direction, dtype=float)
             n = np.linalg.norm(d) if d.shape == (3,) else np.nan
             if not (np.isfinite(n) and abs(n - 1) < 1e-6):
                 raise ValueError(f"Pose.direction must be a unit 3-vector, got {d.tolist()}")
@@ -128,20 +129,40 @@ class Pose:
                 f"Pose.direction is None (objects closing along their paths), and object "
                 f"{lacking!r} has no path"
             )
-        w = None
-        if self.way is not None:
-            w = np.array(self.way, dtype=float)
-            if w.shape != (len(g), 3):
-                raise ValueError(f"Pose.way must be (N, 3) = {(len(g), 3)}, got {w.shape}")
-            if not np.isfinite(w).all():
-                i = int(np.argmax(~np.isfinite(w).all(axis=1)))
-                raise ValueError(f"Pose.way is not finite at vertex {i}")
-            w.setflags(write=False)
         g.setflags(write=False)
-        object.__setattr__(self, "way", w)
         object.__setattr__(self, "gap", g)
         object.__setattr__(self, "direction", d)
         object.__setattr__(self, "objects", objects)
+        object.__setattr__(self, "_way", None)
+        object.__setattr__(self, "_way_of", way if callable(way) else None)
+        if way is not None and not callable(way):
+            object.__setattr__(self, "_way", self._checked_way(way))
+
+    def __setattr__(self, name, value):
+        raise AttributeError(f"a Pose is read-only: cannot set {name!r}")
+
+    def __reduce__(self):
+        return (Pose, (self.gap, self.direction, self.objects, self.way))
+
+    def _checked_way(self, way) -> np.ndarray:
+        w = np.array(way, dtype=float)
+        if w.shape != (len(self.gap), 3):
+            raise ValueError(f"Pose.way must be (N, 3) = {(len(self.gap), 3)}, got {w.shape}")
+        if not np.isfinite(w).all():
+            i = int(np.argmax(~np.isfinite(w).all(axis=1)))
+            raise ValueError(f"Pose.way is not finite at vertex {i}")
+        w.setflags(write=False)
+        return w
+
+    @property
+    def way(self) -> np.ndarray | None:
+        """The way field (see the class), computed on first read where it was given as a
+        function.
+        """
+        if self._way is None and self._way_of is not None:
+            object.__setattr__(self, "_way", self._checked_way(self._way_of()))
+            object.__setattr__(self, "_way_of", None)
+        return self._way
 
     @property
     def depth(self) -> float:

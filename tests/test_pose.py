@@ -2,6 +2,8 @@
 answer's force and reaction, and both written to a file and read back.
 """
 
+import pickle
+
 import numpy as np
 import pytest
 
@@ -104,3 +106,32 @@ def test_a_pose_s_way_field_is_checked_and_travels_through_its_arrays(part):
     way[5, 1] = np.nan
     with pytest.raises(ValueError, match="Pose.way is not finite at vertex 5"):
         Pose(p.gap, p.direction, p.objects, way)
+
+
+def test_a_way_given_as_a_function_is_computed_once_when_first_read(part):
+    """A way field given as a function costs nothing until read (a grip's is a search of the
+    hand's surface, and only a model with ``motion`` reads it); read, it is checked like a
+    given one, kept, and a pickled pose carries it.
+    """
+    p = _pose(part)
+    way = np.zeros((part.n_vertices, 3))
+    way[3] = [0.0, 0.6, -0.8]
+    calls = []
+
+    def compute():
+        calls.append(1)
+        return way
+
+    q = Pose(p.gap, p.direction, p.objects, compute)
+    assert calls == []
+    np.testing.assert_array_equal(q.way, way)
+    np.testing.assert_array_equal(q.way, way)
+    assert len(calls) == 1 and not q.way.flags.writeable
+    back = pickle.loads(pickle.dumps(q))
+    np.testing.assert_array_equal(back.way, way)
+    np.testing.assert_array_equal(back.gap, p.gap)
+    with pytest.raises(AttributeError, match="read-only"):
+        q.gap = p.gap
+    bad = Pose(p.gap, p.direction, p.objects, lambda: way[:-1])
+    with pytest.raises(ValueError, match=r"Pose.way must be \(N, 3\)"):
+        bad.way

@@ -11,6 +11,8 @@ them along the way they press (:mod:`stmpl.contact.gap`; a closing grip: its sig
 
 from __future__ import annotations
 
+from functools import partial
+
 import numpy as np
 
 from stmpl.contact import gap as along
@@ -84,7 +86,7 @@ def posed(
             raise ValueError(f"object {n!r}: the mesh has no faces or non-finite vertices")
         rigid.append(Rigid(n, np.asarray(at.vertices), np.asarray(at.faces)))
         gap = np.minimum(gap, _gap(part, at, d))
-    pose = Pose(gap, d, tuple(rigid), way_field(part.vertices, gap, d))
+    pose = Pose(gap, d, tuple(rigid), partial(way_field, part.vertices, gap, d))
     return Scene.posed(part, thickness, pose, **meta)
 
 
@@ -116,7 +118,7 @@ def moved(scene: Scene, distance: float) -> Scene:
         rigid.append(r)
         mesh = Mesh(r.vertices, r.faces)
         gap = np.minimum(gap, _gap(scene.part, mesh, pose.direction))
-    way = way_field(scene.part.vertices, gap, pose.direction, tuple(rigid))
+    way = partial(way_field, scene.part.vertices, gap, pose.direction, tuple(rigid))
     return Scene.posed(
         scene.part, scene.thickness, Pose(gap, pose.direction, tuple(rigid), way), **scene.meta
     )
@@ -148,7 +150,7 @@ def gripped(
         grip = cached_closing_grip(part, hand, "R", along, around, kind)
     grip = closed(grip, depth)
     gap = _gap(part, Mesh(grip.vertices, grip.faces), None)
-    way = way_field(part.vertices, gap, None, (grip,))
+    way = partial(way_field, part.vertices, gap, None, (grip,))
     return Scene.posed(part, thickness, Pose(gap, None, (grip,), way), **meta)
 
 
