@@ -110,13 +110,34 @@ class LearnedPredictor(TrainedPredictor):
         return self.denormalised(self.answered(thickness, force, body, base), force)
 
     def answered(self, thickness, force, body=None, base=None):
-        """:meth:`raw` with a pose model's pressures read (:meth:`with_pressures`) and the
-        contact prior added (option ``prior: contact``).
+        """:meth:`raw` with a pose model's pressures read (:meth:`with_pressures`), the
+        contact prior added (option ``prior: contact`` or ``held``) and the skin held
+        (``held``: :meth:`held`).
         """
         out = self.with_pressures(self.raw(thickness, force, body, base))
-        if self.config.get("prior") != "contact":
+        prior = self.config.get("prior")
+        if prior not in ("contact", "held"):
             return out
-        return out + F.pad(self.contact_base(gap_of(force), body), (0, out.shape[-1] - 3))
+        out = out + F.pad(self.contact_base(gap_of(force), body), (0, out.shape[-1] - 3))
+        if prior == "contact":
+            return out
+        return torch.cat(
+            [self.held(out[..., :3], gap_of(force), thickness, body), out[..., 3:]], -1
+        )
+
+    def held(self, r, gap, thickness, body=None):
+        """The held prior (:mod:`models.holding`): the skin held at ``r`` ``(B, N, 3)`` near
+        the objects, the tissue's linear FEM elsewhere.
+        """
+        skin = getattr(self, "held_skin", None)
+        if skin is None:
+            raise ValueError(
+                f"{self.name}: prior: held needs the skin's linear FEM, made by fitting the "
+                "model to its dataset (stmpl train) or read with its checkpoint"
+            )
+        if body is not None and bool((body != 0).any()):
+            raise ValueError(f"{self.name}: prior: held knows the linear FEM of its own body only")
+        return skin(r, gap, thickness)
 
     def with_pressures(self, out):
         """A network's output ``(..., C)`` with a pose model's two pressure channels read from

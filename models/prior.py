@@ -9,6 +9,7 @@ import numpy as np
 
 from fem.compliance import ColumnStore
 from models.features import CORRECTION_SCALE
+from models.holding import HeldSkin, fit_held
 from models.linear.operator import (
     ComplianceOperator,
     check_operator,
@@ -21,10 +22,12 @@ from models.linear.operator import (
     unsolved,
 )
 
-PRIORS = ("none", "linear", "contact")
+PRIORS = ("none", "linear", "contact", "held")
 """``linear``: the linear FEM's answer to the force (:class:`LinearPrior`); ``contact``: of a
 model given a pose, the skin inside the objects moved out to their surface
-(:meth:`~models.learned.LearnedPredictor.contact_base`)."""
+(:meth:`~models.learned.LearnedPredictor.contact_base`); ``held``: of a model given a pose, the
+contact prior and the network's answer held near the objects and carried to the rest of the
+skin by the tissue's linear FEM (:mod:`models.holding`)."""
 
 PRESSURE_START = 0.1
 """A pose model's contact pressure before it has learned (units of 10 kPa: 1 kPa, a light
@@ -70,9 +73,9 @@ class LinearPrior:
                 "the linear prior answers a force; a model given a pose takes prior: none or "
                 "contact"
             )
-        if out.get("given") != "pose" and out["prior"] == "contact":
+        if out.get("given") != "pose" and out["prior"] in ("contact", "held"):
             raise ValueError(
-                "the contact prior moves the skin inside a posed object; a model given a force "
+                f"the {out['prior']} prior reads a posed object's gap; a model given a force "
                 "takes prior: none or linear"
             )
         if out.get("geometry") and out["prior"] == "linear" and out["operator"] != "on_demand":
@@ -88,8 +91,13 @@ class LinearPrior:
         return self.config["prior"] == "linear"
 
     def fit(self, dataset, progress: bool = True) -> None:
-        """With ``prior: linear``, compute the linear FEM operator for ``dataset`` (cached)."""
-        if self.prior and self.config.get("operator", "stored") == "on_demand":
+        """With ``prior: linear``, compute the linear FEM operator for ``dataset`` (cached);
+        with ``prior: held``, the skin's compliance near every sample's objects
+        (:func:`models.holding.fit_held`).
+        """
+        if self.config["prior"] == "held":
+            fit_held(self, dataset, progress)
+        elif self.prior and self.config.get("operator", "stored") == "on_demand":
             fit_on_demand(self, self.model.prior, dataset, {}, progress)
         elif self.prior:
             install(self, self.model.prior, fit_operator(self.part, dataset, {}, progress))
@@ -97,6 +105,8 @@ class LinearPrior:
     def restored(self) -> None:
         if self.prior:
             reattach(self, self.model.prior)
+        if self.config["prior"] == "held":
+            self.held_skin = HeldSkin(self.part, **self.meta["holding"]["skin"])
 
     def base(self, thickness, force, body=None, base=None):
         """The linear FEM's ``(B, N, 3)`` answer in the units of ``raw``, or None without the

@@ -8,7 +8,7 @@ import pytest
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
-from fem.holding import Holding
+from fem.holding import Holding, SkinCompliance
 from stmpl.body import tube
 
 RES = {"subdivisions": 0, "layers": 1, "order": 2}
@@ -98,3 +98,22 @@ def test_bad_holds_are_named(part):
         Holding(part, -0.001, RES, "forearm")
     with pytest.raises(ValueError, match="quadratic elements"):
         Holding(part, 0.0075, {"subdivisions": 0, "layers": 1, "order": 1}, "paper")
+
+
+def test_the_skin_compliance_is_solved_once_and_read_back_from_the_cache(part):
+    """:class:`SkinCompliance`: the columns asked for are the holding's own (float32), solved
+    once (a second ask solves none), and a second store of the same set-up reads them from the
+    disk cache; another thickness is another store; a rim vertex is refused by name.
+    """
+    h = Holding(part, 0.0065, RES, "forearm")  # a thickness no other test caches
+    held, _ = _held_and_target(part)
+    s = SkinCompliance(part, 0.0065, "forearm")
+    got = s.columns(held)
+    np.testing.assert_allclose(got, h.columns(held), rtol=1e-6, atol=1e-6 * np.abs(got).max())
+    assert s.solve(held) == 0 and s.done.sum() == len(held)
+    again = SkinCompliance(part, 0.0065, "forearm")
+    assert again.done.sum() == len(held) and again.missing(held).size == 0
+    np.testing.assert_array_equal(again.columns(held), got)
+    assert SkinCompliance(part, 0.0085, "forearm").done.sum() == 0
+    with pytest.raises(ValueError, match="held by the mesh itself"):
+        s.columns([part.rims[0][0]])

@@ -1,0 +1,49 @@
+"""The held prior (models/holding.py): a near answer carried to the whole skin by the
+tissue's linear FEM, against the float64 holding of the FEM wing, and its gradient.
+"""
+
+import numpy as np
+import pytest
+import torch
+
+from fem.holding import Holding
+from models.holding import HeldSkin
+from stmpl.body import tube
+from stmpl.pose import GAP_REACH
+
+
+@pytest.fixture(scope="module")
+def part():
+    return tube(radius=0.03, length=0.08, n_around=12, n_along=6)
+
+
+def test_the_held_answer_is_the_linear_fem_s_from_the_near_skin(part):
+    """Two samples (two thicknesses, two places): on the vertices within reach of an object
+    the answer is the given one, elsewhere the linear FEM's held answer within float32
+    round-off; a sample with no object near stays at rest; the answer is differentiable in the
+    given skin.
+    """
+    x = part.vertices
+    gap = np.full((3, part.n_vertices), GAP_REACH, np.float32)
+    gap[0, (np.abs(x[:, 2] - 0.04) < 0.02) & (x[:, 0] > 0.015)] = -0.001
+    gap[1, (np.abs(x[:, 2] - 0.04) < 0.02) & (x[:, 1] > 0.015)] = 0.004
+    t = np.array([0.0075, 0.01, 0.0075], np.float32)[:, None].repeat(part.n_vertices, 1)
+    rng = np.random.default_rng(0)
+    r = torch.tensor(rng.normal(0, 1e-3, (3, part.n_vertices, 3)), requires_grad=True)
+    skin = HeldSkin(part, "forearm")
+    u = skin(r.float(), torch.from_numpy(gap), torch.from_numpy(t))
+    for b in range(2):
+        held = skin.held(gap[b], t[b])
+        assert 0 < len(held) < part.n_vertices
+        want = Holding(part, float(t[b, 0]), tissue="forearm").answer(held, r[b].detach().numpy())
+        got = u[b].detach().numpy()
+        peak = np.abs(want).max()
+        np.testing.assert_allclose(got[held], want[held], atol=1e-5 * peak)
+        assert np.abs(got - want).max() < 1e-3 * peak
+        assert np.linalg.norm(got, axis=1)[np.setdiff1d(np.arange(len(got)), held)].max() > (
+            0.05 * peak
+        )
+    assert float(u[2].abs().max()) == 0.0
+    u[0].sum().backward()
+    moved = r.grad[0].abs().sum(1).numpy() > 0
+    np.testing.assert_array_equal(np.flatnonzero(moved), skin.held(gap[0], t[0]))
