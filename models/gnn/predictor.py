@@ -237,6 +237,8 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
             seeds, grow = reach.moving(f, base.detach().cpu().numpy(), self.region_tolerance), 1
         else:
             seeds, grow = reach.within_margin(self.part, thickness.cpu().numpy(), f), 0
+        if self.config["prior"] == "held":  # every vertex the held prior reads is answered
+            seeds = seeds | (gap_of(force).cpu().numpy() < GAP_REACH)
         g = subgraph(self._mesh, self.part, seeds, steps, grow)
         dev = x.device
         sub_ei = torch.as_tensor(g.edges, device=dev)
