@@ -31,9 +31,21 @@ from stmpl.contact.gap import of_sample
 from stmpl.part import BodyPart
 from stmpl.pose import GAP_REACH
 
+REACH_TOLERANCE = 1e-6
+"""m: a vertex is within reach of an object where its gap is below :data:`GAP_REACH` by more
+than this (the gap is cut at ``GAP_REACH``, and a float32 copy of the cut value lies just below
+it)."""
+
 CACHED_HOLDS = 256
 """Factorised holds (one per distinct held set and thickness) kept in memory; a training set's
 samples each have one (some 20-50 MB a sample on the forearm)."""
+
+
+def within_reach(gap) -> np.ndarray:
+    """``(..., N)`` bool: the vertices an object lies within :data:`GAP_REACH` of, from their
+    gap ``(..., N)`` (m, NumPy): those the held prior holds.
+    """
+    return np.asarray(gap, dtype=float) < GAP_REACH - REACH_TOLERANCE
 
 
 class HeldSkin:
@@ -64,7 +76,7 @@ class HeldSkin:
         the free ones within :data:`GAP_REACH` of an object.
         """
         _, s = self.store(thickness)
-        return np.flatnonzero((np.asarray(gap) < GAP_REACH) & s.free)
+        return np.flatnonzero(within_reach(gap) & s.free)
 
     def prepare(self, gaps, thicknesses, progress: bool = True) -> int:
         """Solve the columns every sample (``gaps``, ``thicknesses`` ``(B, N)``, m) holds, one
@@ -77,7 +89,7 @@ class HeldSkin:
         n = 0
         for key, gs in by.items():
             s = self._stores[key]
-            need = np.flatnonzero((np.stack(gs) < GAP_REACH).any(0) & s.free)
+            need = np.flatnonzero(within_reach(np.stack(gs)).any(0) & s.free)
             n += s.solve(need, progress)
         return n
 
@@ -113,7 +125,7 @@ class HeldSkin:
         out = []
         for b in range(len(r)):
             key, s = self.store(t[b])
-            H = np.flatnonzero((g[b] < GAP_REACH) & s.free)
+            H = np.flatnonzero(within_reach(g[b]) & s.free)
             if len(H) == 0:
                 out.append(torch.zeros_like(r[b]))
                 continue

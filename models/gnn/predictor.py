@@ -32,6 +32,7 @@ from models.features import (
 from models.gnn import fused
 from models.gnn.network import MeshGraphNet, NormalisedGraphNet, Normaliser
 from models.gnn.subgraph import compiled, mesh, subgraph
+from models.holding import within_reach
 from models.learned import LearnedPredictor
 from models.linear.operator import ComplianceOperator
 from models.prior import CORRECTION_SCALE, LinearPrior, start_silent
@@ -238,7 +239,7 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         else:
             seeds, grow = reach.within_margin(self.part, thickness.cpu().numpy(), f), 0
         if self.config["prior"] == "held":  # every vertex the held prior reads is answered
-            seeds = seeds | (gap_of(force).cpu().numpy() < GAP_REACH)
+            seeds = seeds | within_reach(gap_of(force).cpu().numpy())
         g = subgraph(self._mesh, self.part, seeds, steps, grow)
         dev = x.device
         sub_ei = torch.as_tensor(g.edges, device=dev)
