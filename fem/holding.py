@@ -27,6 +27,7 @@ import json
 import pathlib
 
 import numpy as np
+import scipy.linalg
 from tqdm import tqdm
 
 from fem.finer import FinerPart, meshed
@@ -35,6 +36,7 @@ from fem.solver import Solver
 from stmpl.body.model import default_cache_dir
 from stmpl.files import atomic_savez
 from stmpl.part import BodyPart
+from stmpl.pose import within_reach
 
 HOLD_RESOLUTION = {"subdivisions": 0, "layers": 1, "order": 2}
 """The held skin's linear FEM: the tissue's element layers in quadratic elements on the plain
@@ -46,6 +48,10 @@ STORE_VERSION = 1
 
 BLOCK = 100
 """Vertices whose columns are solved in one block of right-hand sides."""
+
+CACHED_HOLDS = 256
+"""Factorised holds (one per distinct held set and thickness) a :class:`HeldSkin` keeps in
+memory; a training set's samples each have one (1-10 MB a sample on the forearm's grips)."""
 
 
 class Holding:
@@ -246,3 +252,82 @@ class SkinCompliance:
             raise ValueError(f"vertex {k} is held by the mesh itself (a fixed rim): it moves not")
         self.solve(v)
         return self.G[:, (v[:, None] * 3 + np.arange(3)).ravel()]
+
+
+class HeldSkin:
+    """The skin of ``part`` held near the objects of a pose and answered elsewhere by the linear
+    FEM of ``tissue`` (a layered preset's name, with the body's ``phenotype``), at any
+    thickness (one :class:`SkinCompliance` each): the held vertices are the free ones within
+    reach of an object (:func:`stmpl.pose.within_reach`), and the skin held at ``r`` there is
+
+        u = G[:, H] G[H, H]^-1 r_H
+
+    (:meth:`answer`; the learned models' held prior, :mod:`models.holding`, answers the same in
+    torch). ``G[H, H]``'s Cholesky factor is kept for each held set met.
+    """
+
+    def __init__(self, part: BodyPart, tissue: str, phenotype: dict | None = None):
+        self.part, self.tissue, self.phenotype = part, tissue, phenotype
+        self._stores: dict[bytes, SkinCompliance] = {}
+        self._holds: dict[tuple, tuple] = {}
+
+    def store(self, thickness) -> tuple[bytes, SkinCompliance]:
+        """The compliance of the skin at ``thickness`` ``(N,)`` (m), and its key."""
+        t = np.asarray(thickness, dtype=np.float32)
+        key = t.tobytes()
+        if key not in self._stores:
+            self._stores[key] = SkinCompliance(self.part, t, self.tissue, self.phenotype)
+        return key, self._stores[key]
+
+    def held(self, gap, thickness) -> np.ndarray:
+        """``(k,)`` the vertices a sample with ``gap`` ``(N,)`` (m) and ``thickness`` holds."""
+        _, s = self.store(thickness)
+        return np.flatnonzero(within_reach(gap) & s.free)
+
+    def prepare(self, gaps, thicknesses, progress: bool = True) -> int:
+        """Solve the columns every sample (``gaps``, ``thicknesses`` ``(B, N)``, m) holds, one
+        store per thickness; returns how many were solved (0: all cached).
+        """
+        by: dict[bytes, list] = {}
+        for g, t in zip(np.asarray(gaps), np.asarray(thicknesses)):
+            key, _ = self.store(t)
+            by.setdefault(key, []).append(g)
+        n = 0
+        for key, gs in by.items():
+            s = self._stores[key]
+            n += s.solve(np.flatnonzero(within_reach(np.stack(gs)).any(0) & s.free), progress)
+        return n
+
+    def hold(self, gap, thickness) -> tuple[SkinCompliance, np.ndarray, np.ndarray]:
+        """A sample's store, its held DOFs ``(3 k,)`` (vertex by vertex, x y z) and the lower
+        Cholesky factor of ``G[H, H]`` ``(3 k, 3 k)`` (float64; kept); no DOFs where no
+        object is near.
+        """
+        key, s = self.store(thickness)
+        H = np.flatnonzero(within_reach(gap) & s.free)
+        k = (key, H.tobytes())
+        if k not in self._holds:
+            at = (H[:, None] * 3 + np.arange(3)).ravel()
+            A = s.columns(H)[at].astype(np.float64)
+            A = 0.5 * (A + A.T)
+            try:
+                L = scipy.linalg.cholesky(A, lower=True)
+            except np.linalg.LinAlgError:  # float32 rounding of a nearly singular block
+                A[np.diag_indices_from(A)] += 1e-7 * float(A.diagonal().mean())
+                L = scipy.linalg.cholesky(A, lower=True)
+            if len(self._holds) >= CACHED_HOLDS:
+                self._holds.pop(next(iter(self._holds)))
+            self._holds[k] = (at, L)
+        return (s, *self._holds[k])
+
+    def answer(self, r, gap, thickness) -> np.ndarray:
+        """``(N, 3)`` the skin held at ``r`` ``(N, 3)`` (any unit) on the held vertices of a
+        sample with ``gap`` and ``thickness`` ``(N,)`` (m), the linear FEM's answer elsewhere;
+        zero where no object is near.
+        """
+        s, at, L = self.hold(gap, thickness)
+        r = np.asarray(r)
+        if len(at) == 0:
+            return np.zeros_like(r)
+        f = scipy.linalg.cho_solve((L, True), r.reshape(-1)[at].astype(np.float64))
+        return (s.G[:, at] @ f.astype(np.float32)).reshape(r.shape).astype(r.dtype)

@@ -26,94 +26,20 @@ import time
 import numpy as np
 import torch
 
-from fem.holding import SkinCompliance
+from fem import holding as arrays
 from stmpl.contact.gap import of_sample
 from stmpl.part import BodyPart
 from stmpl.pose import GAP_REACH
 
-REACH_TOLERANCE = 1e-6
-"""m: a vertex is within reach of an object where its gap is below :data:`GAP_REACH` by more
-than this (the gap is cut at ``GAP_REACH``, and a float32 copy of the cut value lies just below
-it)."""
 
-CACHED_HOLDS = 256
-"""Factorised holds (one per distinct held set and thickness) kept in memory; a training set's
-samples each have one (some 20-50 MB a sample on the forearm)."""
-
-
-def within_reach(gap) -> np.ndarray:
-    """``(..., N)`` bool: the vertices an object lies within :data:`GAP_REACH` of, from their
-    gap ``(..., N)`` (m, NumPy): those the held prior holds.
-    """
-    return np.asarray(gap, dtype=float) < GAP_REACH - REACH_TOLERANCE
-
-
-class HeldSkin:
-    """The held prior of one body ``part`` and ``tissue`` (a layered preset's name, with the
-    body's ``phenotype``): :meth:`__call__` carries a near answer to the whole skin.
+class HeldSkin(arrays.HeldSkin):
+    """:class:`fem.holding.HeldSkin` answered in torch (:meth:`__call__`), differentiable in
+    the near answer.
     """
 
     def __init__(self, part: BodyPart, tissue: str, phenotype: dict | None = None):
-        self.part, self.tissue, self.phenotype = part, tissue, phenotype
-        self._stores: dict[bytes, SkinCompliance] = {}
-        self._G: dict[bytes, torch.Tensor] = {}
-        self._holds: dict[tuple, tuple] = {}
-
-    def record(self) -> dict:
-        """What a checkpoint keeps to make the prior again."""
-        return {"tissue": self.tissue, "phenotype": self.phenotype, "reach_m": GAP_REACH}
-
-    def store(self, thickness) -> tuple[bytes, SkinCompliance]:
-        """The compliance of the skin at ``thickness`` ``(N,)`` (m), and its key."""
-        t = np.asarray(thickness, dtype=np.float32)
-        key = t.tobytes()
-        if key not in self._stores:
-            self._stores[key] = SkinCompliance(self.part, t, self.tissue, self.phenotype)
-        return key, self._stores[key]
-
-    def held(self, gap, thickness) -> np.ndarray:
-        """``(k,)`` the vertices a sample with ``gap`` ``(N,)`` (m) and ``thickness`` holds:
-        the free ones within :data:`GAP_REACH` of an object.
-        """
-        _, s = self.store(thickness)
-        return np.flatnonzero(within_reach(gap) & s.free)
-
-    def prepare(self, gaps, thicknesses, progress: bool = True) -> int:
-        """Solve the columns every sample (``gaps``, ``thicknesses`` ``(B, N)``, m) holds, one
-        store per thickness; returns how many were solved (0: all cached).
-        """
-        by: dict[bytes, list] = {}
-        for g, t in zip(np.asarray(gaps), np.asarray(thicknesses)):
-            key, s = self.store(t)
-            by.setdefault(key, []).append(g)
-        n = 0
-        for key, gs in by.items():
-            s = self._stores[key]
-            need = np.flatnonzero(within_reach(np.stack(gs)).any(0) & s.free)
-            n += s.solve(need, progress)
-        return n
-
-    def _hold(self, key: bytes, store: SkinCompliance, H: np.ndarray):
-        """The held set's DOFs and the Cholesky factor of ``G[H, H]`` (float64), kept."""
-        k = (key, H.tobytes())
-        if k not in self._holds:
-            at = (H[:, None] * 3 + np.arange(3)).ravel()
-            G = store.columns(H)
-            A = torch.from_numpy(G[at].astype(np.float64))
-            A = 0.5 * (A + A.T)
-            L, info = torch.linalg.cholesky_ex(A)
-            if int(info) != 0:  # float32 rounding of a nearly singular block: a tiny ridge
-                ridge = 1e-7 * float(A.diagonal().mean())
-                L = torch.linalg.cholesky(A + ridge * torch.eye(len(A), dtype=A.dtype))
-            if len(self._holds) >= CACHED_HOLDS:
-                self._holds.pop(next(iter(self._holds)))
-            self._holds[k] = (torch.from_numpy(at), L)
-        return self._holds[k]
-
-    def _matrix(self, key: bytes, store: SkinCompliance, device) -> torch.Tensor:
-        if key not in self._G:
-            self._G[key] = torch.from_numpy(store.G)  # shares the store's memory
-        return self._G[key].to(device)
+        super().__init__(part, tissue, phenotype)
+        self._tensors: dict = {}
 
     def __call__(self, r, gap, thickness):
         """``(B, N, 3)`` the skin held at ``r`` ``(B, N, 3)`` (any unit) on each sample's held
@@ -124,16 +50,20 @@ class HeldSkin:
         t = thickness.detach().cpu().numpy()
         out = []
         for b in range(len(r)):
-            key, s = self.store(t[b])
-            H = np.flatnonzero(within_reach(g[b]) & s.free)
-            if len(H) == 0:
+            s, at, L = self.hold(g[b], t[b])
+            if len(at) == 0:
                 out.append(torch.zeros_like(r[b]))
                 continue
-            at, L = self._hold(key, s, H)
-            G = self._matrix(key, s, r.device)
-            rh = r[b].reshape(-1)[at.to(r.device)].double()[:, None]
-            f = torch.cholesky_solve(rh, L.to(r.device)).to(r.dtype)[:, 0]
-            out.append((G.index_select(1, at.to(r.device)) @ f).reshape(r[b].shape))
+            if id(L) not in self._tensors:  # the factor's and the store's tensors, kept
+                if len(self._tensors) >= arrays.CACHED_HOLDS:
+                    self._tensors.pop(next(iter(self._tensors)))
+                self._tensors[id(L)] = (L, torch.from_numpy(at), torch.from_numpy(L))
+            _, at_t, L_t = self._tensors[id(L)]
+            dev = r.device
+            rh = r[b].reshape(-1)[at_t.to(dev)].double()[:, None]
+            f = torch.cholesky_solve(rh, L_t.to(dev)).to(r.dtype)[:, 0]
+            G = torch.from_numpy(s.G).to(dev)  # shares the store's memory on the CPU
+            out.append((G.index_select(1, at_t.to(dev)) @ f).reshape(r[b].shape))
         return torch.stack(out)
 
 

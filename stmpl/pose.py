@@ -25,6 +25,17 @@ GAP_REACH = 0.02
 """m: the gap field is cut at this distance from the objects (a skin vertex farther away is
 not near any contact, and its distance carries no information)."""
 
+REACH_TOLERANCE = 1e-6
+"""m: a vertex is within reach of an object where its gap lies below :data:`GAP_REACH` by more
+than this (the gap is cut at ``GAP_REACH``, and a float32 copy of the cut lies just below it)."""
+
+
+def within_reach(gap) -> np.ndarray:
+    """``(..., N)`` bool: the vertices an object lies within :data:`GAP_REACH` of, from their
+    gap ``(..., N)`` (m, NumPy).
+    """
+    return np.asarray(gap, dtype=float) < GAP_REACH - REACH_TOLERANCE
+
 
 @dataclass(frozen=True, eq=False)
 class Rigid:

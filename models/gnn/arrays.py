@@ -16,13 +16,16 @@ import scipy.sparse as sp
 from threadpoolctl import ThreadpoolController
 
 from fem.compliance import ColumnStore
+from fem.holding import HeldSkin
 from models.features import (
     CORRECTION_SCALE,
     MIN_TOTAL_N,
     PRESSURE_LOG_MAX,
     PRESSURE_OUT_SCALE,
+    gap_of,
     near_objects,
     posed_answer,
+    way_channels,
 )
 from models.gnn.subgraph import loaded, mesh, subgraph
 from models.linear.columns import (
@@ -33,7 +36,7 @@ from models.linear.columns import (
 )
 from models.trained import TrainedPredictor, checkpoint_part
 from stmpl import checkpoint, reach
-from stmpl.pose import GAP_REACH
+from stmpl.pose import GAP_REACH, within_reach
 
 
 @functools.cache
@@ -183,8 +186,8 @@ class GNNArrays(TrainedPredictor):
     def options(cls, config: dict | None = None) -> dict:
         """A checkpoint's options as trained (the torch predictor checked them then)."""
         out = {"given": "force", **(config or {})}
-        if out.get("prior", "none") not in ("none", "linear", "contact"):
-            raise ValueError(f"prior must be none, linear or contact, got {out['prior']!r}")
+        if out.get("prior", "none") not in ("none", "linear", "contact", "held"):
+            raise ValueError(f"prior must be none, linear, contact or held, got {out['prior']!r}")
         return out
 
     def __init__(self, part, config: dict, state: dict, fidelity="full", **options):
@@ -219,6 +222,8 @@ class GNNArrays(TrainedPredictor):
 
     # -- the prior
     def restored(self) -> None:
+        if self.prior_kind == "held":
+            self._held = HeldSkin(self.part, **self.meta["holding"]["skin"])
         if self.prior_kind != "linear":
             return
         op = self.meta.get("operator") or {}
@@ -281,14 +286,14 @@ class GNNArrays(TrainedPredictor):
         """:meth:`_answers` on one BLAS thread."""
         B, N = len(scenes), self.part.n_vertices
         t = np.stack([s.thickness for s in scenes]).astype(np.float32)
-        given = np.stack([s.pose.gap if self.posed else s.force for s in scenes])
-        f = given.astype(np.float32)
+        given = self.given(scenes).astype(np.float32)
+        f = gap_of(given)
         slots = [self.slot(s.part) if self.general else 0 for s in scenes]
         inv_area = np.stack([self._body_data[k]["inv_area"] for k in slots])
         normals = np.stack([self._body_data[k]["normals"] for k in slots])
         total = f.sum(-1)
-        if self.posed:  # how deep inside an object, how far outside
-            load = [np.maximum(-f, 0.0), np.clip(f, 0.0, GAP_REACH)]
+        if self.posed:  # how deep inside an object, how far outside; the way they move
+            load = [np.maximum(-f, 0.0), np.clip(f, 0.0, GAP_REACH), *way_channels(given)]
         elif self.per_newton:
             pattern = f / np.maximum(total, MIN_TOTAL_N)[:, None]
             load = [pattern * inv_area, np.broadcast_to(total[:, None], f.shape)]
@@ -308,8 +313,11 @@ class GNNArrays(TrainedPredictor):
         out = self._network(x.reshape(B * N, -1), f, t, base, slots).reshape(B, N, -1)
         if self.posed:
             out[..., 3:] = np.exp(np.minimum(out[..., 3:], PRESSURE_LOG_MAX))
-            if self.prior_kind == "contact":  # the skin inside an object moved to its surface
+            if self.prior_kind in ("contact", "held"):  # the skin inside an object moved out
                 out[..., :3] += normals * np.minimum(f, 0.0)[..., None] / self.scale
+            if self.prior_kind == "held":  # ... held near the objects, the linear FEM beyond
+                for b in range(B):
+                    out[b, :, :3] = self._held.answer(out[b, :, :3], f[b], t[b])
         elif self.per_newton:
             out = out * total[:, None, None]
         u = list((out[..., :3] * self.scale).astype(np.float64))
@@ -339,6 +347,8 @@ class GNNArrays(TrainedPredictor):
             seeds, grow = reach.moving(near, base, self.region_tolerance), 1
         else:
             seeds, grow = reach.within_margin(self.part, t, near), 0
+        if self.prior_kind == "held":  # every vertex the held prior reads is answered
+            seeds = seeds | within_reach(f)
         g = subgraph(self._mesh, self.part, seeds, self.steps, grow, kernel=loaded())
         ei = g.edges
         if np.any(np.diff(ei[1]) < 0):  # the subgraph's edges come target by target

@@ -32,12 +32,11 @@ from models.features import (
 from models.gnn import fused
 from models.gnn.network import MeshGraphNet, NormalisedGraphNet, Normaliser
 from models.gnn.subgraph import compiled, mesh, subgraph
-from models.holding import within_reach
 from models.learned import LearnedPredictor
 from models.linear.operator import ComplianceOperator
 from models.prior import CORRECTION_SCALE, LinearPrior, start_silent
 from stmpl import reach
-from stmpl.pose import GAP_REACH
+from stmpl.pose import GAP_REACH, within_reach
 
 
 class GNNPredictor(LinearPrior, LearnedPredictor):

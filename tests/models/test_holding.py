@@ -20,8 +20,8 @@ def part():
 def test_the_held_answer_is_the_linear_fem_s_from_the_near_skin(part):
     """Two samples (two thicknesses, two places): on the vertices within reach of an object
     the answer is the given one, elsewhere the linear FEM's held answer within float32
-    round-off; a sample with no object near stays at rest; the answer is differentiable in the
-    given skin.
+    round-off, and the NumPy answer the same; a sample with no object near stays at rest; the
+    answer is differentiable in the given skin.
     """
     x = part.vertices
     gap = np.full((3, part.n_vertices), GAP_REACH, np.float32)
@@ -40,6 +40,9 @@ def test_the_held_answer_is_the_linear_fem_s_from_the_near_skin(part):
         peak = np.abs(want).max()
         np.testing.assert_allclose(got[held], want[held], atol=1e-5 * peak)
         assert np.abs(got - want).max() < 1e-3 * peak
+        np.testing.assert_allclose(  # the FEM wing's NumPy answer is the same
+            skin.answer(r[b].detach().float().numpy(), gap[b], t[b]), got, atol=1e-6 * peak
+        )
         assert np.linalg.norm(got, axis=1)[np.setdiff1d(np.arange(len(got)), held)].max() > (
             0.05 * peak
         )

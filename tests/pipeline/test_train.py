@@ -297,7 +297,7 @@ def test_a_pose_model_with_motion_trains_and_is_measured_on_the_way_its_samples_
     """``motion: true``: training reads each sample's way field beside its gap (a press's:
     its direction near the object), the validation scenes that back its envelope and the
     test scenes it is measured on carry theirs, and the scores equal those of the same
-    scenes answered one by one.
+    scenes answered one by one; the NumPy engine reads the way too.
     """
     from stmpl.metrics import sample_metrics
     from stmpl.pipeline.evaluate import evaluate_dataset
@@ -326,6 +326,10 @@ def test_a_pose_model_with_motion_trains_and_is_measured_on_the_way_its_samples_
     assert got["rel_mee"][0] == pytest.approx(np.mean(rel), rel=1e-4)
     with pytest.raises(ValueError, match="option motion"):
         p.predict(scenes_of(ds, "test", given="pose")[0][:1])
+    light = predictor.read(tmp_path / "run" / "gnn_motion.safetensors", engine="numpy")
+    for d, e in zip(p.predict(scenes), light.predict(scenes)):  # NumPy reads the way too
+        peak = np.abs(d.displacement).max()
+        np.testing.assert_allclose(e.displacement, d.displacement, atol=1e-5 * peak)
 
 
 @pytest.mark.filterwarnings("ignore::stmpl.failures.OutsideEnvelope")  # five epochs' answers
@@ -335,8 +339,8 @@ def test_a_held_pose_model_answers_far_skin_by_the_linear_fem_of_its_data_s_tiss
     """``prior: held``: fitting solves the skin's compliance near every sample's object (the
     checkpoint records it), and every answer off the vertices near the object is the tissue's
     linear FEM's with the answer near it held (the FEM wing's float64 holding, within float32
-    round-off), the same after the checkpoint is read again and at ``fidelity="auto"``; a force
-    model, and a set of the paper's gel, are refused by name.
+    round-off), the same after the checkpoint is read again, at ``fidelity="auto"`` and by the
+    NumPy engine; a force model, and a set of the paper's gel, are refused by name.
     """
     from fem.holding import Holding
     from models.holding import fit_held
@@ -368,10 +372,14 @@ def test_a_held_pose_model_answers_far_skin_by_the_linear_fem_of_its_data_s_tiss
     import models.gnn.predictor as gnn  # a region of the touched vertices alone, no margin
 
     monkeypatch.setattr(gnn.reach, "within_margin", lambda part, t, f: f > features.CONTACT_BAND)
-    for d, e, f in zip(answers, again.predict(scenes), local.predict(scenes)):
+    light = predictor.read(tmp_path / "run" / "gnn_held.safetensors", engine="numpy")
+    for d, e, f, n in zip(
+        answers, again.predict(scenes), local.predict(scenes), light.predict(scenes)
+    ):
         np.testing.assert_allclose(e.displacement, d.displacement, atol=1e-9)
         peak = np.abs(d.displacement).max()  # the subgraph answers every held vertex
         np.testing.assert_allclose(f.displacement, d.displacement, atol=1e-5 * peak)
+        np.testing.assert_allclose(n.displacement, d.displacement, atol=1e-5 * peak)
     with pytest.raises(ValueError, match="a model given a force takes prior: none or linear"):
         predictor.create("gnn", ds.part, {"prior": "held"})
     gel = SimpleNamespace(card={"config": {"tissue": "paper"}})  # a set of the paper's gel
