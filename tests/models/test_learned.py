@@ -6,6 +6,7 @@ import pytest
 from models import features
 from stmpl import predictor
 from stmpl.pipeline.evaluate import scenes_of
+from stmpl.pose import Pose
 from stmpl.scene import Scene
 from tests.conftest import pressed_ball
 
@@ -319,8 +320,6 @@ def test_a_pose_model_with_motion_reads_the_way_the_objects_move(ds, tmp_path, k
     answer changes with it, a plain pose model's does not), the option travels in the
     checkpoint, a pose without its way is refused by name, and motion needs a pose.
     """
-    import dataclasses
-
     import torch
 
     from stmpl import tissue
@@ -333,7 +332,9 @@ def test_a_pose_model_with_motion_reads_the_way_the_objects_move(ds, tmp_path, k
     scene = posed(ds.part, t, ball, objects.press(ds.part, ball, at, depth=3e-3))
     way = scene.pose.way.copy()
     way[scene.pose.gap < 0.01] = [0.0, 0.8, -0.6]  # a finger sweeping along the skin
-    swept = Scene.posed(ds.part, t, dataclasses.replace(scene.pose, way=way))
+    swept = Scene.posed(
+        ds.part, t, Pose(scene.pose.gap, scene.pose.direction, scene.pose.objects, way)
+    )
     answers = {}
     for motion in (False, True):
         torch.manual_seed(0)
@@ -349,7 +350,7 @@ def test_a_pose_model_with_motion_reads_the_way_the_objects_move(ds, tmp_path, k
     q = predictor.read(p.save(tmp_path / "m.safetensors"))
     assert q.motion
     np.testing.assert_allclose(q.predict(swept).displacement, answers[True][1], atol=1e-9)
-    bare = Scene.posed(ds.part, t, dataclasses.replace(scene.pose, way=None))
+    bare = Scene.posed(ds.part, t, Pose(scene.pose.gap, scene.pose.direction, scene.pose.objects))
     with pytest.raises(ValueError, match="reads the way the objects move \\(option motion\\)"):
         q.predict(bare)
     for options, message in [
