@@ -192,7 +192,10 @@ class LearnedPredictor(TrainedPredictor):
         adds, where the object presses (:func:`near_loss`: over the whole part a dent of a few
         vertices weighs next to nothing; an answer's contact force lives there alone), the
         displacement's relative error, the pressures' in their logarithm (:func:`log_near_loss`),
-        and the reaction's (:meth:`reaction_loss`).
+        and the reaction's (:meth:`reaction_loss`); the option ``displacement_weight`` weighs the
+        displacement's two terms against the pressures' (a relative MEE of a few per cent is
+        small beside the pressures' logarithmic errors, and a grip's displacement learned little
+        at weight 1).
         """
         pred, tgt = self.answered(thickness, force, body, base), self.normalised(target, force)
         if self.config.get("loss", "mse") == "mse":
@@ -202,7 +205,8 @@ class LearnedPredictor(TrainedPredictor):
             p, t, near = pred[..., 3:], tgt[..., 3:], gap <= CONTACT_BAND
             pressure = log_near_loss(p, t, near) + self.reaction_loss(p, t, gap, body)
             dent = near_loss(pred[..., :3], tgt[..., :3], near)
-            return self.euclidean_loss(pred[..., :3], tgt[..., :3], force) + dent + pressure
+            shape = self.euclidean_loss(pred[..., :3], tgt[..., :3], force) + dent
+            return float(self.config.get("displacement_weight", 1.0)) * shape + pressure
         return self.euclidean_loss(pred, tgt, force)
 
     def reaction_loss(self, pred, tgt, gap, body=None):

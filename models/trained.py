@@ -83,6 +83,7 @@ class TrainedPredictor(BasePredictor):
         allowed = {**cls.defaults, "disp_scale_mm": DISP_SCALE_MM, "given": "force"}
         if cls.poses:
             allowed["motion"] = False
+            allowed["displacement_weight"] = 1.0
         unknown = set(config or {}) - set(allowed)
         if unknown:
             raise ValueError(
@@ -103,6 +104,12 @@ class TrainedPredictor(BasePredictor):
         if out.get("motion") and out["given"] != "pose":
             raise ValueError(
                 "motion: true reads the way a posed object moves; a model given a force has none"
+            )
+        checked.number(out.get("displacement_weight", 1.0), "displacement_weight", 0, low_open=True)
+        if out.get("displacement_weight", 1.0) != 1.0 and out["given"] != "pose":
+            raise ValueError(
+                "displacement_weight weighs a pose model's displacement against its pressures; "
+                "a model given a force answers no pressures"
             )
         for key in cls.counts:
             checked.integer(out[key], key, 1)

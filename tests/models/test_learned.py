@@ -359,3 +359,32 @@ def test_a_pose_model_with_motion_reads_the_way_the_objects_move(ds, tmp_path, k
     ]:
         with pytest.raises(ValueError, match=message):
             predictor.create(kind, ds.part, {**TINY_MODELS[kind], **options})
+
+
+def test_a_pose_model_s_displacement_weighs_as_its_option_says(ds):
+    """``displacement_weight``: a pose model's loss is the pressures' terms plus that weight
+    times the displacement's (two models of the same weights differ by exactly that); a force
+    model, and a weight that is not a positive number, are refused by name.
+    """
+    import torch
+
+    rng = np.random.default_rng(0)
+    n = ds.part.n_vertices
+    t = torch.full((2, n), 0.0075)
+    gap = torch.tensor(rng.uniform(-0.002, 0.02, (2, n)), dtype=torch.float32)
+    target = torch.tensor(rng.normal(0, 1e-3, (2, n, 5)), dtype=torch.float32).abs()
+    losses = {}
+    for w in (1.0, 2.0, 5.0):
+        torch.manual_seed(0)
+        options = {**TINY_MODELS["gnn"], "given": "pose", "loss": "relative"}
+        p = predictor.create("gnn", ds.part, {**options, "displacement_weight": w})
+        losses[w] = float(p.loss(t, gap, target))
+    shape = losses[2.0] - losses[1.0]
+    assert shape > 0 and losses[5.0] - losses[1.0] == pytest.approx(4 * shape, rel=1e-4)
+    for options, message in [
+        ({"displacement_weight": 2.0}, "a model given a force answers no pressures"),
+        ({"given": "pose", "displacement_weight": 0.0}, "displacement_weight"),
+        ({"given": "pose", "displacement_weight": "ten"}, "displacement_weight"),
+    ]:
+        with pytest.raises(ValueError, match=message):
+            predictor.create("gnn", ds.part, {**TINY_MODELS["gnn"], **options})
