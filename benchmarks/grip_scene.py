@@ -7,7 +7,8 @@ contact asks of the hand at every iteration.
 The main job's arm (anny's left arm subdivided once, 2109 vertices); her right hand in a
 ``--grip`` at ``--along`` (:func:`stmpl.contact.closing.closing_grip`), set once into an empty
 ``STMPL_CACHE_DIR`` (cold) and read back after (kept); the grip scene closed 3 mm
-(:func:`stmpl.contact.posing.gripped`: the grip read back and the gap field); the gap field
+(:func:`stmpl.contact.posing.gripped`: the grip read back and the gap field), and with its way
+field read (a model with ``motion`` reads it; the scene computes it then); the gap field
 alone (:func:`stmpl.contact.posing.signed_distance`, the rest skin against the closed hand); and
 the FEM's contact distance (:meth:`fem.shapes.Surface.distance`, the hand smoothed as the FEM
 presses it) at the skin's vertices and edge midpoints (the nodes of a quadratic skin) with the
@@ -68,6 +69,18 @@ def main() -> None:
     scene = median_time(lambda: gripped(arm, t, 0.003, {}, args.along, 0.0, args.grip), args.repeat)
     print(
         row(["the grip scene closed 3 mm (kept grip, gap field)", f"{scene:.3f}", str(args.repeat)])
+    )
+    way = median_time(
+        lambda: gripped(arm, t, 0.003, {}, args.along, 0.0, args.grip).pose.way, args.repeat
+    )
+    print(
+        row(
+            [
+                "... and its way field read (a motion model's; computed when first read)",
+                f"{way:.3f}",
+                str(args.repeat),
+            ]
+        )
     )
     hand = closed(grip, 0.003)
     mesh = trimesh.Trimesh(hand.vertices, hand.faces, process=False)
