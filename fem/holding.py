@@ -177,8 +177,10 @@ class SkinCompliance:
 
     @property
     def path(self) -> pathlib.Path:
-        """The disk cache file."""
-        return default_cache_dir() / "holding" / f"{self.part.name}-{self.key}.npy"
+        """The disk cache file: the columns and which are solved, in one file (written whole
+        and atomically, so a column read from it is always one that was solved).
+        """
+        return default_cache_dir() / "holding" / f"{self.part.name}-{self.key}.npz"
 
     @property
     def holding(self) -> Holding:
@@ -194,9 +196,8 @@ class SkinCompliance:
         if not (self.cache and self.path.is_file()):
             return
         try:
-            with np.load(self.path.with_suffix(".npz")) as z:
-                done, free = z["done"], z["free"]
-            G = np.load(self.path, mmap_mode="r")
+            with np.load(self.path) as z:
+                G, done, free = z["G"], z["done"], z["free"]
             if G.shape != self.G.shape or done.shape != self.done.shape:
                 return
             self.G[:] = G
@@ -206,13 +207,8 @@ class SkinCompliance:
             pass  # a broken cache file is solved again
 
     def _write(self) -> None:
-        if not self.cache:
-            return
-        self.path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = self.path.with_suffix(".tmp.npy")
-        np.save(tmp, self.G)
-        atomic_savez(self.path.with_suffix(".npz"), {"done": self.done, "free": self.free})
-        tmp.replace(self.path)
+        if self.cache:
+            atomic_savez(self.path, {"G": self.G, "done": self.done, "free": self.free})
 
     @property
     def free(self) -> np.ndarray:

@@ -103,7 +103,8 @@ def test_bad_holds_are_named(part):
 def test_the_skin_compliance_is_solved_once_and_read_back_from_the_cache(part):
     """:class:`SkinCompliance`: the columns asked for are the holding's own (float32), solved
     once (a second ask solves none), and a second store of the same set-up reads them from the
-    disk cache; another thickness is another store; a rim vertex is refused by name.
+    disk cache (a broken cache file is solved again); another thickness is another store; a rim
+    vertex is refused by name.
     """
     h = Holding(part, 0.0065, RES, "forearm")  # a thickness no other test caches
     held, _ = _held_and_target(part)
@@ -115,5 +116,9 @@ def test_the_skin_compliance_is_solved_once_and_read_back_from_the_cache(part):
     assert again.done.sum() == len(held) and again.missing(held).size == 0
     np.testing.assert_array_equal(again.columns(held), got)
     assert SkinCompliance(part, 0.0085, "forearm").done.sum() == 0
+    again.path.write_bytes(b"not a cache")  # a broken file: nothing read, solved again
+    broken = SkinCompliance(part, 0.0065, "forearm")
+    assert broken.done.sum() == 0 and np.abs(broken.G).max() == 0
+    np.testing.assert_array_equal(broken.columns(held), got)
     with pytest.raises(ValueError, match="held by the mesh itself"):
         s.columns([part.rims[0][0]])
