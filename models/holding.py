@@ -26,13 +26,13 @@ import time
 import numpy as np
 import torch
 
-from fem import holding as arrays
+from fem import holding as fem_holding
 from stmpl.contact.gap import of_sample
 from stmpl.part import BodyPart
 from stmpl.pose import GAP_REACH
 
 
-class HeldSkin(arrays.HeldSkin):
+class HeldSkin(fem_holding.HeldSkin):
     """:class:`fem.holding.HeldSkin` answered in torch (:meth:`__call__`), differentiable in
     the near answer.
     """
@@ -55,7 +55,7 @@ class HeldSkin(arrays.HeldSkin):
                 out.append(torch.zeros_like(r[b]))
                 continue
             if id(L) not in self._tensors:  # the factor's and the store's tensors, kept
-                if len(self._tensors) >= arrays.CACHED_HOLDS:
+                if len(self._tensors) >= fem_holding.CACHED_HOLDS:
                     self._tensors.pop(next(iter(self._tensors)))
                 self._tensors[id(L)] = (L, torch.from_numpy(at), torch.from_numpy(L))
             _, at_t, L_t = self._tensors[id(L)]
