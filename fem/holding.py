@@ -30,7 +30,10 @@ import numpy as np
 import scipy.linalg
 from tqdm import tqdm
 
+from fem.closure import closure_forces
 from fem.finer import FinerPart, meshed
+from fem.friction import SKIN_FRICTION
+from fem.shapes import ROUNDING
 from fem.simulate import resolution, tissue_mesh
 from fem.solver import Solver
 from stmpl.body.model import default_cache_dir
@@ -52,6 +55,9 @@ BLOCK = 100
 CACHED_HOLDS = 256
 """Factorised holds (one per distinct held set and thickness) a :class:`HeldSkin` keeps in
 memory; a training set's samples each have one (1-10 MB a sample on the forearm's grips)."""
+
+CACHED_CLOSURES = 1024
+"""Closures (:meth:`HeldSkin.closure`, 25 kB each on the forearm) a :class:`HeldSkin` keeps."""
 
 
 class Holding:
@@ -266,6 +272,7 @@ class HeldSkin:
         self.part, self.tissue, self.phenotype = part, tissue, phenotype
         self._stores: dict[bytes, SkinCompliance] = {}
         self._holds: dict[tuple, tuple] = {}
+        self._closures: dict[tuple, np.ndarray] = {}
 
     def store(self, thickness) -> tuple[bytes, SkinCompliance]:
         """The compliance of the skin at ``thickness`` ``(N,)`` (m), and its key."""
@@ -315,6 +322,40 @@ class HeldSkin:
                 self._holds.pop(next(iter(self._holds)))
             self._holds[k] = (at, L)
         return (s, *self._holds[k])
+
+    def closure(
+        self, gap, way, thickness, friction: float = SKIN_FRICTION, rounding: float = ROUNDING
+    ) -> np.ndarray:
+        """``(N, 3)`` m, float32: the skin's displacement as the objects of a pose (``gap``
+        ``(N,)`` m, ``way`` ``(N, 3)`` m per m) close on it with Coulomb's ``friction``, at
+        ``thickness`` ``(N,)`` (m), answered by the linear FEM (:mod:`fem.closure`, its contact
+        on the held vertices); zero where no object is near. ``rounding`` (m): how far outside
+        the objects' faces the FEM's surface stands (a mesh's, :data:`fem.shapes.ROUNDING`;
+        none for the analytic ball and disk of a dataset's presses). Kept for the next call
+        with the same pose (a training set's samples come again every epoch).
+        """
+        g = np.asarray(gap, dtype=np.float64)
+        w = np.asarray(way, dtype=np.float64)
+        if w.shape != (len(g), 3):
+            raise ValueError(f"way must be (N, 3) = {(len(g), 3)}, got {w.shape}")
+        key, s = self.store(thickness)
+        k = (key, g.tobytes(), w.tobytes(), float(friction), float(rounding))
+        if k not in self._closures:
+            H = np.flatnonzero(within_reach(g) & s.free)
+            out = np.zeros((len(g), 3), np.float32)
+            if len(H):
+                s.solve(H)
+                at = (H[:, None] * 3 + np.arange(3)).ravel()
+                n = self.part.normals[H]
+                f = closure_forces(s.G[np.ix_(at, at)], n, g[H], w[H], friction, rounding=rounding)
+                pushed = np.flatnonzero(f.any(1))  # the skin the objects push: a few vertices
+                cols = (H[pushed][:, None] * 3 + np.arange(3)).ravel()
+                out = (s.G[:, cols] @ f[pushed].ravel().astype(np.float32)).reshape(-1, 3)
+            if len(self._closures) >= CACHED_CLOSURES:
+                self._closures.pop(next(iter(self._closures)))
+            out.flags.writeable = False
+            self._closures[k] = out
+        return self._closures[k]
 
     def answer(self, r, gap, thickness) -> np.ndarray:
         """``(N, 3)`` the skin held at ``r`` ``(N, 3)`` (any unit) on the held vertices of a

@@ -60,6 +60,12 @@ def normalised_thickness(thickness):
     return tissue.normalise(thickness)
 
 
+HOLDING = ("held", "closure")
+"""The priors that hold the skin near the objects: ``held`` at the network's answer plus the
+contact prior, ``closure`` at the network's answer plus the linear FEM's closure of the objects
+(:meth:`fem.holding.HeldSkin.closure`)."""
+
+
 GAP_SCALE = 0.01
 """m: how deep an object reaches into the rest skin enters over this (a pose's input)."""
 

@@ -27,6 +27,7 @@ import numpy as np
 import torch
 
 from fem import holding as fem_holding
+from fem.shapes import ROUNDING
 from stmpl.contact.gap import of_sample
 from stmpl.part import BodyPart
 from stmpl.pose import GAP_REACH
@@ -67,17 +68,30 @@ class HeldSkin(fem_holding.HeldSkin):
         return torch.stack(out)
 
 
+def rounding_of(kinds) -> float | None:
+    """m: how far outside the objects' faces the FEM's surface stood in a set of samples of
+    ``kinds``: a grip's hand is a mesh, rounded by :data:`fem.shapes.ROUNDING`; a dataset's
+    pressed ball and disk are analytic shapes, not rounded (what the closure prior replays).
+    None for a set of both.
+    """
+    grips = {str(k) == "press_grip" for k in kinds}
+    if len(grips) > 1:
+        return None
+    return ROUNDING if grips == {True} else 0.0
+
+
 def fit_held(predictor, dataset, progress: bool = True) -> None:
-    """Give ``predictor`` (option ``prior: held``) its :class:`HeldSkin` for ``dataset``'s part
-    and tissue, with the columns every sample of the set holds solved (cached on disk), and
-    record it in ``predictor.meta["holding"]``.
+    """Give ``predictor`` (option ``prior: held`` or ``closure``) its :class:`HeldSkin` for
+    ``dataset``'s part and tissue, with the columns every sample of the set holds solved (cached
+    on disk), and record it in ``predictor.meta["holding"]`` with the set's friction coefficient
+    (the closure's).
     """
     cfg = dataset.card["config"]
     tissue = cfg.get("tissue") or "paper"
     if tissue == "paper":
         raise ValueError(
-            "prior: held carries the skin by a layered tissue's linear FEM; this dataset's is "
-            "the paper's gel (take prior: contact)"
+            f"prior: {predictor.config['prior']} carries the skin by a layered tissue's linear "
+            "FEM; this dataset's is the paper's gel (take prior: contact)"
         )
     body = cfg.get("body") or {}
     skin = {"tissue": tissue, "phenotype": cfg.get("phenotype", body.get("phenotype"))}
@@ -85,7 +99,15 @@ def fit_held(predictor, dataset, progress: bool = True) -> None:
     a = dataset.arrays()
     own = a.get("body", np.zeros(len(a["thickness"]), int)) == 0
     if not own.all():
-        raise ValueError("prior: held knows the linear FEM of the model's own body only")
+        raise ValueError(
+            f"prior: {predictor.config['prior']} knows the linear FEM of the model's own body only"
+        )
+    rounding = rounding_of(a["kind"])
+    if rounding is None and predictor.config["prior"] == "closure":
+        raise ValueError(
+            "this set mixes grips (a rounded mesh) with analytic presses (not rounded): the "
+            "closure prior replays one or the other"
+        )
     t0 = time.perf_counter()
     gaps = [
         of_sample(predictor.part.vertices, k, params, g)
@@ -95,6 +117,8 @@ def fit_held(predictor, dataset, progress: bool = True) -> None:
     predictor.held_skin = h
     predictor.meta["holding"] = {
         "skin": skin,
+        "friction": float(cfg.get("friction") or 0.0),
+        "rounding_m": rounding,
         "reach_m": GAP_REACH,
         "columns_at_fit": int(solved),
         "compute_seconds": round(time.perf_counter() - t0, 3),

@@ -16,6 +16,7 @@ import torch.nn.functional as F
 from models.compiled import TOLERANCE, compile_module, uncompiled
 from models.features import (
     CONTACT_BAND,
+    HOLDING,
     MIN_TOTAL_N,
     PRESSURE_OUT_SCALE,
     contact_weight,
@@ -111,33 +112,70 @@ class LearnedPredictor(TrainedPredictor):
 
     def answered(self, thickness, force, body=None, base=None):
         """:meth:`raw` with a pose model's pressures read (:meth:`with_pressures`), the
-        contact prior added (option ``prior: contact`` or ``held``) and the skin held
-        (``held``: :meth:`held`).
+        contact prior added (option ``prior: contact`` or ``held``) or the linear FEM's
+        closure (``closure``: :meth:`closure_base`), and the skin held (``held`` and
+        ``closure``: :meth:`held`).
         """
         out = self.with_pressures(self.raw(thickness, force, body, base))
         prior = self.config.get("prior")
-        if prior not in ("contact", "held"):
+        if prior not in HOLDING and prior != "contact":
             return out
-        out = out + F.pad(self.contact_base(gap_of(force), body), (0, out.shape[-1] - 3))
+        if prior == "closure":
+            near = self.closure_base(force, thickness, body)
+        else:
+            near = self.contact_base(gap_of(force), body)
+        out = out + F.pad(near, (0, out.shape[-1] - 3))
         if prior == "contact":
             return out
         return torch.cat(
             [self.held(out[..., :3], gap_of(force), thickness, body), out[..., 3:]], -1
         )
 
-    def held(self, r, gap, thickness, body=None):
-        """The held prior (:mod:`models.holding`): the skin held at ``r`` ``(B, N, 3)`` near
-        the objects, the tissue's linear FEM elsewhere.
+    def held_skin_of(self, body=None):
+        """The model's :class:`models.holding.HeldSkin` (priors ``held`` and ``closure``),
+        refused where it was not fitted or a sample lies on another body (``body`` ``(B,)``).
         """
         skin = getattr(self, "held_skin", None)
         if skin is None:
             raise ValueError(
-                f"{self.name}: prior: held needs the skin's linear FEM, made by fitting the "
-                "model to its dataset (stmpl train) or read with its checkpoint"
+                f"{self.name}: prior: {self.config.get('prior')} needs the skin's linear FEM, "
+                "made by fitting the model to its dataset (stmpl train) or read with its "
+                "checkpoint"
             )
         if body is not None and bool((body != 0).any()):
-            raise ValueError(f"{self.name}: prior: held knows the linear FEM of its own body only")
-        return skin(r, gap, thickness)
+            raise ValueError(
+                f"{self.name}: prior: {self.config.get('prior')} knows the linear FEM of its own "
+                "body only"
+            )
+        return skin
+
+    def held(self, r, gap, thickness, body=None):
+        """The held prior (:mod:`models.holding`): the skin held at ``r`` ``(B, N, 3)`` near
+        the objects, the tissue's linear FEM elsewhere.
+        """
+        return self.held_skin_of(body)(r, gap, thickness)
+
+    def closure_base(self, given, thickness, body=None):
+        """The closure prior (option ``prior: closure``, a model given a pose and its motion)
+        ``(B, N, 3)`` in the units of :meth:`raw`: the skin as the objects close on it with
+        friction, answered by the tissue's linear FEM (:meth:`fem.holding.HeldSkin.closure`;
+        the friction coefficient and the objects' rounding are the training set's). Not
+        differentiated: it depends on the scene alone.
+        """
+        skin = self.held_skin_of(body)
+        if given.ndim != 3:
+            raise ValueError(f"{self.name}: prior: closure reads the way the objects move")
+        g = given.detach().cpu().numpy()
+        t = thickness.detach().cpu().numpy()
+        record = self.meta["holding"]
+        friction, rounding = float(record["friction"]), float(record["rounding_m"])
+        out = np.stack(
+            [
+                skin.closure(g[b, :, 0], g[b, :, 1:4], t[b], friction, rounding)
+                for b in range(len(g))
+            ]
+        )
+        return torch.from_numpy(out).to(given.device, given.dtype) / self.scale
 
     def with_pressures(self, out):
         """A network's output ``(..., C)`` with a pose model's two pressure channels read from

@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from fem.compliance import ColumnStore
-from models.features import CORRECTION_SCALE
+from models.features import CORRECTION_SCALE, HOLDING
 from models.holding import HeldSkin, fit_held
 from models.linear.operator import (
     ComplianceOperator,
@@ -22,12 +22,14 @@ from models.linear.operator import (
     unsolved,
 )
 
-PRIORS = ("none", "linear", "contact", "held")
+PRIORS = ("none", "linear", "contact", "held", "closure")
 """``linear``: the linear FEM's answer to the force (:class:`LinearPrior`); ``contact``: of a
 model given a pose, the skin inside the objects moved out to their surface
 (:meth:`~models.learned.LearnedPredictor.contact_base`); ``held``: of a model given a pose, the
 contact prior and the network's answer held near the objects and carried to the rest of the
-skin by the tissue's linear FEM (:mod:`models.holding`)."""
+skin by the tissue's linear FEM (:mod:`models.holding`); ``closure``: held likewise, with the
+linear FEM's answer to the objects closing on the skin with friction in place of the contact
+prior (:mod:`fem.closure`; a model given the objects' motion too)."""
 
 PRESSURE_START = 0.1
 """A pose model's contact pressure before it has learned (units of 10 kPa: 1 kPa, a light
@@ -70,10 +72,14 @@ class LinearPrior:
         check_operator(out.get("operator", "stored"))
         if out.get("given") == "pose" and out["prior"] == "linear":
             raise ValueError(
-                "the linear prior answers a force; a model given a pose takes prior: none or "
-                "contact"
+                "the linear prior answers a force; a model given a pose takes prior: none, "
+                "contact, held or closure"
             )
-        if out.get("given") != "pose" and out["prior"] in ("contact", "held"):
+        if out["prior"] == "closure" and out.get("given") == "pose" and not out.get("motion"):
+            raise ValueError(
+                "the closure prior replays how the objects close: it needs motion: true"
+            )
+        if out.get("given") != "pose" and out["prior"] in ("contact", *HOLDING):
             raise ValueError(
                 f"the {out['prior']} prior reads a posed object's gap; a model given a force "
                 "takes prior: none or linear"
@@ -95,7 +101,7 @@ class LinearPrior:
         with ``prior: held``, the skin's compliance near every sample's objects
         (:func:`models.holding.fit_held`).
         """
-        if self.config["prior"] == "held":
+        if self.config["prior"] in HOLDING:
             fit_held(self, dataset, progress)
         elif self.prior and self.config.get("operator", "stored") == "on_demand":
             fit_on_demand(self, self.model.prior, dataset, {}, progress)
@@ -105,7 +111,7 @@ class LinearPrior:
     def restored(self) -> None:
         if self.prior:
             reattach(self, self.model.prior)
-        if self.config["prior"] == "held":
+        if self.config["prior"] in HOLDING:
             self.held_skin = HeldSkin(self.part, **self.meta["holding"]["skin"])
 
     def base(self, thickness, force, body=None, base=None):

@@ -19,6 +19,7 @@ from fem.compliance import ColumnStore
 from fem.holding import HeldSkin
 from models.features import (
     CORRECTION_SCALE,
+    HOLDING,
     MIN_TOTAL_N,
     PRESSURE_LOG_MAX,
     PRESSURE_OUT_SCALE,
@@ -186,8 +187,10 @@ class GNNArrays(TrainedPredictor):
     def options(cls, config: dict | None = None) -> dict:
         """A checkpoint's options as trained (the torch predictor checked them then)."""
         out = {"given": "force", **(config or {})}
-        if out.get("prior", "none") not in ("none", "linear", "contact", "held"):
-            raise ValueError(f"prior must be none, linear, contact or held, got {out['prior']!r}")
+        if out.get("prior", "none") not in ("none", "linear", "contact", *HOLDING):
+            raise ValueError(
+                f"prior must be none, linear, contact, held or closure, got {out['prior']!r}"
+            )
         return out
 
     def __init__(self, part, config: dict, state: dict, fidelity="full", **options):
@@ -222,7 +225,7 @@ class GNNArrays(TrainedPredictor):
 
     # -- the prior
     def restored(self) -> None:
-        if self.prior_kind == "held":
+        if self.prior_kind in HOLDING:
             self._held = HeldSkin(self.part, **self.meta["holding"]["skin"])
         if self.prior_kind != "linear":
             return
@@ -315,7 +318,13 @@ class GNNArrays(TrainedPredictor):
             out[..., 3:] = np.exp(np.minimum(out[..., 3:], PRESSURE_LOG_MAX))
             if self.prior_kind in ("contact", "held"):  # the skin inside an object moved out
                 out[..., :3] += normals * np.minimum(f, 0.0)[..., None] / self.scale
-            if self.prior_kind == "held":  # ... held near the objects, the linear FEM beyond
+            if self.prior_kind == "closure":  # the linear FEM's closure of the objects
+                record = self.meta["holding"]
+                friction, rounding = float(record["friction"]), float(record["rounding_m"])
+                for b in range(B):
+                    near = self._held.closure(f[b], given[b, :, 1:4], t[b], friction, rounding)
+                    out[b, :, :3] += near / self.scale
+            if self.prior_kind in HOLDING:  # ... held near the objects, the linear FEM beyond
                 for b in range(B):
                     out[b, :, :3] = self._held.answer(out[b, :, :3], f[b], t[b])
         elif self.per_newton:
@@ -347,7 +356,7 @@ class GNNArrays(TrainedPredictor):
             seeds, grow = reach.moving(near, base, self.region_tolerance), 1
         else:
             seeds, grow = reach.within_margin(self.part, t, near), 0
-        if self.prior_kind == "held":  # every vertex the held prior reads is answered
+        if self.prior_kind in HOLDING:  # every vertex the held prior reads is answered
             seeds = seeds | within_reach(f)
         g = subgraph(self._mesh, self.part, seeds, self.steps, grow, kernel=loaded())
         ei = g.edges

@@ -19,6 +19,7 @@ from torch import nn
 
 from models.features import (
     GAP_SCALE,
+    HOLDING,
     PRESSURE_SCALE,
     PRIOR_SCALE,
     THICKNESS_SCALE,
@@ -237,7 +238,7 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
             seeds, grow = reach.moving(f, base.detach().cpu().numpy(), self.region_tolerance), 1
         else:
             seeds, grow = reach.within_margin(self.part, thickness.cpu().numpy(), f), 0
-        if self.config["prior"] == "held":  # every vertex the held prior reads is answered
+        if self.config["prior"] in HOLDING:  # every vertex the held prior reads is answered
             seeds = seeds | within_reach(gap_of(force).cpu().numpy())
         g = subgraph(self._mesh, self.part, seeds, steps, grow)
         dev = x.device

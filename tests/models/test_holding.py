@@ -83,3 +83,38 @@ def test_either_network_holds_its_near_answer(tiny_presses, kind, options):
         want = Fixed(ds.part, s.thickness, tissue="forearm").answer(held, d.displacement)
         peak = np.abs(want).max()
         assert peak > 0 and np.abs(d.displacement - want).max() < 1e-3 * peak
+
+
+@pytest.mark.filterwarnings("ignore::stmpl.failures.OutsideEnvelope")
+def test_a_closure_model_starts_from_the_linear_fem_s_closure(tiny_presses):
+    """``prior: closure``: a GNN given a pose and its motion, fitted and not trained (its last
+    layer silent), answers the linear FEM's closure of the object (the set's friction and
+    rounding, none here, analytic balls and disks: the checkpoint's record says so), within
+    float32 round-off; the closure lies on the object's surface where the object pushes, so its
+    peak is at least the object's depth into the rest skin, and a rounded object's reaches
+    further. Without the motion it is refused by name.
+    """
+    from fem.shapes import ROUNDING
+    from models.holding import fit_held
+    from stmpl import predictor
+    from stmpl.data.dataset import Dataset
+    from stmpl.pipeline.evaluate import scenes_of
+
+    ds = Dataset(tiny_presses)
+    options = {"latent": 16, "steps": 2, "given": "pose", "prior": "closure"}
+    with pytest.raises(ValueError, match="it needs motion: true"):
+        predictor.create("gnn", ds.part, options)
+    p = predictor.create("gnn", ds.part, {**options, "motion": True})
+    scenes, _ = scenes_of(ds, "test", given="pose", way=True)
+    with pytest.raises(ValueError, match="prior: closure needs the skin's linear FEM"):
+        p.predict(scenes[0])
+    fit_held(p, ds, progress=False)
+    assert p.meta["holding"]["friction"] == 0.0 and p.meta["holding"]["rounding_m"] == 0.0
+    for s, d in zip(scenes, p.predict(scenes)):
+        gap, way = s.pose.gap.astype(np.float32), s.pose.way.astype(np.float32)
+        want = p.held_skin.closure(gap, way, s.thickness.astype(np.float32), 0.0, 0.0)
+        peak = np.linalg.norm(want, axis=1).max()
+        assert peak >= -gap.min() - 1e-6
+        rounded = p.held_skin.closure(gap, way, s.thickness.astype(np.float32), 0.0, ROUNDING)
+        assert np.linalg.norm(rounded, axis=1).max() > peak + 0.5 * ROUNDING
+        np.testing.assert_allclose(d.displacement, want, atol=1e-5 * peak)

@@ -1,0 +1,104 @@
+"""Objects closing on the skin with friction, answered by a linear compliance (fem/closure.py):
+against Coulomb's law where it has a closed form (one vertex of an isotropic compliance), and
+its conditions on a coupled patch.
+"""
+
+import numpy as np
+import pytest
+
+from fem.closure import closure_forces
+
+G1 = 1e-3  # m/N: one vertex's isotropic compliance
+Z = np.array([[0.0, 0.0, 1.0]])  # its outward normal
+
+
+def _one(way, gap=-0.002, friction=0.5, rounding=0.0005):
+    f = closure_forces(G1 * np.eye(3), Z, np.array([gap]), np.array([way]), friction, 20, rounding)
+    return G1 * f[0]  # the vertex's displacement, m
+
+
+def test_a_press_along_the_normal_moves_the_skin_to_the_rounded_surface():
+    """Pressed straight in 2 mm past the object's faces, the skin lies on its rounded surface:
+    2.5 mm in, nothing along it, whatever the friction.
+    """
+    for friction in (0.0, 0.5, np.inf):
+        np.testing.assert_allclose(_one([0.0, 0.0, -1.0], friction=friction), [0, 0, -0.0025])
+
+
+@pytest.mark.parametrize("sweep", [0.3, 0.8])
+def test_a_sweeping_object_drags_the_skin_as_far_as_coulomb_lets_it(sweep):
+    """The object moves ``sweep`` m along the skin per m into it. The skin sticks while the
+    drag's ratio to the push stays within the friction coefficient 0.5: it moves with the
+    object; beyond, it slips, and (one isotropic compliance) its tangential motion is 0.5 times
+    its normal one.
+    """
+    u = _one([sweep, 0.0, -1.0])
+    assert u[2] == pytest.approx(-0.0025)
+    assert u[0] == pytest.approx(min(sweep, 0.5) * 0.0025)
+    assert u[1] == pytest.approx(0.0, abs=1e-15)
+
+
+def test_no_friction_no_drag_and_stuck_skin_goes_all_the_way():
+    assert _one([0.8, 0.0, -1.0], friction=0.0)[0] == pytest.approx(0.0, abs=1e-15)
+    np.testing.assert_allclose(_one([0.8, 0.0, -1.0], friction=np.inf), [0.002, 0, -0.0025])
+
+
+def test_an_object_that_does_not_reach_the_skin_moves_nothing():
+    assert not _one([0.0, 0.0, -1.0], gap=0.001).any()
+
+
+def _patch(k=12, seed=0):
+    """A coupled compliance among ``k`` vertices of a flat skin (z up): SPD, its diagonal
+    dominant, neighbours pulled along with one another.
+    """
+    rng = np.random.default_rng(seed)
+    x = np.column_stack([rng.uniform(-0.02, 0.02, (k, 2)), np.zeros(k)])
+    d = np.linalg.norm(x[:, None] - x[None], axis=-1)
+    C = np.exp(-d / 0.01)  # positive definite (an exponential kernel)
+    G = 1e-3 * np.kron(C, np.eye(3))
+    return x, G
+
+
+def test_on_a_coupled_patch_every_force_pushes_and_the_touched_skin_meets_the_object():
+    """A ball's worth of gap (deepest in the middle) closing straight in, with friction: every
+    contact force pushes into the skin, within Coulomb's cone; each vertex the object still
+    pushes lies on the object's rounded surface; the others were let go (or never reached) and
+    lie clear of it (below its surface, not inside the object).
+    """
+    x, G = _patch()
+    k = len(x)
+    n = np.tile([0.0, 0.0, 1.0], (k, 1))
+    gap = 0.002 * (np.linalg.norm(x[:, :2], axis=1) / 0.02) ** 2 - 0.0015
+    way = np.tile([0.2, 0.0, -1.0], (k, 1))
+    f = closure_forces(G, n, gap, way, 0.5, 20, 0.0005)
+    u = (G @ f.ravel()).reshape(k, 3)
+    fn = (f * n).sum(1)
+    pushed = fn < 0
+    assert pushed.sum() >= 2
+    assert np.all(fn[~pushed] == 0) and not f[~pushed].any()
+    ft = np.linalg.norm(f - fn[:, None] * n, axis=1)
+    assert np.all(ft <= 0.5 * -fn * (1 + 1e-6))
+    np.testing.assert_allclose(u[pushed, 2], gap[pushed] - 0.0005, atol=1e-9)
+    assert np.all(u[~pushed, 2] <= gap[~pushed] - 0.0005 + 1e-9)
+
+
+@pytest.mark.parametrize(
+    "change, words",
+    [
+        ({"gap": np.array([np.nan])}, "gap is not finite"),
+        ({"way": np.zeros((2, 3))}, "for k = 1"),
+        ({"friction": -0.1}, "friction must be >= 0"),
+        ({"steps": 0}, "steps must be a whole number"),
+        ({"rounding": -1e-3}, "rounding must be a length"),
+    ],
+)
+def test_bad_input_is_refused_by_name(change, words):
+    args = {
+        "G": G1 * np.eye(3),
+        "normals": Z,
+        "gap": np.array([-0.001]),
+        "way": np.array([[0.0, 0.0, -1.0]]),
+        **change,
+    }
+    with pytest.raises(ValueError, match=words):
+        closure_forces(**args)
