@@ -312,18 +312,25 @@ class GNNArrays(TrainedPredictor):
             if self.per_newton:
                 base /= np.maximum(total, MIN_TOTAL_N)[:, None, None]
         channels = [c[..., None] for c in load] + [t[..., None], normals]
+        near = None
+        if self.prior_kind == "closure":  # the linear FEM's closure of the objects, an input
+            record = self.meta["holding"]
+            friction, rounding = float(record["friction"]), float(record["rounding_m"])
+            near = np.stack(
+                [
+                    self._held.closure(f[b], given[b, :, 1:4], t[b], friction, rounding)
+                    for b in range(B)
+                ]
+            ) / np.float32(self.scale)
+            channels.append(near)
         x = np.concatenate(channels + ([] if base is None else [base]), -1)
         out = self._network(x.reshape(B * N, -1), f, t, base, slots).reshape(B, N, -1)
         if self.posed:
             out[..., 3:] = np.exp(np.minimum(out[..., 3:], PRESSURE_LOG_MAX))
             if self.prior_kind in ("contact", "held"):  # the skin inside an object moved out
                 out[..., :3] += normals * np.minimum(f, 0.0)[..., None] / self.scale
-            if self.prior_kind == "closure":  # the linear FEM's closure of the objects
-                record = self.meta["holding"]
-                friction, rounding = float(record["friction"]), float(record["rounding_m"])
-                for b in range(B):
-                    near = self._held.closure(f[b], given[b, :, 1:4], t[b], friction, rounding)
-                    out[b, :, :3] += near / self.scale
+            if near is not None:  # ... or the linear FEM's closure of the objects
+                out[..., :3] += near
             if self.prior_kind in HOLDING:  # ... held near the objects, the linear FEM beyond
                 for b in range(B):
                     out[b, :, :3] = self._held.answer(out[b, :, :3], f[b], t[b])

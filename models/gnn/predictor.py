@@ -125,6 +125,8 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         if self.prior:  # the linear FEM's answer, in the units of raw(), is one more input
             prior = ComplianceOperator()
             node = Normaliser(list(node.shift) + [0.0] * 3, list(node.scale) + [PRIOR_SCALE] * 3)
+        if self.config["prior"] == "closure":  # so is the linear FEM's closure of the objects
+            node = Normaliser(list(node.shift) + [0.0] * 3, list(node.scale) + [PRIOR_SCALE] * 3)
         net = MeshGraphNet(
             len(node.shift),
             4,
@@ -151,6 +153,8 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
             load = torch.stack(load_channels(force, inv_area, self.per_newton), -1)
         base = self.base(thickness, force, body, base)
         extra = [] if base is None else [base]
+        if self.config["prior"] == "closure":
+            extra.append(self.closure_base(force, thickness, body))
         x = torch.cat([load, thickness[..., None], normals, *extra], -1)
         x = x.reshape(B * N, x.shape[-1])
         if self.fidelity == "auto" and not self.model.training:
