@@ -7,7 +7,9 @@ traceback. Anything else is a bug and keeps its traceback.
 
 from __future__ import annotations
 
+import _thread
 import argparse
+import contextlib
 import logging
 import signal
 import sys
@@ -217,17 +219,43 @@ def _stop(signum, frame) -> None:
     raise Stopped(signal.Signals(signum).name)
 
 
+AGAIN_AFTER = 0.01
+"""s: how soon a stop that Python dropped in a finaliser comes again (:func:`stoppable`)."""
+
+
+@contextlib.contextmanager
+def stoppable():
+    """SIGTERM raises :class:`Stopped` where the main thread runs, within this block. Where it
+    lands in a finaliser (a weak reference's callback, a ``__del__``), Python prints such an
+    exception and drops it: there it is raised again as soon as the finaliser returns (a run
+    stopped while the garbage collector ran went on to its end, and said nothing).
+    """
+    hook = sys.unraisablehook
+
+    def again(unraisable) -> None:
+        if isinstance(unraisable.exc_value, Stopped):  # once out of the finaliser (from a
+            # thread: a stop delivered here would land in this hook, and be dropped again)
+            threading.Timer(AGAIN_AFTER, _thread.interrupt_main, (signal.SIGTERM,)).start()
+        else:
+            hook(unraisable)
+
+    previous = signal.signal(signal.SIGTERM, _stop)
+    sys.unraisablehook = again
+    try:
+        yield
+    finally:
+        sys.unraisablehook = hook
+        signal.signal(signal.SIGTERM, previous)
+
+
 def main(argv=None) -> int:
     """Run ``stmpl`` with ``argv`` (default: the process's); returns the exit code (130 after
     Ctrl-C, 143 after SIGTERM, each said in one line).
     """
     args = parser().parse_args(argv)
     if threading.current_thread() is threading.main_thread():
-        previous = signal.signal(signal.SIGTERM, _stop)
-        try:
+        with stoppable():
             return _run(args)
-        finally:
-            signal.signal(signal.SIGTERM, previous)
     return _run(args)
 
 

@@ -314,3 +314,27 @@ def test_evaluate_reads_several_dataset_folders_as_one(tmp_path, capsys, tiny_da
         assert main(["evaluate", str(ckpt), "--data", *data, "--split", "test"]) == 0
         row = [line for line in capsys.readouterr().out.splitlines() if "naive" in line][-1]
         assert row.split("|")[2].strip() == str(samples)
+
+
+def test_a_stop_that_lands_in_a_finaliser_is_raised_again_after_it():
+    """SIGTERM's :class:`Stopped` raised inside a weak reference's callback, where Python
+    prints an exception and drops it, comes again as soon as the callback returns: the run
+    stops, as it would anywhere else.
+    """
+    import signal
+    import time
+    import weakref
+
+    from stmpl.cli.main import Stopped, _stop, stoppable
+
+    class Thing:
+        pass
+
+    with stoppable():
+        thing = Thing()
+        ref = weakref.ref(thing, lambda r: _stop(signal.SIGTERM, None))
+        with pytest.raises(Stopped):
+            del thing  # the callback's Stopped is dropped here ...
+            for _ in range(200):  # ... and raised again here
+                time.sleep(0.005)
+        assert ref() is None
