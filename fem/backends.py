@@ -15,6 +15,19 @@ from fem.placements import Plan
 from fem.worker import payload, solve_shard
 
 
+class WorkerDied(ChildProcessError):
+    """A worker process ended without a word (killed by the system, most often for memory)."""
+
+    def __init__(self, shards: list[int]):
+        self.shards = shards
+        super().__init__(
+            f"a worker process died while solving shard(s) {', '.join(map(str, shards))} "
+            "(killed by the system: out of memory? see dmesg); the finished shards and the "
+            "kept progress stay, the same command resumes from them, and fewer --workers "
+            "need less memory"
+        )
+
+
 def _watch_parent(parent: int) -> None:
     """Worker initialiser: leave when the generating process is gone (killed), rather than
     finish orphaned shards that nobody will write.
@@ -61,14 +74,19 @@ def run(p: Plan, todo: list[int], par: dict, threads: int, tell=None, keep=None)
         )
         manager = ctx.Manager() if tell is not None else None  # carries the workers' ticks
         queue = manager.Queue() if manager is not None else None
-        futs = [ex.submit(solve_shard, payload(p, k, threads, queue, kept(k))) for k in todo]
+        shard = {ex.submit(solve_shard, payload(p, k, threads, queue, kept(k))): k for k in todo}
+        solving: list[int] = []
         try:
-            pending = set(futs)
+            pending = set(shard)
             while pending:
                 finished, pending = cf.wait(pending, timeout=0.5, return_when=cf.FIRST_COMPLETED)
                 _drain(queue, tell)
+                solving = sorted(shard[f] for f in pending if f.running()) or solving
                 for f in finished:
-                    yield f.result()
+                    try:
+                        yield f.result()
+                    except cf.process.BrokenProcessPool:
+                        raise WorkerDied(solving or sorted(shard[f] for f in pending)) from None
         except BaseException:  # stopped (Ctrl-C, SIGTERM) or failed: the workers go at once
             for proc in list((getattr(ex, "_processes", None) or {}).values()):
                 proc.terminate()

@@ -547,6 +547,23 @@ def test_every_planned_sample_ticks_the_progress_as_it_ends(backend, workers):
     assert failed >= len(p.tasks) and sum(ticks) == solved + failed == 3 * len(p.tasks)
 
 
+def _killed(payload):
+    """A worker's shard that ends the way an out-of-memory kill ends it: without a word."""
+    os._exit(9)
+
+
+def test_a_worker_that_dies_is_named_in_one_line_that_says_the_run_resumes(monkeypatch):
+    from fem import backends
+
+    monkeypatch.setattr(backends, "solve_shard", _killed)
+    p = plan(read_config(_cfg()))
+    par = {"backend": "processes", "workers": 2, "scheduler": None}
+    with pytest.raises(backends.WorkerDied, match=r"died while solving shard\(s\) 0.*resumes") as e:
+        list(backends.run(p, [0, 1], par, 1))
+    assert e.value.shards and set(e.value.shards) <= {0, 1}
+    assert isinstance(e.value, OSError)  # the command line's one-line failures
+
+
 def test_a_worker_knows_the_part_a_subdivided_part_came_from():
     """So a press on it is meshed on the coarser part (fem.finer), in every worker process."""
     from fem.worker import part_of, payload
