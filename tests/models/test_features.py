@@ -44,3 +44,24 @@ def test_a_vertex_s_share_of_the_contact_force_tapers_to_none_past_the_band():
     near = features.near_objects(gap)
     assert np.array_equal(near > 0, features.contact_weight(gap) > 0)
     assert np.array_equal(features.near_objects(torch.tensor(gap)).numpy(), near)
+
+
+def test_a_posed_answer_s_contact_ends_where_its_pressure_falls_below_a_share_of_its_peak(arm):
+    """The network's pressure never reaches zero; the answered contact (its force) has an edge
+    at :data:`CONTACT_FLOOR` of the peak, as the FEM's has, while the reaction (from the push)
+    keeps every vertex within the band.
+    """
+    from stmpl.pose import Pose
+    from stmpl.scene import Scene
+
+    n = arm.n_vertices
+    gap = np.full(n, 0.001)  # every vertex within the band: a whole share each
+    pressure = np.full(n, 1e3)  # 1 kPa far off ...
+    pressure[:5] = 2e5  # ... 200 kPa under the object: 0.5 % of the peak
+    pressure[5] = 2e5 * features.CONTACT_FLOOR  # just at the edge: kept
+    scene = Scene.posed(arm, np.full(n, 0.008), Pose(gap, [0.0, 0.0, -1.0]))
+    a = features.posed_answer(scene, np.zeros((n, 3)), pressure, np.full(n, 2.0))
+    area = arm.vertex_areas
+    np.testing.assert_allclose(a["force"][:5], 2e5 * area[:5])
+    assert a["force"][5] == pytest.approx(2e3 * area[5]) and not a["force"][6:].any()
+    assert a["reaction"] == pytest.approx(2.0 * area.sum())
