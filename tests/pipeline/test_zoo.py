@@ -219,6 +219,10 @@ def test_the_shipped_zoo_verifies_and_beats_naive_on_a_fem_solve(anny_body, tmp_
     )
     assert set(recorded) == set(names), "record the answers of a model added to the zoo"
     models = {name: zoo.read(name) for name in names}
+    posed = {name for name, p in models.items() if "force" not in p.takes}
+    assert posed == {name for name, r in recorded.items() if "scene" in r}
+    models = {name: p for name, p in models.items() if name not in posed}  # the next test's
+    recorded = {name: r for name, r in recorded.items() if name not in posed}
     surfaces = sorted(
         {(p.part.name, int(p.part.source.get("subdivisions", 0))) for p in models.values()}
     )
@@ -262,6 +266,44 @@ def test_the_shipped_zoo_verifies_and_beats_naive_on_a_fem_solve(anny_body, tmp_
         learned = [rel[n] for n in rel if models[n].name in ("gnn", "uv_unet")]
         assert naive and learned and max(learned) < min(naive), rel
     assert not recorded, f"recorded models no surface answered: {sorted(recorded)}"
+
+
+def test_the_shipped_pose_models_answer_a_test_grip_as_recorded(tmp_path, monkeypatch):
+    """Every shipped model given an object's pose answers a test sample of the set it learned
+    from (a grip on the layered forearm, solved by the FEM: ``data/forearm_grips`` ships with the
+    repository) as it answered when recorded, at both fidelities, with its reaction, and nearer
+    the FEM than the skin left at rest, within 3x its recorded test error.
+    """
+    monkeypatch.setenv("STMPL_CACHE_DIR", str(tmp_path))  # the closure's columns solved afresh
+    from stmpl.data.dataset import Dataset
+    from stmpl.pipeline.evaluate import scenes_of
+
+    recorded = json.loads(
+        (pathlib.Path(__file__).parents[1] / "recorded" / "zoo_outputs.json").read_text()
+    )
+    posed = {name: r for name, r in recorded.items() if "scene" in r}
+    assert "gnn_forearm_grips" in posed
+    root = pathlib.Path(__file__).parents[2]
+    for name, ref in posed.items():
+        p = zoo.read(name)
+        where = ref["scene"]
+        scenes, true = scenes_of(
+            Dataset(root / where["data"]), where["split"], given="pose", way=True
+        )
+        scene, truth = scenes[where["sample"]], true[where["sample"]]
+        d = p.predict(scene)
+        v = ref["vertices"]
+        tol = 1e-5 * ref["deepest_m"]  # the closure (float32) from columns solved afresh
+        np.testing.assert_allclose(d.displacement[v], ref["displacement_m"], rtol=0, atol=tol)
+        np.testing.assert_allclose(d.displacement.sum(0), ref["sum_m"], rtol=0, atol=1e3 * tol)
+        assert d.reaction == pytest.approx(ref["reaction_n"], rel=1e-5)
+        auto = p.with_fidelity("auto").predict(scene).displacement
+        np.testing.assert_allclose(auto[v], ref["auto"]["displacement_m"], rtol=0, atol=10 * tol)
+        reach = np.linalg.norm(truth, axis=1)
+        active = reach > 1e-6
+        rel = 100 * np.linalg.norm(d.displacement - truth, axis=1)[active].mean() / reach.max()
+        rest = 100 * reach[active].mean() / reach.max()  # the skin not moved at all
+        assert rel < min(rest, 3 * zoo.entry(name)["metrics"]["test"]["rel_mee"][0]), (rel, rest)
 
 
 def test_measure_adds_a_column_and_keeps_the_rest(zoo_dir, tiny_dataset, capsys):
