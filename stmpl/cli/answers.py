@@ -62,6 +62,15 @@ def _tissue(name: str) -> str:
     return "the paper's 1 kPa gel" if name == TISSUE else f"the {name} tissue"
 
 
+def tissue_words(name: str) -> str:
+    """What a scene's thickness is of, in words: the paper's gel, or a layered tissue's skin
+    and fat over its muscle.
+    """
+    if name == TISSUE:
+        return "the paper's 1 kPa gel"
+    return f"skin and fat (the {name} tissue, over its muscle)"
+
+
 def skin_of(preds: list, asked: int | None, default: int) -> int:
     """How often the part is subdivided: as ``asked``, else the surface the first learned
     model was trained on, else ``default``.
@@ -172,7 +181,8 @@ def _met(d) -> str:
     """
     if d.reaction is None:
         return ""
-    line = f"  reaction {d.reaction:.3g} N, peak pressure {d.pressure.max() / 1e3:.3g} kPa"
+    what = "squeeze" if d.scene.pose.direction is None else "reaction"  # a grip's reaction
+    line = f"  {what} {d.reaction:.3g} N, peak pressure {d.pressure.max() / 1e3:.3g} kPa"
     fc = d.info.get("force_control")
     if fc:
         n = fc["answers"]
@@ -181,8 +191,9 @@ def _met(d) -> str:
             if n is None
             else f"found in {n} answer{'s' if n > 1 else ''}"
         )
+        moved = "closed" if d.scene.pose.direction is None else "pressed"  # a grip closes
         line += (
-            f" (pressed {fc['moved_mm']:.2f} mm on from the pose, {how}, "
+            f" ({moved} {fc['moved_mm']:.2f} mm on from the pose, {how}, "
             f"{duration(fc['seconds'])} in all)"
         )
     return line

@@ -34,6 +34,12 @@ DEFAULT_MODEL = "zoo:gnn_arm_bodies"
 """The shipped GNN of the left arm of every anny body (the right arm answered in the mirror)."""
 PART_MODELS = {"belly": "zoo:gnn_belly_bodies"}
 """The default model of the parts that are not an arm."""
+GRASP_MODEL = "zoo:gnn_forearm_grips"
+"""The main job's model: anny's right hand closing on her left forearm's layered tissue."""
+GRASP_TISSUE = "forearm"
+"""The main job's tissue: skin, fat and muscle (docs/tissue.md)."""
+GRASP_FORCE_N = 5.0
+"""N: the main job's squeeze, a firm grasp (the grip model's data: 1-10 N)."""
 
 
 def default_model(part: str) -> str:
@@ -139,7 +145,8 @@ def load_options(parser) -> None:
         type=float,
         default=FORCE_N,
         action=_Given,
-        help=f"total force, N (default {FORCE_N:g}); with --given pose, the force the object "
+        help=f"total force, N (default {FORCE_N:g}; the default grasp of real tissue: "
+        f"{GRASP_FORCE_N:g}); with --given pose, the force the object "
         "is pressed further (or the hand closed) until it meets",
     )
     parser.set_defaults(force_given=False)

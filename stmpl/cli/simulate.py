@@ -1,10 +1,13 @@
 """The main job, ``stmpl simulate``: an object pressed on a body part (by default anny's right
-hand grasping the left forearm), predicted by the shipped GNN (and any other model), with
-``--compare`` the FEM beside it; it writes the deformed body (GLB with the object in place, and
-PLY) and a picture, and prints each method's time.
+hand closing on the layered tissue of her left forearm until it squeezes 5 N), predicted by a
+shipped model (and any other), with ``--compare`` the FEM beside it; it writes the deformed body
+(GLB with the object in place, and PLY) and a picture, and prints each method's time, reaction
+and contact pressure.
 
->>> stmpl simulate                                     # the default grasp, GNN
->>> stmpl simulate --grip pinch --along 0.5 --compare  # a pinch, checked by the FEM
+>>> stmpl simulate                                     # the default grasp of real tissue
+>>> stmpl simulate --force 2 --grip tripod --compare   # a tripod, checked by the FEM
+>>> stmpl simulate --tissue paper                      # the paper's gel, its 0.4 N grasp
+>>> stmpl simulate --tissue paper --grip pinch --along 0.5 --compare
 >>> stmpl simulate --letters ECCV --force 0.3 --model zoo:uv_unet_arm_bodies
 >>> stmpl simulate --weight 0.9 --muscle 0.2 --part right_arm  # another body, its right arm
 >>> stmpl simulate --object tool.stl --at 0.45 0.5 --depth 3
@@ -24,7 +27,12 @@ import numpy as np
 import stmpl.contact.pressing as contact
 from stmpl.body.spec import part_from_spec
 from stmpl.cli import answers
-from stmpl.cli.arguments import default_model
+from stmpl.cli.arguments import (
+    GRASP_FORCE_N,
+    GRASP_MODEL,
+    GRASP_TISSUE,
+    default_model,
+)
 from stmpl.cli.options import phenotype_of, thickness_of
 from stmpl.contact import objects
 from stmpl.contact.grips import GRIPS
@@ -148,10 +156,34 @@ def given_of(given: str | None, specs: list[str], preds: list) -> str:
     return ways.pop() if ways else "force"
 
 
+def models_of(args) -> list[str]:
+    """The models asked, else the default: the grip model of real tissue for anny's hand on her
+    left forearm (at the tissue it learned, with its squeeze unless ``--force`` is given), else
+    the part's model of the paper's gel. Sets ``args.tissue`` and ``args.force`` where it chose.
+    """
+    if args.model:
+        return args.model
+    hand = not any(getattr(args, k) is not None for k in ("object", "sphere", "letters"))
+    if hand and not args.strap and args.part == "left_arm" and args.tissue in (None, GRASP_TISSUE):
+        other = {k: v for k, v in phenotype_of(args).items() if v != 0.5}
+        if other:
+            said = " ".join(f"--{k} {v:g}" for k, v in other.items())
+            raise ValueError(
+                f"the grip model of real tissue ({GRASP_MODEL}) knows anny's default body, not "
+                f"{said}: add --tissue paper (the models of every body, on the paper's gel) or "
+                f"--model fem --tissue {GRASP_TISSUE} (the FEM, minutes a grasp)"
+            )
+        args.tissue = GRASP_TISSUE
+        if not args.force_given:
+            args.force, args.force_given = GRASP_FORCE_N, True
+        return [GRASP_MODEL]
+    return [default_model(args.part)]
+
+
 def run(args) -> int:
     """``stmpl simulate``: build the scene, predict, compare, write and print."""
     t0 = time.perf_counter()
-    specs = args.model or [default_model(args.part)]
+    specs = models_of(args)
     preds = answers.predictors(args, specs)
     args.given = given_of(args.given, specs, preds)
     sub = answers.skin_of(preds, args.subdivide, 1)  # the FEM alone: the once-subdivided skin
@@ -189,7 +221,7 @@ def run(args) -> int:
         said = touch.summary()
     print(
         f"{part.name} ({part.n_vertices} vertices), {1e3 * float(thick.mean()):.3g} mm of "
-        f"tissue; {said}  [{time.perf_counter() - t0:.1f} s to set up]"
+        f"{answers.tissue_words(args.tissue)}; {said}  [{time.perf_counter() - t0:.1f} s to set up]"
     )
     out = answers.answer(scene, specs, preds, args.strict, force)
     failures: dict = {}
@@ -202,7 +234,14 @@ def run(args) -> int:
     folder.mkdir(parents=True, exist_ok=True)
     name, first = next(iter(out.items()))
     write_meshes(first, drawn, folder / "pressed", facts(first, name))
-    contact_figure(out, fem, drawn, folder / "simulate.png", failed=failures)
+    contact_figure(
+        out,
+        fem,
+        drawn,
+        folder / "simulate.png",
+        failed=failures,
+        tissue=answers.tissue_words(args.tissue),
+    )
     atomic_write_text(
         folder / "simulate.json", json.dumps(answers.record(out, fem, failures), indent=1)
     )

@@ -233,6 +233,7 @@ def contact_figure(
     dpi: int = 110,
     title: str | None = None,
     failed: dict | None = None,
+    tissue: str | None = None,
 ) -> Picture:
     """A picture of one pressed scene: a panel per method (``deformations``: name ->
     :class:`~stmpl.scene.Deformation`; ``truth``, e.g. the FEM's, first) showing the deformed
@@ -241,6 +242,7 @@ def contact_figure(
     mean error and its peak. Where answers carry a contact pressure (a scene given by an
     object's pose), a second row shows it on the skin, in kPa on one scale. ``failed``: name ->
     why, the solves that gave no answer, each a panel of the skin at rest that says so in red.
+    ``tissue``: what the thickness is of, in words, for the title (default: "tissue").
     Written as a PNG at ``path`` if given.
     """
     rows = ([("FEM", truth)] if truth is not None else []) + list(deformations.items())
@@ -280,7 +282,7 @@ def contact_figure(
     labels = ["displacement |u| (mm)"] + (["contact pressure (kPa)"] if pressed else [])
     beside = max(page.bar_space(t, lab, big) for t, lab in zip((top, peak), labels))
     width = margin + len(rows) * wide + len(rows) * gap + bar + beside + margin
-    text = (title or _title(first.scene, first.info.get("force_control"))) + (
+    text = (title or _title(first.scene, first.info.get("force_control"), tissue)) + (
         f"\n(displacements drawn {scale:g}x their size; colours true)"
         if scale > 1
         else "\n(displacements drawn true to scale)"
@@ -356,8 +358,9 @@ def _panel_title(name: str, d, truth) -> tuple[str, str]:
     if fc:  # the answer's time is the whole search's
         head += f", {duration(fc['seconds'])} to meet {fc['force']:g} N"
     lines = [head, f"deepest {d.magnitude.max() * 1e3:.2f} mm"]
-    if d.reaction is not None:  # a pose's answer: the force it meets
-        lines[-1] += f", reaction {d.reaction:.3g} N"
+    if d.reaction is not None:  # a pose's answer: the force it meets (a grip's: its squeeze)
+        what = "squeeze" if d.scene.pose.direction is None else "reaction"
+        lines[-1] += f", {what} {d.reaction:.3g} N"
     if truth is not None and d is not truth:
         m = sample_metrics(truth.displacement, d.displacement)
         lines.append(f"error {m['rel_mee']:.2f} % of the deepest, peak {m['peak_err']:+.1f} %")
@@ -372,22 +375,25 @@ def duration(seconds: float) -> str:
     return f"{seconds * 1e3:.1f} ms" if seconds < 1 else f"{seconds:.1f} s"
 
 
-def _title(scene, forced: dict | None = None) -> str:
-    """The picture's title: the part, its tissue and what presses it; ``forced``: the answer's
-    ``info["force_control"]`` (the object pressed on until it met a force).
+def _title(scene, forced: dict | None = None, tissue: str | None = None) -> str:
+    """The picture's title: the part, its tissue (``tissue``: in words) and what presses it;
+    ``forced``: the answer's ``info["force_control"]`` (the object pressed on, or the hand
+    closed, until it met a force).
     """
     load = scene.load
-    if scene.pose is not None and forced:
+    names = ", ".join(scene.pose.names()) if scene.pose is not None else ""
+    if scene.pose is not None and forced and scene.pose.direction is None:  # a closing grip
         text = (
-            f"{', '.join(scene.pose.names()) or 'an object'} pressed on "
-            f"{forced['moved_mm']:.2f} mm from where it was put, until it meets "
-            f"{forced['force']:g} N"
+            f"{names or 'a hand'} closed {forced['moved_mm']:.2f} mm on from where it was put, "
+            f"until it squeezes {forced['force']:g} N"
+        )
+    elif scene.pose is not None and forced:
+        text = (
+            f"{names or 'an object'} pressed on {forced['moved_mm']:.2f} mm from where it was "
+            f"put, until it meets {forced['force']:g} N"
         )
     elif scene.pose is not None:
-        text = (
-            f"{', '.join(scene.pose.names()) or 'an object'} at its pose, "
-            f"{scene.pose.nearest()}: the force is answered"
-        )
+        text = f"{names or 'an object'} at its pose, {scene.pose.nearest()}: the force is answered"
     else:
         text = (
             load.source.summary()
@@ -396,7 +402,7 @@ def _title(scene, forced: dict | None = None) -> str:
         )
     return (
         f"{scene.part.name} ({scene.part.n_vertices} vertices){body_words(scene.part)}, "
-        f"{1e3 * float(np.median(scene.thickness)):.1f} mm tissue\n{text}"
+        f"{1e3 * float(np.median(scene.thickness)):.1f} mm {tissue or 'tissue'}\n{text}"
     )
 
 
