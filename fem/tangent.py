@@ -12,6 +12,8 @@ step to step for an earlier one to precondition it.
 
 from __future__ import annotations
 
+import inspect
+import weakref
 from collections.abc import Callable
 
 import numpy as np
@@ -34,17 +36,26 @@ class Tangent:
 
     Args:
         linear: a linear solver (:mod:`fem.linear_solvers`).
-        assemble: ``(u, f, definite) -> (r, K)``, the solver's :meth:`~fem.solver.Solver.assemble`.
+        assemble: ``(u, f, definite) -> (r, K)``, the solver's :meth:`~fem.solver.Solver.assemble`
+            (kept as a weak method: a solver that holds its tangent is no reference cycle, so
+            its factorisation, PARDISO's memory outside Python, goes with the solver at once).
         can_leave_out: whether the tangent has a pressure stiffness to leave out (mean
             dilatation).
     """
 
     def __init__(self, linear, assemble: Callable, can_leave_out: bool):
         self.linear = linear
-        self.assemble = assemble
+        self._assemble = weakref.WeakMethod(assemble) if inspect.ismethod(assemble) else assemble
         self.can_leave_out = can_leave_out
         self.factored: str | None = None
         """``"full"`` (the tangent), ``"definite"`` (less its pressure stiffness) or ``None``."""
+
+    def assemble(self, u: np.ndarray, f: np.ndarray, definite: bool):
+        """The solver's assembly ``(r, K)`` at ``u``."""
+        assemble = self._assemble
+        if isinstance(assemble, weakref.WeakMethod):
+            assemble = assemble()
+        return assemble(u, f, definite)
 
     def factorise(
         self, u: np.ndarray, f: np.ndarray, definite: bool = False, K=None, confirm: bool = True

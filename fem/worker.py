@@ -6,6 +6,7 @@ disk.
 
 from __future__ import annotations
 
+import gc
 import hashlib
 import json
 import os
@@ -202,6 +203,9 @@ def solve_shard(payload: dict) -> dict:
             continue
         t = _Task(task, pi, ti, split, spec, cfg["thickness_mm"][ti])
         (_press if spec["kind"] in PRESSES else _shared)(shard, t)
+        gc.collect()  # each solve leaves its tangent's arrays in reference cycles (pypardiso's
+        # ctypes pointers); on a worker's large heap Python's collector comes for them too
+        # seldom: a run of the fine reference set grew to 16 GB without this
         shard.current = None
         shard.done.append(task)
         shard.save()

@@ -454,3 +454,29 @@ def test_a_kept_factorisation_preconditions_the_next_solve():
     ref = plain.equilibrium(rest, plain.external_forces(force))
     assert ref["factorisations"] >= second["iterations"]
     np.testing.assert_allclose(second["u"], ref["u"], atol=1e-6 * np.abs(ref["u"]).max())
+
+
+def test_a_solver_and_its_factorisation_go_with_its_last_reference():
+    """No reference cycle holds a solver (its tangent keeps its assembly as a weak method): its
+    factorisation (PARDISO's memory, outside Python's view) is freed when the solver goes, not
+    when the cycle collector next runs; and the tangent still assembles while the solver lives.
+    """
+    import gc
+    import weakref
+
+    part, mesh = _small_shell(layers=1)
+    S = Solver(mesh, NeoHookean(), options=SolverOptions(linear_solver="superlu"))
+    u = np.zeros((mesh.n_nodes, 3))
+    r, K = S.tangent.assemble(u, np.zeros_like(u), False)
+    assert (
+        K.shape == (len(S.free), len(S.free)) and S.tangent.factorise(u, np.zeros_like(u)) is None
+    )
+    gone = weakref.ref(S)
+    was = gc.isenabled()
+    gc.disable()
+    try:
+        del S
+        assert gone() is None
+    finally:
+        if was:
+            gc.enable()
