@@ -320,6 +320,7 @@ class TrainedPredictor(BasePredictor):
         """
         self.meta = {k: v for k, v in meta.items() if k not in ("config", "kind", "envelope")}
         self.tissue = meta.get("dataset", {}).get("tissue", "paper")
+        self.friction = meta.get("holding", {}).get("friction")
         self.restored()
         if "envelope" in meta:
             try:

@@ -144,6 +144,9 @@ class BasePredictor:
     tissue = "paper"
     """The tissue the answers are for: ``"paper"`` (the gel) or a layered preset's name (or a
     file of layers; a learned model's is its data's)."""
+    friction = None
+    """Coulomb's coefficient between posed objects and the skin in the data behind the answers
+    (a learned model's: its data's, where it records one), or ``None``."""
     batched = True
     """Whether a batch of scenes costs less per scene than one at a time. ``False`` for the FEM,
     which solves them one after the other in seconds each and may fail on one alone: callers

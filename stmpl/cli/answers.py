@@ -54,6 +54,9 @@ def predictors(args, specs: list[str]) -> list:
                 f"that tissue, or --model fem --tissue {tissue}"
             )
     args.tissue = tissue
+    if args.friction is None:  # the FEM meets the objects as the learned models' data did
+        had = [p.friction for p in learned.values() if p.friction is not None]
+        args.friction = had[0] if had else 0.0
     return [made(spec, tissue) if f else learned[spec] for spec, f in zip(specs, fem)]
 
 

@@ -232,10 +232,11 @@ def fem_options(parser) -> None:
     parser.add_argument(
         "--friction",
         type=coefficient,
-        default=0.0,
+        default=None,
         metavar="MU",
         help="Coulomb's friction between an object given by its pose (--given pose) and the "
-        "skin in the FEM (default 0: frictionless; dry skin on a smooth solid about 0.5)",
+        "skin in the FEM (default: the first learned model's data's, else 0: frictionless; dry "
+        "skin on a smooth solid about 0.5)",
     )
 
 
