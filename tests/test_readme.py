@@ -88,6 +88,6 @@ def test_readme_main_command_runs_on_the_shipped_default(tmp_path, capsys, arm, 
     monkeypatch.chdir(tmp_path)
     assert main(argv[1:]) == 0
     out = capsys.readouterr().out
-    assert "gnn_arm" in out and "right hand" in out
+    assert "gnn_forearm_grips" in out and "right hand" in out and "squeeze 5 N" in out
     for f in ("simulate.png", "pressed.glb", "pressed.ply"):
         assert os.path.getsize(tmp_path / "simulate_out" / f) > 20_000, f
