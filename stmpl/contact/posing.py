@@ -27,19 +27,40 @@ from stmpl.pose import GAP_REACH, Pose, Rigid
 from stmpl.scene import Scene
 
 
-def signed_distance(mesh, points: np.ndarray, upto: float = GAP_REACH) -> np.ndarray:
+def signed_distance(
+    mesh,
+    points: np.ndarray,
+    upto: float = GAP_REACH,
+    before: np.ndarray | None = None,
+    shift: float = 0.0,
+) -> np.ndarray:
     """``(P,)`` each point's signed distance to a triangle mesh (m; negative inside it, inside
     where its generalized winding number exceeds 1/2), cut at ``upto`` outside.
+
+    ``before`` ``(P,)``: the same field (cut at ``upto``) before the mesh's points moved at
+    most ``shift`` (m) each. No point of the surface then sweeps farther than ``shift``, so a
+    point farther than that from the surface before stays on its side of it: only the others'
+    sides are measured again (the winding numbers, half the cost), with the same answer.
     """
     points = np.asarray(points, dtype=float).reshape(-1, 3)
     lo, hi = np.asarray(mesh.bounds)
     box = np.linalg.norm(np.maximum(0, np.maximum(lo - points, points - hi)), axis=1)
     out = np.full(len(points), float(upto))
     near = np.flatnonzero(box < upto)  # a point farther from the box is farther from the mesh
+    side = None
+    if before is not None:
+        before = np.asarray(before, dtype=float)
+        side = np.where(np.abs(before[near]) > shift, np.sign(before[near]), 0.0)
     if not len(near):
         return out
     d = distance_to_surface(mesh, points[near], upto=upto)  # exact up to upto
-    inside = winding_number(mesh, points[near]) > 0.5
+    if side is None:
+        inside = winding_number(mesh, points[near]) > 0.5
+    else:
+        inside = side < 0
+        unsure = np.flatnonzero(side == 0)
+        if len(unsure):
+            inside[unsure] = winding_number(mesh, points[near][unsure]) > 0.5
     deep = np.flatnonzero(inside & (d > upto))  # inside deeper than upto: exactly too
     if len(deep):
         d[deep] = distance_to_surface(mesh, points[near][deep])
@@ -117,7 +138,11 @@ def moved(scene: Scene, distance: float) -> Scene:
         r = Rigid(o.name, o.vertices + step, o.faces, o.path)
         rigid.append(r)
         mesh = Mesh(r.vertices, r.faces)
-        gap = np.minimum(gap, _gap(scene.part, mesh, pose.direction))
+        if pose.closing and len(pose.objects) == 1:  # the gap is this object's signed distance
+            shift = float(np.linalg.norm(step, axis=-1).max())
+            gap = signed_distance(mesh, scene.part.vertices, before=pose.gap, shift=shift)
+        else:
+            gap = np.minimum(gap, _gap(scene.part, mesh, pose.direction))
     way = partial(way_field, scene.part.vertices, gap, pose.direction, tuple(rigid))
     return Scene.posed(
         scene.part, scene.thickness, Pose(gap, pose.direction, tuple(rigid), way), **scene.meta

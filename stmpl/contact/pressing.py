@@ -279,13 +279,18 @@ def winding_number(
     of the signed solid angles of its triangles over ``4 pi`` (1 inside a closed outward-facing
     mesh, 0 outside). Triangles are grouped in clusters; a cluster seen from farther than
     ``far`` times its radius counts as its dipole, the others triangle by triangle (Barill et
-    al. 2018, "Fast winding numbers for soups and clouds", to first order). ``chunk``: at most
-    about this many (point, cluster) pairs at a time.
+    al. 2018, "Fast winding numbers for soups and clouds", to first order); a few points
+    (at most ``chunk / 4`` point-triangle pairs) are summed over every triangle exactly instead.
+    ``chunk``: at most about this many (point, cluster) pairs at a time.
     """
     tri = np.asarray(mesh.triangles, dtype=float)  # (M, 3, 3)
     points = np.asarray(points, dtype=float).reshape(-1, 3)
     if not len(points) or not len(tri):
         return np.zeros(len(points))
+    if len(points) * len(tri) <= chunk // 4:  # a few points: every triangle exactly, at once
+        rows = np.repeat(np.arange(len(points)), len(tri))
+        angle = solid_angles(np.tile(tri, (len(points), 1, 1)), points[rows])
+        return np.bincount(rows, angle, len(points)) / (4 * np.pi)
     order, starts = clusters(tri)
     tri = tri[order]  # cluster after cluster
     area = 0.5 * np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # (M, 3)

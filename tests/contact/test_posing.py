@@ -148,3 +148,33 @@ def test_posed_moved_and_a_dataset_s_grip_carry_the_way_the_objects_move(part, m
     np.testing.assert_allclose(w, closing.pose.way)
     with pytest.raises(ValueError, match="does not record its placement and depth"):
         posing.sample_way(part, "press_grip", {"grip": "pinch"}, closing.pose.gap)
+
+
+def test_a_closing_object_moved_is_measured_again_only_where_its_side_may_change(part, monkeypatch):
+    """A closing object moved along its path: the gap field measured from the one before (the
+    winding numbers only within the move of the surface) is the one measured afresh, skin
+    sinking inside and the object drawn back alike; and fewer winding numbers are measured.
+    """
+    from stmpl.contact import posing
+
+    tip = objects.sphere(0.008)
+    t = tissue.constant(part, 0.0075)
+    at = posed(part, t, tip, objects.press(part, tip, uv=(0.5, 0.5), depth=0.001))
+    o = at.pose.objects[0]
+    rng = np.random.default_rng(3)  # each vertex its own way: the surface sweeps, not slides
+    path = 0.8 * at.pose.direction + rng.uniform(-0.3, 0.3, (len(o.vertices), 3))
+    gap0 = signed_distance(trimesh.Trimesh(o.vertices, o.faces, process=False), part.vertices)
+    hand = Rigid("hand", o.vertices, o.faces, path)
+    scene = Scene.posed(part, t, Pose(gap0, None, (hand,)))  # a closing pose: its signed distance
+    counted = []
+    measure = posing.winding_number
+    monkeypatch.setattr(
+        posing, "winding_number", lambda m, x: counted.append(len(x)) or measure(m, x)
+    )
+    for distance in (0.003, -0.002, 0.006):
+        got = moved(scene, distance).pose.gap
+        mesh = trimesh.Trimesh(o.vertices + distance * path, o.faces, process=False)
+        fresh = signed_distance(mesh, part.vertices)
+        np.testing.assert_array_equal(got, fresh)
+        assert ((got < 0) != (gap0 < 0)).any() == (distance > 0)  # deeper: skin now inside
+        assert counted[-2] < counted[-1] / 2  # the move's winding numbers, then the fresh ones

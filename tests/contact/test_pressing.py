@@ -104,6 +104,8 @@ def test_the_far_field_winding_number_meets_the_exact_sum():
     ) / (4 * np.pi)
     fast = C.winding_number(sphere, points)
     assert np.abs(fast - exact).max() < 0.01
+    few = C.winding_number(sphere, points[:10])  # a few points: every triangle, exactly
+    np.testing.assert_allclose(few, exact[:10], rtol=0, atol=1e-12)
     np.testing.assert_array_equal(fast > 0.5, exact > 0.5)
     inside = np.linalg.norm(points, axis=1) < 0.95  # clear of the facets
     assert (fast[inside] > 0.99).all() and (
