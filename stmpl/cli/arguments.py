@@ -40,6 +40,9 @@ GRASP_TISSUE = "forearm"
 """The main job's tissue: skin, fat and muscle (docs/tissue.md)."""
 GRASP_FORCE_N = 5.0
 """N: the main job's squeeze, a firm grasp (the grip model's data: 1-10 N)."""
+GRASP_RESOLUTION = "medium"
+"""The FEM's mesh beside the main job's grasp: the grip model's data was solved on it, refined
+within 1 cm of the hand instead of 3 (within 0.3 % of it, in half the time; docs/datasets.md)."""
 
 
 def default_model(part: str) -> str:
@@ -214,8 +217,11 @@ def fem_options(parser) -> None:
     parser.add_argument(
         "--res",
         default=RESOLUTION,
-        help=f"FEM mesh resolution: coarse, medium, fine, finest or reference ({RESOLUTION})",
+        action=_Given,
+        help=f"FEM mesh resolution: coarse, medium, fine, finest or reference ({RESOLUTION}; "
+        f"beside the default grasp of real tissue {GRASP_RESOLUTION}, as the grip model's data)",
     )
+    parser.set_defaults(res_given=False)
     parser.add_argument(
         "--levels",
         type=positive,

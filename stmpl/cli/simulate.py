@@ -30,6 +30,7 @@ from stmpl.cli import answers
 from stmpl.cli.arguments import (
     GRASP_FORCE_N,
     GRASP_MODEL,
+    GRASP_RESOLUTION,
     GRASP_TISSUE,
     default_model,
 )
@@ -158,8 +159,9 @@ def given_of(given: str | None, specs: list[str], preds: list) -> str:
 
 def models_of(args) -> list[str]:
     """The models asked, else the default: the grip model of real tissue for anny's hand on her
-    left forearm (at the tissue it learned, with its squeeze unless ``--force`` is given), else
-    the part's model of the paper's gel. Sets ``args.tissue`` and ``args.force`` where it chose.
+    left forearm (at the tissue it learned, with its squeeze unless ``--force`` is given, the
+    FEM beside it on its data's mesh unless ``--res`` is), else the part's model of the paper's
+    gel. Sets ``args.tissue``, ``args.force`` and ``args.res`` where it chose.
     """
     if args.model:
         return args.model
@@ -176,6 +178,8 @@ def models_of(args) -> list[str]:
         args.tissue = GRASP_TISSUE
         if not args.force_given:
             args.force, args.force_given = GRASP_FORCE_N, True
+        if not args.res_given:  # the FEM beside it as the model's data was solved
+            args.res = GRASP_RESOLUTION
         return [GRASP_MODEL]
     return [default_model(args.part)]
 

@@ -382,3 +382,22 @@ def test_models_that_take_different_scenes_are_named():
         given_of(None, ["m0", "m1"], [_Takes("pose"), _Takes("force")])
     with pytest.raises(ValueError, match="m1 takes only an object's pose: use --given pose"):
         given_of("force", ["m0", "m1"], [_Takes("force", "pose"), _Takes("pose")])
+
+
+@pytest.mark.parametrize(
+    "argv, res, force, tissue",
+    [
+        ([], "medium", 5.0, "forearm"),  # the grip model's data's mesh, its squeeze
+        (["--res", "fine", "--force", "2"], "fine", 2.0, "forearm"),  # as asked
+        (["--tissue", "paper"], "reference", 0.4, "paper"),
+        (["--sphere", "8"], "reference", 0.4, None),  # the paper's model: its own tissue
+    ],
+)
+def test_the_default_grasp_takes_its_model_s_set_up_unless_told(argv, res, force, tissue):
+    from stmpl.cli.main import parser
+    from stmpl.cli.simulate import models_of
+
+    args = parser().parse_args(["simulate", *argv])
+    models = models_of(args)
+    assert (args.res, args.force, args.tissue) == (res, force, tissue)
+    assert (models == ["zoo:gnn_forearm_grips"]) == (tissue == "forearm")
