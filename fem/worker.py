@@ -203,9 +203,8 @@ def solve_shard(payload: dict) -> dict:
             continue
         t = _Task(task, pi, ti, split, spec, cfg["thickness_mm"][ti])
         (_press if spec["kind"] in PRESSES else _shared)(shard, t)
-        gc.collect()  # each solve leaves its tangent's arrays in reference cycles (pypardiso's
-        # ctypes pointers); on a worker's large heap Python's collector comes for them too
-        # seldom: a run of the fine reference set grew to 16 GB without this
+        gc.collect()  # what a task's solves left in reference cycles (pypardiso's ctypes
+        # pointers) goes now: on a worker's large heap Python's collector comes seldom
         shard.current = None
         shard.done.append(task)
         shard.save()
