@@ -173,7 +173,7 @@ def models_of(args) -> list[str]:
             raise ValueError(
                 f"the grip model of real tissue ({GRASP_MODEL}) knows anny's default body, not "
                 f"{said}: add --tissue paper (the models of every body, on the paper's gel) or "
-                f"--model fem --tissue {GRASP_TISSUE} (the FEM, minutes a grasp)"
+                f"--model fem --tissue {GRASP_TISSUE} (the FEM, an hour or more a grasp)"
             )
         args.tissue = GRASP_TISSUE
         if not args.force_given:
