@@ -206,6 +206,13 @@ class Pose:
         """Whether the objects close along their own paths (a grip) instead of one direction."""
         return self.direction is None
 
+    @property
+    def reaction_name(self) -> str:
+        """What the reaction is called: a grip's is its ``"squeeze"`` (the whole contact force),
+        a press's its ``"reaction"`` along the press.
+        """
+        return "squeeze" if self.closing else "reaction"
+
     def arrays(self) -> dict:
         """The pose as named arrays (for a scene file); :meth:`from_arrays` reads them (a
         closing pose's direction is kept as an empty array).

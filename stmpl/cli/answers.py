@@ -69,9 +69,7 @@ def tissue_words(name: str) -> str:
     """What a scene's thickness is of, in words: the paper's gel, or a layered tissue's skin
     and fat over its muscle.
     """
-    if name == TISSUE:
-        return "the paper's 1 kPa gel"
-    return f"skin and fat (the {name} tissue, over its muscle)"
+    return _tissue(name) if name == TISSUE else f"skin and fat ({_tissue(name)}, over its muscle)"
 
 
 def skin_of(preds: list, asked: int | None, default: int) -> int:
@@ -184,8 +182,8 @@ def _met(d) -> str:
     """
     if d.reaction is None:
         return ""
-    what = "squeeze" if d.scene.pose.direction is None else "reaction"  # a grip's reaction
-    line = f"  {what} {d.reaction:.3g} N, peak pressure {d.pressure.max() / 1e3:.3g} kPa"
+    peak = d.pressure.max() / 1e3
+    line = f"  {d.scene.pose.reaction_name} {d.reaction:.3g} N, peak pressure {peak:.3g} kPa"
     fc = d.info.get("force_control")
     if fc:
         n = fc["answers"]
@@ -194,7 +192,7 @@ def _met(d) -> str:
             if n is None
             else f"found in {n} answer{'s' if n > 1 else ''}"
         )
-        moved = "closed" if d.scene.pose.direction is None else "pressed"  # a grip closes
+        moved = "closed" if d.scene.pose.closing else "pressed"
         line += (
             f" ({moved} {fc['moved_mm']:.2f} mm on from the pose, {how}, "
             f"{duration(fc['seconds'])} in all)"

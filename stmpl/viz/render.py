@@ -359,8 +359,7 @@ def _panel_title(name: str, d, truth) -> tuple[str, str]:
         head += f", {duration(fc['seconds'])} to meet {fc['force']:g} N"
     lines = [head, f"deepest {d.magnitude.max() * 1e3:.2f} mm"]
     if d.reaction is not None:  # a pose's answer: the force it meets (a grip's: its squeeze)
-        what = "squeeze" if d.scene.pose.direction is None else "reaction"
-        lines[-1] += f", {what} {d.reaction:.3g} N"
+        lines[-1] += f", {d.scene.pose.reaction_name} {d.reaction:.3g} N"
     if truth is not None and d is not truth:
         m = sample_metrics(truth.displacement, d.displacement)
         lines.append(f"error {m['rel_mee']:.2f} % of the deepest, peak {m['peak_err']:+.1f} %")
@@ -382,7 +381,7 @@ def _title(scene, forced: dict | None = None, tissue: str | None = None) -> str:
     """
     load = scene.load
     names = ", ".join(scene.pose.names()) if scene.pose is not None else ""
-    if scene.pose is not None and forced and scene.pose.direction is None:  # a closing grip
+    if scene.pose is not None and forced and scene.pose.closing:
         text = (
             f"{names or 'a hand'} closed {forced['moved_mm']:.2f} mm on from where it was put, "
             f"until it squeezes {forced['force']:g} N"
