@@ -57,7 +57,8 @@ CACHED_HOLDS = 256
 memory; a training set's samples each have one (1-10 MB a sample on the forearm's grips)."""
 
 CACHED_CLOSURES = 1024
-"""Closures (:meth:`HeldSkin.closure`, 25 kB each on the forearm) a :class:`HeldSkin` keeps."""
+"""Closures (:meth:`HeldSkin.closed`, 75 kB each on the forearm: the displacement and the
+contact forces) a :class:`HeldSkin` keeps."""
 
 
 class Holding:
@@ -326,13 +327,23 @@ class HeldSkin:
     def closure(
         self, gap, way, thickness, friction: float = SKIN_FRICTION, rounding: float = ROUNDING
     ) -> np.ndarray:
-        """``(N, 3)`` m, float32: the skin's displacement as the objects of a pose (``gap``
-        ``(N,)`` m, ``way`` ``(N, 3)`` m per m) close on it with Coulomb's ``friction``, at
-        ``thickness`` ``(N,)`` (m), answered by the linear FEM (:mod:`fem.closure`, its contact
-        on the held vertices); zero where no object is near. ``rounding`` (m): how far outside
-        the objects' faces the FEM's surface stands (a mesh's, :data:`fem.shapes.ROUNDING`;
-        none for the analytic ball and disk of a dataset's presses). Kept for the next call
-        with the same pose (a training set's samples come again every epoch).
+        """``(N, 3)`` m, float32: the skin's displacement as the objects of a pose close on it
+        (:meth:`closed`, which gives the contact forces beside it).
+        """
+        return self.closed(gap, way, thickness, friction, rounding)[0]
+
+    def closed(
+        self, gap, way, thickness, friction: float = SKIN_FRICTION, rounding: float = ROUNDING
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """``(u, f)``: the skin's displacement ``u`` ``(N, 3)`` (m, float32) as the objects of
+        a pose (``gap`` ``(N,)`` m, ``way`` ``(N, 3)`` m per m) close on it with Coulomb's
+        ``friction``, at ``thickness`` ``(N,)`` (m), answered by the linear FEM
+        (:mod:`fem.closure`, its contact on the held vertices), and the contact force ``f``
+        ``(N, 3)`` (N, float64) the objects put on each vertex; both zero where no object is
+        near. ``rounding`` (m): how far outside the objects' faces the FEM's surface stands (a
+        mesh's, :data:`fem.shapes.ROUNDING`; none for the analytic ball and disk of a dataset's
+        presses). Kept for the next call with the same pose (a training set's samples come
+        again every epoch); both arrays are read-only.
         """
         g = np.asarray(gap, dtype=np.float64)
         w = np.asarray(way, dtype=np.float64)
@@ -343,6 +354,7 @@ class HeldSkin:
         if k not in self._closures:
             H = np.flatnonzero(within_reach(g) & s.free)
             out = np.zeros((len(g), 3), np.float32)
+            forces = np.zeros((len(g), 3))
             if len(H):
                 s.solve(H)
                 at = (H[:, None] * 3 + np.arange(3)).ravel()
@@ -351,10 +363,12 @@ class HeldSkin:
                 pushed = np.flatnonzero(f.any(1))  # the skin the objects push: a few vertices
                 cols = (H[pushed][:, None] * 3 + np.arange(3)).ravel()
                 out = (s.G[:, cols] @ f[pushed].ravel().astype(np.float32)).reshape(-1, 3)
+                forces[H] = f
             if len(self._closures) >= CACHED_CLOSURES:
                 self._closures.pop(next(iter(self._closures)))
             out.flags.writeable = False
-            self._closures[k] = out
+            forces.flags.writeable = False
+            self._closures[k] = (out, forces)
         return self._closures[k]
 
     def answer(self, r, gap, thickness) -> np.ndarray:

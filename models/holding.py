@@ -81,17 +81,20 @@ def rounding_of(kinds) -> float | None:
 
 
 def fit_held(predictor, dataset, progress: bool = True) -> None:
-    """Give ``predictor`` (option ``prior: held`` or ``closure``) its :class:`HeldSkin` for
+    """Give ``predictor`` (option ``prior: held`` or ``closure``, or the linear FEM given a pose)
+    its :class:`HeldSkin` for
     ``dataset``'s part and tissue, with the columns every sample of the set holds solved (cached
     on disk), and record it in ``predictor.meta["holding"]`` with the set's friction coefficient
     (the closure's).
     """
     cfg = dataset.card["config"]
+    prior = predictor.config.get("prior")
+    what = f"prior: {prior}" if prior else f"the {predictor.name} model given a pose"
     tissue = cfg.get("tissue") or "paper"
     if tissue == "paper":
         raise ValueError(
-            f"prior: {predictor.config['prior']} carries the skin by a layered tissue's linear "
-            "FEM; this dataset's is the paper's gel (take prior: contact)"
+            f"{what} carries the skin by a layered tissue's linear FEM; this dataset's is the "
+            "paper's gel" + (" (take prior: contact)" if prior else "")
         )
     body = cfg.get("body") or {}
     skin = {"tissue": tissue, "phenotype": cfg.get("phenotype", body.get("phenotype"))}
@@ -99,14 +102,12 @@ def fit_held(predictor, dataset, progress: bool = True) -> None:
     a = dataset.arrays()
     own = a.get("body", np.zeros(len(a["thickness"]), int)) == 0
     if not own.all():
-        raise ValueError(
-            f"prior: {predictor.config['prior']} knows the linear FEM of the model's own body only"
-        )
+        raise ValueError(f"{what} knows the linear FEM of the model's own body only")
     rounding = rounding_of(a["kind"])
-    if rounding is None and predictor.config["prior"] == "closure":
+    if rounding is None and prior in ("closure", None):
         raise ValueError(
-            "this set mixes grips (a rounded mesh) with analytic presses (not rounded): the "
-            "closure prior replays one or the other"
+            f"this set mixes grips (a rounded mesh) with analytic presses (not rounded): {what} "
+            "replays one or the other"
         )
     t0 = time.perf_counter()
     gaps = [

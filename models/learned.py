@@ -136,17 +136,15 @@ class LearnedPredictor(TrainedPredictor):
         refused where it was not fitted or a sample lies on another body (``body`` ``(B,)``).
         """
         skin = getattr(self, "held_skin", None)
+        prior = self.config.get("prior")
+        what = f"prior: {prior}" if prior else "the closure"
         if skin is None:
             raise ValueError(
-                f"{self.name}: prior: {self.config.get('prior')} needs the skin's linear FEM, "
-                "made by fitting the model to its dataset (stmpl train) or read with its "
-                "checkpoint"
+                f"{self.name}: {what} needs the skin's linear FEM, made by fitting the model to "
+                "its dataset (stmpl train) or read with its checkpoint"
             )
         if body is not None and bool((body != 0).any()):
-            raise ValueError(
-                f"{self.name}: prior: {self.config.get('prior')} knows the linear FEM of its own "
-                "body only"
-            )
+            raise ValueError(f"{self.name}: {what} knows the linear FEM of its own body only")
         return skin
 
     def held(self, r, gap, thickness, body=None):

@@ -7,12 +7,20 @@ take it as a prior and learn the rest, :mod:`models.prior`).
 
 Its tensors are buffers, so a checkpoint carries the operator: sparse, the pairs ``(i, j)``
 whose response reaches ``tol`` of the largest at some level.
+
+Given a pose (options ``given: pose, motion: true``) it answers the linear FEM's closure: the
+objects closing on the skin from first touch with the data's friction, the skin's compliance
+near them solved once per thickness and cached (:meth:`fem.holding.HeldSkin.closed`), with the
+contact forces that closure puts on the skin; the reaction is their normal part summed (a grip's
+squeeze). What the learned models' closure prior starts from, answered alone.
 """
 
 from __future__ import annotations
 
+import numpy as np
 from torch import nn
 
+from models.holding import HeldSkin, fit_held
 from models.learned import LearnedPredictor
 from models.linear.operator import (
     ComplianceOperator,
@@ -36,6 +44,7 @@ class LinearPredictor(LearnedPredictor):
 
     name = "linear"
     defaults = {"levels_mm": None, "tol": 1e-3, "operator": "stored"}
+    poses = True
 
     @classmethod
     def options(cls, config: dict | None = None) -> dict:
@@ -50,6 +59,18 @@ class LinearPredictor(LearnedPredictor):
         if not (isinstance(out["tol"], (int, float)) and 0 <= out["tol"] < 1):
             raise ValueError(f"tol must be in [0, 1), got {out['tol']!r}")
         check_operator(out["operator"])
+        if out["given"] == "pose":
+            if not out["motion"]:
+                raise ValueError(
+                    "the linear FEM given a pose replays how the objects close: it needs "
+                    "motion: true"
+                )
+            force_only = [k for k in cls.defaults if out[k] != cls.defaults[k]]
+            if force_only:
+                raise ValueError(
+                    f"{force_only} shape the linear FEM of a force; given a pose it answers "
+                    "the closure of the skin's compliance, solved on demand"
+                )
         return out
 
     def build_model(self) -> nn.Module:
@@ -70,13 +91,40 @@ class LinearPredictor(LearnedPredictor):
         """Compute the operator for ``dataset``'s part and FEM set-up (on demand: the columns
         the dataset's samples load).
         """
-        if self.config["operator"] == "on_demand":
+        if self.posed:
+            fit_held(self, dataset, progress)
+        elif self.config["operator"] == "on_demand":
             fit_on_demand(self, self.model, dataset, self.config, progress)
         else:
             install(self, self.model, fit_operator(self.part, dataset, self.config, progress))
 
     def restored(self) -> None:
         reattach(self, self.model)
+        if self.posed:
+            self.held_skin = HeldSkin(self.part, **self.meta["holding"]["skin"])
+
+    def _answers(self, scenes) -> list:
+        """Given a force, the operator's answers; given a pose, the closure's displacement, the
+        normal contact force it puts on each vertex (N) and their sum, the reaction.
+        """
+        if not self.posed:
+            return super()._answers(scenes)
+        self.given(scenes)  # a pose without its way is refused by name
+        skin = self.held_skin_of()
+        record = self.meta["holding"]
+        friction, rounding = float(record["friction"]), float(record["rounding_m"])
+        out = []
+        for s in scenes:
+            u, f = skin.closed(s.pose.gap, s.pose.way, s.thickness, friction, rounding)
+            force = np.maximum(-np.einsum("ij,ij->i", f, s.part.normals), 0.0)
+            out.append(
+                {
+                    "displacement": u.astype(np.float64),
+                    "force": force,
+                    "reaction": float(force.sum()),
+                }
+            )
+        return out
 
     def load_kernels(self) -> None:
         """The compiled code of the operator's solves on demand

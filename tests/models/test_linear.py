@@ -211,3 +211,45 @@ def test_a_layered_press_set_gets_the_linear_fem_of_its_own_tissue(
     assert np.linalg.norm(np.einsum("nkc,k->nc", gel, scene.force[loaded]), axis=1).max() > (
         2 * deepest
     )  # the gel: 4.8 mm where the forearm's layers give 1.4
+
+
+@pytest.mark.filterwarnings("ignore::stmpl.failures.OutsideEnvelope")
+def test_given_a_pose_it_answers_the_closure_and_its_contact_forces(
+    tiny_presses, tmp_path, monkeypatch
+):
+    """Given a pose and its motion, the linear FEM answers the closure of the skin's compliance
+    (:meth:`fem.holding.HeldSkin.closed`): where the object pushes, the skin lies on its
+    surface (``u . n`` is the rest gap, the analytic ball and disk unrounded), the answered
+    contact force is the closure's normal force there and nothing elsewhere, and the reaction
+    is their sum. Its checkpoint gives the same answers; options it cannot honour are refused.
+    """
+    from stmpl.data.dataset import Dataset
+
+    monkeypatch.setenv("STMPL_CACHE_DIR", str(tmp_path))
+    ds = Dataset(tiny_presses)
+    with pytest.raises(ValueError, match="it needs motion: true"):
+        predictor.create("linear", ds.part, {"given": "pose"})
+    with pytest.raises(ValueError, match="operator.*given a pose"):
+        predictor.create(
+            "linear", ds.part, {"given": "pose", "motion": True, "operator": "on_demand"}
+        )
+    lin = predictor.create("linear", ds.part, {"given": "pose", "motion": True})
+    scenes, _ = scenes_of(ds, "test", given="pose", way=True)
+    with pytest.raises(ValueError, match="the closure needs the skin's linear FEM"):
+        lin.predict(scenes[0])
+    lin.fit(ds, progress=False)
+    assert lin.meta["holding"]["rounding_m"] == 0.0
+    back = predictor.read(lin.save(tmp_path / "lin.safetensors"))
+    for s, d, e in zip(scenes, lin.predict(scenes), back.predict(scenes)):
+        _, f = lin.held_skin.closed(s.pose.gap, s.pose.way, s.thickness, 0.0, 0.0)
+        normal = -np.einsum("ij,ij->i", f, s.part.normals)
+        pushed = normal > 0
+        assert pushed.any()
+        np.testing.assert_allclose(d.force[pushed], normal[pushed], rtol=1e-12)
+        assert (d.force[~pushed] == 0).all()
+        assert d.reaction == pytest.approx(normal[pushed].sum(), rel=1e-12)
+        inward = np.einsum("ij,ij->i", d.displacement, s.part.normals)
+        deepest = -s.pose.gap.min()
+        assert np.abs(inward[pushed] - s.pose.gap[pushed]).max() < 1e-3 * deepest
+        np.testing.assert_array_equal(d.displacement, e.displacement)
+        assert d.reaction == e.reaction
