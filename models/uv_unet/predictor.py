@@ -95,6 +95,7 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
         )
         c_in = 2 + (1 if c["per_newton"] or self.posed else 0) + (6 if c["geometry"] else 0)
         c_in += 3 if self.motion else 0  # the way the objects move
+        c_in += 3 if c["prior"] == "closure" else 0  # the linear FEM's closure of the objects
         if not self.prior:
             net = UNet(
                 c_in,
@@ -140,6 +141,8 @@ class UVUNetPredictor(LinearPrior, LearnedPredictor):
             load = load_channels(force, inv_area, self.per_newton)
         chans = [*load, normalised_thickness(thickness)]
         x = torch.stack(chans, -1)
+        if self.config["prior"] == "closure":  # read as well as started from
+            x = torch.cat([x, self.closure_base(force, thickness, body) / PRIOR_SCALE], -1)
         if self.config["geometry"]:
             geo = (
                 self._geometry.expand(x.shape[0], -1, -1)

@@ -86,13 +86,19 @@ def test_either_network_holds_its_near_answer(tiny_presses, kind, options):
 
 
 @pytest.mark.filterwarnings("ignore::stmpl.failures.OutsideEnvelope")
-def test_a_closure_model_starts_from_the_linear_fem_s_closure(tiny_presses):
-    """``prior: closure``: a GNN given a pose and its motion, fitted and not trained (its last
-    layer silent), answers the linear FEM's closure of the object (the set's friction and
-    rounding, none here, analytic balls and disks: the checkpoint's record says so), within
+@pytest.mark.parametrize(
+    "kind, options",
+    [("gnn", {"latent": 16, "steps": 2}), ("uv_unet", {"size": 64, "width": 4, "depth": 3})],
+)
+def test_a_closure_model_starts_from_the_linear_fem_s_closure(tiny_presses, kind, options):
+    """``prior: closure``: either network given a pose and its motion, fitted and not trained
+    (its last layer silent), answers the linear FEM's closure of the object (the set's friction
+    and rounding, none here, analytic balls and disks: the checkpoint's record says so), within
     float32 round-off; the closure lies on the object's surface where the object pushes, so its
     peak is at least the object's depth into the rest skin, and a rounded object's reaches
-    further. Without the motion it is refused by name.
+    further. The network reads the closure as three more inputs (three more input channels'
+    weights than the same network from the contact prior). Without the motion it is refused by
+    name.
     """
     from fem.shapes import ROUNDING
     from models.holding import fit_held
@@ -101,10 +107,13 @@ def test_a_closure_model_starts_from_the_linear_fem_s_closure(tiny_presses):
     from stmpl.pipeline.evaluate import scenes_of
 
     ds = Dataset(tiny_presses)
-    options = {"latent": 16, "steps": 2, "given": "pose", "prior": "closure"}
+    options = {**options, "given": "pose", "prior": "closure"}
     with pytest.raises(ValueError, match="it needs motion: true"):
-        predictor.create("gnn", ds.part, options)
-    p = predictor.create("gnn", ds.part, {**options, "motion": True})
+        predictor.create(kind, ds.part, options)
+    p = predictor.create(kind, ds.part, {**options, "motion": True})
+    contact = predictor.create(kind, ds.part, {**options, "motion": True, "prior": "contact"})
+    first = 16 if kind == "gnn" else 4 * 4 * 4  # the first layer's outputs per input channel
+    assert p.n_parameters() - contact.n_parameters() == 3 * first
     scenes, _ = scenes_of(ds, "test", given="pose", way=True)
     with pytest.raises(ValueError, match="prior: closure needs the skin's linear FEM"):
         p.predict(scenes[0])
