@@ -18,6 +18,7 @@ faces, no area or non-finite vertices is refused.
 
 from __future__ import annotations
 
+import hashlib
 import itertools
 import pathlib
 from dataclasses import dataclass, field
@@ -262,6 +263,27 @@ def clusters(tri: np.ndarray, leaf: int = LEAF) -> tuple[np.ndarray, np.ndarray]
         starts = np.sort(np.concatenate([starts, starts[:-1][split] + sizes[split] // 2]))
 
 
+CACHED_CLUSTERINGS = 8
+"""Meshes whose clusters :func:`winding_number` keeps, by their faces."""
+
+_CLUSTERINGS: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _clusters_of(faces: np.ndarray, tri: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`clusters` of ``tri``, kept for the next mesh with the same ``faces``: a hand
+    closing on the skin keeps its triangles as they move, and any split of them into clusters
+    serves: each cluster's centre, radius and dipole are measured again at each call, so a
+    cluster a finger's curl has stretched is only summed exactly from farther away. The split
+    made at the first pose serves every later one.
+    """
+    key = hashlib.blake2b(np.ascontiguousarray(faces).tobytes(), digest_size=16).digest()
+    if key not in _CLUSTERINGS:
+        if len(_CLUSTERINGS) >= CACHED_CLUSTERINGS:
+            _CLUSTERINGS.pop(next(iter(_CLUSTERINGS)))
+        _CLUSTERINGS[key] = clusters(tri)
+    return _CLUSTERINGS[key]
+
+
 def _spans(starts: np.ndarray, which: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """For ranges ``starts[k] .. starts[k + 1]`` of each ``which`` ``(Q,)``: ``(owner, at)``,
     the position in ``which`` and the index of every element of every range, range by range.
@@ -291,7 +313,7 @@ def winding_number(
         rows = np.repeat(np.arange(len(points)), len(tri))
         angle = solid_angles(np.tile(tri, (len(points), 1, 1)), points[rows])
         return np.bincount(rows, angle, len(points)) / (4 * np.pi)
-    order, starts = clusters(tri)
+    order, starts = _clusters_of(np.asarray(mesh.faces), tri)
     tri = tri[order]  # cluster after cluster
     area = 0.5 * np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])  # (M, 3)
     size = np.linalg.norm(area, axis=1)
@@ -321,40 +343,47 @@ def winding_number(
     return out
 
 
+REACH_QUANTILES = (0.5, 0.9, 0.99)
+""":func:`distance_to_surface` searches a mesh's triangles in groups by their reach (the
+farthest corner from the centroid), split at these quantiles: a point's search reaches as far
+as its group's largest triangle, so a few long ones (a hand's palm beside its fine fingertips)
+do not widen every point's search."""
+
+
 def distance_to_surface(mesh, points: np.ndarray, upto: float = np.inf) -> np.ndarray:
     """``(P,)`` distance (m) from each point to the mesh's surface: exact where it is at most
     ``upto``, and elsewhere a lower bound above ``upto`` (default: exact everywhere).
 
-    A point's nearest mesh vertex, at ``d``, bounds its distance from above; a triangle whose
-    vertices all lie farther than ``d + L`` (``L`` the longest edge) holds no point nearer than
-    ``d``. So only the triangles at a vertex within ``d + L`` are searched, exactly.
+    A point's nearest triangle centroid, at ``d``, bounds its distance from above; a triangle
+    whose centroid lies farther than ``min(d, upto) + r`` (``r`` its reach, the distance from
+    its centroid to its farthest corner) holds no point within that. So only the triangles
+    inside those balls are searched, exactly, the triangles grouped by reach
+    (:data:`REACH_QUANTILES`) so that each group's ball is as small as its triangles allow.
     """
     points = np.asarray(points, dtype=float).reshape(-1, 3)
     vertices, faces = np.asarray(mesh.vertices), np.asarray(mesh.faces)
     tri = vertices[faces]
-    longest = float(np.linalg.norm(tri - np.roll(tri, 1, axis=1), axis=2).max())
-    tree = cKDTree(vertices)
-    nearest, _ = tree.query(points)
-    out = np.maximum(nearest - longest, 0.0)  # the lower bound
-    need = np.flatnonzero(out <= upto)
-    if not len(need):
-        return out
-    order = np.argsort(faces.ravel(), kind="stable")  # each vertex's faces, in a row
-    start = np.searchsorted(faces.ravel()[order], np.arange(len(vertices) + 1))
-    face_of = order // 3
-    balls = tree.query_ball_point(points[need], nearest[need] + longest)
-    counts = np.fromiter(map(len, balls), np.int64, len(balls))
-    ball = np.fromiter(itertools.chain.from_iterable(balls), np.int64, int(counts.sum()))
-    owner = np.repeat(need, counts)  # the point of each (point, vertex) pair
-    pair, at = _spans(start, ball)  # each vertex's faces
-    key = np.sort(owner[pair] * len(faces) + face_of[at])
-    key = key[np.concatenate([[True], key[1:] != key[:-1]])]  # each (point, face) once
-    rows, cols = key // len(faces), key % len(faces)
+    centroid = tri.mean(1)
+    reach = np.linalg.norm(tri - centroid[:, None], axis=2).max(1)
+    edges = np.unique(np.quantile(reach, (*REACH_QUANTILES, 1.0)))
+    group = np.searchsorted(edges, reach)  # each triangle's: reach <= edges[group]
+    groups = [np.flatnonzero(group == g) for g in range(len(edges))]
+    groups = [(f, cKDTree(centroid[f]), float(reach[f].max())) for f in groups if len(f)]
+    nearest = np.min([tree.query(points)[0] for _, tree, _ in groups], axis=0)
+    sought = np.minimum(nearest, upto)
+    rows, cols = [], []
+    for f, tree, r in groups:
+        balls = tree.query_ball_point(points, sought + r)
+        counts = np.fromiter(map(len, balls), np.int64, len(balls))
+        rows.append(np.repeat(np.arange(len(points)), counts))
+        ball = np.fromiter(itertools.chain.from_iterable(balls), np.int64, int(counts.sum()))
+        cols.append(f[ball])
+    rows, cols = np.concatenate(rows), np.concatenate(cols)
     q, _ = closest_points(tri[cols], points[rows])
-    d = np.linalg.norm(q - points[rows], axis=1)
-    out[need] = np.inf
-    np.minimum.at(out, rows, d)
-    return out
+    out = np.full(len(points), np.inf)
+    np.minimum.at(out, rows, np.linalg.norm(q - points[rows], axis=1))
+    # a point with no triangle within upto lies farther: just above it is a lower bound
+    return np.minimum(out, np.nextafter(sought, np.inf))
 
 
 def contact(part: BodyPart, objects, tolerance: float = 0.002, split: str = "equal") -> Contact:

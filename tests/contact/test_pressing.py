@@ -169,10 +169,15 @@ def test_an_object_that_encloses_the_whole_part_is_named(plate):
 def test_the_distance_to_a_mesh_is_exact_and_bounded_past_what_is_asked():
     """Against brute force over every triangle (:func:`stmpl.geometry.closest_points`): exact
     everywhere by default; with ``upto``, exact where it is at most that, and a lower bound
-    above it elsewhere.
+    above it elsewhere; also on a mesh of fine and long triangles together (a fine ball beside
+    a box of 5 cm faces), which are searched in groups by size.
     """
     rng = np.random.default_rng(0)
-    for mesh in (objects.sphere(0.01), trimesh.creation.box((0.05, 0.02, 0.01))):
+    box = trimesh.creation.box((0.05, 0.02, 0.01))
+    mixed = trimesh.util.concatenate(
+        [objects.sphere(0.01), box.copy().apply_translation((0.02, 0, 0))]
+    )
+    for mesh in (objects.sphere(0.01), box, mixed):
         points = rng.normal(0, 0.02, (300, 3))
         tri = mesh.triangles
         brute = np.array(
