@@ -63,8 +63,10 @@ class HeldSkin(fem_holding.HeldSkin):
             dev = r.device
             rh = r[b].reshape(-1)[at_t.to(dev)].double()[:, None]
             f = torch.cholesky_solve(rh, L_t.to(dev)).to(r.dtype)[:, 0]
-            G = torch.from_numpy(s.G).to(dev)  # shares the store's memory on the CPU
-            out.append((G.index_select(1, at_t.to(dev)) @ f).reshape(r[b].shape))
+            # G's transpose shares the store's memory on the CPU, row by row: a held
+            # vertex's columns of G are its contiguous rows
+            GT = torch.from_numpy(s.G.T).to(dev)
+            out.append((f @ GT.index_select(0, at_t.to(dev))).reshape(r[b].shape))
         return torch.stack(out)
 
 
