@@ -374,6 +374,10 @@ class HeldSkin:
             self._closures[k] = (out, forces)
         return self._closures[k]
 
+    def forget_closures(self) -> None:
+        """Forget the closures kept (:meth:`closed`); the compliance and the holds stay."""
+        self._closures.clear()
+
     def answer(self, r, gap, thickness) -> np.ndarray:
         """``(N, 3)`` the skin held at ``r`` ``(N, 3)`` (any unit) on the held vertices of a
         sample with ``gap`` and ``thickness`` ``(N,)`` (m), the linear FEM's answer elsewhere;

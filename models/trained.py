@@ -211,6 +211,15 @@ class TrainedPredictor(BasePredictor):
         checkpoint does not carry. Nothing by default.
         """
 
+    def forget_scenes(self) -> None:
+        """Forget the closures kept of the poses answered (priors ``closure``, and the linear
+        FEM given a pose); what serves every scene of the body (the skin's compliance, its
+        factors) stays.
+        """
+        for skin in (getattr(self, "held_skin", None), getattr(self, "_held", None)):
+            if skin is not None:
+                skin.forget_closures()
+
     def predict(self, scenes, strict: bool | None = None):
         """As :meth:`BasePredictor.predict`; a scene on the mirror twin of the model's part
         (anny's right arm for a model of the left: :func:`stmpl.part.mirror_twin`) is

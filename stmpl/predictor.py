@@ -169,6 +169,12 @@ class BasePredictor:
         """
         return self._fidelity
 
+    def forget_scenes(self) -> None:
+        """Forget what was kept of the scenes answered (not what serves every scene of the
+        body), so that the next answer to a scene costs what a new scene's does: a timed call
+        after a warm-up measures that. Nothing is kept by default.
+        """
+
     def with_fidelity(self, fidelity: str) -> "BasePredictor":
         """A copy of this predictor (sharing its model and caches) at ``fidelity``."""
         other = copy.copy(self)

@@ -115,6 +115,8 @@ def answer(scene, specs: list[str], preds: list, strict: bool = False, force=Non
                     t0 = time.perf_counter()
                     p.predict(scene)
                     first = time.perf_counter() - t0
+                    if hasattr(p, "forget_scenes"):  # timed as a new scene, not a repeat
+                        p.forget_scenes()
                 out[label(spec)] = d = p.predict(scene)
         if strict and not d.info.get("physical", True):
             raise PredictionFailed(

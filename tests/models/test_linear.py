@@ -253,3 +253,8 @@ def test_given_a_pose_it_answers_the_closure_and_its_contact_forces(
         assert np.abs(inward[pushed] - s.pose.gap[pushed]).max() < 1e-3 * deepest
         np.testing.assert_array_equal(d.displacement, e.displacement)
         assert d.reaction == e.reaction
+    assert lin.held_skin._closures  # kept for the next call with the same pose ...
+    lin.forget_scenes()  # ... until forgotten: a timed call then pays a new pose's closure
+    assert not lin.held_skin._closures
+    again = lin.predict(scenes[0])
+    np.testing.assert_array_equal(again.displacement, lin.predict(scenes[0]).displacement)
