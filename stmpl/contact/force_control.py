@@ -90,6 +90,8 @@ def to_force(predictor, scene: Scene, force: float, rtol: float = 0.005, strict=
 
     lo, hi = _bracket(predictor.name, reaction, force)
     d = _between(predictor.name, reaction, force, rtol, lo, hi)
+    if hasattr(predictor, "forget_scenes"):  # its time a new scene's, not a kept try's
+        predictor.forget_scenes()
     answer = predictor.predict(at[d], strict=strict)
     answer.info["force_control"] = {
         "force": float(force),

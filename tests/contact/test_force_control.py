@@ -24,6 +24,10 @@ class Hertzian(BasePredictor):
     def __init__(self, k=2e4, most=np.inf, jump=None):
         self.k, self.most, self.jump, self.asked = k, most, jump, 0
         self.dent = False  # answer the skin pushed in as deep as the object reaches
+        self.forgot = None  # answers asked when it was last told to forget its scenes
+
+    def forget_scenes(self):
+        self.forgot = self.asked
 
     def reaction(self, depth):
         if self.jump is not None:
@@ -63,6 +67,7 @@ def test_the_object_is_pressed_to_the_depth_whose_reaction_is_the_force(start, f
     again = moved(start, 1e-3 * fc["moved_mm"])  # the answer's scene: the start moved that far
     np.testing.assert_allclose(again.pose.gap, a.scene.pose.gap, atol=1e-12)
     assert fc["answers"] == p.asked <= 20
+    assert p.forgot == p.asked - 1  # the answer returned is timed as a new scene's
 
 
 def test_a_pose_already_past_the_force_is_moved_back(start):
