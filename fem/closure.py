@@ -52,6 +52,46 @@ SLIP_PASSES = 8
 vertices or lets go of pulled ones; a pass that changes neither ends it)."""
 
 
+class HeldColumns:
+    """The compliance among ``k`` held vertices, ``G[at][:, at]`` ``(3 k, 3 k)`` (m/N, float64),
+    read from the skin's whole compliance ``G`` ``(3 N, 3 N)`` column by column as the closure
+    first asks for a column (``at`` ``(3 k,)``: the held DOFs, vertex by vertex, x y z; None:
+    ``G`` is the held block itself). A grip's contact meets a few of the two hundred vertices
+    it holds: on the forearm grips' 96 poses the closure reads 3 % of the block's columns
+    (median; at most 8 %), where gathering the whole block (290k entries scattered over the
+    skin's 160 MB compliance) took a third of the closure's time. The answers are the same
+    (within 1e-14 of the largest force on those poses).
+    """
+
+    def __init__(self, G: np.ndarray, at: np.ndarray | None = None):
+        G = np.asarray(G)
+        self._G, self._at = G, None if at is None else np.asarray(at, dtype=np.int64)
+        m = G.shape[0] if at is None else len(self._at)
+        self.shape = (m, m) if at is not None else G.shape
+        self._cols = np.empty((m, m)) if at is not None else None
+        self._have = np.zeros(m, bool)
+
+    def columns(self, j: np.ndarray) -> np.ndarray:
+        """``(3 k, len(j))`` float64: the block's columns ``j`` (its own DOF numbers); refused
+        where a column read is not finite.
+        """
+        j = np.asarray(j, dtype=np.int64)
+        if self._at is None:
+            return np.asarray(self._G[:, j], dtype=np.float64)
+        new = j[~self._have[j]]
+        if len(new):
+            block = self._G[:, self._at[new]][self._at]
+            if not np.isfinite(block).all():
+                raise ValueError("closure: G is not finite")
+            self._cols[:, new] = block
+            self._have[new] = True
+        return self._cols[:, j]
+
+    def block(self, j: np.ndarray) -> np.ndarray:
+        """``(len(j), len(j))``: the block's rows and columns ``j``."""
+        return self.columns(j)[np.asarray(j, dtype=np.int64)]
+
+
 def closure_forces(
     G,
     normals,
@@ -67,8 +107,10 @@ def closure_forces(
     ``(k,)`` m the gap field of the pose; ``way`` ``(k, 3)`` m per m the way field;
     ``friction`` Coulomb's coefficient (``inf``: the skin sticks); ``steps`` of the closing;
     ``rounding`` m the objects' surface offset. The skin's displacement is ``G @ f.ravel()``.
+    ``G`` may be a :class:`HeldColumns` (read as the contact reaches its vertices).
     """
-    G = np.asarray(G, dtype=np.float64)
+    if not isinstance(G, HeldColumns):
+        G = np.asarray(G, dtype=np.float64)
     n = np.asarray(normals, dtype=np.float64)
     g = np.asarray(gap, dtype=np.float64)
     w = np.asarray(way, dtype=np.float64)
@@ -78,7 +120,8 @@ def closure_forces(
             f"closure: gap (k,), normals and way (k, 3), G (3k, 3k) for k = {k}; got "
             f"{g.shape}, {n.shape}, {w.shape}, {G.shape}"
         )
-    for name, x in (("G", G), ("normals", n), ("gap", g), ("way", w)):
+    dense = not isinstance(G, HeldColumns)
+    for name, x in (("G", G if dense else 0.0), ("normals", n), ("gap", g), ("way", w)):
         if not np.isfinite(x).all():
             raise ValueError(f"closure: {name} is not finite")
     if not (friction >= 0):
@@ -87,6 +130,8 @@ def closure_forces(
         raise ValueError(f"closure: steps must be a whole number >= 1, got {steps!r}")
     if not (np.isfinite(rounding) and rounding >= 0):
         raise ValueError(f"closure: rounding must be a length >= 0 m, got {rounding!r}")
+    if dense:
+        G = HeldColumns(G)
     g = g - rounding
     c = np.maximum(-(w * n).sum(1), MIN_OPENING)
     forces = np.zeros((k, 3))
@@ -109,17 +154,25 @@ def closure_forces(
         A, f = contact_forces(G, A, n[A], target, friction)
         forces = np.zeros((k, 3))
         forces[A] = f
-        u = (G @ forces.ravel()).reshape(k, 3)
+        u = (G.columns(_dofs(A)) @ f.ravel()).reshape(k, 3)  # the load is on A alone
     return forces
+
+
+def _dofs(A: np.ndarray) -> np.ndarray:
+    """``(3 a,)`` the DOFs of vertices ``A`` ``(a,)``, vertex by vertex, x y z."""
+    return (np.asarray(A)[:, None] * 3 + np.arange(3)).ravel()
 
 
 def contact_forces(G, A, normals, target, friction: float) -> tuple[np.ndarray, np.ndarray]:
     """``(A', f)``: the vertices of ``A`` ``(a,)`` that stay in contact and their forces
     ``(a', 3)`` (N) for the skin to meet ``target`` ``(a, 3)`` (m) there: whole where a vertex
     sticks, along ``normals`` ``(a, 3)`` where it slips (Coulomb's ``friction``); the rest of
-    the ``k`` vertices of the compliance ``G`` ``(3 k, 3 k)`` are free of load. Vertices the
-    answer would pull are let go (and the rest solved again).
+    the ``k`` vertices of the compliance ``G`` ``(3 k, 3 k)`` (an array or a
+    :class:`HeldColumns`) are free of load. Vertices the answer would pull are let go (and the
+    rest solved again).
     """
+    if not isinstance(G, HeldColumns):
+        G = HeldColumns(np.asarray(G, dtype=np.float64))
     A = np.asarray(A)
     n, target = np.asarray(normals), np.asarray(target)
     slip = np.zeros(len(A), bool) if np.isfinite(friction) else None
@@ -152,8 +205,7 @@ def _solve(G, A, n, target, slip, along, friction) -> np.ndarray:
     push, ``along`` its tangential direction).
     """
     a = len(A)
-    rows = (A[:, None] * 3 + np.arange(3)).ravel()
-    GAA = G[np.ix_(rows, rows)]
+    GAA = G.block(_dofs(A))
     if slip is None or not slip.any():
         return np.linalg.solve(GAA, target.ravel()).reshape(a, 3)
     stick = np.flatnonzero(~slip)

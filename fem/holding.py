@@ -30,7 +30,7 @@ import numpy as np
 import scipy.linalg
 from tqdm import tqdm
 
-from fem.closure import closure_forces
+from fem.closure import HeldColumns, closure_forces
 from fem.finer import FinerPart, meshed
 from fem.friction import SKIN_FRICTION
 from fem.shapes import ROUNDING
@@ -362,7 +362,8 @@ class HeldSkin:
                 s.solve(H)
                 at = (H[:, None] * 3 + np.arange(3)).ravel()
                 n = self.part.normals[H]
-                f = closure_forces(s.G[np.ix_(at, at)], n, g[H], w[H], friction, rounding=rounding)
+                G = HeldColumns(s.G, at)  # read as the contact reaches a vertex
+                f = closure_forces(G, n, g[H], w[H], friction, rounding=rounding)
                 pushed = np.flatnonzero(f.any(1))  # the skin the objects push: a few vertices
                 cols = (H[pushed][:, None] * 3 + np.arange(3)).ravel()
                 out = (s.G[:, cols] @ f[pushed].ravel().astype(np.float32)).reshape(-1, 3)

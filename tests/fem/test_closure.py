@@ -6,7 +6,7 @@ its conditions on a coupled patch.
 import numpy as np
 import pytest
 
-from fem.closure import closure_forces
+from fem.closure import HeldColumns, closure_forces
 
 G1 = 1e-3  # m/N: one vertex's isotropic compliance
 Z = np.array([[0.0, 0.0, 1.0]])  # its outward normal
@@ -102,3 +102,30 @@ def test_bad_input_is_refused_by_name(change, words):
     }
     with pytest.raises(ValueError, match=words):
         closure_forces(**args)
+
+
+def test_the_held_block_read_column_by_column_answers_as_the_whole_block():
+    """The held vertices' compliance read from a larger skin's as the contact reaches them
+    (:class:`HeldColumns`) gives the forces the whole block does, reading only the columns of
+    the vertices the objects touch; a column that is not finite is refused by name.
+    """
+    x, G = _patch(k=30, seed=1)
+    held = np.arange(3, 25)  # the vertices near the objects, in a larger skin
+    at = (held[:, None] * 3 + np.arange(3)).ravel()
+    n = np.tile([0.0, 0.0, 1.0], (len(held), 1))
+    r = np.linalg.norm(x[held, :2], axis=1)
+    gap = 0.002 * (r / 0.02) ** 2 - 0.0008  # a shallow ball: the middle few vertices touched
+    way = np.tile([0.2, 0.0, -1.0], (len(held), 1))
+    G = np.asfortranarray(G.astype(np.float32))  # kept as the skin's compliance is
+    whole = closure_forces(G[np.ix_(at, at)], n, gap, way, 0.5, 20, 0.0005)
+    block = HeldColumns(G, at)
+    read = closure_forces(block, n, gap, way, 0.5, 20, 0.0005)
+    np.testing.assert_allclose(read, whole, rtol=0, atol=1e-12 * np.abs(whole).max())
+    touched = np.flatnonzero(whole.any(1))
+    assert 0 < len(touched) < len(held) // 2
+    assert block._have.sum() < 3 * len(held) // 2  # not every column was read
+    assert block._have[(touched[:, None] * 3 + np.arange(3)).ravel()].all()
+    bad = G.copy(order="F")
+    bad[:, at[3 * touched[0]]] = np.nan
+    with pytest.raises(ValueError, match="G is not finite"):
+        closure_forces(HeldColumns(bad, at), n, gap, way, 0.5, 20, 0.0005)
