@@ -44,6 +44,7 @@ DEFAULTS = {
     "bodies": None,
     "friction": 0.0,
     "thickness_cycle": False,
+    "force_tolerance": 0.01,
 }
 OPTIONAL = {
     "fidelity": "full",
@@ -52,6 +53,7 @@ OPTIONAL = {
     "tissue": "paper",
     "friction": 0.0,
     "thickness_cycle": False,
+    "force_tolerance": 0.01,
 }
 """Keys whose default leaves a config's hash as it was before the key existed."""
 """``bodies``: ``phenotypes`` (a list of anny phenotypes), ``sample`` (``{count, seed, age}``:
@@ -156,20 +158,7 @@ def check(cfg: dict) -> None:
     _check_setup(cfg)
     _check_tissue(cfg)
     checked.one_of(cfg["fidelity"], "fidelity", FIDELITIES)
-    presses = sorted(set(cfg["placements"]) & set(PRESSES))
-    if presses and cfg["fidelity"] != "full":
-        raise ValueError(
-            f"fidelity {cfg['fidelity']}: {', '.join(presses)} are solved on the whole part "
-            "(fidelity: full)"
-        )
-    checked.number(cfg["friction"], "friction", 0, unit="(Coulomb's coefficient, fem.friction)")
-    if cfg["friction"] and not presses:
-        raise ValueError(
-            f"friction {cfg['friction']:g}: only pressed objects ({', '.join(PRESSES)}) rub on "
-            "the skin; the config has none"
-        )
-    if presses and cfg["linear"]:
-        raise ValueError(f"linear: {', '.join(presses)} have no linear FEM answer (linear: false)")
+    _check_presses(cfg)
     if not isinstance(cfg["thickness_cycle"], bool):
         raise ValueError(f"thickness_cycle must be true or false, got {cfg['thickness_cycle']!r}")
     for kind, spec in cfg["placements"].items():
@@ -182,6 +171,34 @@ def check(cfg: dict) -> None:
         raise ValueError(f"linear must be true or false, got {cfg['linear']!r}")
     if cfg["bodies"] is not None:
         check_bodies(cfg)
+
+
+def _check_presses(cfg: dict) -> None:
+    """The keys that only pressed objects read: ``fidelity`` (full), ``friction``,
+    ``force_tolerance`` and ``linear`` (none).
+    """
+    presses = sorted(set(cfg["placements"]) & set(PRESSES))
+    if presses and cfg["fidelity"] != "full":
+        raise ValueError(
+            f"fidelity {cfg['fidelity']}: {', '.join(presses)} are solved on the whole part "
+            "(fidelity: full)"
+        )
+    checked.number(cfg["friction"], "friction", 0, unit="(Coulomb's coefficient, fem.friction)")
+    if cfg["friction"] and not presses:
+        raise ValueError(
+            f"friction {cfg['friction']:g}: only pressed objects ({', '.join(PRESSES)}) rub on "
+            "the skin; the config has none"
+        )
+    tol = cfg["force_tolerance"]
+    if isinstance(tol, bool) or not isinstance(tol, (int, float)) or not 0 < tol < 0.5:
+        raise ValueError(f"force_tolerance must be a share of each force in (0, 0.5), got {tol!r}")
+    if tol != DEFAULTS["force_tolerance"] and not presses:
+        raise ValueError(
+            f"force_tolerance {tol:g}: only pressed objects ({', '.join(PRESSES)}) are driven to "
+            "their forces by force control; the config has none"
+        )
+    if presses and cfg["linear"]:
+        raise ValueError(f"linear: {', '.join(presses)} have no linear FEM answer (linear: false)")
 
 
 def _check_placements(pl) -> None:

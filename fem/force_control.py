@@ -100,17 +100,25 @@ def press_to_forces(
     friction: float = 0.0,
     coupled: bool = True,
     start: Pressed | None = None,
+    rtol: float = 0.01,
 ) -> list[Pressed]:
     """:func:`press_to_force` to each of ``forces`` (N, rising) in turn, each from the last
     answer (the first from ``start``: an earlier answer of the same press, or rest); after a
     failure the rest are failed as skipped. ``on_answer(force, answer)``: called as each ends (a
-    progress report); ``friction`` and ``coupled`` as for :func:`press_to_force`.
+    progress report); ``friction``, ``coupled`` and ``rtol`` as for :func:`press_to_force`.
     """
     out, last, failed = [], start, None
     for f in forces:
         if failed is None:
             a = press_to_force(
-                solver, shape, direction, float(f), start=last, friction=friction, coupled=coupled
+                solver,
+                shape,
+                direction,
+                float(f),
+                rtol=rtol,
+                start=last,
+                friction=friction,
+                coupled=coupled,
             )
             last, failed = (a, None) if a.ok else (last, f)
         else:

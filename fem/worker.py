@@ -266,7 +266,8 @@ def _shared(shard: _Shard, t: _Task) -> None:
 def _press(shard: _Shard, t: _Task) -> None:
     """One press task: the placement's object pushed by force control to each force level in
     turn (each from the last one's answer, :func:`fem.force_control.press_to_force`: the depth
-    solved with the displacement, or found within 1 % where the search takes over) into the
+    solved with the displacement, or found within the config's ``force_tolerance``, 1 % by
+    default, where the search takes over) into the
     tissue of the whole part. Each answer is a sample: its ``force`` the contact
     force on each vertex (N: the contact pressure times the vertex's area, summing to the total
     normal contact force), ``pressure`` (Pa), ``push`` (Pa: the pressure's part along the press
@@ -337,7 +338,14 @@ def _press(shard: _Shard, t: _Task) -> None:
         )
 
     press_to_forces(
-        solver, shape, direction, forces, record, friction=cfg["friction"], start=kept["last"]
+        solver,
+        shape,
+        direction,
+        forces,
+        record,
+        friction=cfg["friction"],
+        start=kept["last"],
+        rtol=cfg.get("force_tolerance", 0.01),
     )
 
 

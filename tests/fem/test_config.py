@@ -52,6 +52,9 @@ def _cfg(**over):
         ({"placements": {"disk": {"centres": 4, "skip": 4}}}, "skip 4 leaves none of its 4"),
         ({"placements": {"disk": {"skip": -1}}}, "placements.disk.skip must be an integer >= 0"),
         ({"thickness_cycle": "yes"}, "thickness_cycle must be true or false"),
+        ({"force_tolerance": 0.5}, r"force_tolerance must be a share of each force in \(0, 0.5\)"),
+        ({"force_tolerance": True}, "force_tolerance must be a share"),
+        ({"force_tolerance": 0.2}, "force_tolerance 0.2: only pressed objects"),
     ],
 )
 def test_bad_values_are_named(over, message):

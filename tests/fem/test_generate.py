@@ -508,6 +508,46 @@ def test_a_dataset_of_grips_holds_the_hand_s_squeeze_and_pose(tmp_path):
         read_config(_cfg(placements={"press_grip": {"along": [0.5]}}, friction=-1))
 
 
+def test_a_press_set_meets_its_forces_within_its_force_tolerance(tmp_path, monkeypatch):
+    """A set's ``force_tolerance`` is what force control meets each force within (a training
+    set for pose models, whose force levels only spread the squeezes, may take a wide one and
+    spare the search's later tries); left at its default, the config's hash is the one from
+    before the key existed.
+    """
+    import fem.worker
+    from fem.config import config_hash
+    from fem.contact import Pressed
+
+    seen = []
+
+    def stand_in(solver, shape, direction, forces, on_answer=None, rtol=0.01, **kw):
+        seen.append(rtol)
+        out = [Pressed(False, "stand-in", float("nan")) for _ in forces]
+        for f, a in zip(forces, out):
+            on_answer(f, a)
+        return out
+
+    monkeypatch.setattr(fem.worker, "press_to_forces", stand_in)
+    over = {
+        "placements": {"press_sphere": {"centres": 1, "radii": [0.008]}},
+        "thickness_mm": [5.0],
+        "forces": [0.05],
+        "tissue": "forearm",
+        "resolution": {"subdivisions": 0, "layers": 1, "refine_radius": 0.02, "order": 2},
+    }
+    generate(_cfg(force_tolerance=0.2, **over), tmp_path / "wide", progress=False)
+    assert seen == [0.2]
+    card = Dataset(tmp_path / "wide").card
+    assert card["config"]["force_tolerance"] == 0.2 and card["failures_by_reason"] == {
+        "stand-in": 1
+    }
+    default = read_config(_cfg(**over))
+    assert config_hash(default) == config_hash(
+        {k: v for k, v in default.items() if k != "force_tolerance"}
+    )
+    assert config_hash(read_config(_cfg(force_tolerance=0.2, **over))) != config_hash(default)
+
+
 def test_pressed_objects_keep_clear_of_the_held_rims():
     """A press's centre keeps its radius plus twice the deepest tissue from the part's cut
     rims (held in place by the FEM), and a part too small for the centres asked is refused.
