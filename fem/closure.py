@@ -34,10 +34,13 @@ prior alone: 5.1 % and 6.2 %; ``benchmarks/grip_closure.py``). Lengths in m, for
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from fem.friction import SKIN_FRICTION
 from fem.shapes import ROUNDING
+from stmpl import jit
 
 STEPS = 20
 """Steps of the replayed closing (on the forearm grips' test split the relative MEE at 10, 20
@@ -100,6 +103,7 @@ def closure_forces(
     friction: float = SKIN_FRICTION,
     steps: int = STEPS,
     rounding: float = ROUNDING,
+    compiled: bool | None = None,
 ) -> np.ndarray:
     """``(k, 3)`` N: the contact force on each of ``k`` skin vertices as the objects close to
     their pose (see the module). ``G`` ``(3 k, 3 k)`` m/N: the compliance among the vertices
@@ -108,6 +112,9 @@ def closure_forces(
     ``friction`` Coulomb's coefficient (``inf``: the skin sticks); ``steps`` of the closing;
     ``rounding`` m the objects' surface offset. The skin's displacement is ``G @ f.ravel()``.
     ``G`` may be a :class:`HeldColumns` (read as the contact reaches its vertices).
+    ``compiled``: the steps in the compiled loop (:func:`_kernel`; the same answers within
+    rounding, a tenth of the time), where Numba is installed; ``None``: where Numba is loaded
+    in the process already (its import costs a one-off answer more than it saves).
     """
     if not isinstance(G, HeldColumns):
         G = np.asarray(G, dtype=np.float64)
@@ -141,6 +148,10 @@ def closure_forces(
     u = np.zeros((k, 3))
     along = w - (w * n).sum(1, keepdims=True) * n  # the objects' sweep along the skin
     taus = np.linspace(travel, 0.0, steps + 1)
+    kernel = _kernel() if (jit.loaded() if compiled is None else compiled) else None
+    if kernel is not None:
+        big, at = (G._G, G._at) if G._at is not None else (G._G, np.arange(3 * k))
+        return kernel(big, at, n, g, c, along, taus, float(friction), SLIP_PASSES)
     for before, tau in zip(taus[:-1], taus[1:]):
         gap_now = g + tau * c - (n * u).sum(1)
         pushed = (forces * n).sum(1) < 0
@@ -222,3 +233,200 @@ def _solve(G, A, n, target, slip, along, friction) -> np.ndarray:
         C[3 * v : 3 * v + 3, col] = n[v]
     x = np.linalg.solve(C.T @ GAA @ B, C.T @ target.ravel())
     return (B @ x).reshape(a, 3)
+
+
+@functools.lru_cache(maxsize=1)
+def _kernel():
+    """:func:`closure_forces`'s steps (and :func:`contact_forces`' and :func:`_solve`'s work
+    within them) as one compiled loop, or ``None`` without Numba: ``kernel(G, at, n, g, c,
+    along, taus, friction, passes)`` with the compliance ``G`` ``(3 N, 3 N)`` whose DOFs ``at``
+    are held (its columns read as the contact reaches them), ``g`` the gap less the rounding,
+    ``c`` each vertex's opening rate, ``along`` the objects' sweep along the skin and ``taus``
+    the closing's steps, all as :func:`closure_forces` makes them. The same operations in the
+    same order; only the skin's displacement from the forces is summed in another order
+    (within some 1e-15 of the forces on the forearm grips).
+    """
+    compile_ = jit.njit(error_model="numpy")
+    if compile_ is None:
+        return None
+    dofs, read = _dofs_loop(compile_), _read_loop(compile_)
+    solve = _solve_loop(compile_, dofs, read)
+    return _closure_loop(compile_, _contact_loop(compile_, solve), read, dofs)
+
+
+def _dofs_loop(compile_):
+    """The DOFs of vertices ``A``, compiled."""
+
+    @compile_
+    def dofs(A):  # pragma: no cover - compiled
+        out = np.empty(3 * A.shape[0], np.int64)
+        for i in range(A.shape[0]):
+            for d in range(3):
+                out[3 * i + d] = 3 * A[i] + d
+        return out
+
+    return dofs
+
+
+def _read_loop(compile_):
+    """The held block's columns read into ``cols`` as first asked for, compiled."""
+
+    @compile_
+    def read(G, at, cols, have, rows):  # pragma: no cover - compiled
+        for q in rows:
+            if not have[q]:
+                col = at[q]
+                for r in range(at.shape[0]):
+                    v = G[at[r], col]
+                    if not np.isfinite(v):
+                        raise ValueError("closure: G is not finite")
+                    cols[r, q] = v
+                have[q] = True
+
+    return read
+
+
+def _solve_loop(compile_, dofs, read):
+    """:func:`_solve`, compiled."""
+
+    @compile_
+    def solve(G, at, cols, have, A, n, target, slip, along, friction):  # pragma: no cover
+        a = A.shape[0]
+        rows = dofs(A)
+        read(G, at, cols, have, rows)
+        GAA = np.empty((3 * a, 3 * a))
+        for i in range(3 * a):
+            for j in range(3 * a):
+                GAA[i, j] = cols[rows[i], rows[j]]
+        t = target.copy().reshape(3 * a)
+        if not slip.any():
+            return np.linalg.solve(GAA, t).reshape(a, 3)
+        stick = np.nonzero(~slip)[0]
+        slipping = np.nonzero(slip)[0]
+        s3 = 3 * stick.shape[0]
+        m = s3 + slipping.shape[0]
+        B = np.zeros((3 * a, m))
+        C = np.zeros((3 * a, m))
+        for j in range(stick.shape[0]):
+            v = stick[j]
+            for d in range(3):
+                B[3 * v + d, 3 * j + d] = 1.0
+                C[3 * v + d, 3 * j + d] = 1.0
+        for q in range(slipping.shape[0]):
+            v = slipping[q]
+            for d in range(3):
+                B[3 * v + d, s3 + q] = n[v, d] - friction * along[v, d]
+                C[3 * v + d, s3 + q] = n[v, d]
+        CT = np.ascontiguousarray(C.T)
+        x = np.linalg.solve(CT @ GAA @ B, CT @ t)
+        return (B @ x).reshape(a, 3)
+
+    return solve
+
+
+def _contact_loop(compile_, solve):
+    """:func:`contact_forces`, compiled."""
+
+    @compile_
+    def contact(G, at, cols, have, A, n, target, friction, passes):  # pragma: no cover
+        sticks = not np.isfinite(friction)
+        slip = np.zeros(A.shape[0], np.bool_)
+        along = np.zeros((A.shape[0], 3))
+        f = np.zeros((A.shape[0], 3))
+        for _ in range(passes):
+            f = solve(G, at, cols, have, A, n, target, slip, along, friction)
+            a = A.shape[0]
+            fn = np.empty(a)
+            for i in range(a):
+                fn[i] = f[i, 0] * n[i, 0] + f[i, 1] * n[i, 1] + f[i, 2] * n[i, 2]
+            pulled = fn > 0
+            m = pulled.sum()
+            if m > 0 and m < a:
+                keep = np.nonzero(~pulled)[0]
+                A, n, target, along, slip = A[keep], n[keep], target[keep], along[keep], slip[keep]
+                continue
+            if m == a:
+                return A[:0], np.zeros((0, 3))
+            if sticks:
+                return A, f
+            over = np.zeros(a, np.bool_)
+            ft = np.empty((a, 3))
+            size = np.empty(a)
+            for i in range(a):
+                for d in range(3):
+                    ft[i, d] = f[i, d] - fn[i] * n[i, d]
+                size[i] = np.sqrt(ft[i, 0] * ft[i, 0] + ft[i, 1] * ft[i, 1] + ft[i, 2] * ft[i, 2])
+                over[i] = (not slip[i]) and size[i] > friction * -fn[i] * (1 + 1e-9)
+            if not over.any():
+                return A, f
+            for i in range(a):
+                if over[i]:
+                    for d in range(3):
+                        along[i, d] = ft[i, d] / max(size[i], 1e-300)
+                    slip[i] = True
+        return A, f
+
+    return contact
+
+
+def _closure_loop(compile_, contact, read, dofs):
+    """The closing's steps of :func:`closure_forces`, compiled."""
+
+    @compile_
+    def closure(G, at, n, g, c, along, taus, friction, passes):  # pragma: no cover
+        k = g.shape[0]
+        cols = np.empty((3 * k, 3 * k))
+        have = np.zeros(3 * k, np.bool_)
+        forces = np.zeros((k, 3))
+        u = np.zeros((k, 3))
+        gap_now = np.empty(k)
+        pushed = np.zeros(k, np.bool_)
+        for s in range(taus.shape[0] - 1):
+            before, tau = taus[s], taus[s + 1]
+            touched = np.empty(k, np.int64)
+            a = 0
+            for i in range(k):
+                gap_now[i] = (
+                    g[i] + tau * c[i] - (n[i, 0] * u[i, 0] + n[i, 1] * u[i, 1] + n[i, 2] * u[i, 2])
+                )
+                push = forces[i, 0] * n[i, 0] + forces[i, 1] * n[i, 1] + forces[i, 2] * n[i, 2]
+                pushed[i] = push < 0
+                if gap_now[i] <= 0 or pushed[i]:
+                    touched[a] = i
+                    a += 1
+            if a == 0:
+                continue
+            A = touched[:a].copy()
+            nA = np.empty((a, 3))
+            target = np.empty((a, 3))
+            dt = before - tau
+            for q in range(a):
+                i = A[q]
+                share = 1.0
+                if not pushed[i]:
+                    share = min(max(-gap_now[i] / (c[i] * dt), 0.0), 1.0)
+                for d in range(3):
+                    nA[q, d] = n[i, d]
+                    target[q, d] = u[i, d] + share * along[i, d] * dt
+            for q in range(a):
+                i = A[q]
+                dot = nA[q, 0] * target[q, 0] + nA[q, 1] * target[q, 1] + nA[q, 2] * target[q, 2]
+                gap_q = g[i] + tau * c[i] - dot
+                for d in range(3):
+                    target[q, d] = target[q, d] + nA[q, d] * gap_q
+            A, f = contact(G, at, cols, have, A, nA, target, friction, passes)
+            forces[:] = 0.0
+            u[:] = 0.0
+            rows = dofs(A)
+            read(G, at, cols, have, rows)
+            for q in range(A.shape[0]):
+                for d in range(3):
+                    forces[A[q], d] = f[q, d]
+            for r in range(3 * k):
+                acc = 0.0
+                for q in range(rows.shape[0]):
+                    acc += cols[r, rows[q]] * f[q // 3, q % 3]
+                u[r // 3, r % 3] = acc
+        return forces
+
+    return closure

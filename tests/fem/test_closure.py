@@ -129,3 +129,31 @@ def test_the_held_block_read_column_by_column_answers_as_the_whole_block():
     bad[:, at[3 * touched[0]]] = np.nan
     with pytest.raises(ValueError, match="G is not finite"):
         closure_forces(HeldColumns(bad, at), n, gap, way, 0.5, 20, 0.0005)
+
+
+@pytest.mark.parametrize("friction", [0.0, 0.5, np.inf])
+def test_the_compiled_closure_answers_as_the_numpy_one(friction):
+    """The closing's steps compiled (Numba) give NumPy's forces within rounding, on a coupled
+    patch pressed and swept so that vertices stick, slip and are let go; a compliance that is
+    not finite where the contact reads it is refused by name.
+    """
+    x, G = _patch(k=40, seed=2)
+    held = np.arange(5, 35)
+    at = (held[:, None] * 3 + np.arange(3)).ravel()
+    n = np.tile([0.0, 0.0, 1.0], (len(held), 1))
+    r = np.linalg.norm(x[held, :2] - [0.004, 0.0], axis=1)
+    gap = 0.002 * (r / 0.02) ** 2 - 0.0012
+    way = np.column_stack([0.6 * np.ones(len(held)), 0.1 * x[held, 1] / 0.02, -np.ones(len(held))])
+    G = np.asfortranarray(G.astype(np.float32))
+    args = (n, gap, way, friction, 20, 0.0005)
+    eager = closure_forces(HeldColumns(G, at), *args, compiled=False)
+    fast = closure_forces(HeldColumns(G, at), *args, compiled=True)
+    assert (eager * n).sum(1).min() < 0  # something pushed
+    np.testing.assert_allclose(fast, eager, rtol=0, atol=1e-12 * np.abs(eager).max())
+    dense = closure_forces(G[np.ix_(at, at)].astype(np.float64), *args, compiled=True)
+    np.testing.assert_allclose(dense, eager, rtol=0, atol=1e-12 * np.abs(eager).max())
+    bad = G.copy(order="F")
+    touched = held[np.flatnonzero(eager.any(1))[0]]
+    bad[:, 3 * touched] = np.nan
+    with pytest.raises(ValueError, match="G is not finite"):
+        closure_forces(HeldColumns(bad, at), *args, compiled=True)
