@@ -63,6 +63,10 @@ class HeldSkin(fem_holding.HeldSkin):
             dev = r.device
             rh = r[b].reshape(-1)[at_t.to(dev)].double()[:, None]
             f = torch.cholesky_solve(rh, L_t.to(dev)).to(r.dtype)[:, 0]
+            if dev.type == "cpu" and not torch.is_grad_enabled():  # an answer: G read in place
+                u = fem_holding.held_product(s.G, at, f.numpy())
+                out.append(torch.from_numpy(u).to(r.dtype).reshape(r[b].shape))
+                continue
             # G's transpose shares the store's memory on the CPU, row by row: a held
             # vertex's columns of G are its contiguous rows
             GT = torch.from_numpy(s.G.T).to(dev)

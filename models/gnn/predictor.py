@@ -171,8 +171,10 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         rows ``keep`` (ids ``b E + e``, numpy) of them.
         """
         E = self.edge_index.shape[1]
-        rows = np.arange(B * E) if keep is None else np.asarray(keep)
         slots = np.zeros(1, int) if body is None else body.cpu().numpy()
+        if keep is None and B == 1:  # one scene's every edge: its body's encoded edges as kept
+            return self.edges(int(slots[0]))
+        rows = np.arange(B * E) if keep is None else np.asarray(keep)
         if (slots == slots[0]).all():  # one body: its own encoded edges, nothing copied
             enc, at = self.edges(int(slots[0])), rows % E
         else:  # the bodies' encoded edges one after another; each row's body's

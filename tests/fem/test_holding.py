@@ -8,7 +8,7 @@ import pytest
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
-from fem.holding import Holding, SkinCompliance
+from fem.holding import Holding, SkinCompliance, held_product
 from stmpl.body import tube
 
 RES = {"subdivisions": 0, "layers": 1, "order": 2}
@@ -122,3 +122,25 @@ def test_the_skin_compliance_is_solved_once_and_read_back_from_the_cache(part):
     np.testing.assert_array_equal(broken.columns(held), got)
     with pytest.raises(ValueError, match="held by the mesh itself"):
         s.columns([part.rims[0][0]])
+
+
+def test_the_held_product_reads_the_columns_in_place_as_numpy_gathers_them(monkeypatch):
+    """``G[:, at] @ f`` of a compliance kept column by column: compiled where Numba is loaded
+    (the columns read in place, summed in float64), NumPy's gather otherwise; the two agree to
+    float32's rounding.
+    """
+    import stmpl.jit
+
+    rng = np.random.default_rng(0)
+    G = np.asfortranarray(rng.normal(size=(300, 300)).astype(np.float32))
+    at = np.sort(rng.choice(300, 60, replace=False))
+    f = rng.normal(size=60).astype(np.float32)
+    exact = G[:, at].astype(np.float64) @ f.astype(np.float64)
+    monkeypatch.setattr(stmpl.jit, "loaded", lambda: False)
+    plain = held_product(G, at, f)
+    monkeypatch.setattr(stmpl.jit, "loaded", lambda: True)
+    fast = held_product(G, at, f)
+    assert plain.dtype == fast.dtype == np.float32 and fast.shape == (300,)
+    scale = np.abs(exact).max()
+    np.testing.assert_allclose(fast, exact, rtol=0, atol=1e-6 * scale)
+    np.testing.assert_allclose(plain, exact, rtol=0, atol=1e-5 * scale)
