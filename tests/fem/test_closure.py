@@ -106,8 +106,9 @@ def test_bad_input_is_refused_by_name(change, words):
 
 def test_the_held_block_read_column_by_column_answers_as_the_whole_block():
     """The held vertices' compliance read from a larger skin's as the contact reaches them
-    (:class:`HeldColumns`) gives the forces the whole block does, reading only the columns of
-    the vertices the objects touch; a column that is not finite is refused by name.
+    (:class:`HeldColumns`, NumPy's steps) gives the forces the whole block does, reading only
+    the columns of the vertices the objects touch; a column that is not finite is refused by
+    name.
     """
     x, G = _patch(k=30, seed=1)
     held = np.arange(3, 25)  # the vertices near the objects, in a larger skin
@@ -117,9 +118,9 @@ def test_the_held_block_read_column_by_column_answers_as_the_whole_block():
     gap = 0.002 * (r / 0.02) ** 2 - 0.0008  # a shallow ball: the middle few vertices touched
     way = np.tile([0.2, 0.0, -1.0], (len(held), 1))
     G = np.asfortranarray(G.astype(np.float32))  # kept as the skin's compliance is
-    whole = closure_forces(G[np.ix_(at, at)], n, gap, way, 0.5, 20, 0.0005)
+    whole = closure_forces(G[np.ix_(at, at)], n, gap, way, 0.5, 20, 0.0005, compiled=False)
     block = HeldColumns(G, at)
-    read = closure_forces(block, n, gap, way, 0.5, 20, 0.0005)
+    read = closure_forces(block, n, gap, way, 0.5, 20, 0.0005, compiled=False)
     np.testing.assert_allclose(read, whole, rtol=0, atol=1e-12 * np.abs(whole).max())
     touched = np.flatnonzero(whole.any(1))
     assert 0 < len(touched) < len(held) // 2
@@ -128,7 +129,7 @@ def test_the_held_block_read_column_by_column_answers_as_the_whole_block():
     bad = G.copy(order="F")
     bad[:, at[3 * touched[0]]] = np.nan
     with pytest.raises(ValueError, match="G is not finite"):
-        closure_forces(HeldColumns(bad, at), n, gap, way, 0.5, 20, 0.0005)
+        closure_forces(HeldColumns(bad, at), n, gap, way, 0.5, 20, 0.0005, compiled=False)
 
 
 @pytest.mark.parametrize("friction", [0.0, 0.5, np.inf])
