@@ -62,7 +62,7 @@ class HeldColumns:
     ``G`` is the held block itself). A grip's contact meets a few of the two hundred vertices
     it holds: on the forearm grips' 96 poses the closure reads 3 % of the block's columns
     (median; at most 8 %), where gathering the whole block (290k entries scattered over the
-    skin's 160 MB compliance) took a third of the closure's time. The answers are the same
+    skin's 160 MB compliance) takes a third of the closure's time. The answers are the same
     (within 1e-14 of the largest force on those poses).
     """
 
