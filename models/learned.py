@@ -163,6 +163,10 @@ class LearnedPredictor(TrainedPredictor):
         skin = self.held_skin_of(body)
         if given.ndim != 3:
             raise ValueError(f"{self.name}: prior: closure reads the way the objects move")
+        kept = getattr(self, "_closure_kept", None)  # an answer reads it twice: input and prior
+        if kept is not None and kept[0] is given and kept[1] is thickness and kept[2] is body:
+            if kept[3] == (given._version, thickness._version):
+                return kept[4]
         g = given.detach().cpu().numpy()
         t = thickness.detach().cpu().numpy()
         record = self.meta["holding"]
@@ -173,7 +177,9 @@ class LearnedPredictor(TrainedPredictor):
                 for b in range(len(g))
             ]
         )
-        return torch.from_numpy(out).to(given.device, given.dtype) / self.scale
+        out = torch.from_numpy(out).to(given.device, given.dtype) / self.scale
+        self._closure_kept = (given, thickness, body, (given._version, thickness._version), out)
+        return out
 
     def with_pressures(self, out):
         """A network's output ``(..., C)`` with a pose model's two pressure channels read from

@@ -342,13 +342,22 @@ class GNNArrays(TrainedPredictor):
         pressures = out[..., 3:].astype(np.float64) * PRESSURE_OUT_SCALE
         return [posed_answer(s, x, p[:, 0], p[:, 1]) for s, x, p in zip(scenes, u, pressures)]
 
+    @property
+    def held_only(self) -> bool:
+        """Whether the network answers only the held vertices (a held prior): the held prior
+        reads the network's answer there alone and no contact lies beyond them, so the network
+        runs on their subgraph (those vertices and ``steps`` hops more) at every fidelity, the
+        answer it gives on the whole part.
+        """
+        return self.config.get("prior") in HOLDING
+
     def _network(self, x, f, t, base, slots) -> np.ndarray:
         """The network's output ``(B N, C)`` with the prior (:meth:`_answers`), on the whole
         part or at fidelity ``auto`` on each scene's subgraph.
         """
         B, N = f.shape
         E = self._ei.shape[1]
-        if self.fidelity != "auto":
+        if self.fidelity != "auto" and not self.held_only:
             edges = [self._body_data[k]["sorted_edges"] for k in slots]
             edges = edges[0] if B == 1 else np.concatenate(edges)
             ei = (
@@ -359,12 +368,12 @@ class GNNArrays(TrainedPredictor):
             y = self.net(x, edges, ei)
             return y if base is None else base.reshape(B * N, 3) + CORRECTION_SCALE * y
         near = near_objects(f) if self.posed else f
-        if base is not None:  # the region: where the linear FEM moves the tissue, a ring wider
+        if self.held_only:  # the held vertices: the only answers the held prior reads
+            seeds, grow = within_reach(f), 0
+        elif base is not None:  # the region: where the linear FEM moves the tissue, a ring wider
             seeds, grow = reach.moving(near, base, self.region_tolerance), 1
         else:
             seeds, grow = reach.within_margin(self.part, t, near), 0
-        if self.prior_kind in HOLDING:  # every vertex the held prior reads is answered
-            seeds = seeds | within_reach(f)
         g = subgraph(self._mesh, self.part, seeds, self.steps, grow, kernel=loaded())
         ei = g.edges
         if np.any(np.diff(ei[1]) < 0):  # the subgraph's edges come target by target

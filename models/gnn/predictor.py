@@ -157,7 +157,7 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
             extra.append(self.closure_base(force, thickness, body))
         x = torch.cat([load, thickness[..., None], normals, *extra], -1)
         x = x.reshape(B * N, x.shape[-1])
-        if self.fidelity == "auto" and not self.model.training:
+        if self.local:
             return self._raw_local(x, thickness, force, base, body)
         E = self.edge_index.shape[1]
         offs = (torch.arange(B, device=x.device) * N).repeat_interleave(E)
@@ -165,6 +165,26 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         return self.corrected(
             base, self.model(x, None, ei, self.batch_edges(body, B)).reshape(B, N, -1)
         )
+
+    @property
+    def held_only(self) -> bool:
+        """Whether the network answers only the held vertices (a held prior): the held prior
+        reads the network's answer there alone and no contact lies beyond them, so the network
+        runs on their subgraph (those vertices and ``steps`` hops more) at every fidelity, the
+        answer it gives on the whole part (and in training, :attr:`local`, the same gradient).
+        """
+        return self.config.get("prior") in HOLDING
+
+    @property
+    def local(self) -> bool:
+        """Whether the network runs on a subgraph (:meth:`_raw_local`): at fidelity ``auto``
+        and with a held prior (:attr:`held_only`) in answers, and with a held prior in training
+        where the loss reads the held vertices alone (not ``mse``, which reads every vertex's
+        pressures).
+        """
+        if self.model.training:
+            return self.held_only and self.config.get("loss", "mse") != "mse"
+        return self.held_only or self.fidelity == "auto"
 
     def batch_edges(self, body, B: int, keep=None) -> torch.Tensor:
         """``(B E, latent)``: each sample's body's encoded edges, sample after sample; or only
@@ -240,12 +260,12 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
         B, N = thickness.shape
         steps = int(self.config["steps"])
         f = (near_objects(gap_of(force)) if self.posed else force).cpu().numpy()
-        if base is not None:  # the region: where the linear FEM moves the tissue, a ring wider
+        if self.held_only:  # the held vertices: the only answers the held prior reads
+            seeds, grow = within_reach(gap_of(force).cpu().numpy()), 0
+        elif base is not None:  # the region: where the linear FEM moves the tissue, a ring wider
             seeds, grow = reach.moving(f, base.detach().cpu().numpy(), self.region_tolerance), 1
         else:
             seeds, grow = reach.within_margin(self.part, thickness.cpu().numpy(), f), 0
-        if self.config["prior"] in HOLDING:  # every vertex the held prior reads is answered
-            seeds = seeds | within_reach(gap_of(force).cpu().numpy())
         g = subgraph(self._mesh, self.part, seeds, steps, grow)
         dev = x.device
         sub_ei = torch.as_tensor(g.edges, device=dev)

@@ -127,3 +127,71 @@ def test_a_closure_model_starts_from_the_linear_fem_s_closure(tiny_presses, kind
         rounded = p.held_skin.closure(gap, way, s.thickness.astype(np.float32), 0.0, ROUNDING)
         assert np.linalg.norm(rounded, axis=1).max() > peak + 0.5 * ROUNDING
         np.testing.assert_allclose(d.displacement, want, atol=1e-5 * peak)
+
+
+@pytest.mark.filterwarnings("ignore::stmpl.failures.OutsideEnvelope")
+@pytest.mark.filterwarnings("ignore::stmpl.failures.ImpossibleAnswer")
+@pytest.mark.parametrize("engine", ["default", "numpy"])
+def test_a_held_gnn_runs_on_the_held_vertices_subgraph_as_on_the_whole_part(
+    tiny_presses, tmp_path, monkeypatch, engine
+):
+    """With a held prior only the held vertices' answers are read, and no contact lies beyond
+    them: the GNN runs on those vertices and ``steps`` hops more (fewer nodes than the part),
+    and its displacement, contact forces and reaction are those of the network run on the
+    whole part, in torch and in NumPy; in training (a relative loss), so are its loss and
+    gradient.
+    """
+    from models.gnn import arrays as gnn_arrays
+    from models.gnn import predictor as gnn_predictor
+    from models.holding import fit_held
+    from stmpl import predictor
+    from stmpl.data.dataset import Dataset
+    from stmpl.pipeline.evaluate import scenes_of
+
+    ds = Dataset(tiny_presses)
+    torch.manual_seed(0)
+    p = predictor.create(
+        "gnn",
+        ds.part,
+        {"latent": 16, "steps": 2, "given": "pose", "prior": "held", "loss": "relative"},
+    )
+    with torch.no_grad():
+        for q in p.model.parameters():
+            q.add_(0.1 * torch.randn_like(q))
+    fit_held(p, ds, progress=False)
+    if engine == "default":  # in training: the same loss and gradient on the subgraph
+        from stmpl.pipeline.train import _split_tensors
+
+        cfg = {"thickness_mm": None, "train_fraction": 1.0, "max_train": 0}
+        t, g, target, _, _ = _split_tensors(ds, "train", cfg, "cpu", p)
+        p.model.train()
+        grads = []
+        for held_only in (True, False):
+            monkeypatch.setattr(type(p), "held_only", property(lambda self, h=held_only: h))
+            p.model.zero_grad()
+            loss = p.loss(t, g, target)
+            loss.backward()
+            grads.append(
+                (float(loss.detach()), torch.cat([q.grad.ravel() for q in p.model.parameters()]))
+            )
+        monkeypatch.undo()
+        assert grads[0][0] == pytest.approx(grads[1][0], rel=1e-5)
+        torch.testing.assert_close(grads[0][1], grads[1][1], rtol=1e-4, atol=1e-6)
+    p = predictor.read(p.save(tmp_path / "m.safetensors"), engine=engine)
+    assert p.held_only
+    scenes, _ = scenes_of(ds, "test", given="pose")
+    module = gnn_arrays if engine == "numpy" else gnn_predictor
+    sizes = []
+    real = module.subgraph
+    monkeypatch.setattr(
+        module, "subgraph", lambda *a, **k: sizes.append(real(*a, **k)) or sizes[-1]
+    )
+    sub = p.predict(scenes)
+    assert sizes and max(len(g.nodes) for g in sizes) < ds.part.n_vertices
+    monkeypatch.setattr(type(p), "held_only", property(lambda self: False))
+    whole = p.predict(scenes)
+    for a, b in zip(sub, whole):
+        peak = np.abs(b.displacement).max()
+        assert peak > 0 and np.abs(a.displacement - b.displacement).max() <= 1e-5 * peak
+        np.testing.assert_allclose(a.force, b.force, rtol=1e-4, atol=1e-9 * b.force.max())
+        assert a.reaction == pytest.approx(b.reaction, rel=1e-4)
