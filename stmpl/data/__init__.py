@@ -1,2 +1,3 @@
 """Datasets: the on-disk format (:mod:`~stmpl.data.format`) and the ``Dataset`` / ``Datasets``
-readers (:mod:`~stmpl.data.dataset`)."""
+readers (:mod:`~stmpl.data.dataset`).
+"""

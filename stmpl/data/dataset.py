@@ -1,5 +1,6 @@
 """Reading datasets: :class:`Dataset` (one folder in the format of :mod:`stmpl.data.format`),
-:class:`Datasets` (several of one part and FEM set-up read as one) and :func:`open_data`."""
+:class:`Datasets` (several of one part and FEM set-up read as one) and :func:`open_data`.
+"""
 
 from __future__ import annotations
 
@@ -9,6 +10,7 @@ import pathlib
 
 import numpy as np
 
+from stmpl.body.spec import SHAPE_KEYS
 from stmpl.data.format import (
     ARRAYS,
     FORMATS,
@@ -21,7 +23,6 @@ from stmpl.data.format import (
     read_shard,
 )
 from stmpl.part import BodyPart
-from stmpl.body.spec import SHAPE_KEYS
 
 
 class Dataset:
@@ -39,8 +40,10 @@ class Dataset:
             raise FileNotFoundError(f"dataset folder not found: {self.folder}")
         card = self.folder / "card.json"
         if not card.is_file():
-            raise FileNotFoundError(f"{self.folder} has no card.json; run `stmpl generate` to "
-                                    "make or finish it (`--max-shards 0` cards a set part way)")
+            raise FileNotFoundError(
+                f"{self.folder} has no card.json; run `stmpl generate` to "
+                "make or finish it (`--max-shards 0` cards a set part way)"
+            )
         try:
             self.card = json.loads(card.read_text())
         except (json.JSONDecodeError, UnicodeDecodeError) as e:
@@ -58,8 +61,9 @@ class Dataset:
         try:
             with np.load(self.folder / "part.npz") as z:
                 arrays = {k: z[k] for k in z.files}
-            self.part = BodyPart.from_arrays(str(arrays["name"]), arrays,
-                                             json.loads(str(arrays["source"])))
+            self.part = BodyPart.from_arrays(
+                str(arrays["name"]), arrays, json.loads(str(arrays["source"]))
+            )
         except (OSError, ValueError, KeyError) as e:
             raise ValueError(f"{self.folder / 'part.npz'} is missing or corrupt: {e}") from e
         self._cache: dict = {}
@@ -78,18 +82,22 @@ class Dataset:
 
     def __repr__(self) -> str:
         part_way = "" if self.complete else f", part way: {self.card['shards_written']} shards"
-        return (f"Dataset({str(self.folder)!r}, {len(self)} samples, "
-                f"{self.card['samples_per_split']}{part_way})")
+        return (
+            f"Dataset({str(self.folder)!r}, {len(self)} samples, "
+            f"{self.card['samples_per_split']}{part_way})"
+        )
 
     def verify(self) -> None:
         """Check every shard (and the part) against the card; ``ValueError`` naming the first
-        that differs. :meth:`arrays` does the same as it reads."""
+        that differs. :meth:`arrays` does the same as it reads.
+        """
         self._cache.pop("all", None)
         self._cache["all"] = self._read_all()
 
     def arrays(self, split: str | None = None) -> dict[str, np.ndarray]:
         """All samples (or one split's) as stacked arrays; also ``kind`` and ``params`` lists.
-        The shards are checked against the card on the first call."""
+        The shards are checked against the card on the first call.
+        """
         _check_split(split)
         if "all" not in self._cache:
             self._cache["all"] = self._read_all()
@@ -99,7 +107,8 @@ class Dataset:
         """The planned samples of ``split`` (all for ``None``) whose solve failed, or that
         were not attempted: ``thickness``, ``force`` ``(F, N)`` (m, N), ``total`` ``(F,)`` N,
         ``split`` and ``body`` ``(F,)``, and ``reason`` (one sentence each); ``None`` for a
-        dataset written before failures kept their inputs (its card still counts them)."""
+        dataset written before failures kept their inputs (its card still counts them).
+        """
         _check_split(split)
         if "failed" not in self._cache:
             self._cache["failed"] = self._read_failed()
@@ -117,9 +126,11 @@ class Dataset:
             for k, out in (("thickness", thickness), ("force", force)):
                 if len(got[0]):
                     if got[1][k].shape != (len(got[0]), n):
-                        raise ValueError(f"dataset {self.folder}: {s.name} holds failed "
-                                         f"{k} of shape {got[1][k].shape}, the part has {n} "
-                                         "vertices")
+                        raise ValueError(
+                            f"dataset {self.folder}: {s.name} holds failed "
+                            f"{k} of shape {got[1][k].shape}, the part has {n} "
+                            "vertices"
+                        )
                     out.append(got[1][k])
         n = self.part.n_vertices
         return {
@@ -141,8 +152,10 @@ class Dataset:
             if v1:
                 raw.update(s.read_bytes())
             elif entry.get("content") != attrs["content"]:
-                raise ValueError(f"dataset {self.folder}: {s.name} does not match card.json "
-                                 "(an edited or corrupt shard); generate the dataset again")
+                raise ValueError(
+                    f"dataset {self.folder}: {s.name} does not match card.json "
+                    "(an edited or corrupt shard); generate the dataset again"
+                )
             digests.append(attrs["content"])
             for k in parts:
                 parts[k] += [arrays[k]] if k in ARRAYS else list(arrays[k])
@@ -150,14 +163,18 @@ class Dataset:
                 optional[k].append(arrays.get(k))
         if v1:
             if raw.hexdigest()[:16] != self.card["hash"]:
-                raise ValueError(f"dataset {self.folder}: shard contents do not match card.json "
-                                 "(corrupt or edited shard)")
+                raise ValueError(
+                    f"dataset {self.folder}: shard contents do not match card.json "
+                    "(corrupt or edited shard)"
+                )
         elif content_hash(part_hash(self.part), digests) != self.card["hash"]:
-            raise ValueError(f"dataset {self.folder}: part.npz or the shard list does not match "
-                             "card.json (edited files); generate the dataset again")
+            raise ValueError(
+                f"dataset {self.folder}: part.npz or the shard list does not match "
+                "card.json (edited files); generate the dataset again"
+            )
         out = {k: np.concatenate(parts[k]) for k in ARRAYS}
         out["kind"], out["params"] = parts["kind"], [json.loads(p) for p in parts["params"]]
-        for k, v in optional.items():        # every shard has it, or the dataset has none
+        for k, v in optional.items():  # every shard has it, or the dataset has none
             if v and all(x is not None for x in v):
                 out[k] = np.concatenate(v)
             elif any(x is not None for x in v):
@@ -165,8 +182,10 @@ class Dataset:
         out["body"] = np.zeros(len(out["total"]), np.int32)
         n = len(self.part.vertices)
         if out["displacement"].shape[1:] != (n, 3) and len(out["displacement"]):
-            raise ValueError(f"dataset {self.folder}: displacement has shape "
-                             f"{out['displacement'].shape}, the part has {n} vertices")
+            raise ValueError(
+                f"dataset {self.folder}: displacement has shape "
+                f"{out['displacement'].shape}, the part has {n} vertices"
+            )
         return out
 
 
@@ -177,30 +196,61 @@ agree on them (their forces, thicknesses and placements may differ)."""
 
 def same_mesh(a: BodyPart, b: BodyPart) -> str:
     """What keeps two parts from being one mesh in two shapes (``""`` when they are: the same
-    name, vertex count, faces, UV chart and rims; the vertices may differ)."""
+    name, vertex count, faces, UV chart and rims; the vertices may differ).
+    """
     if a.name != b.name or a.n_vertices != b.n_vertices:
-        why = ("another part" if a.name != b.name else
-               "another body model (an SMPL-format file?) or another resolution")
-        return (f"{a.name} ({a.n_vertices} vertices) and {b.name} ({b.n_vertices} vertices): "
-                f"{why}")
+        why = (
+            "another part"
+            if a.name != b.name
+            else "another body model (an SMPL-format file?) or another resolution"
+        )
+        return f"{a.name} ({a.n_vertices} vertices) and {b.name} ({b.n_vertices} vertices): {why}"
     for k in ("faces", "face_uv", "uv_vertex"):
         if not np.array_equal(getattr(a, k), getattr(b, k)):
             return f"two {a.name} meshes with other {k}"
-    if len(a.rims) != len(b.rims) or any(not np.array_equal(x, y) for x, y in zip(a.rims,
-                                                                                 b.rims)):
+    if len(a.rims) != len(b.rims) or any(not np.array_equal(x, y) for x, y in zip(a.rims, b.rims)):
         return f"two {a.name} meshes with other rims"
     return ""
 
 
+SAME_BODY_M = 1e-9
+"""m: parts of one mesh whose vertices all agree within this are one body (the same body built on
+another machine differs in its last digits, 1e-15 m)."""
+
+
+def bodies_of(parts) -> list[int]:
+    """Which body each of ``parts`` (of one mesh, :func:`same_mesh`) is: ``k`` for the ``k``-th
+    distinct one in order of appearance, a part whose vertices agree with an earlier one's within
+    :data:`SAME_BODY_M` taken as that body.
+    """
+    firsts: list = []
+    out = []
+    for p in parts:
+        k = next(
+            (
+                i
+                for i, q in enumerate(firsts)
+                if np.abs(p.vertices - q.vertices).max(initial=0.0) <= SAME_BODY_M
+            ),
+            None,
+        )
+        if k is None:
+            firsts.append(p)
+            k = len(firsts) - 1
+        out.append(k)
+    return out
+
+
 def _setup(card: dict) -> dict:
     """A dataset's FEM set-up (:data:`SETUP`, and the card's tissue preset), its body's shape
-    left out (:data:`stmpl.body.spec.SHAPE_KEYS`: anny's phenotype, a tube's radius...)."""
-
+    left out (:data:`stmpl.body.spec.SHAPE_KEYS`: anny's phenotype, a tube's radius...).
+    """
     cfg = card["config"]
     out = {k: cfg.get(k) for k in SETUP}
     body = out["body"] or {}
-    out["body"] = {k: v for k, v in body.items()
-                   if k not in SHAPE_KEYS.get(body.get("model"), set())}
+    out["body"] = {
+        k: v for k, v in body.items() if k not in SHAPE_KEYS.get(body.get("model"), set())
+    }
     out["tissue"] = card.get("tissue", "paper")
     return out
 
@@ -220,25 +270,29 @@ class Datasets:
 
     def __init__(self, folders, name: str | None = None):
         if isinstance(folders, (str, pathlib.Path)) or len(folders) < 2:
-            raise ValueError(f"Datasets takes a list of two or more dataset folders, got "
-                             f"{folders!r}; open one with Dataset")
+            raise ValueError(
+                f"Datasets takes a list of two or more dataset folders, got "
+                f"{folders!r}; open one with Dataset"
+            )
         self.members = [Dataset(f) for f in folders]
         first = self.members[0]
-        hashes = [part_hash(ds.part) for ds in self.members]
         for ds in self.members[1:]:
             why = same_mesh(first.part, ds.part)
             if why:
-                raise ValueError(f"datasets {first.folder} and {ds.folder} live on different "
-                                 f"meshes ({why}); they cannot be trained on together")
+                raise ValueError(
+                    f"datasets {first.folder} and {ds.folder} live on different "
+                    f"meshes ({why}); they cannot be trained on together"
+                )
             setup, other = _setup(first.card), _setup(ds.card)
             if setup != other:
                 diff = sorted(k for k in setup if setup[k] != other[k])
-                raise ValueError(f"datasets {first.folder} and {ds.folder} differ in their FEM "
-                                 f"set-up ({', '.join(diff)}); they cannot be trained on together")
+                raise ValueError(
+                    f"datasets {first.folder} and {ds.folder} differ in their FEM "
+                    f"set-up ({', '.join(diff)}); they cannot be trained on together"
+                )
         self.part = first.part
-        distinct = list(dict.fromkeys(hashes))            # each body once, in order of appearance
-        self.parts = [self.members[hashes.index(h)].part for h in distinct]
-        self._body = [distinct.index(h) for h in hashes]
+        self._body = bodies_of([ds.part for ds in self.members])  # each body once, in order
+        self.parts = [self.members[self._body.index(k)].part for k in range(max(self._body) + 1)]
         self.folder = " + ".join(str(ds.folder) for ds in self.members)
         cards = [ds.card for ds in self.members]
         levels = sorted({float(t) for c in cards for t in c["config"]["thickness_mm"]})
@@ -246,17 +300,26 @@ class Datasets:
             "name": name or "+".join(c["name"] for c in cards),
             "hash": hashlib.sha256(" ".join(c["hash"] for c in cards).encode()).hexdigest()[:16],
             "samples": sum(int(c["samples"]) for c in cards),
-            "samples_per_split": {s: sum(int(c["samples_per_split"][s]) for c in cards)
-                                  for s in SPLITS},
+            "samples_per_split": {
+                s: sum(int(c["samples_per_split"][s]) for c in cards) for s in SPLITS
+            },
             "config": {**cards[0]["config"], "thickness_mm": levels},
             "tissue": cards[0].get("tissue", "paper"),
             "complete": all(ds.complete for ds in self.members),
-            "datasets": [{"folder": str(ds.folder), "name": ds.card["name"],
-                          "hash": ds.card["hash"], "complete": ds.complete}
-                         for ds in self.members]}
+            "datasets": [
+                {
+                    "folder": str(ds.folder),
+                    "name": ds.card["name"],
+                    "hash": ds.card["hash"],
+                    "complete": ds.complete,
+                }
+                for ds in self.members
+            ],
+        }
         if len(self.parts) > 1:
-            self.card["bodies"] = [(p.source or {}).get("options", {}).get("phenotype")
-                                   for p in self.parts]
+            self.card["bodies"] = [
+                (p.source or {}).get("options", {}).get("phenotype") for p in self.parts
+            ]
         self._all: dict | None = None
         self.complete = self.card["complete"]
 
@@ -283,16 +346,20 @@ class Datasets:
                 a["body"] = np.full(len(a["total"]), body, np.int32)
                 parts.append(a)
             have = [k for k in OPTIONAL if any(k in a for a in parts)]
-            for a in parts:                   # a member without it: NaN, "not known"
+            for a in parts:  # a member without it: NaN, "not known"
                 for k in have:
                     if k not in a:
                         like = next(b[k] for b in parts if k in b)
                         shape = (len(a["total"]), *like.shape[1:])
                         a[k] = np.full(shape, np.nan, np.float32)
-            self._all = {k: (np.concatenate([a[k] for a in parts])
-                             if isinstance(parts[0][k], np.ndarray)
-                             else [x for a in parts for x in a[k]])
-                         for k in list(ARRAYS) + list(STRINGS) + ["body"] + have}
+            self._all = {
+                k: (
+                    np.concatenate([a[k] for a in parts])
+                    if isinstance(parts[0][k], np.ndarray)
+                    else [x for a in parts for x in a[k]]
+                )
+                for k in list(ARRAYS) + list(STRINGS) + ["body"] + have
+            }
         return _of_split(self._all, split)
 
     def failed(self, split: str | None = None) -> dict | None:
@@ -300,9 +367,17 @@ class Datasets:
         got = [ds.failed(split) for ds in self.members]
         if any(g is None for g in got):
             return None
-        got = [{**g, "body": np.full(len(g["total"]), b, np.int32)} for g, b in zip(got, self._body)]
-        return {k: (np.concatenate([g[k] for g in got]) if k != "reason"
-                    else [r for g in got for r in g[k]]) for k in got[0]}
+        got = [
+            {**g, "body": np.full(len(g["total"]), b, np.int32)} for g, b in zip(got, self._body)
+        ]
+        return {
+            k: (
+                np.concatenate([g[k] for g in got])
+                if k != "reason"
+                else [r for g in got for r in g[k]]
+            )
+            for k in got[0]
+        }
 
 
 def _check_split(split: str | None) -> None:
@@ -315,8 +390,9 @@ def _of_split(a: dict, split: str | None) -> dict:
     if split is None:
         return a
     keep = np.flatnonzero(a["split"] == SPLITS.index(split))
-    return {k: (v[keep] if isinstance(v, np.ndarray) else [v[i] for i in keep])
-            for k, v in a.items()}
+    return {
+        k: (v[keep] if isinstance(v, np.ndarray) else [v[i] for i in keep]) for k, v in a.items()
+    }
 
 
 BODIES_FORMAT = "stmpl-bodies/1"
@@ -325,7 +401,8 @@ BODIES_FORMAT = "stmpl-bodies/1"
 
 def member_folders(folder) -> list[pathlib.Path] | None:
     """The member dataset folders a ``bodies.json`` in ``folder`` lists (None if there is
-    none); ``ValueError`` if it is unreadable, ``FileNotFoundError`` if a member is missing."""
+    none); ``ValueError`` if it is unreadable, ``FileNotFoundError`` if a member is missing.
+    """
     folder = pathlib.Path(folder)
     path = folder / "bodies.json"
     if not path.is_file():
@@ -345,7 +422,8 @@ def member_folders(folder) -> list[pathlib.Path] | None:
 
 def open_data(data) -> Dataset | Datasets:
     """A :class:`Dataset` from one folder, :class:`Datasets` from a list of two or more; a
-    folder of one dataset per body (``bodies.json``) stands for its members."""
+    folder of one dataset per body (``bodies.json``) stands for its members.
+    """
     folders = list(data) if isinstance(data, (list, tuple)) else [data]
     if not folders:
         raise ValueError("no dataset folder given (an empty list)")
@@ -356,7 +434,7 @@ def open_data(data) -> Dataset | Datasets:
         names.append(_bodies_name(f) if members else None)
     if len(flat) == 1:
         return Dataset(flat[0])
-    name = None                           # a set of bodies goes by its own name
+    name = None  # a set of bodies goes by its own name
     if any(names):
         name = "+".join(n or Dataset(f).card["name"] for n, f in zip(names, folders))
     return Datasets(flat, name=name)

@@ -29,17 +29,38 @@ import pathlib
 
 import numpy as np
 
-from stmpl.part import BodyPart
 from stmpl.files import atomic_path
+from stmpl.part import BodyPart
 
 FORMAT = "stmpl-dataset/2"
 """Written by this version. ``stmpl-dataset/1`` (hash of the shard files' bytes) is still read."""
 FORMATS = ("stmpl-dataset/1", FORMAT)
 SPLITS = ("train", "val", "test")
-ARRAYS = ("thickness", "force", "displacement", "total", "split", "placement",
-          "thickness_level", "task", "iterations", "solve_time", "max_compression")
-CONTENT = ("task", "placement", "thickness_level", "split", "total", "thickness", "force",
-           "displacement", "kind", "params")
+ARRAYS = (
+    "thickness",
+    "force",
+    "displacement",
+    "total",
+    "split",
+    "placement",
+    "thickness_level",
+    "task",
+    "iterations",
+    "solve_time",
+    "max_compression",
+)
+CONTENT = (
+    "task",
+    "placement",
+    "thickness_level",
+    "split",
+    "total",
+    "thickness",
+    "force",
+    "displacement",
+    "kind",
+    "params",
+)
 """The per-sample arrays the content hash covers (solver diagnostics and timings are not)."""
 FLOATS = ("thickness", "force", "displacement")
 INTS = ("task", "placement", "thickness_level", "split", "iterations")
@@ -59,7 +80,8 @@ members without it."""
 
 def at_levels(arrays: dict, thickness_mm) -> np.ndarray:
     """``(S,)`` mask of the samples whose (uniform) thickness is one of ``thickness_mm``; the
-    float32 thickness is widened before it is compared (a float32 5 mm is not a float64 5 mm)."""
+    float32 thickness is widened before it is compared (a float32 5 mm is not a float64 5 mm).
+    """
     level = np.round(np.asarray(arrays["thickness"][:, 0], dtype=float), 6)
     return np.isin(level, np.round(np.asarray(thickness_mm, dtype=float) * 1e-3, 6))
 
@@ -110,9 +132,9 @@ def write_shard(
     :data:`DOUBLES` and :data:`STRINGS` to one value per sample; ``attrs`` (JSON-ready) go to
     the file's attributes with the format, the shard number and the sample count; ``failed``
     (``{"thickness": [...], "force": [...]}``, one ``(N,)`` array per entry of
-    ``attrs["failures"]``) the inputs of the planned samples that failed."""
+    ``attrs["failures"]``) the inputs of the planned samples that failed.
+    """
     import h5py  # deferred: dataset shards only
-
 
     n = len(records["task"])
     path = shard_path(folder, shard)
@@ -126,27 +148,31 @@ def write_shard(
             for k in FLOATS + tuple(k for k in OPTIONAL if records.get(k) is not None):
                 shape = (0, 0, 3) if k in ("displacement", "linear") else (0, 0)
                 arr = np.stack(records[k]) if n else np.zeros(shape, np.float32)
-                h.create_dataset(k, data=arr, compression="gzip", compression_opts=4,
-                                 shuffle=True)
+                h.create_dataset(k, data=arr, compression="gzip", compression_opts=4, shuffle=True)
             for k in INTS:
                 h.create_dataset(k, data=np.asarray(records[k], dtype=np.int32))
             for k in DOUBLES:
                 h.create_dataset(k, data=np.asarray(records[k], dtype=np.float64))
             for k in STRINGS:
-                h.create_dataset(k, data=np.asarray(records[k], dtype=object),
-                                 dtype=h5py.string_dtype())
+                h.create_dataset(
+                    k, data=np.asarray(records[k], dtype=object), dtype=h5py.string_dtype()
+                )
             if failed is not None:
                 for k in FAILED:
                     rows = failed[k]
                     arr = np.stack(rows) if rows else np.zeros((0, 0), np.float32)
-                    h.create_dataset(f"failed_{k}", data=arr.astype(np.float32),
-                                     compression="gzip", compression_opts=4, shuffle=True)
+                    h.create_dataset(
+                        f"failed_{k}",
+                        data=arr.astype(np.float32),
+                        compression="gzip",
+                        compression_opts=4,
+                        shuffle=True,
+                    )
         content = read_shard(tmp)[1]["content"]  # as a reader will see it
         with h5py.File(tmp, "a") as h:
             h.attrs["written"] = content
             if failed is not None:
-                h.attrs["failed_written"] = _failed_hash({k: h[f"failed_{k}"][()]
-                                                          for k in FAILED})
+                h.attrs["failed_written"] = _failed_hash({k: h[f"failed_{k}"][()] for k in FAILED})
     return path
 
 
@@ -167,7 +193,8 @@ def read_failed(path) -> tuple[list, dict] | None:
     """``(failures, {"thickness": (F, N), "force": (F, N)})`` of a shard: each failed planned
     sample's record (task, placement, split, thickness_mm, total, reason) and inputs; ``None``
     for a shard written before failures kept their inputs. ``ValueError`` names a shard whose
-    failures were changed after it was written."""
+    failures were changed after it was written.
+    """
     import h5py  # deferred: dataset shards only
 
     try:
@@ -191,7 +218,8 @@ def read_failed(path) -> tuple[list, dict] | None:
 def read_shard(path, keys=ARRAYS + STRINGS) -> tuple[dict, dict]:
     """``(arrays, attrs)`` of a shard and its content hash as ``attrs["content"]``; raises
     ``ValueError`` naming the file if it is unreadable, or changed since it was written (its
-    content against the hash it was written with, ``attrs["written"]``)."""
+    content against the hash it was written with, ``attrs["written"]``).
+    """
     import h5py  # deferred: dataset shards only
 
     try:
@@ -217,26 +245,49 @@ def read_shard(path, keys=ARRAYS + STRINGS) -> tuple[dict, dict]:
 
 def read_shard_meta(path, chash: str | None = None) -> dict | None:
     """A finished shard's metadata and summary arrays, or ``None`` if it is unreadable, of
-    another format or (with ``chash``) from another config: such a shard is solved again."""
+    another format or (with ``chash``) from another config: such a shard is solved again.
+    """
     path = pathlib.Path(path)
     if not path.is_file():
         return None
     try:
-        arrays, attrs = read_shard(path, ("split", "thickness_level", "iterations", "total",
-                                          "solve_time", "max_compression", "kind"))
+        arrays, attrs = read_shard(
+            path,
+            (
+                "split",
+                "thickness_level",
+                "iterations",
+                "total",
+                "solve_time",
+                "max_compression",
+                "kind",
+            ),
+        )
     except ValueError:
         return None
     if attrs.get("format") != FORMAT or (chash is not None and attrs.get("config_hash") != chash):
         return None
     try:
-        meta = {"shard": int(attrs["shard"]), "n_samples": int(attrs["n_samples"]),
-                "tasks": json.loads(attrs["tasks"]), "failures": json.loads(attrs["failures"]),
-                "wall": float(attrs["wall"]), "content": attrs["content"]}
+        meta = {
+            "shard": int(attrs["shard"]),
+            "n_samples": int(attrs["n_samples"]),
+            "tasks": json.loads(attrs["tasks"]),
+            "failures": json.loads(attrs["failures"]),
+            "wall": float(attrs["wall"]),
+            "content": attrs["content"],
+        }
     except (KeyError, ValueError, TypeError):
         return None
     if len(arrays["split"]) != meta["n_samples"]:
         return None
-    for k in ("split", "thickness_level", "iterations", "total", "solve_time", "max_compression",
-              "kind"):
+    for k in (
+        "split",
+        "thickness_level",
+        "iterations",
+        "total",
+        "solve_time",
+        "max_compression",
+        "kind",
+    ):
         meta[k] = arrays[k]
     return meta

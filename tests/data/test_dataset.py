@@ -176,6 +176,20 @@ def test_datasets_on_several_bodies_of_one_mesh(tmp_path, tiny_config, tiny_data
     assert len(both.card["bodies"]) == 2
 
 
+def test_the_same_body_built_again_is_one_body(tiny_dataset):
+    """A part whose vertices differ from another's in their last digits (the same body built on
+    another machine: 1e-15 m) is that body; a micrometre apart, another one.
+    """
+    from stmpl.data.dataset import SAME_BODY_M, bodies_of
+
+    part = Dataset(tiny_dataset).part
+    again = part.with_vertices(part.vertices * (1 + 1e-15))
+    other = part.with_vertices(part.vertices + 1e-6)
+    assert np.abs(again.vertices - part.vertices).max() < SAME_BODY_M
+    assert part_hash(again) != part_hash(part)  # the bytes differ
+    assert bodies_of([part, again, other, again, other]) == [0, 0, 1, 0, 1]
+
+
 def test_a_linear_answer_is_kept_and_hashed(tmp_path, tiny_config):
     """With ``linear: true`` every sample carries the linear FEM's answer to its load, the
     operator's columns times the forces (a light press: within 3 % of the FEM's peak); an
@@ -236,7 +250,8 @@ def test_a_broken_set_of_bodies_is_named(tmp_path):
 
 def test_datasets_carry_their_tissue_and_refuse_to_mix_tissues(tmp_path, tiny_dataset):
     """Several sets read as one keep their tissue preset on the card (a model trained on them
-    is judged by it); sets of two tissues are refused by name."""
+    is judged by it); sets of two tissues are refused by name.
+    """
     import json
     import shutil
 
