@@ -243,6 +243,18 @@ def read_shard(path, keys=ARRAYS + STRINGS) -> tuple[dict, dict]:
     return arrays, attrs
 
 
+SUMMARY = (
+    "split",
+    "thickness_level",
+    "iterations",
+    "total",
+    "solve_time",
+    "max_compression",
+    "kind",
+)
+"""The per-sample arrays a shard's summary (:func:`read_shard_meta`) reads."""
+
+
 def read_shard_meta(path, chash: str | None = None) -> dict | None:
     """A finished shard's metadata and summary arrays, or ``None`` if it is unreadable, of
     another format or (with ``chash``) from another config: such a shard is solved again.
@@ -251,18 +263,7 @@ def read_shard_meta(path, chash: str | None = None) -> dict | None:
     if not path.is_file():
         return None
     try:
-        arrays, attrs = read_shard(
-            path,
-            (
-                "split",
-                "thickness_level",
-                "iterations",
-                "total",
-                "solve_time",
-                "max_compression",
-                "kind",
-            ),
-        )
+        arrays, attrs = read_shard(path, SUMMARY)
     except ValueError:
         return None
     if attrs.get("format") != FORMAT or (chash is not None and attrs.get("config_hash") != chash):
@@ -280,14 +281,6 @@ def read_shard_meta(path, chash: str | None = None) -> dict | None:
         return None
     if len(arrays["split"]) != meta["n_samples"]:
         return None
-    for k in (
-        "split",
-        "thickness_level",
-        "iterations",
-        "total",
-        "solve_time",
-        "max_compression",
-        "kind",
-    ):
+    for k in SUMMARY:
         meta[k] = arrays[k]
     return meta
