@@ -1,6 +1,6 @@
 """How long the grip models take to answer a grip, beside the gel's default GNN on a disk.
 
-    python benchmarks/grip_answer.py [--repeat 3] [--split test] [--gnn NAME_OR_PATH ...]
+    python benchmarks/grip_answer.py [--repeat 3] [--split test] [--gnn SPEC ...]
 
 The shipped grip models given a pose (``zoo:gnn_forearm_grips``, on the linear FEM's closure
 of the hand, and ``zoo:linear_forearm_grips``, that closure itself) answer the grips of the
@@ -19,8 +19,8 @@ Besides the whole ``predict()``, the closure alone (:meth:`fem.holding.HeldSkin.
 grip's pose, forgotten before each call) both ways, and the held prior (the skin held where the
 hand holds it and the linear FEM elsewhere), with its factor kept and at a held set never met.
 Medians over the grips and ``--repeat`` rounds, one thread; run it alone: the times are
-wall-clock. ``--gnn`` times other grip GNNs beside the shipped one (zoo names or checkpoint
-paths), each read like it.
+wall-clock. ``--gnn`` times other grip GNNs beside the shipped one (``zoo:<name>`` or checkpoint
+paths, as ``stmpl evaluate`` names them), each read like it.
 """
 
 from __future__ import annotations
@@ -57,8 +57,8 @@ def main() -> None:
     ap.add_argument(
         "--gnn",
         nargs="+",
-        default=["gnn_forearm_grips"],
-        help="grip GNNs to time: zoo names or .safetensors checkpoints",
+        default=["zoo:gnn_forearm_grips"],
+        help="grip GNNs to time: zoo:<name> or .safetensors checkpoints",
     )
     args = ap.parse_args()
     os.environ.setdefault("OMP_NUM_THREADS", "1")
@@ -67,11 +67,12 @@ def main() -> None:
 
     import torch
 
-    from stmpl import loads, predictor, tissue
+    from stmpl import loads, tissue
     from stmpl.data.dataset import Dataset
     from stmpl.machine import describe
     from stmpl.pipeline import zoo
     from stmpl.pipeline.evaluate import scenes_of
+    from stmpl.pipeline.spec import label, predictor_from_spec
     from stmpl.scene import Scene
     from stmpl.table import header, row
 
@@ -100,13 +101,7 @@ def main() -> None:
     import fem.closure
     from stmpl import jit
 
-    def read(name: str, **options):
-        """A zoo model by name, or a checkpoint by its path."""
-        if name.endswith(".safetensors"):
-            return predictor.read(name, **options)
-        return zoo.read(name, **options)
-
-    models = [*args.gnn, "linear_forearm_grips"]
+    models = [*args.gnn, "zoo:linear_forearm_grips"]
     grip = zoo.read("gnn_forearm_grips")
     skin = grip.held_skin
     record = grip.meta["holding"]
@@ -126,14 +121,14 @@ def main() -> None:
     for fidelity in ("full", "auto"):
         for name in models:
             engine = "numpy" if name in args.gnn else "default"
-            p = read(name, fidelity=fidelity, engine=engine)
+            p = predictor_from_spec(name, fidelity=fidelity, engine=engine)
             ms = median_ms(p.predict, grips, args.repeat, p.forget_scenes)
             rows.append((name, fidelity, "numpy", ms))
     closure_numpy = median_ms(closed, poses, args.repeat, skin.forget_closures)
     # as an application answering many scenes does: the compiled loops loaded
     for fidelity in ("full", "auto"):
         for name in models:
-            p = read(name, fidelity=fidelity)
+            p = predictor_from_spec(name, fidelity=fidelity)
             p.load_kernels()  # the GNN's subgraph and fused steps (none for the linear FEM)
             engine = ("torch" if name in args.gnn else "numpy") + ", loops compiled"
             fem.closure._kernel()  # the closure's loop (Numba's disk cache)
@@ -157,7 +152,7 @@ def main() -> None:
             )
         )
     for name, fidelity, engine, ms in rows:
-        name = pathlib.Path(name).stem
+        name = label(name)
         print(row([name, fidelity, engine, f"{ms:.1f}", f"{ms / base[fidelity]:.1f}"]))
     print()
     print(header(["part of a grip's answer", "ms"], "lr"))
