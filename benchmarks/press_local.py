@@ -11,6 +11,12 @@ times are wall-clock, each the best of ``--repeats``.
 
 ``--ramp K``: instead, the force met in K equal steps on the whole arm, each from the last
 answer, as a dataset's force levels are made: the time of each sample of the ramp.
+
+``--strain``: instead, the whole arm's answer alone, and how far from the disk its strain
+reaches: the elements whose small strain ``|sym(F) - I|`` (Frobenius, largest over the
+element's points), or the part of the Green strain ``E`` that small strain leaves out
+(``|E - (sym(F) - I)|``), passes each level, and how many nodes a cut at each distance holds
+inside and on it (what a linear far field condensed onto the cut would cost).
 """
 
 from __future__ import annotations
@@ -22,6 +28,7 @@ import warnings
 import numpy as np
 
 from fem.force_control import press_to_force
+from fem.layers import preset
 from fem.local import press_local
 from fem.shapes import Punch, skin_near, touching
 from fem.simulate import resolution, tissue_mesh
@@ -39,6 +46,7 @@ def main() -> None:
     ap.add_argument("--radius-mm", type=float, default=10.0)
     ap.add_argument("--repeats", type=int, default=2)
     ap.add_argument("--ramp", type=int, default=0, help="K steps to the force, each from the last")
+    ap.add_argument("--strain", action="store_true", help="how far the answer's strain reaches")
     args = ap.parse_args()
     warnings.simplefilter("ignore")
     part = AnnyBody(phenotype={"weight": 0.5}).part("left_arm")
@@ -56,6 +64,9 @@ def main() -> None:
 
     if args.ramp:
         ramp(part, thickness, shape, p, n, args)
+        return
+    if args.strain:
+        reach(part, thickness, shape, p, n, args)
         return
 
     def whole():
@@ -133,6 +144,85 @@ def ramp(part, thickness, shape, p, n, args) -> None:
         cells = [f"{force:g}", f"{1e3 * answer.depth:.3f}", f"{answer.reaction:.3f}", f"{dt:.1f}"]
         print(row([*cells, ""]), flush=True)
     print(f"\n{args.ramp} samples in {total:.0f} s: {total / args.ramp:.1f} s a sample")
+
+
+def reach(part, thickness, shape, p, n, args) -> None:
+    """How far from the disk's centre ``p`` the whole arm's answer is strained (``--strain``)."""
+    mesh, material = tissue_mesh(part, thickness, args.res, args.tissue, near=p[None])
+    solver = Solver(mesh, material, order=resolution(args.res).order)
+    t0 = time.perf_counter()
+    answer = press_to_force(solver, shape, -n, args.force)
+    if not answer.ok:
+        print(f"failed: {answer.reason}")
+        return
+    seconds = time.perf_counter() - t0
+    print(
+        f"{1e3 * answer.depth:.3f} mm, {answer.reaction:.3f} N in {seconds:.0f} s; "
+        f"{len(solver.conn)} elements, {solver.n_all} nodes\n"
+    )
+    F = solver.deformation_gradient(answer.state)  # (T, Q, 3, 3)
+    small = 0.5 * (F + F.swapaxes(-1, -2)) - np.eye(3)
+    green = 0.5 * (F.swapaxes(-1, -2) @ F - np.eye(3))
+    small_n = np.linalg.norm(small, axis=(-1, -2)).max(1)
+    left_out = np.linalg.norm(green - small, axis=(-1, -2)).max(1)
+    centres = solver.positions[solver.conn].mean(1)
+    dist = 1e3 * np.linalg.norm(centres - p, axis=1)  # mm
+    layer = getattr(material, "layer", np.zeros(len(dist), int))
+    names = [x.name for x in preset(args.tissue).layers] if hasattr(material, "layer") else ["gel"]
+
+    def by_layer(sel):
+        counts = np.bincount(layer[sel], minlength=len(names))
+        return {names[k]: int(c) for k, c in enumerate(counts) if c}
+
+    print(
+        header(
+            [
+                "level",
+                "small strain above: elements",
+                "farthest mm",
+                "left out above: elements",
+                "farthest mm",
+                "beyond 60 mm, by layer",
+            ],
+            "lrrrrl",
+        )
+    )
+    for level in (0.1, 0.03, 0.01, 0.003, 0.001):
+        a, b = small_n > level, left_out > level
+        cells = [
+            f"{level:g}",
+            a.sum(),
+            f"{dist[a].max(initial=0):.0f}",
+            b.sum(),
+            f"{dist[b].max(initial=0):.0f}",
+            ", ".join(f"{k}: {m}" for k, m in by_layer(a & (dist > 60)).items()),
+        ]
+        print(row([str(c) for c in cells]))
+    print()
+    print(
+        header(
+            [
+                "cut at mm",
+                "nodes inside",
+                "nodes on the cut",
+                "small strain outside",
+                "left out outside",
+            ],
+            "rrrrr",
+        )
+    )
+    for cut in (20, 40, 60, 80, 100):
+        inside = dist < cut
+        nodes_in = np.unique(solver.conn[inside])
+        on_cut = np.intersect1d(nodes_in, solver.conn[~inside])
+        cells = [
+            cut,
+            len(nodes_in),
+            len(on_cut),
+            f"{small_n[~inside].max():.4f}",
+            f"{left_out[~inside].max():.4f}",
+        ]
+        print(row([str(c) for c in cells]))
 
 
 if __name__ == "__main__":
