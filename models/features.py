@@ -66,6 +66,16 @@ contact prior, ``closure`` at the network's answer plus the linear FEM's closure
 (:meth:`fem.holding.HeldSkin.closure`)."""
 
 
+def runs_held_only(config: dict) -> bool:
+    """Whether a network of options ``config`` answers only the held vertices (a held prior,
+    :data:`HOLDING`): the held prior reads the network's answer there alone and no contact lies
+    beyond them, so the network runs on their subgraph (those vertices and ``steps`` hops more)
+    at every fidelity, the answer it gives on the whole part (and in training the same
+    gradient).
+    """
+    return config.get("prior") in HOLDING
+
+
 GAP_SCALE = 0.01
 """m: how deep an object reaches into the rest skin enters over this (a pose's input)."""
 

@@ -26,6 +26,7 @@ from models.features import (
     gap_of,
     near_objects,
     posed_answer,
+    runs_held_only,
     way_channels,
 )
 from models.gnn.subgraph import loaded, mesh, subgraph
@@ -344,12 +345,8 @@ class GNNArrays(TrainedPredictor):
 
     @property
     def held_only(self) -> bool:
-        """Whether the network answers only the held vertices (a held prior): the held prior
-        reads the network's answer there alone and no contact lies beyond them, so the network
-        runs on their subgraph (those vertices and ``steps`` hops more) at every fidelity, the
-        answer it gives on the whole part.
-        """
-        return self.config.get("prior") in HOLDING
+        """:func:`models.features.runs_held_only` of this network's options."""
+        return runs_held_only(self.config)
 
     def _network(self, x, f, t, base, slots) -> np.ndarray:
         """The network's output ``(B N, C)`` with the prior (:meth:`_answers`), on the whole

@@ -19,7 +19,6 @@ from torch import nn
 
 from models.features import (
     GAP_SCALE,
-    HOLDING,
     PRESSURE_SCALE,
     PRIOR_SCALE,
     THICKNESS_SCALE,
@@ -28,6 +27,7 @@ from models.features import (
     gap_of,
     load_channels,
     near_objects,
+    runs_held_only,
     way_channels,
 )
 from models.gnn import fused
@@ -168,12 +168,8 @@ class GNNPredictor(LinearPrior, LearnedPredictor):
 
     @property
     def held_only(self) -> bool:
-        """Whether the network answers only the held vertices (a held prior): the held prior
-        reads the network's answer there alone and no contact lies beyond them, so the network
-        runs on their subgraph (those vertices and ``steps`` hops more) at every fidelity, the
-        answer it gives on the whole part (and in training, :attr:`local`, the same gradient).
-        """
-        return self.config.get("prior") in HOLDING
+        """:func:`models.features.runs_held_only` of this network's options."""
+        return runs_held_only(self.config)
 
     @property
     def local(self) -> bool:
