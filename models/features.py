@@ -162,18 +162,21 @@ touched every vertex within 8 mm of the hand, and its contact's area lay five ti
 the FEM had seen."""
 
 
-def posed_answer(scene: Scene, u: np.ndarray, pressure: np.ndarray, push: np.ndarray) -> dict:
+def posed_answer(
+    scene: Scene, u: np.ndarray, pressure: np.ndarray, push: np.ndarray, squeeze: bool = False
+) -> dict:
     """A pose model's answer to ``scene``: displacement ``u`` ``(N, 3)`` m, the contact force on
     each vertex from ``pressure`` ``(N,)`` Pa (the network's; below :data:`CONTACT_FLOOR` of its
     peak where contact is answered read as none) and the reaction from ``push`` ``(N,)`` Pa (the
     network's pressure along the press direction, the reaction's density), both weighed by
     :func:`contact_weight`: whole within :data:`CONTACT_BAND` of the objects, tapered to none
-    beyond.
+    beyond. ``squeeze``: the reaction is the contact forces summed instead (a grip's squeeze,
+    option ``reaction: pressure``, :data:`models.trained.REACTIONS`).
     """
     share = contact_weight(scene.pose.gap) * scene.part.vertex_areas
     pressure = np.maximum(pressure, 0.0)
     peak = pressure[share > 0].max(initial=0.0)  # the peak where contact is answered
     pressure = np.where(pressure >= CONTACT_FLOOR * peak, pressure, 0.0)
     force = pressure * share
-    reaction = float(np.sum(push * share))
+    reaction = float(force.sum()) if squeeze else float(np.sum(push * share))
     return {"displacement": u, "force": force, "reaction": reaction}

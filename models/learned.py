@@ -266,13 +266,21 @@ class LearnedPredictor(TrainedPredictor):
             if body is None
             else self.body_tensor("inv_area", body)
         )
-        true = (tgt[..., 1] / inv_area).sum(-1)
-        got = contact_weight(gap) * pred[..., 1] / inv_area
+        k = self.reaction_channel
+        true = (tgt[..., k] / inv_area).sum(-1)
+        got = contact_weight(gap) * pred[..., k] / inv_area
         return (
             (torch.log(got.sum(-1).clamp_min(1e-12)) - torch.log(true.clamp_min(1e-12)))
             .abs()
             .mean()
         )
+
+    @property
+    def reaction_channel(self) -> int:
+        """Which of a pose model's pressure channels its reaction sums (option ``reaction``,
+        :data:`models.trained.REACTIONS`): 1, the push, or 0, the pressure.
+        """
+        return 0 if self.config.get("reaction", "push") == "pressure" else 1
 
     def euclidean_loss(self, pred, tgt, force):
         """The ``relative`` or ``pooled`` loss of ``(B, N, 3)`` outputs against targets in the
@@ -302,7 +310,10 @@ class LearnedPredictor(TrainedPredictor):
         if not self.posed:
             return u
         pressures = out[..., 3:].double().cpu().numpy() * PRESSURE_OUT_SCALE
-        return [posed_answer(s, x, p[:, 0], p[:, 1]) for s, x, p in zip(scenes, u, pressures)]
+        squeeze = self.config.get("reaction", "push") == "pressure"
+        return [
+            posed_answer(s, x, p[:, 0], p[:, 1], squeeze) for s, x, p in zip(scenes, u, pressures)
+        ]
 
     def network(self) -> torch.nn.Module:
         """The module :meth:`compile` compiles: the network without its prior (by default the

@@ -39,6 +39,14 @@ GIVEN = ("force", "pose")
 (the gap field; it then answers the contact pressure as well, :mod:`stmpl.pose`)."""
 
 
+REACTIONS = ("push", "pressure")
+"""A pose model's option ``reaction``: where its reaction comes from. ``push``: its push
+channel summed (the pressure's part along the press direction, the reaction's density);
+``pressure``: its contact forces summed (objects closing each along its own path, a grip, whose
+reaction is the whole contact force, the squeeze, and whose push is the pressure itself), so
+that the answer's contact forces sum to its reaction; the reaction's loss reads that channel."""
+
+
 class TrainedPredictor(BasePredictor):
     """A predictor trained on FEM data, for one body part (or, with the option ``geometry``, for
     every body of that part's mesh: see :meth:`slot`), whatever runs its network.
@@ -84,6 +92,7 @@ class TrainedPredictor(BasePredictor):
         if cls.poses:
             allowed["motion"] = False
             allowed["displacement_weight"] = 1.0
+            allowed["reaction"] = "push"
         unknown = set(config or {}) - set(allowed)
         if unknown:
             raise ValueError(
@@ -110,6 +119,13 @@ class TrainedPredictor(BasePredictor):
             raise ValueError(
                 "displacement_weight weighs a pose model's displacement against its pressures; "
                 "a model given a force answers no pressures"
+            )
+        if out.get("reaction", "push") not in REACTIONS:
+            raise ValueError(f"reaction must be one of {REACTIONS}, got {out['reaction']!r}")
+        if out.get("reaction", "push") != "push" and out["given"] != "pose":
+            raise ValueError(
+                "reaction says where a pose model's reaction comes from; a model "
+                "given a force answers none"
             )
         for key in cls.counts:
             checked.integer(out[key], key, 1)

@@ -341,7 +341,10 @@ class GNNArrays(TrainedPredictor):
         if not self.posed:
             return u
         pressures = out[..., 3:].astype(np.float64) * PRESSURE_OUT_SCALE
-        return [posed_answer(s, x, p[:, 0], p[:, 1]) for s, x, p in zip(scenes, u, pressures)]
+        squeeze = self.config.get("reaction", "push") == "pressure"
+        return [
+            posed_answer(s, x, p[:, 0], p[:, 1], squeeze) for s, x, p in zip(scenes, u, pressures)
+        ]
 
     @property
     def held_only(self) -> bool:

@@ -276,6 +276,44 @@ def test_a_pose_model_s_reaction_error_is_read_in_its_logarithm(ds):
     assert expected == pytest.approx(-np.log(0.85), abs=0.01)
 
 
+def test_a_grip_model_s_reaction_is_its_contact_forces_summed(ds):
+    """Option ``reaction: pressure`` (a grip's squeeze): the answer's reaction is the sum of its
+    contact forces, and the reaction's loss reads the pressure channel, not the push; a model
+    given a force is refused the option by name.
+    """
+    import torch
+
+    from stmpl import tissue
+    from stmpl.contact import objects
+    from stmpl.contact.posing import posed
+
+    torch.manual_seed(0)
+    options = {**TINY_MODELS["gnn"], "given": "pose", "reaction": "pressure"}
+    p = predictor.create("gnn", ds.part, options)
+    ball = objects.sphere(0.008)
+    at = int(np.argmax(ds.part.rim_distance))
+    scene = posed(
+        ds.part,
+        tissue.constant(ds.part, 0.0075),
+        ball,
+        objects.press(ds.part, ball, at, depth=3e-3),
+    )
+    d = p.predict(scene)
+    assert d.force.sum() > 0 and d.reaction == pytest.approx(d.force.sum(), rel=1e-12)
+    n = ds.part.n_vertices
+    tgt = torch.ones(1, n, 2)
+    tgt[..., 1] = 5.0  # a push five times the pressure: the loss must not read it
+    gap = torch.zeros(1, n)
+    assert float(p.reaction_loss(tgt, tgt, gap)) == pytest.approx(0.0, abs=1e-6)
+    assert p.reaction_channel == 0
+    pushed = predictor.create("gnn", ds.part, {**TINY_MODELS["gnn"], "given": "pose"})
+    assert pushed.reaction_channel == 1
+    with pytest.raises(ValueError, match="reaction says where a pose model"):
+        predictor.create("gnn", ds.part, {**TINY_MODELS["gnn"], "reaction": "pressure"})
+    with pytest.raises(ValueError, match="reaction must be one of"):
+        predictor.create("gnn", ds.part, {**options, "reaction": "sum"})
+
+
 def test_the_dent_s_error_is_its_own_share_of_the_peak():
     """``near_loss``: the relative MEE over the vertices where an object presses alone; a
     sample where none does counts zero.
