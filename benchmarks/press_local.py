@@ -70,8 +70,7 @@ def main() -> None:
         return
 
     def whole():
-        mesh, material = tissue_mesh(part, thickness, args.res, args.tissue, near=p[None])
-        solver = Solver(mesh, material, order=resolution(args.res).order)
+        solver = whole_arm(part, thickness, p, args)
         return press_to_force(solver, shape, -n, args.force), len(solver.free)
 
     def local():
@@ -124,11 +123,16 @@ def main() -> None:
     )
 
 
+def whole_arm(part, thickness, p, args) -> Solver:
+    """The whole arm's solver at ``args.res`` and ``args.tissue``, refined near ``p`` ``(3,)``."""
+    mesh, material = tissue_mesh(part, thickness, args.res, args.tissue, near=p[None])
+    return Solver(mesh, material, order=resolution(args.res).order)
+
+
 def ramp(part, thickness, shape, p, n, args) -> None:
     """The force in ``args.ramp`` equal steps, each from the last answer, on the whole arm."""
     t0 = time.perf_counter()
-    mesh, material = tissue_mesh(part, thickness, args.res, args.tissue, near=p[None])
-    solver = Solver(mesh, material, order=resolution(args.res).order)
+    solver = whole_arm(part, thickness, p, args)
     print(f"mesh and solver: {time.perf_counter() - t0:.1f} s, {len(solver.free)} DOFs\n")
     print(header(["force N", "depth mm", "reaction N", "s", "note"], "rrrrl"))
     last, total = None, 0.0
@@ -148,8 +152,7 @@ def ramp(part, thickness, shape, p, n, args) -> None:
 
 def reach(part, thickness, shape, p, n, args) -> None:
     """How far from the disk's centre ``p`` the whole arm's answer is strained (``--strain``)."""
-    mesh, material = tissue_mesh(part, thickness, args.res, args.tissue, near=p[None])
-    solver = Solver(mesh, material, order=resolution(args.res).order)
+    solver = whole_arm(part, thickness, p, args)
     t0 = time.perf_counter()
     answer = press_to_force(solver, shape, -n, args.force)
     if not answer.ok:
@@ -167,8 +170,10 @@ def reach(part, thickness, shape, p, n, args) -> None:
     left_out = np.linalg.norm(green - small, axis=(-1, -2)).max(1)
     centres = solver.positions[solver.conn].mean(1)
     dist = 1e3 * np.linalg.norm(centres - p, axis=1)  # mm
-    layer = getattr(material, "layer", np.zeros(len(dist), int))
-    names = [x.name for x in preset(args.tissue).layers] if hasattr(material, "layer") else ["gel"]
+    if hasattr(solver.material, "layer"):  # a layered tissue: each element's layer
+        layer, names = solver.material.layer, [x.name for x in preset(args.tissue).layers]
+    else:
+        layer, names = np.zeros(len(dist), int), ["gel"]
 
     def by_layer(sel):
         counts = np.bincount(layer[sel], minlength=len(names))

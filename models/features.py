@@ -162,6 +162,14 @@ touched every vertex within 8 mm of the hand, and its contact's area lay five ti
 the FEM had seen."""
 
 
+def squeezes(config: dict) -> bool:
+    """Whether a pose model of options ``config`` has its contact forces summed for its
+    reaction (option ``reaction: pressure``, :data:`models.trained.REACTIONS`: a grip's
+    squeeze) rather than its push channel.
+    """
+    return config.get("reaction", "push") == "pressure"
+
+
 def posed_answer(
     scene: Scene, u: np.ndarray, pressure: np.ndarray, push: np.ndarray, squeeze: bool = False
 ) -> dict:

@@ -23,6 +23,7 @@ from models.features import (
     gap_of,
     posed_answer,
     pressure_out,
+    squeezes,
     total_force,
 )
 from models.losses import log_near_loss, near_loss, pooled_loss, relative_loss
@@ -280,7 +281,7 @@ class LearnedPredictor(TrainedPredictor):
         """Which of a pose model's pressure channels its reaction sums (option ``reaction``,
         :data:`models.trained.REACTIONS`): 1, the push, or 0, the pressure.
         """
-        return 0 if self.config.get("reaction", "push") == "pressure" else 1
+        return 0 if squeezes(self.config) else 1
 
     def euclidean_loss(self, pred, tgt, force):
         """The ``relative`` or ``pooled`` loss of ``(B, N, 3)`` outputs against targets in the
@@ -310,7 +311,7 @@ class LearnedPredictor(TrainedPredictor):
         if not self.posed:
             return u
         pressures = out[..., 3:].double().cpu().numpy() * PRESSURE_OUT_SCALE
-        squeeze = self.config.get("reaction", "push") == "pressure"
+        squeeze = squeezes(self.config)
         return [
             posed_answer(s, x, p[:, 0], p[:, 1], squeeze) for s, x, p in zip(scenes, u, pressures)
         ]

@@ -27,6 +27,7 @@ from models.features import (
     near_objects,
     posed_answer,
     runs_held_only,
+    squeezes,
     way_channels,
 )
 from models.gnn.subgraph import loaded, mesh, subgraph
@@ -341,7 +342,7 @@ class GNNArrays(TrainedPredictor):
         if not self.posed:
             return u
         pressures = out[..., 3:].astype(np.float64) * PRESSURE_OUT_SCALE
-        squeeze = self.config.get("reaction", "push") == "pressure"
+        squeeze = squeezes(self.config)
         return [
             posed_answer(s, x, p[:, 0], p[:, 1], squeeze) for s, x, p in zip(scenes, u, pressures)
         ]
