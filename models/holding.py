@@ -61,7 +61,7 @@ class HeldSkin(fem_holding.HeldSkin):
                 self._tensors[id(L)] = (L, torch.from_numpy(at), torch.from_numpy(L))
             _, at_t, L_t = self._tensors[id(L)]
             dev = r.device
-            rh = r[b].reshape(-1)[at_t.to(dev)].double()[:, None]
+            rh = r[b].reshape(-1)[at_t.to(dev)].to(L_t.dtype)[:, None]
             f = torch.cholesky_solve(rh, L_t.to(dev)).to(r.dtype)[:, 0]
             if dev.type == "cpu" and not torch.is_grad_enabled():  # an answer: G read in place
                 u = fem_holding.held_product(s.G, at, f.numpy())
@@ -72,6 +72,11 @@ class HeldSkin(fem_holding.HeldSkin):
             GT = torch.from_numpy(s.G.T).to(dev)
             out.append((f @ GT.index_select(0, at_t.to(dev))).reshape(r[b].shape))
         return torch.stack(out)
+
+
+    def forget_poses(self) -> None:
+        super().forget_poses()
+        self._tensors.clear()
 
 
 def rounding_of(kinds) -> float | None:

@@ -228,13 +228,14 @@ class TrainedPredictor(BasePredictor):
         """
 
     def forget_scenes(self) -> None:
-        """Forget the closures kept of the poses answered (priors ``closure``, and the linear
-        FEM given a pose); what serves every scene of the body (the skin's compliance, its
-        factors) stays.
+        """Forget what was kept of the poses answered (priors ``held`` and ``closure``, and the
+        linear FEM given a pose): their closures and their held sets' factors
+        (:meth:`fem.holding.HeldSkin.forget_poses`); what serves every scene of the body (the
+        skin's compliance) stays.
         """
         for skin in (getattr(self, "held_skin", None), getattr(self, "_held", None)):
             if skin is not None:
-                skin.forget_closures()
+                skin.forget_poses()
 
     def predict(self, scenes, strict: bool | None = None):
         """As :meth:`BasePredictor.predict`; a scene on the mirror twin of the model's part

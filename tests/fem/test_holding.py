@@ -8,7 +8,7 @@ import pytest
 import scipy.sparse as sp
 from scipy.sparse.linalg import spsolve
 
-from fem.holding import Holding, SkinCompliance, held_product
+from fem.holding import Holding, SkinCompliance, held_block, held_factor, held_product
 from stmpl.body import tube
 
 RES = {"subdivisions": 0, "layers": 1, "order": 2}
@@ -144,3 +144,67 @@ def test_the_held_product_reads_the_columns_in_place_as_numpy_gathers_them(monke
     scale = np.abs(exact).max()
     np.testing.assert_allclose(fast, exact, rtol=0, atol=1e-6 * scale)
     np.testing.assert_allclose(plain, exact, rtol=0, atol=1e-5 * scale)
+
+
+def test_the_held_block_is_read_in_place_as_numpy_gathers_it(monkeypatch):
+    """``G[at, at]`` made symmetric, in float64: compiled where Numba is loaded (read in
+    place), NumPy's gather otherwise; the two equal to the bit.
+    """
+    import stmpl.jit
+
+    rng = np.random.default_rng(1)
+    G = np.asfortranarray(rng.normal(size=(300, 300)).astype(np.float32))
+    at = np.sort(rng.choice(300, 60, replace=False))
+    want = G[np.ix_(at, at)].astype(np.float64)
+    want = 0.5 * (want + want.T)
+    monkeypatch.setattr(stmpl.jit, "loaded", lambda: False)
+    plain = held_block(G, at)
+    monkeypatch.setattr(stmpl.jit, "loaded", lambda: True)
+    fast = held_block(G, at)
+    assert plain.dtype == fast.dtype == np.float64 and fast.shape == (60, 60)
+    np.testing.assert_array_equal(plain, want)
+    np.testing.assert_array_equal(fast, want)
+
+
+def test_a_held_factor_is_float32_where_it_can_be_and_float64_where_not():
+    """A well-conditioned block factorises in float32 (``L L^T`` within float32's rounding of
+    it); a badly conditioned one (condition number 1e6 or 1e9) in float64, its factor exact,
+    even where float32's factorisation meets no negative pivot; a singular one with its
+    diagonal lifted by 1e-7 of its mean, not refused.
+    """
+    rng = np.random.default_rng(2)
+    Q, _ = np.linalg.qr(rng.normal(size=(40, 40)))
+    for low, dtype, tol in [
+        (1e-2, np.float32, 1e-6),
+        (1e-6, np.float64, 1e-14),
+        (1e-9, np.float64, 1e-14),
+    ]:
+        A = (Q * np.geomspace(low, 1.0, 40)) @ Q.T
+        L = held_factor(A)
+        assert L.dtype == dtype
+        assert np.abs(np.tril(L) - L).max() == 0
+        assert np.abs(L.astype(np.float64) @ L.T - A).max() < tol
+    A = (Q * np.r_[0.0, np.ones(39)]) @ Q.T
+    L = held_factor(A)
+    lifted = A + 1e-7 * A.diagonal().mean() * np.eye(40)
+    assert np.abs(L @ L.T - lifted).max() < 1e-12
+    assert held_factor(np.zeros((0, 0))).shape == (0, 0)  # no object near
+
+
+def test_forgetting_the_poses_forgets_their_held_factors(part):
+    """:meth:`HeldSkin.forget_poses`: a pose's held set factorised again after it (a moving
+    object meets a new held set at nearly every answer: a timed answer must pay for it).
+    """
+    from fem.holding import HeldSkin
+
+    skin = HeldSkin(part, "forearm")
+    t = np.full(part.n_vertices, 0.0075)
+    gap = np.full(part.n_vertices, 1.0)
+    held, _ = _held_and_target(part)
+    gap[held] = -0.001
+    first = skin.hold(gap, t)[2]
+    assert skin.hold(gap, t)[2] is first  # kept
+    skin.forget_poses()
+    again = skin.hold(gap, t)[2]
+    assert again is not first
+    np.testing.assert_array_equal(again, first)
