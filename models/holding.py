@@ -73,7 +73,6 @@ class HeldSkin(fem_holding.HeldSkin):
             out.append((f @ GT.index_select(0, at_t.to(dev))).reshape(r[b].shape))
         return torch.stack(out)
 
-
     def forget_poses(self) -> None:
         super().forget_poses()
         self._tensors.clear()
