@@ -430,8 +430,11 @@ def held_factor(A: np.ndarray) -> np.ndarray:
     if len(A) == 0:
         return np.zeros((0, 0), np.float32)
     try:
-        L = scipy.linalg.cholesky(A.astype(np.float32), lower=True, check_finite=False)
-        rcond, info = scipy.linalg.lapack.spocon(L, float(np.abs(A).sum(0).max()), uplo="L")
+        A32 = A.astype(np.float32)
+        norm = float(np.abs(A32).sum(0).max())
+        # symmetric: its transpose is the Fortran-ordered array LAPACK factorises in place
+        L = scipy.linalg.cholesky(A32.T, lower=True, overwrite_a=True, check_finite=False)
+        rcond, info = scipy.linalg.lapack.spocon(L, norm, uplo="L")
         if info == 0 and rcond * HELD_FACTOR_CONDITION > 1.0:
             return L
     except np.linalg.LinAlgError:
