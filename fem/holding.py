@@ -319,7 +319,7 @@ class HeldSkin:
         if k not in self._holds:
             s.solve(H)
             at = (H[:, None] * 3 + np.arange(3)).ravel()
-            L = held_factor(held_block(s.G, at))
+            L = held_factor(s.G, at)
             if len(self._holds) >= CACHED_HOLDS:
                 self._holds.pop(next(iter(self._holds)))
             self._holds[k] = (at, L)
@@ -418,31 +418,37 @@ from the factor by LAPACK's ``spocon``) is below this: its solve then lies withi
 float32 compliance the block is read from puts on either. The forearm's grips: 5e3-3e4."""
 
 
-def held_factor(A: np.ndarray) -> np.ndarray:
-    """The lower Cholesky factor of a held block ``A`` ``(k, k)`` (float64, :func:`held_block`),
-    in float32 where that factorisation succeeds and the block's condition number is below
-    :data:`HELD_FACTOR_CONDITION`: half the time and memory of float64 (on the forearm's grips
-    the test grips' answers move by at most 3.4e-6 of their peak).
-    Else in float64, and where even that meets a non-positive pivot (the float32 compliance's
-    rounding of a nearly singular block), with ``1e-7`` of the mean diagonal added to the
-    diagonal. An empty block (no object near) has an empty factor.
+def held_factor(G: np.ndarray, at: np.ndarray) -> np.ndarray:
+    """The lower Cholesky factor of the held block ``G[at, at]`` (:func:`held_block`; where
+    Numba is loaded, its lower triangle read in place) of the compliance ``G`` ``(3 N, 3 N)``
+    (m/N, float32) on the held DOFs ``at`` ``(k,)``: in float32
+    where that factorisation succeeds and the block's condition number is below
+    :data:`HELD_FACTOR_CONDITION` (half the time and memory of float64; on the forearm's test
+    grips the answers move by at most 3.4e-6 of their peak). Else in float64, and where even
+    that meets a non-positive pivot (the float32 compliance's rounding of a nearly singular
+    block), with ``1e-7`` of the mean diagonal added to the diagonal. No held DOFs (no object
+    near): an empty factor.
     """
-    if len(A) == 0:
+    at = np.asarray(at, dtype=np.int64)
+    if len(at) == 0:
         return np.zeros((0, 0), np.float32)
-    try:
-        A32 = A.astype(np.float32)
+    kernel = _block_kernel() if jit.loaded() and G.flags.f_contiguous else None
+    if kernel is None:
+        A32 = held_block(G, at).astype(np.float32)
         norm = float(np.abs(A32).sum(0).max())
-        # symmetric: its transpose is the Fortran-ordered array LAPACK factorises in place
+    else:
+        A32, norm = kernel(G, at)
+    try:  # LAPACK factorises the Fortran-ordered transpose in place, from its lower triangle
         L = scipy.linalg.cholesky(A32.T, lower=True, overwrite_a=True, check_finite=False)
         rcond, info = scipy.linalg.lapack.spocon(L, norm, uplo="L")
         if info == 0 and rcond * HELD_FACTOR_CONDITION > 1.0:
             return L
     except np.linalg.LinAlgError:
         pass
+    A = held_block(G, at)
     try:
         return scipy.linalg.cholesky(A, lower=True)
     except np.linalg.LinAlgError:
-        A = A.copy()
         A[np.diag_indices_from(A)] += 1e-7 * float(A.diagonal().mean())
         return scipy.linalg.cholesky(A, lower=True)
 
@@ -450,20 +456,21 @@ def held_factor(A: np.ndarray) -> np.ndarray:
 def held_block(G: np.ndarray, at: np.ndarray) -> np.ndarray:
     """``(k, k)`` float64: ``G[at, at]`` of the compliance ``G`` ``(3 N, 3 N)`` (m/N, float32)
     on the held DOFs ``at`` ``(k,)``, made symmetric (``(A + A^T) / 2``: ``G``'s columns are
-    solved apart, so its two halves differ by the solver's rounding). Where Numba is loaded the
-    block is read in place, column by column (NumPy gathers the whole columns first: 14 MB for
-    a grip's two hundred held vertices on the forearm, to keep a thirtieth of it).
+    solved apart, so its two halves differ by the solver's rounding).
     """
-    kernel = _block_kernel() if jit.loaded() and G.flags.f_contiguous else None
-    if kernel is None:
-        A = G[:, at][at].astype(np.float64)
-        return 0.5 * (A + A.T)
-    return kernel(G, np.asarray(at, dtype=np.int64))
+    A = G[:, at][at].astype(np.float64)
+    return 0.5 * (A + A.T)
 
 
 @functools.lru_cache(maxsize=1)
 def _block_kernel():
-    """:func:`held_block`'s compiled loop, or ``None`` without Numba."""
+    """The held block's lower triangle in float32 (what LAPACK reads of a symmetric matrix; the
+    compliance's two triangles differ by less than float32's rounding, some 5e-9 of the
+    largest entry on the forearm's grips), read in place (NumPy gathers the whole columns
+    first: 14 MB for a grip's two hundred held vertices on the forearm, to keep a sixtieth of
+    it), and the symmetric block's 1-norm; ``None`` without Numba. The triangle is returned as
+    the upper one of a C-ordered array, whose transpose LAPACK takes without a copy.
+    """
     compile_ = jit.njit(error_model="numpy")
     if compile_ is None:
         return None
@@ -471,17 +478,17 @@ def _block_kernel():
     @compile_
     def block(G, at):  # pragma: no cover - compiled
         k = at.shape[0]
-        A = np.empty((k, k))
+        B = np.zeros((k, k), np.float32)  # row j: the block's column j, from its diagonal down
+        sums = np.zeros(k)
         for j in range(k):
             col = at[j]
-            for i in range(k):
-                A[i, j] = G[at[i], col]
-        for j in range(k):
-            for i in range(j + 1, k):
-                m = 0.5 * (A[i, j] + A[j, i])
-                A[i, j] = m
-                A[j, i] = m
-        return A
+            for i in range(j, k):
+                v = G[at[i], col]
+                B[j, i] = v
+                sums[j] += abs(v)
+                if i > j:
+                    sums[i] += abs(v)
+        return B, sums.max()
 
     return block
 

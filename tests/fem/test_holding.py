@@ -146,49 +146,40 @@ def test_the_held_product_reads_the_columns_in_place_as_numpy_gathers_them(monke
     np.testing.assert_allclose(plain, exact, rtol=0, atol=1e-5 * scale)
 
 
-def test_the_held_block_is_read_in_place_as_numpy_gathers_it(monkeypatch):
-    """``G[at, at]`` made symmetric, in float64: compiled where Numba is loaded (read in
-    place), NumPy's gather otherwise; the two equal to the bit.
+@pytest.mark.parametrize("compiled", [False, True])
+def test_a_held_factor_is_float32_where_it_can_be_and_float64_where_not(monkeypatch, compiled):
+    """The factor of ``G[at, at]`` made symmetric: of a well-conditioned block in float32
+    (``L L^T`` within float32's rounding of it); of a badly conditioned one (condition number
+    1e6 or 1e9) in float64, exact, even where float32's factorisation meets no negative pivot;
+    of a singular one with its diagonal lifted by 1e-7 of its mean, not refused; the same with
+    the block read in place (compiled, where Numba is loaded) as gathered by NumPy.
     """
     import stmpl.jit
 
-    rng = np.random.default_rng(1)
-    G = np.asfortranarray(rng.normal(size=(300, 300)).astype(np.float32))
-    at = np.sort(rng.choice(300, 60, replace=False))
-    want = G[np.ix_(at, at)].astype(np.float64)
-    want = 0.5 * (want + want.T)
-    monkeypatch.setattr(stmpl.jit, "loaded", lambda: False)
-    plain = held_block(G, at)
-    monkeypatch.setattr(stmpl.jit, "loaded", lambda: True)
-    fast = held_block(G, at)
-    assert plain.dtype == fast.dtype == np.float64 and fast.shape == (60, 60)
-    np.testing.assert_array_equal(plain, want)
-    np.testing.assert_array_equal(fast, want)
-
-
-def test_a_held_factor_is_float32_where_it_can_be_and_float64_where_not():
-    """A well-conditioned block factorises in float32 (``L L^T`` within float32's rounding of
-    it); a badly conditioned one (condition number 1e6 or 1e9) in float64, its factor exact,
-    even where float32's factorisation meets no negative pivot; a singular one with its
-    diagonal lifted by 1e-7 of its mean, not refused.
-    """
+    monkeypatch.setattr(stmpl.jit, "loaded", lambda: compiled)
     rng = np.random.default_rng(2)
     Q, _ = np.linalg.qr(rng.normal(size=(40, 40)))
-    for low, dtype, tol in [
-        (1e-2, np.float32, 1e-6),
-        (1e-6, np.float64, 1e-14),
-        (1e-9, np.float64, 1e-14),
-    ]:
-        A = (Q * np.geomspace(low, 1.0, 40)) @ Q.T
-        L = held_factor(A)
-        assert L.dtype == dtype
+    at = np.sort(rng.choice(100, 40, replace=False))
+
+    def compliance(A):  # A at ``at`` of a float32 compliance, a little asymmetric elsewhere
+        G = rng.normal(size=(100, 100)).astype(np.float32)
+        G[np.ix_(at, at)] = A
+        return np.asfortranarray(G)
+
+    for low, dtype, tol in [(1e-2, np.float32, 1e-6), (1e-6, np.float64, 1e-12), (1e-9, None, 0)]:
+        G = compliance((Q * np.geomspace(low, 1.0, 40)) @ Q.T)
+        A = held_block(G, at)
+        np.testing.assert_array_equal(A, A.T)
+        L = held_factor(G, at)
+        assert L.dtype == (dtype or np.float64)
         assert np.abs(np.tril(L) - L).max() == 0
-        assert np.abs(L.astype(np.float64) @ L.T - A).max() < tol
-    A = (Q * np.r_[0.0, np.ones(39)]) @ Q.T
-    L = held_factor(A)
-    lifted = A + 1e-7 * A.diagonal().mean() * np.eye(40)
-    assert np.abs(L @ L.T - lifted).max() < 1e-12
-    assert held_factor(np.zeros((0, 0))).shape == (0, 0)  # no object near
+        if dtype is not None:
+            assert np.abs(L.astype(np.float64) @ L.T - A).max() < tol
+    G = compliance((Q * np.r_[0.0, np.ones(39)]) @ Q.T)
+    A = held_block(G, at)
+    L = held_factor(G, at)
+    assert np.abs(L @ L.T - (A + 1e-7 * A.diagonal().mean() * np.eye(40))).max() < 1e-6
+    assert held_factor(G, at[:0]).shape == (0, 0)  # no object near
 
 
 def test_forgetting_the_poses_forgets_their_held_factors(part):
