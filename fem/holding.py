@@ -421,20 +421,21 @@ float32 compliance the block is read from puts on either. The forearm's grips: 5
 def held_factor(G: np.ndarray, at: np.ndarray) -> np.ndarray:
     """The lower Cholesky factor of the held block ``G[at, at]`` (:func:`held_block`; where
     Numba is loaded, its lower triangle read in place) of the compliance ``G`` ``(3 N, 3 N)``
-    (m/N, float32) on the held DOFs ``at`` ``(k,)``: in float32
-    where that factorisation succeeds and the block's condition number is below
-    :data:`HELD_FACTOR_CONDITION` (half the time and memory of float64; on the forearm's test
-    grips the answers move by at most 3.4e-6 of their peak). Else in float64, and where even
-    that meets a non-positive pivot (the float32 compliance's rounding of a nearly singular
-    block), with ``1e-7`` of the mean diagonal added to the diagonal. No held DOFs (no object
-    near): an empty factor.
+    (m/N, float32) on the held DOFs ``at`` ``(k,)``: in float32 where that factorisation
+    succeeds and the block's condition number is below :data:`HELD_FACTOR_CONDITION` (half the
+    time and memory of float64; on the forearm's test grips the answers move by at most 3.5e-6
+    of their peak). Else in float64, and where even that meets a non-positive pivot (the
+    float32 compliance's rounding of a nearly singular block), with ``1e-7`` of the mean
+    diagonal added to the diagonal. No held DOFs (no object near): an empty factor.
     """
     at = np.asarray(at, dtype=np.int64)
     if len(at) == 0:
         return np.zeros((0, 0), np.float32)
+    A = None  # the float64 block, gathered where NumPy reads it or float32 will not do
     kernel = _block_kernel() if jit.loaded() and G.flags.f_contiguous else None
     if kernel is None:
-        A32 = held_block(G, at).astype(np.float32)
+        A = held_block(G, at)
+        A32 = A.astype(np.float32)
         norm = float(np.abs(A32).sum(0).max())
     else:
         A32, norm = kernel(G, at)
@@ -445,7 +446,8 @@ def held_factor(G: np.ndarray, at: np.ndarray) -> np.ndarray:
             return L
     except np.linalg.LinAlgError:
         pass
-    A = held_block(G, at)
+    if A is None:
+        A = held_block(G, at)
     try:
         return scipy.linalg.cholesky(A, lower=True)
     except np.linalg.LinAlgError:
