@@ -325,6 +325,33 @@ class HeldSkin:
             self._holds[k] = (at, L)
         return (s, *self._holds[k])
 
+    def pushing(self, gap, thickness) -> tuple[SkinCompliance, np.ndarray, np.ndarray]:
+        """A sample's store, its held DOFs ``(3 k,)`` (as :meth:`hold`) and the compliance's
+        diagonal there ``(3 k,)`` (m/N, float64): what :meth:`push` reads, no factor.
+        """
+        key, s = self.store(thickness)
+        H = np.flatnonzero(within_reach(gap) & s.free)
+        s.solve(H)
+        at = (H[:, None] * 3 + np.arange(3)).ravel()
+        return s, at, s.G[at, at].astype(np.float64)
+
+    def push(self, r, forces, gap, thickness) -> np.ndarray:
+        """``(N, 3)`` in the units of ``r`` and ``forces`` ``(N, 3)``: the skin moved by ``r``
+        on the held vertices of a sample with ``gap`` and ``thickness`` ``(N,)`` (m), and
+        everywhere by the forces ``forces_H / (d_H PUSH_SPREAD)`` on the held DOFs, ``d`` the
+        compliance's diagonal there (:data:`PUSH_SPREAD`), carried by the compliance; zero
+        where no object is near. No factor: what the skin does beyond the held vertices comes
+        of the forces alone.
+        """
+        s, at, d = self.pushing(gap, thickness)
+        r = np.asarray(r)
+        if len(at) == 0:
+            return np.zeros_like(r)
+        f = (np.asarray(forces).reshape(-1)[at] / (d * PUSH_SPREAD)).astype(np.float32)
+        u = held_product(s.G, at, f).astype(np.float64)
+        u[at] += r.reshape(-1)[at]
+        return u.reshape(r.shape).astype(r.dtype)
+
     def closure(
         self, gap, way, thickness, friction: float = SKIN_FRICTION, rounding: float = ROUNDING
     ) -> np.ndarray:
@@ -410,6 +437,12 @@ def held_product(G: np.ndarray, at: np.ndarray, f: np.ndarray) -> np.ndarray:
         return G[:, at] @ np.asarray(f, dtype=np.float32)
     return kernel(G, np.asarray(at, dtype=np.int64), np.asarray(f, dtype=np.float64))
 
+
+PUSH_SPREAD = 25.0
+"""How many times its own compliance a held DOF moves under forces spread evenly over a grip's
+held set (the held block's row sums over its diagonal on the forearm's test grips: 17-32 in
+the median): :meth:`HeldSkin.push` divides by it, so that an even answer moves the skin by
+about itself."""
 
 HELD_FACTOR_CONDITION = 1e5
 """A held block is factorised in float32 where its condition number (in the 1-norm, estimated

@@ -73,6 +73,34 @@ class HeldSkin(fem_holding.HeldSkin):
             out.append((f @ GT.index_select(0, at_t.to(dev))).reshape(r[b].shape))
         return torch.stack(out)
 
+    def pushed(self, r, forces, gap, thickness):
+        """:meth:`fem.holding.HeldSkin.push` of each sample in torch, differentiable in ``r``
+        and ``forces`` ``(B, N, 3)``: the skin moved by ``r`` on the held vertices (of ``gap``
+        and ``thickness`` ``(B, N)``, m) and everywhere by the forces on the held DOFs,
+        carried by the compliance.
+        """
+        g = gap.detach().cpu().numpy()
+        t = thickness.detach().cpu().numpy()
+        out = []
+        for b in range(len(r)):
+            s, at, d = self.pushing(g[b], t[b])
+            if len(at) == 0:
+                out.append(torch.zeros_like(r[b]))
+                continue
+            dev = r.device
+            at_t = torch.from_numpy(at).to(dev)
+            scale = torch.from_numpy(d * fem_holding.PUSH_SPREAD).to(dev, r.dtype)
+            f = forces[b].reshape(-1)[at_t] / scale
+            if dev.type == "cpu" and not torch.is_grad_enabled():  # an answer: G read in place
+                u = fem_holding.held_product(s.G, at, f.numpy().astype(np.float32))
+                u = torch.from_numpy(u).to(r.dtype)
+            else:
+                GT = torch.from_numpy(s.G.T).to(dev)  # a held DOF's column: a contiguous row
+                u = (f.to(GT.dtype) @ GT.index_select(0, at_t)).to(r.dtype)
+            moved = torch.zeros_like(u).index_add(0, at_t, r[b].reshape(-1)[at_t])
+            out.append((u + moved).reshape(r[b].shape))
+        return torch.stack(out)
+
     def forget_poses(self) -> None:
         super().forget_poses()
         self._tensors.clear()

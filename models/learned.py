@@ -115,9 +115,15 @@ class LearnedPredictor(TrainedPredictor):
         """:meth:`raw` with a pose model's pressures read (:meth:`with_pressures`), the
         contact prior added (option ``prior: contact`` or ``held``) or the linear FEM's
         closure (``closure``: :meth:`closure_base`), and the skin held (``held`` and
-        ``closure``: :meth:`held`).
+        ``closure``: :meth:`held`); with ``held_answer: force`` the network answers, beside
+        the held skin's displacement from the closure, forces on it, which the compliance
+        carries everywhere (:meth:`models.holding.HeldSkin.pushed`: no factor).
         """
-        out = self.with_pressures(self.raw(thickness, force, body, base))
+        out = self.raw(thickness, force, body, base)
+        forces = None
+        if self.config.get("held_answer") == "force":
+            out, forces = out[..., :5], out[..., 5:]
+        out = self.with_pressures(out)
         prior = self.config.get("prior")
         if prior not in HOLDING and prior != "contact":
             return out
@@ -125,6 +131,9 @@ class LearnedPredictor(TrainedPredictor):
             near = self.closure_base(force, thickness, body)
         else:
             near = self.contact_base(gap_of(force), body)
+        if self.config.get("held_answer") == "force":  # the network's: forces on the held skin
+            pushed = self.held_skin_of(body).pushed(out[..., :3], forces, gap_of(force), thickness)
+            return torch.cat([near + pushed, out[..., 3:]], -1)
         out = out + F.pad(near, (0, out.shape[-1] - 3))
         if prior == "contact":
             return out

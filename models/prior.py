@@ -31,6 +31,13 @@ skin by the tissue's linear FEM (:mod:`models.holding`); ``closure``: held likew
 linear FEM's answer to the objects closing on the skin with friction in place of the contact
 prior (:mod:`fem.closure`; a model given the objects' motion too)."""
 
+HELD_ANSWERS = ("displacement", "force")
+"""What a model with a held prior answers on the held skin (option ``held_answer``):
+``displacement``, the skin's own, carried to the rest by the linear FEM holding it there
+(:meth:`models.holding.HeldSkin.__call__`, a factor of the held block at each new held set);
+``force`` (prior ``closure``), the held skin's displacement from the closure and forces on it,
+which the compliance carries everywhere (:meth:`models.holding.HeldSkin.pushed`, no factor)."""
+
 PRESSURE_START = 0.1
 """A pose model's contact pressure before it has learned (units of 10 kPa: 1 kPa, a light
 touch's), :func:`start_silent`."""
@@ -51,7 +58,7 @@ def start_silent(last, posed: bool = False) -> None:
         last.weight.zero_()
         last.bias.zero_()
         if posed:
-            last.bias[3:] = float(np.log(PRESSURE_START))
+            last.bias[3:5] = float(np.log(PRESSURE_START))
 
 
 class LinearPrior:
@@ -78,6 +85,15 @@ class LinearPrior:
         if out["prior"] == "closure" and out.get("given") == "pose" and not out.get("motion"):
             raise ValueError(
                 "the closure prior replays how the objects close: it needs motion: true"
+            )
+        if out.get("held_answer", "displacement") not in HELD_ANSWERS:
+            raise ValueError(
+                f"held_answer must be one of {HELD_ANSWERS}, got {out['held_answer']!r}"
+            )
+        if out.get("held_answer", "displacement") == "force" and out["prior"] != "closure":
+            raise ValueError(
+                "held_answer: force adds forces to the linear FEM's closure of the objects: it "
+                "takes prior: closure"
             )
         if out.get("given") != "pose" and out["prior"] in ("contact", *HOLDING):
             raise ValueError(

@@ -93,6 +93,7 @@ class TrainedPredictor(BasePredictor):
             allowed["motion"] = False
             allowed["displacement_weight"] = 1.0
             allowed["reaction"] = "push"
+            allowed["held_answer"] = "displacement"
         unknown = set(config or {}) - set(allowed)
         if unknown:
             raise ValueError(
@@ -169,6 +170,8 @@ class TrainedPredictor(BasePredictor):
         """The network's outputs per vertex: the displacement, and for a pose the contact
         pressure and its part along the press direction (the reaction's density).
         """
+        if self.config.get("held_answer") == "force":
+            return 8  # and the forces on the held skin
         return 5 if self.posed else 3
 
     # -- bodies

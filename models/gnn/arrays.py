@@ -328,14 +328,7 @@ class GNNArrays(TrainedPredictor):
         x = np.concatenate(channels + ([] if base is None else [base]), -1)
         out = self._network(x.reshape(B * N, -1), f, t, base, slots).reshape(B, N, -1)
         if self.posed:
-            out[..., 3:] = np.exp(np.minimum(out[..., 3:], PRESSURE_LOG_MAX))
-            if self.prior_kind in ("contact", "held"):  # the skin inside an object moved out
-                out[..., :3] += normals * np.minimum(f, 0.0)[..., None] / self.scale
-            if near is not None:  # ... or the linear FEM's closure of the objects
-                out[..., :3] += near
-            if self.prior_kind in HOLDING:  # ... held near the objects, the linear FEM beyond
-                for b in range(B):
-                    out[b, :, :3] = self._held.answer(out[b, :, :3], f[b], t[b])
+            out = self._posed(out, near, normals, f, t)
         elif self.per_newton:
             out = out * total[:, None, None]
         u = list((out[..., :3] * self.scale).astype(np.float64))
@@ -346,6 +339,29 @@ class GNNArrays(TrainedPredictor):
         return [
             posed_answer(s, x, p[:, 0], p[:, 1], squeeze) for s, x, p in zip(scenes, u, pressures)
         ]
+
+    def _posed(self, out, near, normals, f, t) -> np.ndarray:
+        """A pose model's network output ``(B, N, C)`` read: its pressures from their
+        logarithm, its displacement on its prior (the skin inside an object moved out, or the
+        linear FEM's closure ``near``), held near the objects and the linear FEM's beyond, or
+        with ``held_answer: force`` moved on the held skin and pushed there. ``(B, N, 5)``.
+        """
+        forces = None
+        if self.config.get("held_answer") == "force":
+            out, forces = out[..., :5], out[..., 5:]
+        out[..., 3:] = np.exp(np.minimum(out[..., 3:], PRESSURE_LOG_MAX))
+        if self.prior_kind in ("contact", "held"):  # the skin inside an object moved out
+            out[..., :3] += normals * np.minimum(f, 0.0)[..., None] / self.scale
+        if forces is not None:  # the closure, moved on the held skin and pushed there
+            for b in range(len(out)):
+                out[b, :, :3] = near[b] + self._held.push(out[b, :, :3], forces[b], f[b], t[b])
+            return out
+        if near is not None:  # ... or the linear FEM's closure of the objects
+            out[..., :3] += near
+        if self.prior_kind in HOLDING:  # ... held near the objects, the linear FEM beyond
+            for b in range(len(out)):
+                out[b, :, :3] = self._held.answer(out[b, :, :3], f[b], t[b])
+        return out
 
     @property
     def held_only(self) -> bool:

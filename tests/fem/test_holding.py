@@ -199,3 +199,43 @@ def test_forgetting_the_poses_forgets_their_held_factors(part):
     again = skin.hold(gap, t)[2]
     assert again is not first
     np.testing.assert_array_equal(again, first)
+
+
+def test_the_pushed_skin_moves_as_told_on_the_held_set_and_by_the_forces_everywhere(part):
+    """:meth:`HeldSkin.push`: moves alone stay on the held vertices; a force of 1 N on a held
+    DOF (its answer ``PUSH_SPREAD d_j``) moves the skin by the compliance's column, by ``d_j``
+    (m/N) at that DOF itself, and as much at DOF ``i`` as a force at ``i`` moves ``j``
+    (Maxwell-Betti); the two add; no object near, no motion.
+    """
+    from fem.holding import PUSH_SPREAD, HeldSkin
+
+    skin = HeldSkin(part, "forearm")
+    t = np.full(part.n_vertices, 0.0075)
+    gap = np.full(part.n_vertices, 1.0)
+    held, _ = _held_and_target(part)
+    gap[held] = -0.001
+    s, at, d = skin.pushing(gap, t)
+    np.testing.assert_array_equal(at[::3] // 3, held)
+    rng = np.random.default_rng(0)
+    r = np.zeros((part.n_vertices, 3))
+    r[held] = rng.normal(0, 1e-3, (len(held), 3))
+    zero = np.zeros_like(r)
+    np.testing.assert_allclose(skin.push(r, zero, gap, t), r, atol=1e-12)
+    i, j = at[4], at[-2]
+
+    def pushed_at(k):
+        forces = np.zeros(3 * part.n_vertices)
+        forces[k] = PUSH_SPREAD * d[np.flatnonzero(at == k)[0]]
+        return skin.push(zero, forces.reshape(-1, 3), gap, t).ravel()
+
+    ui, uj = pushed_at(i), pushed_at(j)
+    np.testing.assert_allclose(uj, s.G[:, j], rtol=1e-5, atol=1e-6 * abs(s.G[j, j]))
+    assert uj[j] == pytest.approx(d[np.flatnonzero(at == j)[0]], rel=1e-5)
+    assert ui[j] == pytest.approx(uj[i], rel=2e-3)
+    both = np.zeros(3 * part.n_vertices)
+    both[j] = PUSH_SPREAD * d[np.flatnonzero(at == j)[0]]
+    np.testing.assert_allclose(
+        skin.push(r, both.reshape(-1, 3), gap, t).ravel(), r.ravel() + uj, atol=1e-9
+    )
+    far = np.full(part.n_vertices, 1.0)
+    assert not skin.push(r, r, far, t).any()

@@ -195,3 +195,81 @@ def test_a_held_gnn_runs_on_the_held_vertices_subgraph_as_on_the_whole_part(
         assert peak > 0 and np.abs(a.displacement - b.displacement).max() <= 1e-5 * peak
         np.testing.assert_allclose(a.force, b.force, rtol=1e-4, atol=1e-9 * b.force.max())
         assert a.reaction == pytest.approx(b.reaction, rel=1e-4)
+
+
+def test_the_pushed_skin_in_torch_is_the_fem_wing_s_and_its_gradient_stays_held(part):
+    """:meth:`HeldSkin.pushed` (``held_answer: force``): an answer (no gradient, the compliance
+    read in place) and a training step's (its rows gathered) are the FEM wing's
+    :meth:`~fem.holding.HeldSkin.push` within float32 round-off; the gradient reaches the moves
+    and the forces on the held DOFs alone; a sample with no object near stays at rest.
+    """
+    x = part.vertices
+    gap = np.full((2, part.n_vertices), GAP_REACH, np.float32)
+    gap[0, (np.abs(x[:, 2] - 0.04) < 0.02) & (x[:, 0] > 0.015)] = -0.001
+    t = np.full((2, part.n_vertices), 0.0075, np.float32)
+    rng = np.random.default_rng(1)
+    r = torch.tensor(rng.normal(0, 1e-3, (2, part.n_vertices, 3)), dtype=torch.float32)
+    forces = torch.tensor(rng.normal(0, 1e-3, (2, part.n_vertices, 3)), dtype=torch.float32)
+    skin = HeldSkin(part, "forearm")
+    g, th = torch.from_numpy(gap), torch.from_numpy(t)
+    with torch.no_grad():
+        answer = skin.pushed(r, forces, g, th)
+    want = skin.push(r[0].numpy(), forces[0].numpy(), gap[0], t[0])
+    peak = np.abs(want).max()
+    np.testing.assert_allclose(answer[0].numpy(), want, atol=1e-5 * peak)
+    assert float(answer[1].abs().max()) == 0.0
+    r.requires_grad_(True)
+    forces.requires_grad_(True)
+    trained = skin.pushed(r, forces, g, th)
+    np.testing.assert_allclose(trained[0].detach().numpy(), want, atol=1e-5 * peak)
+    trained[0].sum().backward()
+    held = skin.held(gap[0], t[0])
+    for grad in (r.grad, forces.grad):
+        np.testing.assert_array_equal(np.flatnonzero(grad[0].abs().sum(1).numpy() > 0), held)
+        assert float(grad[1].abs().max()) == 0.0
+
+
+@pytest.mark.filterwarnings("ignore::stmpl.failures.OutsideEnvelope")
+@pytest.mark.filterwarnings("ignore::stmpl.failures.ImpossibleAnswer")  # the stirred weights'
+@pytest.mark.parametrize("engine", ["default", "numpy"])
+def test_a_force_answering_closure_gnn_starts_from_the_closure(tiny_presses, tmp_path, engine):
+    """``held_answer: force``: a GNN with the closure prior answers three more channels (the
+    forces on the held skin); fitted and not trained (its last layer silent) it answers the
+    linear FEM's closure, in torch and in NumPy; stirred, both engines answer alike. Without
+    the closure prior, or with another word, it is refused by name.
+    """
+    from models.holding import fit_held
+    from stmpl import predictor
+    from stmpl.data.dataset import Dataset
+    from stmpl.pipeline.evaluate import scenes_of
+
+    ds = Dataset(tiny_presses)
+    options = {"latent": 16, "steps": 2, "given": "pose", "motion": True, "prior": "closure"}
+    with pytest.raises(ValueError, match="it takes prior: closure"):
+        predictor.create("gnn", ds.part, {**options, "prior": "held", "held_answer": "force"})
+    with pytest.raises(ValueError, match="held_answer must be one of"):
+        predictor.create("gnn", ds.part, {**options, "held_answer": "forces"})
+    torch.manual_seed(0)
+    p = predictor.create("gnn", ds.part, {**options, "held_answer": "force"})
+    assert p.out_channels == 8
+    fit_held(p, ds, progress=False)
+    scenes, _ = scenes_of(ds, "test", given="pose", way=True)
+    q = predictor.read(p.save(tmp_path / "silent.safetensors"), engine=engine)
+    for s, d in zip(scenes, q.predict(scenes)):
+        gap, way = s.pose.gap.astype(np.float32), s.pose.way.astype(np.float32)
+        want = p.held_skin.closure(gap, way, s.thickness.astype(np.float32), 0.0, 0.0)
+        peak = np.linalg.norm(want, axis=1).max()
+        assert peak > 0
+        np.testing.assert_allclose(d.displacement, want, atol=1e-5 * peak)
+    with torch.no_grad():
+        for w in p.model.parameters():
+            w.add_(0.1 * torch.randn_like(w))
+    q = predictor.read(p.save(tmp_path / "stirred.safetensors"), engine=engine)
+    for a, b in zip(p.predict(scenes), q.predict(scenes)):
+        peak = np.abs(a.displacement).max()
+        assert np.abs(a.displacement - b.displacement).max() <= 1e-5 * peak
+    s = scenes[0]
+    closure = p.held_skin.closure(
+        s.pose.gap.astype(np.float32), s.pose.way.astype(np.float32), s.thickness, 0.0, 0.0
+    )
+    assert np.abs(q.predict(s).displacement - closure).max() > 0.01 * np.abs(closure).max()
