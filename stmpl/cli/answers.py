@@ -10,6 +10,7 @@ import time
 import warnings
 
 from stmpl import predictor
+from stmpl.cli import kept
 from stmpl.cli.arguments import TISSUE
 from stmpl.cli.options import phenotype_of
 from stmpl.contact.force_control import to_force
@@ -164,6 +165,27 @@ def truth(scene, args, failures: dict | None = None, force=None):
         phenotype=phenotype_of(args),
         friction=args.friction,
     )
+    setup = {
+        "res": args.res,
+        "levels": args.levels,
+        "fidelity": args.fidelity,
+        "tissue": args.tissue,
+        "phenotype": phenotype_of(args),
+        "friction": args.friction,
+        "force_N": force,
+    }
+    k = kept.key(scene, setup, kept.code_of(fem))
+    t0 = time.perf_counter()
+    d = None if args.fresh else kept.read(k)
+    if d is not None:
+        took = f"{duration(time.perf_counter() - t0):>10}"
+        print(
+            f"{name:<{WIDTH}} deepest {1e3 * d.magnitude.max():6.3f} mm  {took}"
+            + _met(d)
+            + f"; kept from an identical solve of {duration(d.info['seconds'])} "
+            f"({d.info['kept']}; --fresh solves it again)"
+        )
+        return d
     try:
         d = fem.predict(scene) if force is None else to_force(fem, scene, force)
     except PredictionFailed as e:
@@ -175,6 +197,7 @@ def truth(scene, args, failures: dict | None = None, force=None):
         f"{name:<{WIDTH}} deepest {1e3 * d.magnitude.max():6.3f} mm  "
         f"{duration(d.info['seconds']):>10}" + _met(d)
     )
+    kept.write(k, d)
     return d
 
 
@@ -230,6 +253,7 @@ def record(out: dict, fem, failures: dict) -> dict:
         fem_record = {
             "deepest_mm": round(1e3 * float(fem.magnitude.max()), 6),
             "seconds": fem.info.get("seconds"),
+            "kept_from": fem.info.get("kept"),
         }
         if fem.reaction is not None:
             fem_record["reaction_N"] = round(float(fem.reaction), 6)

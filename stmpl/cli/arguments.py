@@ -266,6 +266,12 @@ def model_options(parser, default: str) -> None:
     )
     parser.add_argument("--compare", action="store_true", help="also solve the FEM, report errors")
     parser.add_argument(
+        "--fresh",
+        action="store_true",
+        help="with --compare, solve the FEM again though the same code answered the same "
+        "question before (its answer is kept in stmpl's cache directory, answers/)",
+    )
+    parser.add_argument(
         "--strict",
         action="store_true",
         help="refuse a scene outside a model's data, or an impossible answer, instead of "
