@@ -156,48 +156,39 @@ def truth(scene, args, failures: dict | None = None, force=None):
     they meet it, by the FEM's own force control.
     """
     name = f"FEM ({args.res})" if args.tissue == "paper" else f"FEM ({args.res}, {args.tissue})"
-    fem = predictor.create(
-        "fem",
-        res=args.res,
-        levels=args.levels,
-        fidelity=args.fidelity,
-        tissue=args.tissue,
-        phenotype=phenotype_of(args),
-        friction=args.friction,
-    )
-    setup = {
+    options = {
         "res": args.res,
         "levels": args.levels,
         "fidelity": args.fidelity,
         "tissue": args.tissue,
         "phenotype": phenotype_of(args),
         "friction": args.friction,
-        "force_N": force,
     }
-    k = kept.key(scene, setup, kept.code_of(fem))
+    fem = predictor.create("fem", **options)
+    k = kept.key(scene, {**options, "force_N": force}, kept.code_of(fem))
     t0 = time.perf_counter()
     d = None if args.fresh else kept.read(k)
-    if d is not None:
-        took = f"{duration(time.perf_counter() - t0):>10}"
-        print(
-            f"{name:<{WIDTH}} deepest {1e3 * d.magnitude.max():6.3f} mm  {took}"
-            + _met(d)
-            + f"; kept from an identical solve of {duration(d.info['seconds'])} "
+    note = ""
+    if d is None:
+        try:
+            d = fem.predict(scene) if force is None else to_force(fem, scene, force)
+        except PredictionFailed as e:
+            print(f"{name:<{WIDTH}} failed: {e}; no errors to show")
+            if failures is not None:
+                failures[name] = str(e)
+            return None
+        took = d.info["seconds"]
+        kept.write(k, d)
+    else:
+        took = time.perf_counter() - t0
+        note = (
+            f"; kept from an identical solve of {duration(d.info['seconds'])} "
             f"({d.info['kept']}; --fresh solves it again)"
         )
-        return d
-    try:
-        d = fem.predict(scene) if force is None else to_force(fem, scene, force)
-    except PredictionFailed as e:
-        print(f"{name:<{WIDTH}} failed: {e}; no errors to show")
-        if failures is not None:
-            failures[name] = str(e)
-        return None
     print(
         f"{name:<{WIDTH}} deepest {1e3 * d.magnitude.max():6.3f} mm  "
-        f"{duration(d.info['seconds']):>10}" + _met(d)
+        f"{duration(took):>10}" + _met(d) + note
     )
-    kept.write(k, d)
     return d
 
 
