@@ -165,7 +165,7 @@ def truth(scene, args, failures: dict | None = None, force=None):
         "friction": args.friction,
     }
     fem = predictor.create("fem", **options)
-    k = kept.key(scene, {**options, "force_N": force}, kept.code_of(fem))
+    k = kept.key(scene, kept.setup_of({**options, "force_N": force}), kept.code_of(fem))
     t0 = time.perf_counter()
     d = None if args.fresh else kept.read(k)
     note = ""

@@ -4,20 +4,25 @@ main job again with another model, or redraws its picture, asks it the same ques
 
 An answer is kept under a key of everything that decides it: the scene's arrays (the part, the
 thickness, the force or the pose), the FEM's set-up as the command gives it (resolution,
-levels, fidelity, tissue, phenotype, friction, a target force), the stmpl version and the
-source code of stmpl and of the package the FEM predictor comes from. Any change to either
-code base, or to the scene, is another key: a kept answer is only ever one the same code gave
-to the same question. Failed solves are not kept (they are solved again). Files live in
-stmpl's cache directory (``answers/``); a file that cannot be read is solved again.
+levels, fidelity, tissue, and a tissue file's own bytes, phenotype, friction, a target force),
+the stmpl version and the source code the FEM predictor runs: its module and every module it
+imports, followed through stmpl and the FEM's package (an import anywhere in a file counts, and
+so does a module named in a string, as lazy exports name them). A change to any of those files,
+or to the scene, is another key: a kept answer is only ever one the same code gave to the same
+question, while a change elsewhere (the command line, a learned model) keeps it. Failed solves
+are not kept (they are solved again). Files live in stmpl's cache directory (``answers/``); a
+file that cannot be read is solved again.
 """
 
 from __future__ import annotations
 
+import ast
 import functools
 import hashlib
+import importlib.util
 import json
 import pathlib
-import sys
+import re
 from importlib import metadata
 
 import numpy as np
@@ -29,32 +34,96 @@ KEPT_VERSION = 1
 """Bumped when what a kept answer's file holds changes meaning."""
 
 
-@functools.lru_cache(maxsize=8)
-def sources(package: str) -> str:
-    """The SHA-256 of the ``.py`` files of an imported ``package`` (its directory, sorted by
-    path, each path beside its bytes), hex.
+def module_file(name: str) -> pathlib.Path | None:
+    """The source file of module ``name`` (a package's ``__init__.py``) if it can be found
+    without importing it, else ``None``.
     """
-    mod = sys.modules.get(package)
-    if mod is None or getattr(mod, "__file__", None) is None:
-        raise ValueError(f"package {package!r} is not imported: its sources cannot be read")
-    root = pathlib.Path(mod.__file__).parent
-    h = hashlib.sha256()
-    for p in sorted(root.rglob("*.py")):
-        h.update(str(p.relative_to(root)).encode())
-        h.update(p.read_bytes())
-    return h.hexdigest()
+    try:
+        spec = importlib.util.find_spec(name)
+    except (ImportError, ValueError):
+        return None
+    if spec is None or not spec.origin or not spec.origin.endswith(".py"):
+        return None
+    return pathlib.Path(spec.origin)
+
+
+def named_modules(path: pathlib.Path, name: str) -> set[str]:
+    """The modules the file ``path`` of module ``name`` may import: its import statements
+    (anywhere in the file, relative ones resolved), each ``from m import x`` also as ``m.x``
+    (``x`` may be a module), and every string that reads as a dotted name.
+    """
+    tree = ast.parse(path.read_bytes(), filename=str(path))
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                parts = package.split(".")[: len(package.split(".")) - node.level + 1]
+                base = ".".join(parts + ([base] if base else []))
+            out.add(base)
+            out.update(f"{base}.{a.name}" for a in node.names)
+        elif isinstance(node, ast.Constant) and isinstance(node.value, str):
+            if re.fullmatch(r"[A-Za-z_]\w*(\.[A-Za-z_]\w*)+", node.value):
+                out.add(node.value)
+    return out
+
+
+@functools.lru_cache(maxsize=8)
+def sources(module: str, packages: tuple[str, ...]) -> dict[str, str]:
+    """``{file: SHA-256}`` of ``module``'s source and of every module it imports, followed
+    (:func:`named_modules`) within the top-level ``packages``; files by their path relative to
+    their package's parent, sorted.
+    """
+    if module_file(module) is None:
+        raise ValueError(f"module {module!r} has no source file: its code cannot be read")
+    seen: dict[str, pathlib.Path] = {}
+    todo = [module]
+    while todo:
+        name = todo.pop()
+        if name in seen or name.split(".")[0] not in packages:
+            continue
+        path = module_file(name)
+        if path is None:
+            continue
+        seen[name] = path
+        parts = name.split(".")
+        todo += [".".join(parts[:i]) for i in range(1, len(parts))]  # the packages above it
+        todo += sorted(named_modules(path, name))
+    out = {}
+    for name, path in seen.items():
+        depth = name.count(".") + (path.name == "__init__.py")
+        out[str(path.relative_to(path.parents[depth]))] = hashlib.sha256(
+            path.read_bytes()
+        ).hexdigest()
+    return dict(sorted(out.items()))
 
 
 def code_of(fem) -> dict:
-    """What code decides the answers of the predictor ``fem``: stmpl's version and the digests
-    of stmpl's sources and of the package ``fem``'s class comes from.
+    """What code decides the answers of the predictor ``fem``: stmpl's version and the digest
+    of the sources its class's module runs (:func:`sources`, within stmpl and its package).
     """
-    package = type(fem).__module__.split(".")[0]
+    module = type(fem).__module__
     try:
         version = metadata.version("stmpl")
     except metadata.PackageNotFoundError:
         version = "unknown"
-    return {"stmpl": version, "sources": {p: sources(p) for p in sorted({"stmpl", package})}}
+    files = sources(module, tuple(sorted({"stmpl", module.split(".")[0]})))
+    digest = hashlib.sha256(json.dumps(files, sort_keys=True).encode()).hexdigest()
+    return {"stmpl": version, "module": module, "sources": digest}
+
+
+def setup_of(options: dict) -> dict:
+    """The FEM's set-up ``options`` as a key holds it: a tissue given as a YAML file also by
+    the SHA-256 of its bytes (the file read again when it changes).
+    """
+    out = dict(options)
+    t = out.get("tissue")
+    if isinstance(t, str) and t.endswith((".yaml", ".yml")) and pathlib.Path(t).is_file():
+        out["tissue_sha256"] = hashlib.sha256(pathlib.Path(t).read_bytes()).hexdigest()
+    return out
 
 
 def key(scene: Scene, setup: dict, code: dict) -> str:

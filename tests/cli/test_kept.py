@@ -65,19 +65,59 @@ def test_the_key_holds_the_scene_the_set_up_and_the_code(arm):
     assert kept.read(k) is None  # nothing kept under it
 
 
-def test_the_sources_digest_changes_with_any_file(tmp_path, monkeypatch):
+def test_the_sources_digest_follows_what_the_module_imports(tmp_path, monkeypatch):
     import importlib
 
     pkg = tmp_path / "kept_probe"
     (pkg / "sub").mkdir(parents=True)
-    (pkg / "__init__.py").write_text("")
+    (pkg / "__init__.py").write_text('LAZY = {"later": "kept_probe.later"}\n')
+    (pkg / "sub" / "__init__.py").write_text("")
     (pkg / "sub" / "law.py").write_text("MU = 150.0\n")
+    (pkg / "later.py").write_text("X = 1\n")
+    (pkg / "solver.py").write_text("def solve():\n    from .sub import law\n    return law.MU\n")
+    (pkg / "other.py").write_text("Y = 1\n")
     monkeypatch.syspath_prepend(str(tmp_path))
     importlib.import_module("kept_probe")
-    before = kept.sources("kept_probe")
-    assert re.fullmatch(r"[0-9a-f]{64}", before)
-    (pkg / "sub" / "law.py").write_text("MU = 151.0\n")  # a changed parameter deep inside
-    kept.sources.cache_clear()
-    assert kept.sources("kept_probe") != before
-    with pytest.raises(ValueError, match="not imported"):
-        kept.sources("not_imported_anywhere")
+
+    def digest():
+        kept.sources.cache_clear()
+        return kept.sources("kept_probe.solver", ("kept_probe",))
+
+    before = digest()
+    assert set(before) == {
+        "kept_probe/__init__.py",
+        "kept_probe/solver.py",
+        "kept_probe/sub/__init__.py",
+        "kept_probe/sub/law.py",
+        "kept_probe/later.py",  # named in a string, as a lazy export names it
+    }
+    assert all(re.fullmatch(r"[0-9a-f]{64}", h) for h in before.values())
+    (pkg / "other.py").write_text("Y = 2\n")  # not imported: the same key
+    assert digest() == before
+    (pkg / "sub" / "law.py").write_text("MU = 151.0\n")  # imported inside a function
+    assert digest()["kept_probe/sub/law.py"] != before["kept_probe/sub/law.py"]
+    (pkg / "later.py").write_text("X = 2\n")
+    assert digest()["kept_probe/later.py"] != before["kept_probe/later.py"]
+    with pytest.raises(ValueError, match="no source file"):
+        kept.sources("not_importable_anywhere", ("not_importable_anywhere",))
+
+
+def test_the_fem_key_leaves_out_the_learned_models_and_the_command_line():
+    from stmpl import predictor
+
+    files = kept.sources("fem.predictor", ("fem", "stmpl"))
+    assert "fem/solver.py" in files and "fem/material.py" in files and "stmpl/scene.py" in files
+    assert not any(f.startswith(("stmpl/cli/", "models/")) for f in files)
+    assert "fem/closure.py" not in files  # the learned models' linear closure
+    code = kept.code_of(predictor.create("fem", res="coarse"))
+    assert code["module"] == "fem.predictor" and re.fullmatch(r"[0-9a-f]{64}", code["sources"])
+
+
+def test_a_tissue_file_is_keyed_by_its_bytes(tmp_path):
+    f = tmp_path / "layers.yaml"
+    f.write_text("layers: []\n")
+    first = kept.setup_of({"tissue": str(f), "res": "coarse"})
+    assert first["res"] == "coarse" and len(first["tissue_sha256"]) == 64
+    f.write_text("layers: [{}]\n")
+    assert kept.setup_of({"tissue": str(f)})["tissue_sha256"] != first["tissue_sha256"]
+    assert kept.setup_of({"tissue": "forearm"}) == {"tissue": "forearm"}
