@@ -107,15 +107,14 @@ def main() -> None:
     models = [*args.gnn, "zoo:linear_forearm_grips"]
     grip = zoo.read("gnn_forearm_grips")
     skin = grip.held_skin
-    record = grip.meta["holding"]
-    friction, rounding = float(record["friction"]), float(record["rounding_m"])
+    closing = grip.closure_options()
     poses = []
     for s in grips:
         g = np.asarray(grip.given([s]), dtype=np.float32)[0]
         poses.append((g[:, 0], g[:, 1:4], np.asarray(s.thickness, np.float32)))
 
     def closed(c):
-        return skin.closed(*c[:2], c[2], friction, rounding)
+        return skin.closed(*c[:2], c[2], *closing)
 
     columns = [
         "model",
@@ -165,7 +164,7 @@ def main() -> None:
     for c in poses:
         closed(c)
     held = median_ms(
-        lambda c: skin.answer(skin.closure(*c[:2], c[2], friction, rounding), c[0], c[2]),
+        lambda c: skin.answer(skin.closure(*c[:2], c[2], *closing), c[0], c[2]),
         poses,
         args.repeat,
     )

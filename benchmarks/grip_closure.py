@@ -9,8 +9,10 @@ grip set (relative MEE and peak error, the product's measures):
   the skin alone (the skin free to slide): how much lies in the drag along the skin;
 - the linear FEM's closure of the hand from first touch (:mod:`fem.closure`: stick and slip
   by Coulomb's law; what ``prior: closure`` starts from) without friction, at the set's
-  friction coefficient and sticking throughout, and at the set's friction on the hand's own
-  faces (no rounding), with its time a scene.
+  friction coefficient (each step's contact settled one vertex a pass, and by the rule of the
+  models fitted before it, all at once: :data:`fem.closure.CONTACT_RULES`) and sticking
+  throughout, and at the set's friction on the hand's own faces (no rounding), with its time a
+  scene.
 
     python benchmarks/grip_closure.py [--data data/forearm_grips] [--splits test val train]
 
@@ -54,6 +56,7 @@ def main() -> None:
         ("its normal part held", None),
         ("closure, no friction", (0.0, ROUNDING)),
         (f"closure, friction {mu:g}", (mu, ROUNDING)),
+        (f"closure, friction {mu:g}, all at once", (mu, ROUNDING, "all_at_once")),
         ("closure, sticking", (np.inf, ROUNDING)),
         (f"closure, friction {mu:g}, faces unrounded", (mu, 0.0)),
     ]

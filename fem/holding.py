@@ -32,7 +32,7 @@ import scipy.linalg
 import scipy.linalg.lapack
 from tqdm import tqdm
 
-from fem.closure import HeldColumns, closure_forces
+from fem.closure import CONTACT_RULE, HeldColumns, closure_forces
 from fem.finer import FinerPart, meshed
 from fem.friction import SKIN_FRICTION
 from fem.shapes import ROUNDING
@@ -353,15 +353,27 @@ class HeldSkin:
         return u.reshape(r.shape).astype(r.dtype)
 
     def closure(
-        self, gap, way, thickness, friction: float = SKIN_FRICTION, rounding: float = ROUNDING
+        self,
+        gap,
+        way,
+        thickness,
+        friction: float = SKIN_FRICTION,
+        rounding: float = ROUNDING,
+        rule: str = CONTACT_RULE,
     ) -> np.ndarray:
         """``(N, 3)`` m, float32: the skin's displacement as the objects of a pose close on it
         (:meth:`closed`, which gives the contact forces beside it).
         """
-        return self.closed(gap, way, thickness, friction, rounding)[0]
+        return self.closed(gap, way, thickness, friction, rounding, rule)[0]
 
     def closed(
-        self, gap, way, thickness, friction: float = SKIN_FRICTION, rounding: float = ROUNDING
+        self,
+        gap,
+        way,
+        thickness,
+        friction: float = SKIN_FRICTION,
+        rounding: float = ROUNDING,
+        rule: str = CONTACT_RULE,
     ) -> tuple[np.ndarray, np.ndarray]:
         """``(u, f)``: the skin's displacement ``u`` ``(N, 3)`` (m, float32) as the objects of
         a pose (``gap`` ``(N,)`` m, ``way`` ``(N, 3)`` m per m) close on it with Coulomb's
@@ -370,15 +382,16 @@ class HeldSkin:
         ``(N, 3)`` (N, float64) the objects put on each vertex; both zero where no object is
         near. ``rounding`` (m): how far outside the objects' faces the FEM's surface stands (a
         mesh's, :data:`fem.shapes.ROUNDING`; none for the analytic ball and disk of a dataset's
-        presses). Kept for the next call with the same pose (a training set's samples come
-        again every epoch); both arrays are read-only.
+        presses). ``rule``: how each step's contact settles (:data:`fem.closure.CONTACT_RULES`).
+        Kept for the next call with the same pose (a training set's samples come again every
+        epoch); both arrays are read-only.
         """
         g = np.asarray(gap, dtype=np.float64)
         w = np.asarray(way, dtype=np.float64)
         if w.shape != (len(g), 3):
             raise ValueError(f"way must be (N, 3) = {(len(g), 3)}, got {w.shape}")
         key, s = self.store(thickness)
-        k = (key, g.tobytes(), w.tobytes(), float(friction), float(rounding))
+        k = (key, g.tobytes(), w.tobytes(), float(friction), float(rounding), rule)
         if k not in self._closures:
             H = np.flatnonzero(within_reach(g) & s.free)
             out = np.zeros((len(g), 3), np.float32)
@@ -388,7 +401,7 @@ class HeldSkin:
                 at = (H[:, None] * 3 + np.arange(3)).ravel()
                 n = self.part.normals[H]
                 G = HeldColumns(s.G, at)  # read as the contact reaches a vertex
-                f = closure_forces(G, n, g[H], w[H], friction, rounding=rounding)
+                f = closure_forces(G, n, g[H], w[H], friction, rounding=rounding, rule=rule)
                 pushed = np.flatnonzero(f.any(1))  # the skin the objects push: a few vertices
                 cols = (H[pushed][:, None] * 3 + np.arange(3)).ravel()
                 out = (s.G[:, cols] @ f[pushed].ravel().astype(np.float32)).reshape(-1, 3)

@@ -27,6 +27,7 @@ import numpy as np
 import torch
 
 from fem import holding as fem_holding
+from fem.closure import CONTACT_RULE
 from fem.shapes import ROUNDING
 from stmpl.contact.gap import of_sample
 from stmpl.part import BodyPart
@@ -158,6 +159,7 @@ def fit_held(predictor, dataset, progress: bool = True) -> None:
         "skin": skin,
         "friction": float(cfg.get("friction") or 0.0),
         "rounding_m": rounding,
+        "contact_rule": CONTACT_RULE,
         "reach_m": GAP_REACH,
         "columns_at_fit": int(solved),
         "compute_seconds": round(time.perf_counter() - t0, 3),

@@ -179,13 +179,9 @@ class LearnedPredictor(TrainedPredictor):
                 return kept[4]
         g = given.detach().cpu().numpy()
         t = thickness.detach().cpu().numpy()
-        record = self.meta["holding"]
-        friction, rounding = float(record["friction"]), float(record["rounding_m"])
+        closing = self.closure_options()
         out = np.stack(
-            [
-                skin.closure(g[b, :, 0], g[b, :, 1:4], t[b], friction, rounding)
-                for b in range(len(g))
-            ]
+            [skin.closure(g[b, :, 0], g[b, :, 1:4], t[b], *closing) for b in range(len(g))]
         )
         out = torch.from_numpy(out).to(given.device, given.dtype) / self.scale
         self._closure_kept = (given, thickness, body, (given._version, thickness._version), out)

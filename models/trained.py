@@ -343,6 +343,20 @@ class TrainedPredictor(BasePredictor):
         """
         raise NotImplementedError
 
+    def closure_options(self) -> tuple[float, float, str]:
+        """``(friction, rounding_m, rule)``: how this model replays a pose's closure
+        (:mod:`fem.closure`), as its record of the held skin says (``meta["holding"]``,
+        :func:`models.holding.fit_held`): the training set's friction and rounding, and the
+        contact rule it was fitted with (``"all_at_once"`` for a model that records none,
+        fitted before :data:`fem.closure.CONTACT_RULES` had another).
+        """
+        record = self.meta["holding"]
+        return (
+            float(record["friction"]),
+            float(record["rounding_m"]),
+            str(record.get("contact_rule", "all_at_once")),
+        )
+
     def restore(self, path, meta: dict) -> None:
         """Take a checkpoint's sidecar ``meta`` (read from ``path``): the record, the tissue of
         the data and the envelope; then :meth:`restored`.

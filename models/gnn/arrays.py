@@ -316,13 +316,9 @@ class GNNArrays(TrainedPredictor):
         channels = [c[..., None] for c in load] + [t[..., None], normals]
         near = None
         if self.prior_kind == "closure":  # the linear FEM's closure of the objects, an input
-            record = self.meta["holding"]
-            friction, rounding = float(record["friction"]), float(record["rounding_m"])
+            closing = self.closure_options()
             near = np.stack(
-                [
-                    self._held.closure(f[b], given[b, :, 1:4], t[b], friction, rounding)
-                    for b in range(B)
-                ]
+                [self._held.closure(f[b], given[b, :, 1:4], t[b], *closing) for b in range(B)]
             ) / np.float32(self.scale)
             channels.append(near)
         x = np.concatenate(channels + ([] if base is None else [base]), -1)

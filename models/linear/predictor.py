@@ -111,11 +111,10 @@ class LinearPredictor(LearnedPredictor):
             return super()._answers(scenes)
         self.given(scenes)  # a pose without its way is refused by name
         skin = self.held_skin_of()
-        record = self.meta["holding"]
-        friction, rounding = float(record["friction"]), float(record["rounding_m"])
+        closing = self.closure_options()
         out = []
         for s in scenes:
-            u, f = skin.closed(s.pose.gap, s.pose.way, s.thickness, friction, rounding)
+            u, f = skin.closed(s.pose.gap, s.pose.way, s.thickness, *closing)
             force = np.maximum(-np.einsum("ij,ij->i", f, s.part.normals), 0.0)
             out.append(
                 {

@@ -6,7 +6,7 @@ its conditions on a coupled patch.
 import numpy as np
 import pytest
 
-from fem.closure import HeldColumns, closure_forces
+from fem.closure import CONTACT_RULES, HeldColumns, closure_forces, contact_forces
 
 G1 = 1e-3  # m/N: one vertex's isotropic compliance
 Z = np.array([[0.0, 0.0, 1.0]])  # its outward normal
@@ -90,6 +90,7 @@ def test_on_a_coupled_patch_every_force_pushes_and_the_touched_skin_meets_the_ob
         ({"friction": -0.1}, "friction must be >= 0"),
         ({"steps": 0}, "steps must be a whole number"),
         ({"rounding": -1e-3}, "rounding must be a length"),
+        ({"rule": "sometimes"}, "rule must be one of"),
     ],
 )
 def test_bad_input_is_refused_by_name(change, words):
@@ -132,8 +133,9 @@ def test_the_held_block_read_column_by_column_answers_as_the_whole_block():
         closure_forces(HeldColumns(bad, at), n, gap, way, 0.5, 20, 0.0005, compiled=False)
 
 
+@pytest.mark.parametrize("rule", CONTACT_RULES)
 @pytest.mark.parametrize("friction", [0.0, 0.5, np.inf])
-def test_the_compiled_closure_answers_as_the_numpy_one(friction):
+def test_the_compiled_closure_answers_as_the_numpy_one(friction, rule):
     """The closing's steps compiled (Numba) give NumPy's forces within rounding, on a coupled
     patch pressed and swept so that vertices stick, slip and are let go; a compliance that is
     not finite where the contact reads it is refused by name.
@@ -147,14 +149,94 @@ def test_the_compiled_closure_answers_as_the_numpy_one(friction):
     way = np.column_stack([0.6 * np.ones(len(held)), 0.1 * x[held, 1] / 0.02, -np.ones(len(held))])
     G = np.asfortranarray(G.astype(np.float32))
     args = (n, gap, way, friction, 20, 0.0005)
-    eager = closure_forces(HeldColumns(G, at), *args, compiled=False)
-    fast = closure_forces(HeldColumns(G, at), *args, compiled=True)
+    eager = closure_forces(HeldColumns(G, at), *args, compiled=False, rule=rule)
+    fast = closure_forces(HeldColumns(G, at), *args, compiled=True, rule=rule)
     assert (eager * n).sum(1).min() < 0  # something pushed
     np.testing.assert_allclose(fast, eager, rtol=0, atol=1e-12 * np.abs(eager).max())
-    dense = closure_forces(G[np.ix_(at, at)].astype(np.float64), *args, compiled=True)
+    dense = closure_forces(G[np.ix_(at, at)].astype(np.float64), *args, compiled=True, rule=rule)
     np.testing.assert_allclose(dense, eager, rtol=0, atol=1e-12 * np.abs(eager).max())
     bad = G.copy(order="F")
     touched = held[np.flatnonzero(eager.any(1))[0]]
     bad[:, 3 * touched] = np.nan
     with pytest.raises(ValueError, match="G is not finite"):
-        closure_forces(HeldColumns(bad, at), *args, compiled=True)
+        closure_forces(HeldColumns(bad, at), *args, compiled=True, rule=rule)
+
+
+def _left_inside(rule: str, trials: int = 3000) -> int:
+    """Of ``trials`` small random contacts (2-5 vertices of a coupled patch, each held to a
+    target inside the objects and swept along the skin, friction 0.5), how many the contact
+    solve settles with a vertex let go that its answer leaves inside the objects.
+    """
+    rng = np.random.default_rng(0)
+    count = 0
+    for _ in range(trials):
+        a = rng.integers(2, 6)
+        x = np.column_stack([rng.uniform(-0.01, 0.01, (a, 2)), np.zeros(a)])
+        d = np.linalg.norm(x[:, None] - x[None], axis=-1)
+        G = 1e-3 * np.kron(np.exp(-d / 0.01), np.eye(3))
+        n = np.tile([0, 0, 1.0], (a, 1))
+        target = np.column_stack([rng.normal(0, 1e-3, (a, 2)), -rng.uniform(0, 2e-3, a)])
+        A, f = contact_forces(G, np.arange(a), n, target, 0.5, rule)
+        forces = np.zeros((a, 3))
+        forces[A] = f
+        u = (G @ forces.ravel()).reshape(a, 3)
+        off = np.setdiff1d(np.arange(a), A)
+        inside = ((u[off] - target[off]) * n[off]).sum(1)  # > 0: on the objects' side
+        count += bool(len(off)) and inside.max() > 1e-9
+    return count
+
+
+def test_one_change_a_pass_leaves_no_vertex_inside_the_objects():
+    """The contact solve by ``"one_at_a_time"`` never leaves a vertex it let go inside the
+    objects; ``"all_at_once"``, which lets go of every pulled vertex and slips every vertex past
+    Coulomb's bound in one pass, does on a few of the same contacts.
+    """
+    assert _left_inside("one_at_a_time") == 0
+    assert _left_inside("all_at_once") == 5
+
+
+def test_a_grip_s_squeeze_grows_smoothly_as_the_hand_closes():
+    """On a validation grip of the layered forearm (a tripod, shipped with the repository, its
+    skin's compliance solved), the closure's squeeze rises by nearly equal steps as the hand
+    closes 1.5 to 2.2 mm past its first touch under ``"one_at_a_time"``; ``"all_at_once"``
+    settles some depths otherwise than their neighbours and the squeeze falls on the way.
+    """
+    import pathlib
+
+    from fem.holding import HeldSkin
+    from fem.shapes import ROUNDING
+    from stmpl.contact.posing import first_touch, moved
+    from stmpl.data.dataset import Dataset
+    from stmpl.pipeline.evaluate import scenes_of
+    from stmpl.pose import within_reach
+
+    ds = Dataset(pathlib.Path(__file__).parents[2] / "data" / "forearm_grips")
+    scenes, _ = scenes_of(ds, "val", given="pose")
+    a = ds.arrays("val")
+    start = first_touch(scenes[8].part, scenes[8].thickness, a["kind"][8], a["params"][8])
+    skin = HeldSkin(ds.part, ds.card["config"]["tissue"])
+    friction = float(ds.card["config"]["friction"])
+    squeeze = {}
+    for rule in CONTACT_RULES:
+        out = []
+        for depth in np.linspace(0.0015, 0.0022, 29):
+            s = moved(start, depth)
+            _, f = skin.closed(s.pose.gap, s.pose.way, s.thickness, friction, ROUNDING, rule)
+            out.append(-(f * s.part.normals).sum())
+        squeeze[rule] = np.diff(out)
+    steady = squeeze["one_at_a_time"]
+    assert steady.min() > 0.9 * steady.mean() and steady.max() < 1.1 * steady.mean()
+    assert squeeze["all_at_once"].min() < 0
+
+    # the compiled steps settle as NumPy's, on the grip, by either rule
+    s = moved(start, 0.0022)
+    _, store = skin.store(s.thickness)
+    H = np.flatnonzero(within_reach(s.pose.gap) & store.free)
+    store.solve(H)
+    at = (H[:, None] * 3 + np.arange(3)).ravel()
+    args = (s.part.normals[H], s.pose.gap[H], s.pose.way[H], friction, 20, ROUNDING)
+    for rule in CONTACT_RULES:
+        eager = closure_forces(HeldColumns(store.G, at), *args, compiled=False, rule=rule)
+        fast = closure_forces(HeldColumns(store.G, at), *args, compiled=True, rule=rule)
+        assert (eager * s.part.normals[H]).sum() < -1.0  # a squeeze of over 1 N
+        np.testing.assert_allclose(fast, eager, rtol=0, atol=1e-10 * np.abs(eager).max())

@@ -119,6 +119,11 @@ def test_a_closure_model_starts_from_the_linear_fem_s_closure(tiny_presses, kind
         p.predict(scenes[0])
     fit_held(p, ds, progress=False)
     assert p.meta["holding"]["friction"] == 0.0 and p.meta["holding"]["rounding_m"] == 0.0
+    assert p.closure_options() == (0.0, 0.0, "one_at_a_time")  # the rule it was fitted with
+    record = p.meta["holding"]
+    p.meta["holding"] = {k: v for k, v in record.items() if k != "contact_rule"}
+    assert p.closure_options()[2] == "all_at_once"  # a model fitted before the rule was recorded
+    p.meta["holding"] = record
     for s, d in zip(scenes, p.predict(scenes)):
         gap, way = s.pose.gap.astype(np.float32), s.pose.way.astype(np.float32)
         want = p.held_skin.closure(gap, way, s.thickness.astype(np.float32), 0.0, 0.0)
