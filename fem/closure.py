@@ -42,7 +42,7 @@ import functools
 
 import numpy as np
 
-from fem.closure_loops import _left_inside_loop, _past_bound_loop
+from fem.closure_loops import left_inside_loop, past_bound_loop
 from fem.friction import SKIN_FRICTION
 from fem.shapes import ROUNDING
 from stmpl import jit
@@ -410,7 +410,7 @@ def _settle_loop(compile_, solve, dofs):
     """
     tolerance = SETTLE_TOLERANCE
 
-    past_bound, left_inside = _past_bound_loop(compile_), _left_inside_loop(compile_)
+    past_bound, left_inside = past_bound_loop(compile_), left_inside_loop(compile_)
 
     @compile_
     def settle(G, at, cols, have, A, n, target, friction, passes):  # pragma: no cover

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 
-def _past_bound_loop(compile_):
+def past_bound_loop(compile_):
     """The sticking vertex furthest past Coulomb's bound (``"one_at_a_time"``), compiled."""
 
     @compile_
@@ -29,7 +29,7 @@ def _past_bound_loop(compile_):
     return past_bound
 
 
-def _left_inside_loop(compile_):
+def left_inside_loop(compile_):
     """The vertex let go deepest inside the objects (``"one_at_a_time"``), compiled."""
 
     @compile_
