@@ -9,8 +9,9 @@ grip set (relative MEE and peak error, the product's measures):
   the skin alone (the skin free to slide): how much lies in the drag along the skin;
 - the linear FEM's closure of the hand from first touch (:mod:`fem.closure`: stick and slip
   by Coulomb's law; what ``prior: closure`` starts from) without friction, at the set's
-  friction coefficient (each step's contact settled one vertex a pass, and by the rule of the
-  models fitted before it, all at once: :data:`fem.closure.CONTACT_RULES`) and sticking
+  friction coefficient (each step's contact the least-energy forces within Coulomb's disks, and
+  by the rule of the models fitted before it, all at once: :data:`fem.closure.CONTACT_RULES`)
+  and sticking
   throughout, and at the set's friction on the hand's own faces (no rounding), with its time a
   scene.
 

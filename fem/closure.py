@@ -15,24 +15,19 @@ rounding ``r`` (:data:`fem.shapes.ROUNDING`), so a vertex meets them at ``g_i = 
 ``tau`` (m) along the closing, the gap at rest opens by ``c_i tau`` with ``c_i = -w_i . n_i``
 (``n_i`` the skin's outward normal). From the first touch to the pose, step by step, a vertex is
 in contact where its gap less its displacement inward is closed, or where it was pushed at the
-last step; a vertex in contact
-
-- sticks: it lies on the objects' surface and moves along the skin with them (by the objects'
-  sweep along the skin, ``w_i`` less its normal part, over the part of the step it was in
-  contact), unless its tangential force ``|f_t|`` would pass ``mu |f_n|`` (Coulomb's law, ``mu``
-  the friction coefficient);
-- slips: its normal motion is as sticking, its force ``f_n (n_i - mu d_i)`` with ``d_i`` the
-  direction the sticking force pulled along the skin;
-- lets go where it would be pulled rather than pushed, and is taken back (once a step) where
-  the answer without it would leave it inside the objects.
-
-Each step settles those states one vertex at a time (:data:`CONTACT_RULES`), so that a pose a
-hair's breadth from another settles as it does. The contact forces ``f`` (N) solve
-``G_AA f = u_A`` on the contact vertices ``A`` with those conditions, and the skin's
+last step. Each step's target for a vertex in contact is to lie on the objects' surface and
+to move along the skin with them (by the objects' sweep along the skin, ``w_i`` less its
+normal part, over the part of the step it was in contact), and its contact forces ``f`` (N)
+are the least-energy forces within Coulomb's friction disks (:mod:`fem.tresca`, ``mu`` the
+friction coefficient): where a vertex's tangential force stays within ``mu`` times its push it
+sticks (``G_AA f = u_A`` at the target), on the disk's rim it slides against its force, and
+where it would be pulled it is let go, lying outside the objects. Those forces are unique and
+move continuously with the pose, so a pose a hair's breadth from another settles as it does
+(:data:`CONTACT_RULES` keeps the rule of the models fitted before, which is not so). The skin's
 displacement is ``G[:, A] f``. The tissue is linear here and the contact sits at the vertices,
 so the answer is a prior, not the FEM: on the forearm grips' test and validation splits it lies
-3.6 % and 3.5 % of the peak from the FEM on average (settled all at once, as the models fitted
-before this rule do: 4.2 % and 4.0 %; the contact prior alone: 5.1 % and 6.2 %;
+3.4 % and 3.6 % of the peak from the FEM on average (settled by the older rule, as the models
+fitted before it are: 4.2 % and 4.0 %; the contact prior alone: 5.1 % and 6.2 %;
 ``benchmarks/grip_closure.py``). Lengths in m, forces in N.
 """
 
@@ -42,9 +37,9 @@ import functools
 
 import numpy as np
 
-from fem.closure_loops import left_inside_loop, past_bound_loop
 from fem.friction import SKIN_FRICTION
 from fem.shapes import ROUNDING
+from fem.tresca import coulomb_forces, coulomb_loop, pushes
 from stmpl import jit
 
 STEPS = 20
@@ -55,32 +50,27 @@ MIN_OPENING = 0.05
 """m per m: the least rate at which a vertex's gap opens as the objects go back (``c_i``); an
 object point that sweeps along the skin (``w_i`` tangent to it) is taken to open at this."""
 
-CONTACT_RULES = ("one_at_a_time", "all_at_once")
+CONTACT_RULES = ("least_energy", "all_at_once")
 """How a step's contact settles which vertices stick, slip or are let go (:func:`contact_forces`):
 
-- ``"one_at_a_time"``: one change a pass, the most pulled vertex let go first, else the
-  sticking vertex furthest past Coulomb's bound set slipping, else a vertex let go that the
-  answer leaves inside the objects taken back (once a step, slipping, with a normal force
-  only); up to ``8 a + 8`` passes for ``a`` vertices in contact. A vertex's state follows the
-  forces smoothly: the closure of a pose a hair's breadth from another answers as it does.
-- ``"all_at_once"``: every pulled vertex let go, or every vertex past the bound set slipping,
-  in one pass, a vertex let go never taken back within its step; up to :data:`SLIP_PASSES`
-  passes. Under friction two poses 1e-16 m apart can settle differently (on a forearm grip the
-  squeeze moved by 0.22 N and the skin by 0.44 mm, a vertex left 0.09 mm inside a finger):
-  the rule of models fitted before ``"one_at_a_time"``, kept for them.
+- ``"least_energy"``: the unique least-energy forces within Coulomb's friction disks, their
+  radii lagged from the forces before (:mod:`fem.tresca`). A vertex's state follows the forces
+  smoothly: the closure of a pose a hair's breadth from another answers as it does, and no
+  vertex let go is left inside the objects.
+- ``"all_at_once"``: every pulled vertex let go, or every vertex past the bound set slipping
+  (its force then along the direction its sticking force pulled), in one pass, a vertex let go
+  never taken back within its step; up to :data:`SLIP_PASSES` passes. Under friction two poses
+  1e-16 m apart can settle differently (on a forearm grip the squeeze moved by 0.22 N and the
+  skin by 0.44 mm, a vertex left 0.09 mm inside a finger): the rule of models fitted before
+  ``"least_energy"``, kept for them.
 """
 
-CONTACT_RULE = "one_at_a_time"
+CONTACT_RULE = "least_energy"
 """The rule a closure takes unless told otherwise (a model records its own)."""
 
 SLIP_PASSES = 8
 """Passes of the ``"all_at_once"`` iteration a step makes at most (each pass adds slipping
 vertices or lets go of pulled ones; a pass that changes neither ends it)."""
-
-SETTLE_TOLERANCE = 1e-9
-"""m, and the relative margin on Coulomb's bound: how far inside the objects a vertex let go may
-be left, and how far past the bound a sticking one may pull, before ``"one_at_a_time"`` changes
-it."""
 
 
 class HeldColumns:
@@ -142,8 +132,9 @@ def closure_forces(
     ``rounding`` m the objects' surface offset. The skin's displacement is ``G @ f.ravel()``.
     ``G`` may be a :class:`HeldColumns` (read as the contact reaches its vertices).
     ``compiled``: the steps in the compiled loop (:func:`_kernel`; the same answers within
-    rounding, a tenth of the time), where Numba is installed; ``None``: where Numba is loaded
-    in the process already (its import costs a one-off answer more than it saves). ``rule``:
+    rounding, a hundredth of the time on a grip), where Numba is installed; ``None``: so where
+    Numba is installed (NumPy's steps take a few hundred ms a grip, Numba's import and its
+    kernels' load from the cache half a second, once a process). ``rule``:
     how each step's contact settles (:data:`CONTACT_RULES`).
     """
     if not isinstance(G, HeldColumns):
@@ -180,7 +171,7 @@ def closure_forces(
     u = np.zeros((k, 3))
     along = w - (w * n).sum(1, keepdims=True) * n  # the objects' sweep along the skin
     taus = np.linspace(travel, 0.0, steps + 1)
-    kernel = _kernel(rule) if (jit.loaded() if compiled is None else compiled) else None
+    kernel = _kernel(rule) if (compiled is None or compiled) else None
     if kernel is not None:
         big, at = (G._G, G._at) if G._at is not None else (G._G, np.arange(3 * k))
         return kernel(big, at, n, g, c, along, taus, float(friction), SLIP_PASSES)
@@ -194,7 +185,7 @@ def closure_forces(
         share = np.where(pushed[A], 1.0, np.clip(-gap_now[A] / (c[A] * (before - tau)), 0, 1))
         target = u[A] + share[:, None] * along[A] * (before - tau)
         target += n[A] * (g[A] + tau * c[A] - (n[A] * target).sum(1))[:, None]  # on the surface
-        A, f = contact_forces(G, A, n[A], target, friction, rule)
+        A, f = contact_forces(G, A, n[A], target, friction, rule, forces[A])
         forces = np.zeros((k, 3))
         forces[A] = f
         u = (G.columns(_dofs(A)) @ f.ravel()).reshape(k, 3)  # the load is on A alone
@@ -207,60 +198,28 @@ def _dofs(A: np.ndarray) -> np.ndarray:
 
 
 def contact_forces(
-    G, A, normals, target, friction: float, rule: str = CONTACT_RULE
+    G, A, normals, target, friction: float, rule: str = CONTACT_RULE, previous=None
 ) -> tuple[np.ndarray, np.ndarray]:
     """``(A', f)``: the vertices of ``A`` ``(a,)`` that stay in contact and their forces
-    ``(a', 3)`` (N) for the skin to meet ``target`` ``(a, 3)`` (m) there: whole where a vertex
-    sticks, along ``normals`` ``(a, 3)`` where it slips (Coulomb's ``friction``); the rest of
-    the ``k`` vertices of the compliance ``G`` ``(3 k, 3 k)`` (an array or a
-    :class:`HeldColumns`) are free of load. Vertices the answer would pull are let go (and the
-    rest solved again), as ``rule`` says (:data:`CONTACT_RULES`).
+    ``(a', 3)`` (N) for the skin to meet ``target`` ``(a, 3)`` (m) there, as ``rule`` settles
+    them (:data:`CONTACT_RULES`) under Coulomb's ``friction`` with ``normals`` ``(a, 3)``;
+    the rest of the ``k`` vertices of the compliance ``G`` ``(3 k, 3 k)`` (an array or a
+    :class:`HeldColumns`) are free of load. ``previous`` ``(a, 3)`` (N): the forces on ``A``
+    before (the last step's; ``None``: none), from which ``"least_energy"`` lags its disks.
     """
     if not isinstance(G, HeldColumns):
         G = HeldColumns(np.asarray(G, dtype=np.float64))
     A, n, target = np.asarray(A), np.asarray(normals), np.asarray(target)
     if rule == "all_at_once":
         return _all_at_once(G, A, n, target, friction)
-    if rule != "one_at_a_time":
+    if rule != "least_energy":
         raise ValueError(f"closure: rule must be one of {CONTACT_RULES}, got {rule!r}")
-    a = len(A)
-    on = np.ones(a, bool)  # in contact
-    slip = np.zeros(a, bool)
-    back = np.zeros(a, bool)  # let go and taken back this step
-    along = np.zeros((a, 3))  # a slipping vertex's tangential force direction
-    sticks = not np.isfinite(friction)
-    idx, f = np.arange(a), np.zeros((a, 3))
-    for _ in range(8 * a + 8):
-        idx = np.flatnonzero(on)
-        if not len(idx):
-            return A[:0], np.zeros((0, 3))
-        f = _solve(
-            G, A[idx], n[idx], target[idx], None if sticks else slip[idx], along[idx], friction
-        )
-        fn = (f * n[idx]).sum(1)
-        if (fn > 0).any():  # the most pulled is let go
-            on[idx[np.argmax(fn)]] = False
-            continue
-        if not sticks:
-            ft = f - fn[:, None] * n[idx]
-            size = np.linalg.norm(ft, axis=1)
-            ratio = np.where(slip[idx], 0.0, size / np.maximum(friction * -fn, 1e-300))
-            if ratio.max() > 1 + SETTLE_TOLERANCE:  # the one furthest past the bound slips
-                m = int(np.argmax(ratio))
-                slip[idx[m]] = True
-                along[idx[m]] = ft[m] / max(size[m], 1e-300)
-                continue
-        off = np.flatnonzero(~on & ~back)
-        if len(off):  # let go but left inside: taken back, slipping, its force normal
-            u = G.columns(_dofs(A[idx]))[_dofs(A[off])] @ f.ravel()
-            depth = ((u.reshape(-1, 3) - target[off]) * n[off]).sum(1)  # > 0: inside
-            if depth.max() > SETTLE_TOLERANCE:
-                w = off[np.argmax(depth)]
-                on[w] = slip[w] = back[w] = True
-                along[w] = 0.0
-                continue
-        return A[idx], f
-    return A[idx], f
+    if not len(A):
+        return A, np.zeros((0, 3))
+    start = np.zeros((len(A), 3)) if previous is None else np.asarray(previous, dtype=np.float64)
+    f = coulomb_forces(G.block(_dofs(A)), n, target, friction, start)
+    keep = np.flatnonzero(pushes(f, n) > 0)
+    return A[keep], f[keep]
 
 
 def _all_at_once(G, A, n, target, friction) -> tuple[np.ndarray, np.ndarray]:
@@ -330,8 +289,11 @@ def _kernel(rule: str = CONTACT_RULE):
         return None
     dofs, read = _dofs_loop(compile_), _read_loop(compile_)
     solve = _solve_loop(compile_, dofs, read)
-    settle = _settle_loop if rule == "one_at_a_time" else _contact_loop
-    return _closure_loop(compile_, settle(compile_, solve, dofs), read, dofs)
+    if rule == "least_energy":
+        settle = _least_energy_loop(compile_, solve, dofs, read)
+    else:
+        settle = _contact_loop(compile_, solve, dofs)
+    return _closure_loop(compile_, settle, read, dofs)
 
 
 def _dofs_loop(compile_):
@@ -404,49 +366,27 @@ def _solve_loop(compile_, dofs, read):
     return solve
 
 
-def _settle_loop(compile_, solve, dofs):
-    """:func:`contact_forces` by the ``"one_at_a_time"`` rule, compiled (``passes`` unused:
-    ``8 a + 8``).
+def _least_energy_loop(compile_, solve, dofs, read):
+    """:func:`contact_forces` by the ``"least_energy"`` rule, compiled (``passes`` unused:
+    :data:`fem.tresca.PASSES`).
     """
-    tolerance = SETTLE_TOLERANCE
-
-    past_bound, left_inside = past_bound_loop(compile_), left_inside_loop(compile_)
+    coulomb = coulomb_loop(compile_)
 
     @compile_
-    def settle(G, at, cols, have, A, n, target, friction, passes):  # pragma: no cover
+    def settle(G, at, cols, have, A, n, target, friction, passes, previous):  # pragma: no cover
         a = A.shape[0]
-        sticks = not np.isfinite(friction)
-        on, slip, back = np.ones(a, np.bool_), np.zeros(a, np.bool_), np.zeros(a, np.bool_)
-        along = np.zeros((a, 3))
-        idx = np.arange(a)
-        f = np.zeros((a, 3))
-        for _ in range(8 * a + 8):
-            idx = np.nonzero(on)[0]
-            if idx.shape[0] == 0:
-                return A[:0], np.zeros((0, 3))
-            slip_b = slip[idx] & (not sticks)
-            f = solve(G, at, cols, have, A[idx], n[idx], target[idx], slip_b, along[idx], friction)
-            fn = np.empty(idx.shape[0])
-            for q in range(idx.shape[0]):
-                i = idx[q]
-                fn[q] = f[q, 0] * n[i, 0] + f[q, 1] * n[i, 1] + f[q, 2] * n[i, 2]
-            worst = np.argmax(fn)
-            if fn[worst] > 0:  # the most pulled is let go
-                on[idx[worst]] = False
-                continue
-            if not sticks:
-                ratio, m, ft = past_bound(f, fn, n, idx, slip, friction)
-                if ratio > 1 + tolerance:  # the one furthest past the bound slips
-                    slip[idx[m]] = True
-                    along[idx[m]] = ft / max(np.sqrt((ft * ft).sum()), 1e-300)
-                    continue
-            deepest, w = left_inside(cols, A, n, target, f, dofs(A[idx]), on, back)
-            if w >= 0 and deepest > tolerance:  # let go but left inside: taken back
-                on[w], slip[w], back[w] = True, True, True
-                along[w] = 0.0
-                continue
-            return A[idx], f
-        return A[idx], f
+        rows = dofs(A)
+        read(G, at, cols, have, rows)
+        GAA = np.empty((3 * a, 3 * a))
+        for i in range(3 * a):
+            for j in range(3 * a):
+                GAA[i, j] = cols[rows[i], rows[j]]
+        f = coulomb(GAA, n, target, friction, previous)
+        keep = np.empty(a, np.bool_)
+        for i in range(a):
+            keep[i] = -(f[i, 0] * n[i, 0] + f[i, 1] * n[i, 1] + f[i, 2] * n[i, 2]) > 0
+        idx = np.nonzero(keep)[0]
+        return A[idx], f[idx]
 
     return settle
 
@@ -455,7 +395,7 @@ def _contact_loop(compile_, solve, dofs):
     """:func:`contact_forces` by the ``"all_at_once"`` rule, compiled."""
 
     @compile_
-    def contact(G, at, cols, have, A, n, target, friction, passes):  # pragma: no cover
+    def contact(G, at, cols, have, A, n, target, friction, passes, previous):  # pragma: no cover
         sticks = not np.isfinite(friction)
         slip = np.zeros(A.shape[0], np.bool_)
         along = np.zeros((A.shape[0], 3))
@@ -526,6 +466,7 @@ def _closure_loop(compile_, contact, read, dofs):
             A = touched[:a].copy()
             nA = np.empty((a, 3))
             target = np.empty((a, 3))
+            previous = np.empty((a, 3))  # the forces of the last step, where the disks start
             dt = before - tau
             for q in range(a):
                 i = A[q]
@@ -534,6 +475,7 @@ def _closure_loop(compile_, contact, read, dofs):
                     share = min(max(-gap_now[i] / (c[i] * dt), 0.0), 1.0)
                 for d in range(3):
                     nA[q, d] = n[i, d]
+                    previous[q, d] = forces[i, d]
                     target[q, d] = u[i, d] + share * along[i, d] * dt
             for q in range(a):
                 i = A[q]
@@ -541,7 +483,7 @@ def _closure_loop(compile_, contact, read, dofs):
                 gap_q = g[i] + tau * c[i] - dot
                 for d in range(3):
                     target[q, d] = target[q, d] + nA[q, d] * gap_q
-            A, f = contact(G, at, cols, have, A, nA, target, friction, passes)
+            A, f = contact(G, at, cols, have, A, nA, target, friction, passes, previous)
             forces[:] = 0.0
             u[:] = 0.0
             rows = dofs(A)
