@@ -288,11 +288,11 @@ def _kernel(rule: str = CONTACT_RULE):
     if compile_ is None:
         return None
     dofs, read = _dofs_loop(compile_), _read_loop(compile_)
-    solve = _solve_loop(compile_, dofs, read)
+    block = _block_loop(compile_, dofs, read)
     if rule == "least_energy":
-        settle = _least_energy_loop(compile_, solve, dofs, read)
+        settle = _least_energy_loop(compile_, block)
     else:
-        settle = _contact_loop(compile_, solve, dofs)
+        settle = _contact_loop(compile_, _solve_loop(compile_, block), dofs)
     return _closure_loop(compile_, settle, read, dofs)
 
 
@@ -328,18 +328,29 @@ def _read_loop(compile_):
     return read
 
 
-def _solve_loop(compile_, dofs, read):
+def _block_loop(compile_, dofs, read):
+    """The held block's rows and columns of vertices ``A`` (read as first asked for), compiled."""
+
+    @compile_
+    def block(G, at, cols, have, A):  # pragma: no cover - compiled
+        rows = dofs(A)
+        read(G, at, cols, have, rows)
+        GAA = np.empty((rows.shape[0], rows.shape[0]))
+        for i in range(rows.shape[0]):
+            for j in range(rows.shape[0]):
+                GAA[i, j] = cols[rows[i], rows[j]]
+        return GAA
+
+    return block
+
+
+def _solve_loop(compile_, block):
     """:func:`_solve`, compiled."""
 
     @compile_
     def solve(G, at, cols, have, A, n, target, slip, along, friction):  # pragma: no cover
         a = A.shape[0]
-        rows = dofs(A)
-        read(G, at, cols, have, rows)
-        GAA = np.empty((3 * a, 3 * a))
-        for i in range(3 * a):
-            for j in range(3 * a):
-                GAA[i, j] = cols[rows[i], rows[j]]
+        GAA = block(G, at, cols, have, A)
         t = target.copy().reshape(3 * a)
         if not slip.any():
             return np.linalg.solve(GAA, t).reshape(a, 3)
@@ -366,7 +377,7 @@ def _solve_loop(compile_, dofs, read):
     return solve
 
 
-def _least_energy_loop(compile_, solve, dofs, read):
+def _least_energy_loop(compile_, block):
     """:func:`contact_forces` by the ``"least_energy"`` rule, compiled (``passes`` unused:
     :data:`fem.tresca.PASSES`).
     """
@@ -375,12 +386,7 @@ def _least_energy_loop(compile_, solve, dofs, read):
     @compile_
     def settle(G, at, cols, have, A, n, target, friction, passes, previous):  # pragma: no cover
         a = A.shape[0]
-        rows = dofs(A)
-        read(G, at, cols, have, rows)
-        GAA = np.empty((3 * a, 3 * a))
-        for i in range(3 * a):
-            for j in range(3 * a):
-                GAA[i, j] = cols[rows[i], rows[j]]
+        GAA = block(G, at, cols, have, A)
         f = coulomb(GAA, n, target, friction, previous)
         keep = np.empty(a, np.bool_)
         for i in range(a):

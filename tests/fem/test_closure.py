@@ -195,27 +195,37 @@ def test_the_least_energy_contact_leaves_no_vertex_inside_the_objects():
     assert _left_inside("all_at_once") == 5
 
 
+def _validation_grip(i: int):
+    """``(start, skin, friction)``: validation grip ``i`` of the layered forearm's grip set
+    (shipped with the repository) at its first touch, the skin's held compliance and the set's
+    friction coefficient.
+    """
+    import pathlib
+
+    from fem.holding import HeldSkin
+    from stmpl.contact.posing import first_touch
+    from stmpl.data.dataset import Dataset
+    from stmpl.pipeline.evaluate import scenes_of
+
+    ds = Dataset(pathlib.Path(__file__).parents[2] / "data" / "forearm_grips")
+    scenes, _ = scenes_of(ds, "val", given="pose")
+    a = ds.arrays("val")
+    start = first_touch(scenes[i].part, scenes[i].thickness, a["kind"][i], a["params"][i])
+    skin = HeldSkin(ds.part, ds.card["config"]["tissue"])
+    return start, skin, float(ds.card["config"]["friction"])
+
+
 def test_a_grip_s_squeeze_grows_smoothly_as_the_hand_closes():
     """On a validation grip of the layered forearm (a tripod, shipped with the repository, its
     skin's compliance solved), the closure's squeeze rises by nearly equal steps as the hand
     closes 1.5 to 2.2 mm past its first touch under ``"least_energy"``; ``"all_at_once"``
     settles some depths otherwise than their neighbours and the squeeze falls on the way.
     """
-    import pathlib
-
-    from fem.holding import HeldSkin
     from fem.shapes import ROUNDING
-    from stmpl.contact.posing import first_touch, moved
-    from stmpl.data.dataset import Dataset
-    from stmpl.pipeline.evaluate import scenes_of
+    from stmpl.contact.posing import moved
     from stmpl.pose import within_reach
 
-    ds = Dataset(pathlib.Path(__file__).parents[2] / "data" / "forearm_grips")
-    scenes, _ = scenes_of(ds, "val", given="pose")
-    a = ds.arrays("val")
-    start = first_touch(scenes[8].part, scenes[8].thickness, a["kind"][8], a["params"][8])
-    skin = HeldSkin(ds.part, ds.card["config"]["tissue"])
-    friction = float(ds.card["config"]["friction"])
+    start, skin, friction = _validation_grip(8)
     squeeze = {}
     for rule in CONTACT_RULES:
         out = []
@@ -249,20 +259,10 @@ def test_a_grip_s_closure_is_continuous_where_its_contact_meets_coulomb_s_bound(
     less than 1e-5 mm (a rule settling the vertex furthest past the bound first moved it there
     by 0.10 mm, 0.045 N).
     """
-    import pathlib
-
-    from fem.holding import HeldSkin
     from fem.shapes import ROUNDING
-    from stmpl.contact.posing import first_touch, moved
-    from stmpl.data.dataset import Dataset
-    from stmpl.pipeline.evaluate import scenes_of
+    from stmpl.contact.posing import moved
 
-    ds = Dataset(pathlib.Path(__file__).parents[2] / "data" / "forearm_grips")
-    scenes, _ = scenes_of(ds, "val", given="pose")
-    a = ds.arrays("val")
-    start = first_touch(scenes[14].part, scenes[14].thickness, a["kind"][14], a["params"][14])
-    skin = HeldSkin(ds.part, ds.card["config"]["tissue"])
-    friction = float(ds.card["config"]["friction"])
+    start, skin, friction = _validation_grip(14)
     out = []
     for depth in (4.2276833e-3, 4.2276834e-3):
         s = moved(start, depth)
