@@ -100,12 +100,12 @@ class Pose:
             known (a dataset's sample: a learned model needs no more, the FEM refuses it).
         way: ``(N, 3)`` how the objects' surface nearest each rest skin vertex moves per metre
             the objects press or close (m per m: the direction itself for objects pressing
-            along one; a grip's :attr:`Rigid.path` at its nearest point), zero where no object
-            lies within :data:`GAP_REACH`; ``None`` where it is not known. A learned model with
-            the option ``motion`` reads it beside the gap. It may be given as a function of no
-            arguments that returns it: then it is computed (and checked) when first read, so a
-            scene whose answer never reads it does not pay for it (a grip's costs a search of
-            the hand's surface).
+            along one; a grip's :attr:`Rigid.path` blended over its nearest vertices), zero
+            where no object lies within :data:`GAP_REACH`; ``None`` where it is not known. A
+            learned model with the option ``motion`` reads it beside the gap. It may be given
+            as a function of no arguments that returns it: then it is computed (and checked)
+            when first read, so a scene whose answer never reads it does not pay for it (a
+            grip's costs a search of the hand's surface).
 
     A pose is read-only: its arrays cannot be written, nor its attributes set.
     """

@@ -133,12 +133,32 @@ def of_sample(points, kind: str, params: dict, stored) -> np.ndarray:
     return signed
 
 
+WAY_NEIGHBOURS = 3
+"""How many of the nearest object vertices a closing pose's way blends (:func:`way`)."""
+
+
+def blended(path, distances, nearest) -> np.ndarray:
+    """``(P, 3)`` the paths ``path`` ``(V, 3)`` of each point's ``K`` nearest object vertices
+    (``nearest`` ``(P, K + 1)`` indices, ``distances`` ``(P, K + 1)`` m, ascending), weighted
+    by how much nearer each lies than the ``(K + 1)``-th: ``w_j = d_{K+1} - d_j``. A vertex's
+    weight falls to zero as it stops being among the ``K`` nearest, so the way changes
+    continuously as a point moves across the object (the single nearest vertex's path jumps
+    where two vertices are equally near); all ``K + 1`` equally near: their mean.
+    """
+    d = np.asarray(distances, dtype=float)
+    w = d[:, -1:] - d
+    tied = w.sum(1) <= 0.0
+    w[tied] = 1.0  # every one of the K + 1 as near: their mean, whichever K the search chose
+    return np.einsum("pk,pki->pi", w / w.sum(1, keepdims=True), np.asarray(path, float)[nearest])
+
+
 def way(points, gap, direction=None, objects=()) -> np.ndarray:
     """``(P, 3)`` the way field of a pose (:attr:`stmpl.pose.Pose.way`, m per m) on the rest
     skin ``points`` ``(P, 3)`` with gap field ``gap`` ``(P,)`` (m): the press ``direction``
     ``(3,)`` where an object lies within :data:`~stmpl.pose.GAP_REACH`; objects that close
     along their own paths (``direction`` None; :class:`~stmpl.pose.Rigid` with a ``path``):
-    the path of the object vertex nearest each point there. Zero elsewhere.
+    the paths of the :data:`WAY_NEIGHBOURS` object vertices nearest each point there,
+    :func:`blended` so that the field is continuous. Zero elsewhere.
     """
     x = np.asarray(points, dtype=float).reshape(-1, 3)
     g = np.asarray(gap, dtype=float).reshape(-1)
@@ -153,7 +173,8 @@ def way(points, gap, direction=None, objects=()) -> np.ndarray:
         raise ValueError("a closing pose's way needs its objects, each with its path")
     v = np.concatenate([o.vertices for o in objects])
     path = np.concatenate([o.path for o in objects])
-    if len(near):
-        _, nearest = cKDTree(v).query(x[near])
-        out[near] = path[nearest]
+    if len(near):  # a Rigid has at least three vertices: the query's answers are (P, k)
+        k = min(WAY_NEIGHBOURS + 1, len(v))
+        distances, nearest = cKDTree(v).query(x[near], k=k)
+        out[near] = blended(path, distances, nearest)
     return out

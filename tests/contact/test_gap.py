@@ -65,9 +65,9 @@ def test_a_sample_s_gap_is_measured_along_its_press_and_a_grip_s_is_kept():
         gap.ball(x, [0, 0, 0], 0.008, [0, 0, 0])
 
 
-def test_the_way_field_is_the_press_direction_or_the_nearest_object_vertex_s_path():
-    """Within reach of an object the way is the press direction; a closing pose's is the path
-    of the object vertex nearest each point (two fingers sweeping opposite ways drag the skin
+def test_the_way_field_is_the_press_direction_or_the_nearest_object_vertices_paths():
+    """Within reach of an object the way is the press direction; a closing pose's is the paths
+    of the object vertices nearest each point (two fingers sweeping opposite ways drag the skin
     under each its own way); beyond reach it is zero; a closing pose without paths is refused.
     """
     from stmpl.pose import Rigid
@@ -95,3 +95,41 @@ def test_the_way_field_is_the_press_direction_or_the_nearest_object_vertex_s_pat
         gap.way(x, g, None, (Rigid("box", left.vertices, tri),))
     with pytest.raises(ValueError, match="one distance per point"):
         gap.way(x, g[:2], D)
+
+
+def test_a_closing_pose_s_way_blends_the_nearest_paths_and_changes_continuously():
+    """Four object vertices on a line, each closing its own way: a point's way weights the
+    paths of its three nearest by how much nearer each is than the fourth (worked by hand at
+    x = 0.4); walked across the object the way changes by at most a step's worth (the nearest
+    vertex's path alone jumps by its full difference where two are equally near); a point
+    equidistant from all four takes their mean; of three vertices, the two nearest blend.
+    """
+    from stmpl.pose import Rigid
+
+    v = np.array([[0.0, 0, 0], [1.0, 0, 0], [2.0, 0, 0], [3.0, 0, 0]])
+    path = np.array([[1.0, 0, 0], [0.0, 1, 0], [0.0, 0, 1], [1.0, 1, 1]])
+    line = Rigid("line", v, np.array([[0, 1, 2], [1, 2, 3]]), path=path)
+    x = np.array([[0.4, 0.0, 0.0]])
+    w = gap.way(x, [-0.001], None, (line,))
+    d = np.array([0.4, 0.6, 1.6, 2.6])  # the distances to the four, nearest first
+    expected = ((d[3] - d[0]) * path[0] + (d[3] - d[1]) * path[1] + (d[3] - d[2]) * path[2]) / (
+        3 * d[3] - d[:3].sum()
+    )
+    np.testing.assert_allclose(w[0], expected)
+    walk = np.stack([np.linspace(-0.5, 3.5, 4001), np.zeros(4001), np.zeros(4001)], 1)
+    ways = gap.way(walk, np.full(4001, -0.001), None, (line,))
+    step = np.linalg.norm(np.diff(ways, axis=0), axis=1).max()
+    assert step < 0.01, step  # a step of 1 mm of the 4 m walk: no jump
+    single = np.linalg.norm(np.diff(path[[0, 1]], axis=0))
+    assert single > 1.0  # what the nearest vertex's path alone would jump by at x = 0.5
+    square = Rigid(
+        "square",
+        [[1.0, 0, 0], [-1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0]],
+        np.array([[0, 1, 2], [0, 1, 3]]),
+        path=path,
+    )
+    np.testing.assert_allclose(gap.way([[0, 0, 0.0]], [-0.001], None, (square,))[0], path.mean(0))
+    tri = Rigid("tri", v[:3], np.array([[0, 1, 2]]), path=path[:3])  # fewer than four
+    d = np.array([0.4, 0.6, 1.6])
+    expected = ((d[2] - d[0]) * path[0] + (d[2] - d[1]) * path[1]) / (2 * d[2] - d[:2].sum())
+    np.testing.assert_allclose(gap.way(x, [-0.001], None, (tri,))[0], expected)

@@ -125,8 +125,8 @@ def test_a_dataset_s_object_at_first_touch_moved_by_its_depth_is_its_sample_s_po
 def test_posed_moved_and_a_dataset_s_grip_carry_the_way_the_objects_move(part, monkeypatch):
     """A posed fingertip's way is its press direction near it; a closing object moved along
     its path carries that path; a grip sample's way is its hand closed the recorded depth
-    (the grip read from :func:`cached_closing_grip`), the path of the hand vertex nearest each
-    skin vertex.
+    (the grip read from :func:`cached_closing_grip`), the paths of the hand vertices nearest
+    each skin vertex.
     """
     from stmpl.contact import posing
 
