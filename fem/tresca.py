@@ -26,13 +26,16 @@ Each pass is solved by accelerated projected gradient descent (FISTA with adapti
 Beck and Teboulle 2009, SIAM J. Imaging Sci. 2(1) 183; O'Donoghue and Candes 2015, Found.
 Comput. Math. 15 715), its step ``1 / lambda_max(G)``, each iterate projected onto the sets
 ``K_i`` (a half-line along ``n_i`` times a disk: the projection clamps the push at zero and
-scales the tangential part into the disk). On the forearm grips' contacts (up to 20 vertices,
-``G``'s condition number up to 400) a pass takes up to some 220 iterations.
+scales the tangential part into the disk). On the forearm grips' contacts (up to 50 vertices
+as force control closes the whole hand to 10 N, ``G``'s condition number up to some 1400) a
+pass takes up to some 550 iterations.
 """
 
 from __future__ import annotations
 
 import numpy as np
+
+from stmpl.failures import PredictionFailed
 
 PASSES = 4
 """Passes of the lagged radii a contact solve makes (on the forearm grips' test split, four
@@ -47,22 +50,39 @@ ITERATIONS = 20000
 need)."""
 
 
+class NotSettled(PredictionFailed):
+    """A contact solve whose forces did not settle within :data:`ITERATIONS`: an answer built
+    on them is not given.
+    """
+
+
 def project(f: np.ndarray, n: np.ndarray, bound: np.ndarray) -> np.ndarray:
     """``(a, 3)``: the forces ``f`` ``(a, 3)`` (N) brought into the sets ``K_i`` of the module,
     the push along ``-n`` ``(a, 3)`` clamped at zero, the tangential part within ``bound``
-    ``(a,)`` (N; ``inf``: no limit).
+    ``(a,)`` (N, >= 0; ``inf``: no limit).
     """
     fn = (f * n).sum(1)
     ft = f - fn[:, None] * n
     size = np.linalg.norm(ft, axis=1)
-    over = size > bound
+    over = size > bound  # with bound >= 0, size > 0 wherever it is over
     scale = np.where(over, bound / np.where(over, size, 1.0), 1.0)
     return np.minimum(fn, 0.0)[:, None] * n + ft * scale[:, None]
 
 
 def pushes(f: np.ndarray, n: np.ndarray) -> np.ndarray:
-    """``(a,)`` N: each force's push ``-f . n`` (>= 0 for a force of the sets ``K_i``)."""
+    """``(a,)`` N: each force's push ``-f . n`` (>= 0 for a force of the sets ``K_i``, within
+    rounding: a vertex let go keeps a tangential part, whose product with a unit normal
+    rounds to some 1e-17 of it either way).
+    """
     return -(f * n).sum(1)
+
+
+def radii(f: np.ndarray, n: np.ndarray, friction: float) -> np.ndarray:
+    """``(a,)`` N: Coulomb's disk radii ``friction * p_i`` of the forces ``f`` ``(a, 3)``, each
+    push ``p_i`` (:func:`pushes`) taken as zero where it rounds below (a radius below zero
+    is no disk: the projection onto it would divide by a zero tangential force).
+    """
+    return friction * np.maximum(pushes(f, n), 0.0)
 
 
 def within_disks(G: np.ndarray, n: np.ndarray, target: np.ndarray, bound: np.ndarray, start):
@@ -87,7 +107,9 @@ def within_disks(G: np.ndarray, n: np.ndarray, target: np.ndarray, bound: np.nda
         x, theta = step, theta_next
         if moved <= TOLERANCE * np.abs(x).max(initial=0.0):
             return x
-    raise ValueError(f"contact: the forces did not settle in {ITERATIONS} iterations")
+        if not np.isfinite(moved):
+            raise NotSettled("contact: the forces are not finite (the compliance is not definite)")
+    raise NotSettled(f"contact: the forces did not settle in {ITERATIONS} iterations")
 
 
 def coulomb_forces(G, n, target, friction: float, previous) -> np.ndarray:
@@ -101,8 +123,8 @@ def coulomb_forces(G, n, target, friction: float, previous) -> np.ndarray:
         bound = np.full(len(n), np.inf if friction > 0 else 0.0)
         return within_disks(G, n, target, bound, f)
     for _ in range(PASSES):
-        f = within_disks(G, n, target, friction * pushes(f, n), f)
-    return project(f, n, friction * pushes(f, n))
+        f = within_disks(G, n, target, radii(f, n, friction), f)
+    return project(f, n, radii(f, n, friction))
 
 
 def coulomb_loop(compile_):
@@ -124,11 +146,12 @@ def coulomb_loop(compile_):
         return out
 
     @compile_
-    def pushes_(f, n):  # pragma: no cover - compiled
-        p = np.empty(f.shape[0])
+    def radii_(f, n, friction):  # pragma: no cover - compiled
+        b = np.empty(f.shape[0])
         for i in range(f.shape[0]):
-            p[i] = -(f[i, 0] * n[i, 0] + f[i, 1] * n[i, 1] + f[i, 2] * n[i, 2])
-        return p
+            p = -(f[i, 0] * n[i, 0] + f[i, 1] * n[i, 1] + f[i, 2] * n[i, 2])
+            b[i] = friction * max(p, 0.0)
+        return b
 
     @compile_
     def disks(G, n, target, bound, start):  # pragma: no cover - compiled
@@ -151,7 +174,11 @@ def coulomb_loop(compile_):
             x, theta = step, theta_next
             if moved <= tolerance * np.abs(x).max():
                 return x
-        raise ValueError("contact: the forces did not settle in the iterations allowed")
+            if not np.isfinite(moved):
+                raise NotSettled(
+                    "contact: the forces are not finite (the compliance is not definite)"
+                )
+        raise NotSettled("contact: the forces did not settle in the iterations allowed")
 
     @compile_
     def coulomb(G, n, target, friction, previous):  # pragma: no cover - compiled
@@ -160,7 +187,7 @@ def coulomb_loop(compile_):
             bound = np.full(n.shape[0], np.inf if friction > 0 else 0.0)
             return disks(G, n, target, bound, f)
         for _ in range(passes):
-            f = disks(G, n, target, friction * pushes_(f, n), f)
-        return project_(f, n, friction * pushes_(f, n))
+            f = disks(G, n, target, radii_(f, n, friction), f)
+        return project_(f, n, radii_(f, n, friction))
 
     return coulomb

@@ -10,6 +10,7 @@ import fem.tresca as tresca
 from fem.closure import contact_forces
 from fem.tresca import coulomb_forces, coulomb_loop, pushes, within_disks
 from stmpl import jit
+from stmpl.failures import PredictionFailed
 
 Z = np.array([0.0, 0.0, 1.0])
 
@@ -108,11 +109,44 @@ def test_the_answer_moves_continuously_with_its_targets():
         assert np.abs(out[0] - out[1]).max() <= 1e-6 * np.abs(out[0]).max()
 
 
-def test_a_pass_that_does_not_settle_is_refused(monkeypatch):
+def test_a_pass_that_does_not_settle_is_refused_as_a_failed_prediction(monkeypatch):
+    """Too few iterations, or a compliance that is not definite (the forces run off to
+    infinity): the pass is refused with its reason as a failed prediction, which force control
+    and the evaluation count, not as bad input.
+    """
     G, n, t = _patch(6, 0)
     monkeypatch.setattr(tresca, "ITERATIONS", 2)
-    with pytest.raises(ValueError, match="did not settle in 2 iterations"):
+    with pytest.raises(PredictionFailed, match="did not settle in 2 iterations"):
         within_disks(G, n, t, np.full(6, 0.1), np.zeros((6, 3)))
+    monkeypatch.setattr(tresca, "ITERATIONS", 20000)
+    with pytest.raises(tresca.NotSettled, match="not finite"), np.errstate(all="ignore"):
+        indefinite = 1e-3 * np.diag(np.tile([1.0, 1.0, -1.0], 6))  # pushing opens the skin
+        within_disks(indefinite, n, t, np.full(6, 0.1), np.zeros((6, 3)))
+
+
+@pytest.mark.parametrize("compiled", [False, True])
+def test_a_force_let_go_whose_push_rounds_below_zero_gives_no_disk(compiled):
+    """A vertex let go the step before keeps at most a tangential part, and its push ``-f . n``
+    rounds to a few 1e-17 of it either way. Lagged from such a force, a disk's radius below
+    zero (once projecting a zero tangential force onto it divided by zero, and the forces
+    turned NaN on a 10 N whole-hand grip) is no disk: the forces answer as from no force.
+    """
+    G, n, t = _patch(7, 3)
+    before = np.zeros((7, 3))
+    before[2] = 1e-179 * n[2]  # pulling by a rounding: a push of -1e-179 N
+    before[4] = 1e-3 * _tangential(np.array([[0.3, 0.8, 0.1]]), n[4:5])[0]
+    assert pushes(before, n)[2] < 0
+    solve = coulomb_forces
+    if compiled:
+        compile_ = jit.njit(error_model="numpy")
+        if compile_ is None:
+            pytest.skip("Numba is not installed")
+        solve = coulomb_loop(compile_)
+    f = solve(G, n, t, 0.5, before)
+    assert np.isfinite(f).all()
+    clean = before.copy()
+    clean[2] = 0.0
+    np.testing.assert_array_equal(f, solve(G, n, t, 0.5, clean))
 
 
 @pytest.mark.parametrize("friction", [0.0, 0.5, np.inf])
