@@ -132,10 +132,12 @@ def closure_forces(
     ``rounding`` m the objects' surface offset. The skin's displacement is ``G @ f.ravel()``.
     ``G`` may be a :class:`HeldColumns` (read as the contact reaches its vertices).
     ``compiled``: the steps in the compiled loop (:func:`_kernel`; the same answers within
-    rounding, a hundredth of the time on a grip), where Numba is installed; ``None``: so where
-    Numba is installed (NumPy's steps take a few hundred ms a grip, Numba's import and its
-    kernels' load from the cache half a second, once a process). ``rule``:
-    how each step's contact settles (:data:`CONTACT_RULES`).
+    rounding, a tenth of the time on a grip or less), where Numba is installed; ``None``: so
+    where this process has imported Numba already. Numba's cache does not keep these kernels
+    (closures over other compiled functions), so each process compiles them again, some 10 s
+    on our machine: a one-off answer, as the main job's six of force control, takes NumPy's
+    steps (0.1-0.2 s a grip) and an application answering many grips loads them once.
+    ``rule``: how each step's contact settles (:data:`CONTACT_RULES`).
     """
     if not isinstance(G, HeldColumns):
         G = np.asarray(G, dtype=np.float64)
@@ -171,7 +173,7 @@ def closure_forces(
     u = np.zeros((k, 3))
     along = w - (w * n).sum(1, keepdims=True) * n  # the objects' sweep along the skin
     taus = np.linspace(travel, 0.0, steps + 1)
-    kernel = _kernel(rule) if (compiled is None or compiled) else None
+    kernel = _kernel(rule) if (jit.loaded() if compiled is None else compiled) else None
     if kernel is not None:
         big, at = (G._G, G._at) if G._at is not None else (G._G, np.arange(3 * k))
         return kernel(big, at, n, g, c, along, taus, float(friction), SLIP_PASSES)
