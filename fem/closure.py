@@ -135,8 +135,8 @@ def closure_forces(
     rounding, a tenth of the time on a grip or less), where Numba is installed; ``None``: so
     where this process has imported Numba already. Numba's cache does not keep these kernels
     (closures over other compiled functions), so each process compiles them again, some 10 s
-    on our machine: a one-off answer, as the main job's six of force control, takes NumPy's
-    steps (0.1-0.2 s a grip) and an application answering many grips loads them once.
+    on our machine: one-off answers, as the main job's force control gives, take NumPy's steps
+    (0.1-0.2 s a grip) and an application answering many grips loads them once.
     ``rule``: how each step's contact settles (:data:`CONTACT_RULES`).
     """
     if not isinstance(G, HeldColumns):
