@@ -85,14 +85,17 @@ def radii(f: np.ndarray, n: np.ndarray, friction: float) -> np.ndarray:
     return friction * np.maximum(pushes(f, n), 0.0)
 
 
-def within_disks(G: np.ndarray, n: np.ndarray, target: np.ndarray, bound: np.ndarray, start):
+def within_disks(
+    G: np.ndarray, n: np.ndarray, target: np.ndarray, bound: np.ndarray, start, L=None
+):
     """``(a, 3)`` N: the least-energy forces of one pass (see the module) on ``a`` vertices with
     compliance ``G`` ``(3 a, 3 a)`` (m/N, vertex by vertex, x y z), outward normals ``n``
     ``(a, 3)``, ``target`` ``(a, 3)`` (m) and disks of radius ``bound`` ``(a,)`` (N), the
-    iteration started from ``start`` ``(a, 3)``. Refused where it does not settle within
+    iteration started from ``start`` ``(a, 3)``, its step ``1 / L`` (``L`` m/N: ``G``'s largest
+    eigenvalue, found here where ``None``). Refused where it does not settle within
     :data:`ITERATIONS`.
     """
-    L = float(np.linalg.eigvalsh(G)[-1])
+    L = float(np.linalg.eigvalsh(G)[-1]) if L is None else float(L)
     t = target.ravel()
     x = project(start, n, bound)
     y, theta = x.copy(), 1.0
@@ -119,31 +122,34 @@ def coulomb_forces(G, n, target, friction: float, previous) -> np.ndarray:
     contact), and the tangential parts brought within ``friction`` times the push at the end.
     """
     f = np.asarray(previous, dtype=np.float64)
+    L = float(np.linalg.eigvalsh(G)[-1])  # the same compliance in every pass
     if not np.isfinite(friction) or friction == 0:
         bound = np.full(len(n), np.inf if friction > 0 else 0.0)
-        return within_disks(G, n, target, bound, f)
+        return within_disks(G, n, target, bound, f, L)
     for _ in range(PASSES):
-        f = within_disks(G, n, target, radii(f, n, friction), f)
+        f = within_disks(G, n, target, radii(f, n, friction), f, L)
     return project(f, n, radii(f, n, friction))
 
 
 def coulomb_loop(compile_):
-    """:func:`coulomb_forces`, compiled: ``coulomb(G, n, target, friction, previous)``."""
+    """:func:`coulomb_forces`, compiled: ``coulomb(G, n, target, friction, previous)``. The
+    same operations in the same order, each iteration in place (no arrays made within it).
+    """
     passes, tolerance, iterations = PASSES, TOLERANCE, ITERATIONS
 
     @compile_
-    def project_(f, n, bound):  # pragma: no cover - compiled
-        out = np.empty_like(f)
+    def project_into(f, n, bound, out):  # pragma: no cover - compiled
         for i in range(f.shape[0]):
             fn = f[i, 0] * n[i, 0] + f[i, 1] * n[i, 1] + f[i, 2] * n[i, 2]
-            ft = np.empty(3)
-            for d in range(3):
-                ft[d] = f[i, d] - fn * n[i, d]
-            size = np.sqrt(ft[0] * ft[0] + ft[1] * ft[1] + ft[2] * ft[2])
+            t0 = f[i, 0] - fn * n[i, 0]
+            t1 = f[i, 1] - fn * n[i, 1]
+            t2 = f[i, 2] - fn * n[i, 2]
+            size = np.sqrt(t0 * t0 + t1 * t1 + t2 * t2)
             scale = bound[i] / size if size > bound[i] else 1.0
-            for d in range(3):
-                out[i, d] = min(fn, 0.0) * n[i, d] + ft[d] * scale
-        return out
+            push = min(fn, 0.0)
+            out[i, 0] = push * n[i, 0] + t0 * scale
+            out[i, 1] = push * n[i, 1] + t1 * scale
+            out[i, 2] = push * n[i, 2] + t2 * scale
 
     @compile_
     def radii_(f, n, friction):  # pragma: no cover - compiled
@@ -154,40 +160,61 @@ def coulomb_loop(compile_):
         return b
 
     @compile_
-    def disks(G, n, target, bound, start):  # pragma: no cover - compiled
+    def disks(G, L, n, t, bound, start):  # pragma: no cover - compiled
         a = n.shape[0]
-        L = np.linalg.eigvalsh(G)[-1]
-        t = target.copy().reshape(3 * a)
-        x = project_(start, n, bound)
+        x = np.empty((a, 3))
+        project_into(start, n, bound, x)
         y = x.copy()
+        z = np.empty((a, 3))  # the gradient step from y, then the projected step
+        step = np.empty((a, 3))
+        Gy = np.empty(3 * a)
         theta = 1.0
         for _ in range(iterations):
-            g = (G @ y.reshape(3 * a) - t).reshape(a, 3)
-            step = project_(y - g / L, n, bound)
+            np.dot(G, y.reshape(3 * a), Gy)
+            for i in range(a):
+                for d in range(3):
+                    z[i, d] = y[i, d] - (Gy[3 * i + d] - t[3 * i + d]) / L
+            project_into(z, n, bound, step)
             theta_next = (1.0 + np.sqrt(1.0 + 4.0 * theta * theta)) / 2.0
-            if ((step - x) * (y - step)).sum() > 0:
+            uphill = 0.0
+            moved = 0.0
+            largest = 0.0
+            total = 0.0  # not finite where any force is not
+            for i in range(a):
+                for d in range(3):
+                    uphill += (step[i, d] - x[i, d]) * (y[i, d] - step[i, d])
+            momentum = (theta - 1.0) / theta_next
+            if uphill > 0:
                 theta_next = 1.0
-                y = step.copy()
-            else:
-                y = step + (theta - 1.0) / theta_next * (step - x)
-            moved = np.abs(step - x).max()
-            x, theta = step, theta_next
-            if moved <= tolerance * np.abs(x).max():
-                return x
-            if not np.isfinite(moved):
+            for i in range(a):
+                for d in range(3):
+                    s = step[i, d]
+                    y[i, d] = s if uphill > 0 else s + momentum * (s - x[i, d])
+                    moved = max(moved, abs(s - x[i, d]))
+                    x[i, d] = s
+                    largest = max(largest, abs(s))
+                    total += s
+            theta = theta_next
+            if not np.isfinite(total):
                 raise NotSettled(
                     "contact: the forces are not finite (the compliance is not definite)"
                 )
+            if moved <= tolerance * largest:
+                return x
         raise NotSettled("contact: the forces did not settle in the iterations allowed")
 
     @compile_
     def coulomb(G, n, target, friction, previous):  # pragma: no cover - compiled
         f = previous.copy()
+        t = target.copy().reshape(3 * n.shape[0])
+        L = np.linalg.eigvalsh(G)[-1]  # the same compliance in every pass
         if not np.isfinite(friction) or friction == 0:
             bound = np.full(n.shape[0], np.inf if friction > 0 else 0.0)
-            return disks(G, n, target, bound, f)
+            return disks(G, L, n, t, bound, f)
         for _ in range(passes):
-            f = disks(G, n, target, radii_(f, n, friction), f)
-        return project_(f, n, radii_(f, n, friction))
+            f = disks(G, L, n, t, radii_(f, n, friction), f)
+        out = np.empty_like(f)
+        project_into(f, n, radii_(f, n, friction), out)
+        return out
 
     return coulomb
