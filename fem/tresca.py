@@ -131,11 +131,8 @@ def coulomb_forces(G, n, target, friction: float, previous) -> np.ndarray:
     return project(f, n, radii(f, n, friction))
 
 
-def coulomb_loop(compile_):
-    """:func:`coulomb_forces`, compiled: ``coulomb(G, n, target, friction, previous)``. The
-    same operations in the same order, each iteration in place (no arrays made within it).
-    """
-    passes, tolerance, iterations = PASSES, TOLERANCE, ITERATIONS
+def _project_loop(compile_):
+    """:func:`project` in place, compiled: ``project_into(f, n, bound, out)``."""
 
     @compile_
     def project_into(f, n, bound, out):  # pragma: no cover - compiled
@@ -151,13 +148,14 @@ def coulomb_loop(compile_):
             out[i, 1] = push * n[i, 1] + t1 * scale
             out[i, 2] = push * n[i, 2] + t2 * scale
 
-    @compile_
-    def radii_(f, n, friction):  # pragma: no cover - compiled
-        b = np.empty(f.shape[0])
-        for i in range(f.shape[0]):
-            p = -(f[i, 0] * n[i, 0] + f[i, 1] * n[i, 1] + f[i, 2] * n[i, 2])
-            b[i] = friction * max(p, 0.0)
-        return b
+    return project_into
+
+
+def _disks_loop(compile_, project_into):
+    """:func:`within_disks`, compiled and in place: ``disks(G, L, n, t, bound, start)`` with
+    ``t`` the target flat ``(3 a,)``.
+    """
+    tolerance, iterations = TOLERANCE, ITERATIONS
 
     @compile_
     def disks(G, L, n, t, bound, start):  # pragma: no cover - compiled
@@ -202,6 +200,25 @@ def coulomb_loop(compile_):
             if moved <= tolerance * largest:
                 return x
         raise NotSettled("contact: the forces did not settle in the iterations allowed")
+
+    return disks
+
+
+def coulomb_loop(compile_):
+    """:func:`coulomb_forces`, compiled: ``coulomb(G, n, target, friction, previous)``. The
+    same operations in the same order, each iteration in place (no arrays made within it).
+    """
+    passes = PASSES
+    project_into = _project_loop(compile_)
+    disks = _disks_loop(compile_, project_into)
+
+    @compile_
+    def radii_(f, n, friction):  # pragma: no cover - compiled
+        b = np.empty(f.shape[0])
+        for i in range(f.shape[0]):
+            p = -(f[i, 0] * n[i, 0] + f[i, 1] * n[i, 1] + f[i, 2] * n[i, 2])
+            b[i] = friction * max(p, 0.0)
+        return b
 
     @compile_
     def coulomb(G, n, target, friction, previous):  # pragma: no cover - compiled
