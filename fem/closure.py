@@ -313,7 +313,10 @@ def _dofs_loop(compile_):
 
 
 def _read_loop(compile_):
-    """The held block's columns read into ``cols`` as first asked for, compiled."""
+    """The held block's columns read into ``cols`` as first asked for, compiled: column ``q``
+    is row ``q`` of ``cols``, contiguous (a step's few columns are then a few rows, written
+    and summed in place, where a column of a C-ordered block touches every row's page).
+    """
 
     @compile_
     def read(G, at, cols, have, rows):  # pragma: no cover - compiled
@@ -324,7 +327,7 @@ def _read_loop(compile_):
                     v = G[at[r], col]
                     if not np.isfinite(v):
                         raise ValueError("closure: G is not finite")
-                    cols[r, q] = v
+                    cols[q, r] = v
                 have[q] = True
 
     return read
@@ -340,7 +343,7 @@ def _block_loop(compile_, dofs, read):
         GAA = np.empty((rows.shape[0], rows.shape[0]))
         for i in range(rows.shape[0]):
             for j in range(rows.shape[0]):
-                GAA[i, j] = cols[rows[i], rows[j]]
+                GAA[i, j] = cols[rows[j], rows[i]]  # row q of cols: the block's column q
         return GAA
 
     return block
@@ -499,11 +502,11 @@ def _closure_loop(compile_, contact, read, dofs):
             for q in range(A.shape[0]):
                 for d in range(3):
                     forces[A[q], d] = f[q, d]
-            for r in range(3 * k):
-                acc = 0.0
-                for q in range(rows.shape[0]):
-                    acc += cols[r, rows[q]] * f[q // 3, q % 3]
-                u[r // 3, r % 3] = acc
+            flat = u.reshape(3 * k)  # summed over the forces in their order, as before
+            for q in range(rows.shape[0]):
+                fq, col = f[q // 3, q % 3], cols[rows[q]]
+                for r in range(3 * k):
+                    flat[r] += col[r] * fq
         return forces
 
     return closure

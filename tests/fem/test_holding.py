@@ -126,8 +126,8 @@ def test_the_skin_compliance_is_solved_once_and_read_back_from_the_cache(part):
 
 def test_the_held_product_reads_the_columns_in_place_as_numpy_gathers_them(monkeypatch):
     """``G[:, at] @ f`` of a compliance kept column by column: compiled where Numba is loaded
-    (the columns read in place, summed in float64), NumPy's gather otherwise; the two agree to
-    float32's rounding.
+    (the columns read in place, summed in float32 a few at a time and in float64 across
+    them), NumPy's gather otherwise; the two agree to float32's rounding.
     """
     import stmpl.jit
 

@@ -8,7 +8,7 @@ import pytest
 
 import fem.tresca as tresca
 from fem.closure import contact_forces
-from fem.tresca import coulomb_forces, coulomb_loop, pushes, within_disks
+from fem.tresca import SMALL, coulomb_forces, coulomb_loop, pushes, within_disks
 from stmpl import jit
 from stmpl.failures import PredictionFailed
 
@@ -149,15 +149,20 @@ def test_a_force_let_go_whose_push_rounds_below_zero_gives_no_disk(compiled):
     np.testing.assert_array_equal(f, solve(G, n, t, 0.5, clean))
 
 
+@pytest.mark.parametrize("size", [7, 20])
 @pytest.mark.parametrize("friction", [0.0, 0.5, np.inf])
-def test_the_compiled_solve_answers_as_the_numpy_one(friction):
+def test_the_compiled_solve_answers_as_the_numpy_one(friction, size):
+    """The compiled pass, its product by ``G`` in its own loop (7 vertices, up to
+    :data:`fem.tresca.SMALL` DOFs) or in BLAS (20), answers as NumPy's.
+    """
+    assert 3 * 7 <= SMALL < 3 * 20
     compile_ = jit.njit(error_model="numpy")
     if compile_ is None:
         pytest.skip("Numba is not installed")
     coulomb = coulomb_loop(compile_)
     for seed in range(5):
-        G, n, t = _patch(7, seed)
-        start = np.zeros((7, 3))
+        G, n, t = _patch(size, seed)
+        start = np.zeros((size, 3))
         eager = coulomb_forces(G, n, t, friction, start)
         fast = coulomb(G, n, t, friction, start)
         np.testing.assert_allclose(fast, eager, rtol=0, atol=1e-12 * np.abs(eager).max())
