@@ -33,6 +33,7 @@ import scipy.linalg.lapack
 from tqdm import tqdm
 
 from fem.closure import CONTACT_RULE, HeldColumns, closure_forces
+from fem.columns import Quantized, product
 from fem.finer import FinerPart, meshed
 from fem.friction import SKIN_FRICTION
 from fem.shapes import ROUNDING
@@ -184,6 +185,7 @@ class SkinCompliance:
         self.key = h.hexdigest()[:16]
         self.G = np.zeros((3 * n, 3 * n), np.float32, order="F")  # column by column
         self.done = np.zeros(n, bool)
+        self.quantized = Quantized(self.G)  # the products' 16-bit columns, made as read
         self._holding: Holding | None = None
         self._free: np.ndarray | None = None
         self._read()
@@ -215,6 +217,7 @@ class SkinCompliance:
                 return
             self.G[:] = G
             self.done[:] = done
+            self.quantized.forget(np.arange(3 * len(done)))
             self._free = free
         except (OSError, ValueError, KeyError):
             pass  # a broken cache file is solved again
@@ -247,11 +250,27 @@ class SkinCompliance:
         for b in blocks:
             at = (b[:, None] * 3 + np.arange(3)).ravel()
             self.G[:, at] = self.holding.columns(b)
+            self.quantized.forget(at)
             self.done[b] = True
             bar.update(len(b))
         bar.close()
         self._write()
         return len(todo)
+
+    def product(self, at: np.ndarray, f: np.ndarray, bits: int = 32) -> np.ndarray:
+        """``(3 N,)`` float32: ``G[:, at] @ f``, the skin's displacement (m) under forces ``f``
+        ``(len(at),)`` (N) on the DOFs ``at`` (their columns solved), read in place where Numba
+        is loaded (:mod:`fem.columns`). ``bits=16``: from the columns' 16-bit copy where Numba
+        is loaded (half the bytes; for forces that do not cancel, a model's own: within
+        ``sum |f_j| s_j / 2`` of the float32 product, ``s_j`` a column's largest entry over
+        32767), float32 otherwise.
+        """
+        if bits not in (16, 32):
+            raise ValueError(f"a product reads the columns in 16 or 32 bits, got {bits!r}")
+        at = np.asarray(at, dtype=np.int64)
+        if bits == 16 and jit.loaded():
+            return self.quantized.product(at, f)
+        return product(self.G, at, f)
 
     def columns(self, vertices) -> np.ndarray:
         """``(3 N, 3 k)`` the columns of ``vertices`` ``(k,)`` (free ones; solved if missing)."""
@@ -348,7 +367,7 @@ class HeldSkin:
         if len(at) == 0:
             return np.zeros_like(r)
         f = (np.asarray(forces).reshape(-1)[at] / (d * PUSH_SPREAD)).astype(np.float32)
-        u = held_product(s.G, at, f).astype(np.float64)
+        u = s.product(at, f, bits=16).astype(np.float64)
         u[at] += r.reshape(-1)[at]
         return u.reshape(r.shape).astype(r.dtype)
 
@@ -435,27 +454,8 @@ class HeldSkin:
         if len(at) == 0:
             return np.zeros_like(r)
         f = scipy.linalg.cho_solve((L, True), r.reshape(-1)[at].astype(np.float64))
-        return held_product(s.G, at, f.astype(np.float32)).reshape(r.shape).astype(r.dtype)
+        return s.product(at, f).reshape(r.shape).astype(r.dtype)
 
-
-def held_product(G: np.ndarray, at: np.ndarray, f: np.ndarray) -> np.ndarray:
-    """``(3 N,)`` float32: ``G[:, at] @ f``, the skin's displacement (m) under forces ``f``
-    ``(len(at),)`` (N, float32) on the held DOFs ``at`` of the compliance ``G`` ``(3 N, 3 N)``
-    (m/N, float32, kept column by column). Where Numba is loaded the columns are read in place
-    in one pass, summed in float32 a few columns at a time and in float64 across them (NumPy
-    gathers them first: 14 MB copied for a grip's two hundred held vertices on the forearm,
-    then read again).
-    """
-    kernel = _product_kernel() if jit.loaded() and G.flags.f_contiguous else None
-    if kernel is None:
-        return G[:, at] @ np.asarray(f, dtype=np.float32)
-    return kernel(G, np.asarray(at, dtype=np.int64), np.asarray(f, dtype=np.float64))
-
-
-PRODUCT_RUN = 16
-"""Columns :func:`held_product` sums in float32 before adding into float64: the float32 sums'
-rounding stays that of a few terms (within 1e-7 of the largest entry in the tests), the
-float64 additions a sixteenth of the terms."""
 
 PUSH_SPREAD = 25.0
 """How many times its own compliance a held DOF moves under forces spread evenly over a grip's
@@ -545,33 +545,3 @@ def _block_kernel():
         return B, sums.max()
 
     return block
-
-
-@functools.lru_cache(maxsize=1)
-def _product_kernel():
-    """:func:`held_product`'s compiled loop, or ``None`` without Numba: the columns summed in
-    float32 :data:`PRODUCT_RUN` at a time (a loop of single multiply-adds, which the compiler
-    vectorises), each run's sum added into float64 (summing every term in float64 took twice the
-    time, converting each entry).
-    """
-    compile_ = jit.njit(error_model="numpy")
-    if compile_ is None:
-        return None
-    run = PRODUCT_RUN
-
-    @compile_
-    def product(G, at, f):  # pragma: no cover - compiled
-        n, k = G.shape[0], at.shape[0]
-        acc = np.zeros(n)
-        part = np.zeros(n, np.float32)
-        for j0 in range(0, k, run):
-            part[:] = 0.0
-            for j in range(j0, min(j0 + run, k)):
-                col, fj = at[j], np.float32(f[j])
-                for r in range(n):
-                    part[r] += G[r, col] * fj
-            for r in range(n):
-                acc[r] += part[r]
-        return acc.astype(np.float32)
-
-    return product

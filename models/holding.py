@@ -65,7 +65,7 @@ class HeldSkin(fem_holding.HeldSkin):
             rh = r[b].reshape(-1)[at_t.to(dev)].to(L_t.dtype)[:, None]
             f = torch.cholesky_solve(rh, L_t.to(dev)).to(r.dtype)[:, 0]
             if dev.type == "cpu" and not torch.is_grad_enabled():  # an answer: G read in place
-                u = fem_holding.held_product(s.G, at, f.numpy())
+                u = s.product(at, f.numpy())
                 out.append(torch.from_numpy(u).to(r.dtype).reshape(r[b].shape))
                 continue
             # G's transpose shares the store's memory on the CPU, row by row: a held
@@ -93,8 +93,7 @@ class HeldSkin(fem_holding.HeldSkin):
             scale = torch.from_numpy(d * fem_holding.PUSH_SPREAD).to(dev, r.dtype)
             f = forces[b].reshape(-1)[at_t] / scale
             if dev.type == "cpu" and not torch.is_grad_enabled():  # an answer: G read in place
-                u = fem_holding.held_product(s.G, at, f.numpy().astype(np.float32))
-                u = torch.from_numpy(u).to(r.dtype)
+                u = torch.from_numpy(s.product(at, f.numpy(), bits=16)).to(r.dtype)
             else:
                 GT = torch.from_numpy(s.G.T).to(dev)  # a held DOF's column: a contiguous row
                 u = (f.to(GT.dtype) @ GT.index_select(0, at_t)).to(r.dtype)
