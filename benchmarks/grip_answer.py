@@ -45,16 +45,7 @@ def median_ms(fn, calls, repeat: int, forget=None) -> float:
     """The median of ``fn(c)`` over ``calls`` and ``repeat`` rounds (after one warm-up
     round), ms; ``forget()`` before each call.
     """
-    times = []
-    for r in range(repeat + 1):
-        for c in calls:
-            if forget is not None:
-                forget()
-            t0 = time.perf_counter()
-            fn(c)
-            if r:
-                times.append(time.perf_counter() - t0)
-    return 1e3 * float(np.median(times))
+    return interleaved([(None, fn, calls, forget)], repeat)[None]
 
 
 def interleaved(timers, repeat: int) -> dict:

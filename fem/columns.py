@@ -45,10 +45,11 @@ def product(G: np.ndarray, at: np.ndarray, f: np.ndarray) -> np.ndarray:
     columns are read in place in one pass (NumPy gathers them first: 14 MB copied for a grip's
     two hundred held vertices on the forearm, then read again).
     """
-    kernel = _kernels()[0] if jit.loaded() and G.flags.f_contiguous else None
+    kernel = _kernel() if jit.loaded() and G.flags.f_contiguous else None
     if kernel is None:
         return G[:, at] @ np.asarray(f, dtype=np.float32)
-    return kernel(G, np.asarray(at, dtype=np.int64), np.asarray(f, dtype=np.float64))
+    at = np.asarray(at, dtype=np.int64)
+    return kernel(G, _ones(G.shape[1]), at, np.asarray(f, dtype=np.float64))
 
 
 class Quantized:
@@ -98,37 +99,33 @@ class Quantized:
         if f.shape != at.shape:
             raise ValueError(f"f must be (k,) = {at.shape} for the columns asked, got {f.shape}")
         self.columns(at)
-        kernel = _kernels()[1] if jit.loaded() else None
+        kernel = _kernel() if jit.loaded() else None
         if kernel is None:
             return (self.q[:, at] @ (f * self.scale[at])).astype(np.float32)
         return kernel(self.q, self.scale, at, f)
 
 
+@functools.lru_cache(maxsize=4)
+def _ones(m: int) -> np.ndarray:
+    """``(m,)`` ones: the scales of a float32 matrix's columns (read-only)."""
+    out = np.ones(m)
+    out.flags.writeable = False
+    return out
+
+
 @functools.lru_cache(maxsize=1)
-def _kernels():
-    """The compiled products, ``(float32, 16 bits)``, or ``(None, None)`` without Numba."""
+def _kernel():
+    """The compiled product ``kernel(q, scale, at, f)``, ``G[:, at] @ f`` with ``G[i, j] =
+    scale[j] q[i, j]`` (``q`` float32, and ``scale`` ones, or 16-bit steps), or ``None``
+    without Numba.
+    """
     compile_ = jit.njit(error_model="numpy")
     if compile_ is None:
-        return None, None
+        return None
     run = PRODUCT_RUN
 
     @compile_
-    def of_floats(G, at, f):  # pragma: no cover - compiled
-        n, k = G.shape[0], at.shape[0]
-        acc = np.zeros(n)
-        part = np.zeros(n, np.float32)
-        for j0 in range(0, k, run):
-            part[:] = 0.0
-            for j in range(j0, min(j0 + run, k)):
-                col, w = at[j], np.float32(f[j])
-                for r in range(n):
-                    part[r] += G[r, col] * w
-            for r in range(n):
-                acc[r] += part[r]
-        return acc.astype(np.float32)
-
-    @compile_
-    def of_steps(q, scale, at, f):  # pragma: no cover - compiled
+    def product(q, scale, at, f):  # pragma: no cover - compiled
         n, k = q.shape[0], at.shape[0]
         acc = np.zeros(n)
         part = np.zeros(n, np.float32)
@@ -143,4 +140,4 @@ def _kernels():
                 acc[r] += part[r]
         return acc.astype(np.float32)
 
-    return of_floats, of_steps
+    return product
