@@ -217,7 +217,9 @@ def test_the_shipped_zoo_verifies_and_beats_naive_on_a_fem_solve(anny_body, tmp_
     recorded = json.loads(
         (pathlib.Path(__file__).parents[1] / "recorded" / "zoo_outputs.json").read_text()
     )
-    assert set(recorded) == set(names), "record the answers of a model added to the zoo"
+    assert set(recorded) == set(names), (
+        "record the answers of a model added to the zoo: python tests/recorded/record.py NAME"
+    )
     models = {name: zoo.read(name) for name in names}
     posed = {name for name, p in models.items() if "force" not in p.takes}
     assert posed == {name for name, r in recorded.items() if "scene" in r}
