@@ -8,9 +8,8 @@ on the held skin, no factor; and ``zoo:linear_forearm_grips``, that closure itse
 the grips of the shipped grip set's ``--split`` (``data/forearm_grips``: anny's right hand
 closing on the layered forearm of her left arm, the main job's arm of 2109 vertices), each a
 new scene: the predictor forgets the closures and the held sets' factors it kept before each
-answer
-(``forget_scenes()``), as the main job's force control and a moving hand meet a new pose, and
-nearly always a new held set, at every answer. Beside them, the gel's default GNN
+answer (``forget_scenes()``), as the main job's force control and a moving hand meet a new
+pose, and nearly always a new held set, at every answer. Beside them, the gel's default GNN
 (``zoo:gnn_arm_bodies``) answers 0.3 N disks of 2 cm radius on 7.5 mm of tissue on the same
 arm, and the same grips given by their force (the FEM's contact force on each vertex: the
 paper's load model, the scene the gel's models answer of a grasp): the grip models are held to

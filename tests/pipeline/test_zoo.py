@@ -10,6 +10,7 @@ from stmpl import envelope, predictor
 from stmpl.pipeline import manifest, zoo
 from stmpl.pipeline.evaluate import scenes_of
 from stmpl.pipeline.spec import predictor_from_spec
+from tests.recorded.record import disk_scene
 
 
 @pytest.fixture
@@ -209,8 +210,6 @@ def test_the_shipped_zoo_verifies_and_beats_naive_on_a_fem_solve(anny_body, tmp_
     patch shared with other columns (another scene's, earlier) may differ in its last digits.
     """
     monkeypatch.setenv("STMPL_CACHE_DIR", str(tmp_path))
-    from stmpl import loads, tissue
-    from stmpl.scene import Scene
 
     names = zoo.names()
     assert {"naive_arm", "uv_unet_arm", "gnn_arm"} <= set(names)
@@ -231,11 +230,7 @@ def test_the_shipped_zoo_verifies_and_beats_naive_on_a_fem_solve(anny_body, tmp_
     assert ("belly", 1) in surfaces and ("left_arm", 1) in surfaces
     for name_of_part, sub in surfaces:
         part = anny_body.part(name_of_part).subdivided(sub)
-        scene = Scene.from_load(
-            part,
-            tissue.constant(part, 0.0075),
-            loads.disk(part, uv=(0.42, 0.55), radius=0.02, total=0.2),
-        )
+        scene = disk_scene(part)
         fem = predictor.create("fem", fidelity="auto" if sub else "full")
         truth = fem.predict(scene).displacement
         active = np.linalg.norm(truth, axis=1) > 1e-6

@@ -36,6 +36,17 @@ GRIP = {"data": "data/forearm_grips", "split": "test", "sample": 2}
 """The recorded grip of the pose models."""
 
 
+def disk_scene(part) -> Scene:
+    """The scene the models given a force answer: a 2 cm disk of 0.2 N on 7.5 mm of tissue at
+    chart point (0.42, 0.55) of ``part``.
+    """
+    return Scene.from_load(
+        part,
+        tissue.constant(part, 0.0075),
+        loads.disk(part, uv=(0.42, 0.55), radius=0.02, total=0.2),
+    )
+
+
 def _vertices(recorded: dict, name: str, kind: str, part: str, deepest: int, n: int) -> list:
     """The vertices to record: the entry's own, else those of a recorded model of the same kind
     (pose or force) and part, else the deepest and six spread over the part.
@@ -54,13 +65,7 @@ def record(name: str, recorded: dict) -> dict:
     sub = int(p.part.source.get("subdivisions", 0))
     out = {"part": p.part.name, "subdivisions": sub}
     if "force" in p.takes:
-        part = AnnyBody().part(p.part.name).subdivided(sub)
-        scene = Scene.from_load(
-            part,
-            tissue.constant(part, 0.0075),
-            loads.disk(part, uv=(0.42, 0.55), radius=0.02, total=0.2),
-        )
-        kind = "force"
+        scene, kind = disk_scene(AnnyBody().part(p.part.name).subdivided(sub)), "force"
     else:
         scenes, _ = scenes_of(Dataset(ROOT / GRIP["data"]), GRIP["split"], given="pose", way=True)
         scene, kind = scenes[GRIP["sample"]], "pose"
